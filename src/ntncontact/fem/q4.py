@@ -1,0 +1,95 @@
+"""Q4 bilinear element: shape functions, 2x2 Gauss rule, vectorized kinematics (report 5.1.1)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+_G = 1.0 / np.sqrt(3.0)
+#: 2x2 Gauss points (xi, eta) and weights.
+GAUSS_POINTS = np.array([[-_G, -_G], [_G, -_G], [_G, _G], [-_G, _G]])
+GAUSS_WEIGHTS = np.ones(4)
+#: Natural coordinates of the four corners, counter-clockwise (report (5.2)).
+CORNERS = np.array([[-1.0, -1.0], [1.0, -1.0], [1.0, 1.0], [-1.0, 1.0]])
+
+
+def shape_functions(xi: NDArray, eta: NDArray) -> NDArray:
+    """N_a(xi, eta) = (1 + xi_a xi)(1 + eta_a eta)/4, shape (..., 4)."""
+    xi = np.asarray(xi)[..., None]
+    eta = np.asarray(eta)[..., None]
+    return 0.25 * (1.0 + CORNERS[:, 0] * xi) * (1.0 + CORNERS[:, 1] * eta)
+
+
+def shape_gradients(xi: NDArray, eta: NDArray) -> NDArray:
+    """dN_a/d(xi, eta), shape (..., 4, 2)."""
+    xi = np.asarray(xi)[..., None]
+    eta = np.asarray(eta)[..., None]
+    dxi = 0.25 * CORNERS[:, 0] * (1.0 + CORNERS[:, 1] * eta)
+    deta = 0.25 * CORNERS[:, 1] * (1.0 + CORNERS[:, 0] * xi)
+    return np.stack([dxi, deta], axis=-1)
+
+
+#: Shape functions and natural gradients at the Gauss points: (4 gp, 4 nodes) and (4, 4, 2).
+N_GP = shape_functions(GAUSS_POINTS[:, 0], GAUSS_POINTS[:, 1])
+DN_GP = shape_gradients(GAUSS_POINTS[:, 0], GAUSS_POINTS[:, 1])
+
+
+class InvertedElementError(ValueError):
+    """An element whose reference or current Jacobian is not positive."""
+
+    def __init__(self, element: int, value: float, where: str) -> None:
+        self.element = int(element)
+        self.value = float(value)
+        super().__init__(f"element {element} is inverted in the {where} (det J = {value:.3e})")
+
+
+@dataclass(frozen=True)
+class Kinematics:
+    """Per element and Gauss point: reference gradients, volume weights and F."""
+
+    grad: NDArray  # dN_a/dX_J, (ne, 4gp, 4, 2)
+    weight: NDArray  # det(dX/dxi) * w_g, (ne, 4gp)
+    F: NDArray  # deformation gradient, (ne, 4gp, 2, 2)
+
+
+def reference_gradients(X_e: NDArray) -> tuple[NDArray, NDArray]:
+    """Gradients dN/dX and integration weights over each element's reference (X) image.
+
+    ``X_e`` has shape (ne, 4, 2). Raises :class:`InvertedElementError` for the first element
+    with a non-positive Jacobian at a Gauss point.
+    """
+    J = np.einsum("gaj,eai->egij", DN_GP, X_e)  # dX_i/dxi_j
+    det = J[..., 0, 0] * J[..., 1, 1] - J[..., 0, 1] * J[..., 1, 0]
+    bad = det <= 0.0
+    if bad.any():
+        e = int(np.argwhere(bad)[0, 0])
+        raise InvertedElementError(e, float(det[e].min()), "reference configuration")
+    inv = np.empty_like(J)
+    inv[..., 0, 0] = J[..., 1, 1] / det
+    inv[..., 1, 1] = J[..., 0, 0] / det
+    inv[..., 0, 1] = -J[..., 0, 1] / det
+    inv[..., 1, 0] = -J[..., 1, 0] / det
+    grad = np.einsum("gaj,egjI->egaI", DN_GP, inv)
+    return grad, det * GAUSS_WEIGHTS
+
+
+def deformation_gradient(grad: NDArray, x_e: NDArray) -> NDArray:
+    """F_iJ = sum_a x_ai dN_a/dX_J at every Gauss point, shape (ne, 4, 2, 2)."""
+    return np.einsum("eai,egaJ->egiJ", x_e, grad)
+
+
+def kinematics(X_e: NDArray, x_e: NDArray) -> Kinematics:
+    """Reference gradients, weights and deformation gradient for elements (ne, 4, 2)."""
+    grad, weight = reference_gradients(X_e)
+    return Kinematics(grad, weight, deformation_gradient(grad, x_e))
+
+
+def check_current_jacobian(F: NDArray) -> None:
+    """Raise :class:`InvertedElementError` if det F <= 0 at any Gauss point."""
+    det = F[..., 0, 0] * F[..., 1, 1] - F[..., 0, 1] * F[..., 1, 0]
+    bad = det <= 0.0
+    if bad.any():
+        e = int(np.argwhere(bad)[0, 0])
+        raise InvertedElementError(e, float(det[e].min()), "current configuration")

@@ -1,0 +1,110 @@
+"""The immutable Q4 mesh type shared by every layer of ntncontact."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from types import MappingProxyType
+from typing import Mapping
+
+import numpy as np
+from numpy.typing import NDArray
+
+
+class MeshError(ValueError):
+    """A mesh that cannot be used: bad connectivity, unknown set, inverted element."""
+
+
+def _frozen(array: NDArray, dtype: type) -> NDArray:
+    out = np.array(array, dtype=dtype, copy=True)
+    out.setflags(write=False)
+    return out
+
+
+@dataclass(frozen=True)
+class QuadMesh:
+    """Node coordinates and counter-clockwise Q4 connectivity with named sets.
+
+    ``node_sets`` map a name to node indices; ``edge_sets`` (surfaces) map a name to an
+    (m, 2) array of node pairs, each pair ordered so that the body lies on its left
+    (counter-clockwise boundary orientation), i.e. the outward normal of edge (a, b) is
+    ``rot(-90)(x_b - x_a)``.
+    """
+
+    nodes: NDArray[np.float64]
+    cells: NDArray[np.int64]
+    node_sets: Mapping[str, NDArray[np.int64]] = field(default_factory=dict)
+    edge_sets: Mapping[str, NDArray[np.int64]] = field(default_factory=dict)
+    name: str = "body"
+
+    def __post_init__(self) -> None:
+        nodes = _frozen(self.nodes, np.float64)
+        cells = _frozen(self.cells, np.int64)
+        if nodes.ndim != 2 or nodes.shape[1] != 2:
+            raise MeshError(f"{self.name}: nodes must have shape (n, 2), got {nodes.shape}")
+        if cells.ndim != 2 or cells.shape[1] != 4:
+            raise MeshError(f"{self.name}: cells must have shape (m, 4), got {cells.shape}")
+        if cells.size and (cells.min() < 0 or cells.max() >= len(nodes)):
+            raise MeshError(f"{self.name}: cell connectivity refers to a node that does not exist")
+        node_sets = {k: _frozen(v, np.int64).reshape(-1) for k, v in self.node_sets.items()}
+        edge_sets = {k: _frozen(v, np.int64).reshape(-1, 2) for k, v in self.edge_sets.items()}
+        for label, sets in (("node set", node_sets), ("edge set", edge_sets)):
+            for key, idx in sets.items():
+                if idx.size and (idx.min() < 0 or idx.max() >= len(nodes)):
+                    raise MeshError(f"{self.name}: {label} '{key}' refers to a missing node")
+        object.__setattr__(self, "nodes", nodes)
+        object.__setattr__(self, "cells", cells)
+        object.__setattr__(self, "node_sets", MappingProxyType(node_sets))
+        object.__setattr__(self, "edge_sets", MappingProxyType(edge_sets))
+
+    @property
+    def n_nodes(self) -> int:
+        return int(self.nodes.shape[0])
+
+    @property
+    def n_cells(self) -> int:
+        return int(self.cells.shape[0])
+
+    def node_set(self, name: str) -> NDArray[np.int64]:
+        """Nodes of a node set, or of an edge set of that name (its nodes, sorted)."""
+        if name in self.node_sets:
+            return self.node_sets[name]
+        if name in self.edge_sets:
+            return np.unique(self.edge_sets[name])
+        known = sorted(set(self.node_sets) | set(self.edge_sets))
+        raise MeshError(f"{self.name}: no node or edge set named '{name}' (known: {known})")
+
+    def edge_set(self, name: str) -> NDArray[np.int64]:
+        if name not in self.edge_sets:
+            raise MeshError(
+                f"{self.name}: no surface (edge set) named '{name}' "
+                f"(known: {sorted(self.edge_sets)})"
+            )
+        return self.edge_sets[name]
+
+    def with_nodes(self, nodes: NDArray[np.float64]) -> QuadMesh:
+        """The same topology and sets at new node coordinates."""
+        return QuadMesh(nodes, self.cells, dict(self.node_sets), dict(self.edge_sets), self.name)
+
+    def with_name(self, name: str) -> QuadMesh:
+        return QuadMesh(self.nodes, self.cells, dict(self.node_sets), dict(self.edge_sets), name)
+
+    def with_sets(
+        self,
+        node_sets: Mapping[str, NDArray[np.int64]] | None = None,
+        edge_sets: Mapping[str, NDArray[np.int64]] | None = None,
+    ) -> QuadMesh:
+        """A copy with extra (or replaced) named sets."""
+        ns = dict(self.node_sets) | dict(node_sets or {})
+        es = dict(self.edge_sets) | dict(edge_sets or {})
+        return QuadMesh(self.nodes, self.cells, ns, es, self.name)
+
+    def transformed(
+        self, angle_deg: float = 0.0, translation: tuple[float, float] = (0.0, 0.0),
+        center: tuple[float, float] = (0.0, 0.0),
+    ) -> QuadMesh:
+        """Rotate by ``angle_deg`` about ``center`` (counter-clockwise), then translate."""
+        theta = np.deg2rad(angle_deg)
+        rot = np.array([[np.cos(theta), -np.sin(theta)], [np.sin(theta), np.cos(theta)]])
+        c = np.asarray(center, dtype=float)
+        moved = (self.nodes - c) @ rot.T + c + np.asarray(translation, dtype=float)
+        return self.with_nodes(moved)

@@ -1,0 +1,111 @@
+"""Q4 element kernels and global assembly: finite differences, patch tests, mass."""
+
+import numpy as np
+import pytest
+
+from ntncontact.fem.assembly import Assembler, MaterialGroup
+from ntncontact.fem.element import element_force_tangent
+from ntncontact.fem.q4 import InvertedElementError
+
+RNG = np.random.default_rng(1)
+
+
+def distorted_grid(nx=3, ny=2, jitter=0.15):
+    """A structured grid with interior nodes moved: non-parallelogram elements."""
+    xs, ys = np.meshgrid(np.linspace(0, 1.5, nx + 1), np.linspace(0, 1.0, ny + 1))
+    nodes = np.column_stack([xs.ravel(), ys.ravel()])
+    interior = (nodes[:, 0] > 0) & (nodes[:, 0] < 1.5) & (nodes[:, 1] > 0) & (nodes[:, 1] < 1.0)
+    nodes[interior] += jitter * RNG.uniform(-1, 1, (interior.sum(), 2)) / max(nx, ny)
+    i, j = np.meshgrid(np.arange(nx), np.arange(ny))
+    n0 = (j * (nx + 1) + i).ravel()
+    cells = np.column_stack([n0, n0 + 1, n0 + nx + 2, n0 + nx + 1])
+    return nodes, cells
+
+
+def make_assembler(nodes, cells, kind):
+    ne = len(cells)
+    return Assembler(cells, len(nodes), [MaterialGroup(kind, np.arange(ne))],
+                     np.full(ne, 2.0), np.full(ne, 1.0), np.full(ne, 3.0))
+
+
+@pytest.mark.parametrize("kind", ["neo_hookean", "linear_elastic"])
+def test_element_tangent_matches_central_differences(kind):
+    nodes, cells = distorted_grid(1, 1)
+    X_e = nodes[cells]
+    x_e = X_e + 0.1 * RNG.standard_normal(X_e.shape)
+    lam, mu = np.array([2.0]), np.array([1.0])
+    f, K, W = element_force_tangent(kind, X_e, x_e, lam, mu)
+    h = 1e-6
+    for d in range(8):
+        dx = np.zeros(8)
+        dx[d] = h
+        fp, _, Wp = element_force_tangent(kind, X_e, x_e + dx.reshape(1, 4, 2), lam, mu, False)
+        fm, _, Wm = element_force_tangent(kind, X_e, x_e - dx.reshape(1, 4, 2), lam, mu, False)
+        # central differences: truncation O(h^2) and cancellation O(eps/h) ~ 1e-10 at O(1) forces
+        np.testing.assert_allclose((fp - fm)[0] / (2 * h), K[0, :, d], rtol=1e-6, atol=1e-8)
+        assert (Wp - Wm)[0] / (2 * h) == pytest.approx(f[0, d], rel=1e-6, abs=1e-8)
+
+
+@pytest.mark.parametrize("kind", ["neo_hookean", "linear_elastic"])
+def test_patch_test_homogeneous_deformation_gives_zero_interior_force(kind):
+    nodes, cells = distorted_grid(4, 3, jitter=0.3)
+    asm = make_assembler(nodes, cells, kind)
+    G = np.array([[0.02, 0.01], [-0.015, 0.03]]) if kind == "linear_elastic" else np.array(
+        [[0.3, 0.2], [-0.1, 0.25]])
+    x = nodes + nodes @ G.T
+    f, K, W = asm.internal(nodes, x)
+    boundary = (np.isclose(nodes[:, 0], 0) | np.isclose(nodes[:, 0], 1.5)
+                | np.isclose(nodes[:, 1], 0) | np.isclose(nodes[:, 1], 1.0))
+    f = f.reshape(-1, 2)
+    # a homogeneous F is reproduced exactly by Q4: interior nodes carry no force (round-off)
+    assert np.abs(f[~boundary]).max() < 1e-12 * np.abs(f).max()
+    # total energy equals W(F) times the area, and boundary forces equal the traction resultants
+    from ntncontact.materials.models import stress_and_tangent
+    P, _, Wd = stress_and_tangent(kind, np.eye(2) + G, 2.0, 1.0)
+    assert W == pytest.approx(Wd * 1.5, rel=1e-12)
+    right = np.isclose(nodes[:, 0], 1.5)
+    np.testing.assert_allclose(f[right].sum(axis=0), P[:, 0] * 1.0, rtol=1e-12)
+    assert K.shape == (2 * len(nodes),) * 2
+
+
+def test_rigid_rotation_is_stress_free_for_neo_hookean():
+    nodes, cells = distorted_grid(3, 2)
+    asm = make_assembler(nodes, cells, "neo_hookean")
+    th = 1.1
+    R = np.array([[np.cos(th), -np.sin(th)], [np.sin(th), np.cos(th)]])
+    f, _, W = asm.internal(nodes, nodes @ R.T + [3.0, -2.0], need_tangent=False)
+    assert np.abs(f).max() < 1e-13 and abs(W) < 1e-14
+
+
+def test_global_tangent_matches_central_differences():
+    nodes, cells = distorted_grid(3, 2)
+    asm = make_assembler(nodes, cells, "neo_hookean")
+    x = nodes + 0.05 * RNG.standard_normal(nodes.shape)
+    _, K, _ = asm.internal(nodes, x)
+    v = RNG.standard_normal(nodes.shape)
+    h = 1e-6
+    fp, _, _ = asm.internal(nodes, x + h * v, False)
+    fm, _, _ = asm.internal(nodes, x - h * v, False)
+    np.testing.assert_allclose((fp - fm) / (2 * h), K @ v.ravel(), rtol=1e-6, atol=1e-7)
+    assert abs(K - K.T).max() < 1e-12 * abs(K).max()  # hyperelastic tangent is symmetric
+
+
+def test_mass_matrices_carry_the_total_mass_and_lumping_keeps_it():
+    nodes, cells = distorted_grid(3, 2)
+    asm = make_assembler(nodes, cells, "linear_elastic")
+    area = 1.5
+    for lumped in (False, True):
+        M = asm.mass(nodes, lumped)
+        ones_x = np.tile([1.0, 0.0], len(nodes))
+        assert ones_x @ M @ ones_x == pytest.approx(3.0 * area, rel=1e-13)
+    Mc, Ml = asm.nodal_mass(nodes, False), asm.nodal_mass(nodes, True)
+    np.testing.assert_allclose(np.asarray(Mc.sum(axis=1)).ravel(), Ml.diagonal(), rtol=1e-13)
+
+
+def test_inverted_element_is_named():
+    nodes, cells = distorted_grid(2, 1)
+    asm = make_assembler(nodes, cells, "neo_hookean")
+    x = nodes.copy()
+    x[cells[1, 2]] = x[cells[1, 0]] - [0.1, 0.1]  # fold element 1
+    with pytest.raises(InvertedElementError, match="element 1 .*current"):
+        asm.internal(nodes, x)

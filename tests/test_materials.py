@@ -1,0 +1,89 @@
+"""Constitutive models: derivatives by finite differences, closed-form stresses, bad input."""
+
+import numpy as np
+import pytest
+
+from ntncontact.materials.models import (
+    Material,
+    MaterialError,
+    cauchy_stress,
+    linear_elastic,
+    neo_hookean,
+    von_mises,
+)
+
+RNG = np.random.default_rng(0)
+F_SAMPLES = np.eye(2) + 0.3 * RNG.standard_normal((5, 2, 2))
+
+
+@pytest.mark.parametrize("model", [neo_hookean, linear_elastic])
+def test_stress_is_energy_derivative_and_tangent_is_stress_derivative(model):
+    lam, mu, h = 2.0, 1.3, 1e-6
+    P, A, _ = model(F_SAMPLES, lam, mu)
+    for i in range(2):
+        for J in range(2):
+            dF = np.zeros((2, 2))
+            dF[i, J] = h
+            Pp, _, Wp = model(F_SAMPLES + dF, lam, mu)
+            Pm, _, Wm = model(F_SAMPLES - dF, lam, mu)
+            # central differences: error O(h^2) ~ 1e-12 relative to O(1) stresses
+            np.testing.assert_allclose((Wp - Wm) / (2 * h), P[:, i, J], rtol=1e-7, atol=1e-8)
+            np.testing.assert_allclose((Pp - Pm) / (2 * h), A[:, :, :, i, J], rtol=1e-7,
+                                       atol=1e-8)
+
+
+def test_neo_hookean_uniaxial_plane_strain_stretch_closed_form():
+    lam, mu, s = 3.0, 2.0, 1.7
+    F = np.diag([s, 1.0])
+    P, _, W = neo_hookean(F, lam, mu)
+    # P11 = mu (s - 1/s) + lam ln s / s, P22 = lam ln s, W = mu/2 (s^2 - 1) - mu ln s + lam/2 ln^2 s
+    assert P[0, 0] == pytest.approx(mu * (s - 1 / s) + lam * np.log(s) / s, rel=1e-14)
+    assert P[1, 1] == pytest.approx(lam * np.log(s), rel=1e-14)
+    assert P[0, 1] == 0.0 and P[1, 0] == 0.0
+    assert W == pytest.approx(mu / 2 * (s * s - 1) - mu * np.log(s) + lam / 2 * np.log(s) ** 2)
+    sigma, s33 = cauchy_stress("neo_hookean", F, lam, mu)
+    assert sigma[0, 0] == pytest.approx(P[0, 0] * s / s, rel=1e-14)
+    assert s33 == pytest.approx(lam * np.log(s) / s, rel=1e-14)
+
+
+def test_neo_hookean_is_stress_free_and_frame_indifferent():
+    lam, mu = 3.0, 2.0
+    P, A, W = neo_hookean(np.eye(2), lam, mu)
+    assert np.abs(P).max() == 0.0 and W == 0.0
+    # small strain limit: tangent at identity equals the linear elastic moduli
+    _, A_lin, _ = linear_elastic(np.eye(2), lam, mu)
+    np.testing.assert_allclose(A, A_lin, atol=1e-14)
+    th = 0.7
+    R = np.array([[np.cos(th), -np.sin(th)], [np.sin(th), np.cos(th)]])
+    F = F_SAMPLES[0]
+    _, _, W1 = neo_hookean(F, lam, mu)
+    _, _, W2 = neo_hookean(R @ F, lam, mu)
+    assert W2 == pytest.approx(W1, rel=1e-13)
+
+
+def test_von_mises_of_pure_shear_and_hydrostatic():
+    sig = np.array([[0.0, 2.0], [2.0, 0.0]])
+    assert von_mises(sig, 0.0) == pytest.approx(np.sqrt(3.0) * 2.0)
+    assert von_mises(np.eye(2) * 5.0, 5.0) == pytest.approx(0.0, abs=1e-14)
+
+
+@pytest.mark.parametrize(
+    "kwargs, match",
+    [
+        ({"E": 1.0, "nu": 0.5}, "Poisson"),
+        ({"E": -1.0, "nu": 0.3}, "Young"),
+        ({"E": 1.0, "nu": 0.3, "density": 0.0}, "density"),
+    ],
+)
+def test_nonphysical_parameters_are_clear_errors(kwargs, match):
+    args = {"density": 1.0} | kwargs
+    with pytest.raises(MaterialError, match=match):
+        Material.from_young("neo_hookean", **args)
+
+
+def test_lame_round_trip():
+    m = Material.from_young("linear_elastic", 800.0, 0.3, 2.0)
+    assert m.lam == pytest.approx(461.538, rel=1e-5) and m.mu == pytest.approx(307.692, rel=1e-5)
+    assert m.young == pytest.approx(800.0) and m.poisson == pytest.approx(0.3)
+    with pytest.raises(MaterialError, match="shear"):
+        Material("neo_hookean", 1.0, 0.0, 1.0)
