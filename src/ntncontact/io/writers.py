@@ -1,0 +1,334 @@
+"""Result writers for a run folder: history CSV, contact CSV, summary JSON (and the VTU series).
+
+Every writer leaves valid files behind at any moment: CSV rows are flushed as they are written
+(a reader drops an unterminated last line, see :func:`read_csv_table`) and the summary JSON is
+replaced atomically. :class:`ResultsDirectory` bundles the four writers for a time loop.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import math
+import os
+import time as _time
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+from types import TracebackType
+from typing import Any
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from ntncontact.io.vtk import VtuSeriesWriter
+
+HISTORY_FILE = "history.csv"
+CONTACT_FILE = "contact.csv"
+SUMMARY_FILE = "summary.json"
+
+HISTORY_COLUMNS = (
+    "step",
+    "time",
+    "kinetic_energy",
+    "strain_energy",
+    "total_energy",
+    "linear_momentum_x",
+    "linear_momentum_y",
+    "angular_momentum",
+    "newton_iterations",
+)
+CONTACT_COLUMNS = (
+    "step",
+    "time",
+    "interface",
+    "node_1",
+    "node_2",
+    "x",
+    "y",
+    "gap",
+    "gap_rate",
+    "normal_traction",
+    "tangential_traction",
+    "normal_force",
+    "tangential_force",
+    "status",
+)
+SUMMARY_STATUSES = ("running", "completed", "failed", "interrupted")
+
+
+def format_value(value: Any) -> str:
+    """One CSV cell: integers and bools as integers, floats by ``repr`` (round-trips exactly)."""
+    if isinstance(value, (bool, np.bool_)):
+        return str(int(value))
+    if isinstance(value, (int, np.integer)):
+        return str(int(value))
+    if isinstance(value, (float, np.floating)):
+        return repr(float(value))
+    if isinstance(value, str):
+        return value
+    raise TypeError(f"cannot write {value!r} of type {type(value).__name__} to a CSV cell")
+
+
+def _format_column(values: NDArray) -> list[str]:
+    # Vectorised per dtype: tolist() yields Python scalars whose repr round-trips.
+    if values.dtype.kind == "b":
+        return [str(int(v)) for v in values.tolist()]
+    if values.dtype.kind in "iu":
+        return [str(v) for v in values.tolist()]
+    if values.dtype.kind == "f":
+        return [repr(v) for v in values.tolist()]
+    return [format_value(v) if not isinstance(v, str) else v for v in values.tolist()]
+
+
+def _check_columns(extra_columns: Sequence[str], required: Sequence[str]) -> tuple[str, ...]:
+    columns = tuple(required) + tuple(extra_columns)
+    duplicates = sorted({c for c in columns if columns.count(c) > 1})
+    if duplicates:
+        raise ValueError(f"duplicate column names {duplicates}")
+    return columns
+
+
+def _check_keys(given: Sequence[str], expected: Sequence[str], what: str) -> None:
+    missing = [c for c in expected if c not in given]
+    unknown = [c for c in given if c not in expected]
+    if missing or unknown:
+        raise KeyError(f"{what}: missing columns {missing}, unknown columns {unknown}")
+
+
+class _CsvWriter:
+    """A CSV file opened for writing with its header written and flushed."""
+
+    def __init__(self, path: Path, columns: tuple[str, ...]) -> None:
+        self.path = path
+        self.columns = columns
+        path.parent.mkdir(parents=True, exist_ok=True)
+        self._file = open(path, "w", newline="", encoding="utf-8")
+        self._csv = csv.writer(self._file, lineterminator="\n")
+        self._write_rows([list(columns)])
+
+    def _write_rows(self, rows: Sequence[Sequence[str]]) -> None:
+        if self._file.closed:
+            raise ValueError(f"{self.path} is already closed")
+        self._csv.writerows(rows)
+        self._file.flush()
+
+    def close(self) -> None:
+        self._file.close()
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc_info: object) -> None:
+        self.close()
+
+
+class HistoryWriter(_CsvWriter):
+    """``history.csv``: one row per output step, the required columns then ``extra_columns``."""
+
+    def __init__(self, directory: str | os.PathLike, extra_columns: Sequence[str] = ()) -> None:
+        columns = _check_columns(extra_columns, HISTORY_COLUMNS)
+        super().__init__(Path(directory) / HISTORY_FILE, columns)
+
+    def write(self, row: Mapping[str, Any]) -> None:
+        """Append one row; ``row`` must hold exactly the writer's columns."""
+        _check_keys(list(row), self.columns, str(self.path))
+        self._write_rows([[format_value(row[c]) for c in self.columns]])
+
+
+class ContactWriter(_CsvWriter):
+    """``contact.csv``: one row per active node pair per output step."""
+
+    def __init__(self, directory: str | os.PathLike, extra_columns: Sequence[str] = ()) -> None:
+        columns = _check_columns(extra_columns, CONTACT_COLUMNS)
+        super().__init__(Path(directory) / CONTACT_FILE, columns)
+
+    def write_step(self, step: int, time: float, pairs: Mapping[str, ArrayLike]) -> int:
+        """Append the rows of one output step and return how many were written.
+
+        ``pairs`` maps every column except ``step`` and ``time`` to an array with one entry per
+        active pair; scalars (e.g. a single ``interface`` name) are repeated for every pair.
+        """
+        _check_keys(list(pairs), self.columns[2:], str(self.path))
+        arrays = {name: np.asarray(values) for name, values in pairs.items()}
+        lengths = {name: a.shape[0] for name, a in arrays.items() if a.ndim > 0}
+        if not lengths:
+            raise ValueError("contact rows need at least one per-pair array (e.g. node_1)")
+        count = max(lengths.values())
+        wrong = {name: n for name, n in lengths.items() if n != count}
+        if wrong or any(a.ndim > 1 for a in arrays.values()):
+            raise ValueError(f"contact columns must be 1D of length {count}; got lengths {wrong}")
+        cells = [[format_value(step)] * count, [format_value(time)] * count]
+        for name in self.columns[2:]:
+            column = np.broadcast_to(arrays[name], (count,))
+            cells.append(_format_column(column))
+        self._write_rows(list(zip(*cells, strict=True)))
+        return count
+
+
+def to_jsonable(value: Any) -> Any:
+    """Convert numpy scalars/arrays, paths and tuples to JSON types; non-finite floats to None.
+
+    Non-finite floats become ``null`` so the file is strict JSON that any parser accepts.
+    """
+    if isinstance(value, Mapping):
+        return {str(k): to_jsonable(v) for k, v in value.items()}
+    if isinstance(value, np.ndarray):
+        return to_jsonable(value.tolist())
+    if isinstance(value, (list, tuple)):
+        return [to_jsonable(v) for v in value]
+    if isinstance(value, np.generic):
+        return to_jsonable(value.item())
+    if isinstance(value, float) and not math.isfinite(value):
+        return None
+    if isinstance(value, os.PathLike):
+        return os.fspath(value)
+    if value is None or isinstance(value, (bool, int, float, str)):
+        return value
+    raise TypeError(f"cannot write {value!r} of type {type(value).__name__} to JSON")
+
+
+def write_json_atomic(path: str | os.PathLike, data: Mapping[str, Any]) -> None:
+    """Write ``data`` as JSON to a temporary file, then rename it over ``path``."""
+    final = Path(path)
+    tmp = final.with_name(final.name + ".tmp")
+    text = json.dumps(to_jsonable(data), indent=2, allow_nan=False)
+    with open(tmp, "w", encoding="utf-8") as handle:
+        handle.write(text + "\n")
+        handle.flush()
+        os.fsync(handle.fileno())
+    os.replace(tmp, final)
+
+
+class SummaryWriter:
+    """``summary.json``: run status, step count, wall time and energy conservation.
+
+    ``wall_time_s`` is measured from construction unless given. The energy statistics come from
+    :meth:`record_energy`: ``energy_max_relative_variation`` is max |E - E0| / |E0| (null when
+    E0 is zero). Every :meth:`update` rewrites the file atomically.
+    """
+
+    def __init__(self, directory: str | os.PathLike, **extra: Any) -> None:
+        self.path = Path(directory) / SUMMARY_FILE
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        self._start = _time.perf_counter()
+        self._max_variation = 0.0
+        self._data: dict[str, Any] = {
+            "steps": 0,
+            "wall_time_s": 0.0,
+            "energy_initial": None,
+            "energy_final": None,
+            "energy_max_relative_variation": None,
+            "status": "running",
+            "error": None,
+        }
+        self.update(**extra)
+
+    @property
+    def data(self) -> dict[str, Any]:
+        """A copy of the current summary contents."""
+        return dict(self._data)
+
+    def record_energy(self, step: int, total_energy: float) -> None:
+        """Track the total energy of an output step (does not write; call :meth:`update`)."""
+        energy = float(total_energy)
+        if self._data["energy_initial"] is None:
+            self._data["energy_initial"] = energy
+        initial = self._data["energy_initial"]
+        self._data["energy_final"] = energy
+        self._data["steps"] = max(int(step), int(self._data["steps"]))
+        if initial != 0.0:
+            self._max_variation = max(self._max_variation, abs(energy - initial) / abs(initial))
+            self._data["energy_max_relative_variation"] = self._max_variation
+
+    def update(self, **fields: Any) -> None:
+        """Merge ``fields`` into the summary and rewrite the file."""
+        status = fields.get("status", self._data["status"])
+        if status not in SUMMARY_STATUSES:
+            raise ValueError(f"summary status must be one of {SUMMARY_STATUSES}, got {status!r}")
+        if "wall_time_s" not in fields:
+            fields["wall_time_s"] = _time.perf_counter() - self._start
+        merged = self._data | fields
+        # Write before keeping: a value JSON cannot hold leaves the file and the state unchanged.
+        write_json_atomic(self.path, merged)
+        self._data = merged
+
+    def finish(self, status: str = "completed", error: str | None = None, **fields: Any) -> None:
+        """Record the final status (and error message) of the run."""
+        self.update(status=status, error=error, **fields)
+
+
+class ResultsDirectory:
+    """All writers of one run folder; use as a context manager around the time loop.
+
+    On leaving the ``with`` block the summary status becomes ``completed``, ``interrupted``
+    (KeyboardInterrupt) or ``failed`` (any other exception, message in ``error``).
+    """
+
+    def __init__(
+        self,
+        directory: str | os.PathLike,
+        history_columns: Sequence[str] = (),
+        contact_columns: Sequence[str] = (),
+        write_fields: bool = True,
+        **summary_extra: Any,
+    ) -> None:
+        self.directory = Path(directory)
+        self.directory.mkdir(parents=True, exist_ok=True)
+        self.history = HistoryWriter(self.directory, history_columns)
+        self.contact = ContactWriter(self.directory, contact_columns)
+        self.fields = VtuSeriesWriter(self.directory) if write_fields else None
+        self.summary = SummaryWriter(self.directory, **summary_extra)
+
+    def write_history(self, row: Mapping[str, Any]) -> None:
+        """Append a history row and refresh the summary's step count and energy statistics."""
+        self.history.write(row)
+        self.summary.record_energy(row["step"], row["total_energy"])
+        self.summary.update()
+
+    def close(self) -> None:
+        self.history.close()
+        self.contact.close()
+
+    def __enter__(self) -> ResultsDirectory:
+        return self
+
+    def __exit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        traceback: TracebackType | None,
+    ) -> None:
+        self.close()
+        if exc_type is None:
+            self.summary.finish("completed")
+        elif issubclass(exc_type, KeyboardInterrupt):
+            self.summary.finish("interrupted", error="interrupted by the user")
+        else:
+            self.summary.finish("failed", error=f"{exc_type.__name__}: {exc}")
+
+
+def read_csv_table(path: str | os.PathLike) -> dict[str, NDArray]:
+    """Read a results CSV into columns: int, float or str arrays.
+
+    An unterminated last line (a run killed mid-write) and rows with the wrong number of cells
+    are dropped, so a partially written file still reads.
+    """
+    csv_path = Path(path)
+    text = csv_path.read_text(encoding="utf-8")
+    lines = text.split("\n")
+    # The last element is "" after a complete final line, or the cut-off fragment otherwise.
+    complete = [line for line in lines[:-1] if line]
+    rows = list(csv.reader(complete))
+    if not rows:
+        raise ValueError(f"{csv_path} has no header line")
+    header, body = rows[0], [r for r in rows[1:] if len(r) == len(rows[0])]
+    return {name: _parse_column([r[i] for r in body]) for i, name in enumerate(header)}
+
+
+def _parse_column(cells: list[str]) -> NDArray:
+    for kind in (int, float):
+        try:
+            return np.array([kind(c) for c in cells], dtype=kind)
+        except ValueError:
+            continue
+    return np.array(cells, dtype=str)
