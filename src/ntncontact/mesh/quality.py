@@ -1,0 +1,140 @@
+"""Quality measures of Q4 meshes: edge lengths, corner angles, corner Jacobians (report 4.2).
+
+All measures are vectorized over cells. ``quality_statistics`` reproduces the quantities of the
+report's Table 4.1 (minimum/maximum/average/variance of edge lengths and interior angles), with
+the population variance defined just below that table.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from ntncontact.mesh.quadmesh import MeshError, QuadMesh
+
+__all__ = [
+    "check_elements",
+    "corner_angles_deg",
+    "corner_jacobians",
+    "edge_lengths",
+    "quality_statistics",
+    "unique_edges",
+]
+
+
+def _nodes_cells(
+    mesh_or_nodes: QuadMesh | ArrayLike, cells: ArrayLike | None = None
+) -> tuple[NDArray[np.float64], NDArray[np.int64]]:
+    """Accept either a QuadMesh or a (nodes, cells) pair."""
+    if isinstance(mesh_or_nodes, QuadMesh):
+        return mesh_or_nodes.nodes, mesh_or_nodes.cells
+    if cells is None:
+        raise TypeError("pass a QuadMesh or both nodes and cells")
+    nodes = np.asarray(mesh_or_nodes, dtype=float)
+    cell_arr = np.asarray(cells, dtype=np.int64).reshape(-1, 4)
+    return nodes, cell_arr
+
+
+def unique_edges(cells: ArrayLike) -> NDArray[np.int64]:
+    """Undirected edges of a Q4 mesh, each once, as sorted node pairs (e, 2)."""
+    cell_arr = np.asarray(cells, dtype=np.int64).reshape(-1, 4)
+    pairs = np.stack([cell_arr, np.roll(cell_arr, -1, axis=1)], axis=-1).reshape(-1, 2)
+    return np.unique(np.sort(pairs, axis=1), axis=0)
+
+
+def edge_lengths(mesh_or_nodes: QuadMesh | ArrayLike, cells: ArrayLike | None = None) -> NDArray:
+    """Lengths of the unique edges (an edge shared by two cells is counted once)."""
+    nodes, cell_arr = _nodes_cells(mesh_or_nodes, cells)
+    edges = unique_edges(cell_arr)
+    return np.linalg.norm(nodes[edges[:, 1]] - nodes[edges[:, 0]], axis=1)
+
+
+def _corner_vectors(nodes: NDArray, cells: NDArray) -> tuple[NDArray, NDArray]:
+    """At each corner k: a = x_{k+1} - x_k (to the next node), b = x_{k-1} - x_k (previous)."""
+    x = nodes[cells]  # (m, 4, 2)
+    return np.roll(x, -1, axis=1) - x, np.roll(x, 1, axis=1) - x
+
+
+def corner_jacobians(
+    mesh_or_nodes: QuadMesh | ArrayLike, cells: ArrayLike | None = None
+) -> NDArray[np.float64]:
+    """Signed corner Jacobians (m, 4): cross(x_{k+1} - x_k, x_{k-1} - x_k).
+
+    Positive at every corner of a convex counter-clockwise cell; equals 4 det(dx/dxi) of the
+    bilinear map evaluated at that corner. A non-positive value flags inversion or collapse.
+    """
+    nodes, cell_arr = _nodes_cells(mesh_or_nodes, cells)
+    a, b = _corner_vectors(nodes, cell_arr)
+    return a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]
+
+
+def corner_angles_deg(
+    mesh_or_nodes: QuadMesh | ArrayLike, cells: ArrayLike | None = None
+) -> NDArray[np.float64]:
+    """Interior angle (degrees, in [0, 360)) at each of the 4 corners of each cell, (m, 4).
+
+    Measured counter-clockwise from the edge to the next node to the edge to the previous node,
+    so a reflex corner of a non-convex (but valid CCW) cell reads above 180 and the four angles of
+    any simple CCW quadrilateral sum to 360.
+    """
+    nodes, cell_arr = _nodes_cells(mesh_or_nodes, cells)
+    a, b = _corner_vectors(nodes, cell_arr)
+    cross = a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]
+    dot = np.einsum("...i,...i->...", a, b)
+    return np.mod(np.degrees(np.arctan2(cross, dot)), 360.0)
+
+
+def quality_statistics(
+    mesh_or_nodes: QuadMesh | ArrayLike, cells: ArrayLike | None = None
+) -> dict[str, float]:
+    """Table 4.1 measures of a mesh.
+
+    Edge statistics are over the population of unique edges; angle statistics over the
+    population of all 4 m interior corner angles (degrees). Variances are population variances
+    (divide by the count), as defined below the report's Table 4.1. The average angle of a valid
+    quadrilateral mesh is exactly 90 degrees since each cell's angles sum to 360.
+    """
+    lengths = edge_lengths(mesh_or_nodes, cells)
+    angles = corner_angles_deg(mesh_or_nodes, cells).ravel()
+    return {
+        "min_edge": float(lengths.min()),
+        "max_edge": float(lengths.max()),
+        "average_edge": float(lengths.mean()),
+        "variance_edge": float(lengths.var()),
+        "min_angle_deg": float(angles.min()),
+        "max_angle_deg": float(angles.max()),
+        "average_angle_deg": float(angles.mean()),
+        "variance_angle": float(angles.var()),
+    }
+
+
+def check_elements(
+    mesh_or_nodes: QuadMesh | ArrayLike,
+    cells: ArrayLike | None = None,
+    body_name: str | None = None,
+    rel_tol: float = 1e-10,
+) -> None:
+    """Raise MeshError naming the first inverted or degenerate element, its corner and the body.
+
+    A corner is inverted when its corner Jacobian is negative, and degenerate when it is at most
+    ``rel_tol * |a| |b|`` (sine of the corner angle below ``rel_tol``, or a zero-length edge).
+    The corner reported is the one with the smallest scaled Jacobian in that element.
+    """
+    if body_name is None:
+        body_name = mesh_or_nodes.name if isinstance(mesh_or_nodes, QuadMesh) else "body"
+    nodes, cell_arr = _nodes_cells(mesh_or_nodes, cells)
+    a, b = _corner_vectors(nodes, cell_arr)
+    jac = a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]
+    scale = np.linalg.norm(a, axis=-1) * np.linalg.norm(b, axis=-1)
+    bad = ~(jac > rel_tol * scale)  # also catches NaN coordinates
+    if not bad.any():
+        return
+    elem = int(np.flatnonzero(bad.any(axis=1))[0])
+    with np.errstate(divide="ignore", invalid="ignore"):
+        scaled = np.where(scale[elem] > 0, jac[elem] / scale[elem], -np.inf)
+    corner = int(np.argmin(np.nan_to_num(scaled, nan=-np.inf)))
+    kind = "inverted" if jac[elem, corner] < 0 else "degenerate"
+    raise MeshError(
+        f"body '{body_name}': element {elem} is {kind} "
+        f"(corner Jacobian {jac[elem, corner]:.3g} at node {int(cell_arr[elem, corner])})"
+    )
