@@ -1,0 +1,1 @@
+"""ALE mesh motion: surface relocation and respacing, interior smoothing, remapping, velocities."""
