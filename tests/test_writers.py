@@ -256,3 +256,11 @@ def test_results_directory_marks_interrupt(tmp_path):
     data = json.loads((tmp_path / "summary.json").read_text())
     assert data["status"] == "interrupted"
     assert not (tmp_path / "fields").exists()
+
+
+def test_read_vtu_raises_on_corrupt_file(tmp_path):
+    # meshio.read() would sys.exit here; callers need an exception they can catch.
+    bad = tmp_path / "half.vtu"
+    bad.write_text("<VTKFile")
+    with pytest.raises(meshio.ReadError):
+        read_vtu(bad)

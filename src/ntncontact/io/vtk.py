@@ -171,8 +171,12 @@ def read_pvd(pvd_path: str | os.PathLike) -> list[tuple[float, Path]]:
 
 
 def read_vtu(path: str | os.PathLike, time: float = float("nan")) -> VtuFrame:
-    """Read a VTU written by :class:`VtuSeriesWriter` back into 2D arrays."""
-    mesh = meshio.read(path)
+    """Read a VTU written by :class:`VtuSeriesWriter` back into 2D arrays.
+
+    Raises ``meshio.ReadError`` (or ``xml.etree.ElementTree.ParseError``) on a corrupt file.
+    """
+    # meshio.read() calls sys.exit on a corrupt file; the format reader raises ReadError instead.
+    mesh = meshio.vtu.read(os.fspath(path))
     quads = np.vstack([block.data for block in mesh.cells if block.type == "quad"])
     n_points = len(mesh.points)
     point_data = {name: _drop_z(v, n_points) for name, v in mesh.point_data.items()}

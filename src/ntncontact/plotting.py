@@ -1,0 +1,300 @@
+"""Figures made from a results folder alone (history.csv, contact.csv, fields.pvd + VTUs).
+
+matplotlib is imported inside the functions and drives an Agg canvas directly (no pyplot), so
+importing this module costs nothing and never changes the user's global backend. Every function
+tolerates a partially written run: truncated CSV lines are dropped and only the VTU files the PVD
+lists (and that parse) are used.
+"""
+
+from __future__ import annotations
+
+import os
+import warnings
+from collections.abc import Sequence
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from ntncontact.io.vtk import VtuFrame, read_pvd, read_vtu
+from ntncontact.io.writers import CONTACT_FILE, HISTORY_FILE, read_csv_table
+
+if TYPE_CHECKING:
+    from matplotlib.figure import Figure
+
+PVD_FILE = "fields.pvd"
+MAX_PANELS = 6
+DPI = 110
+
+
+class ResultsNotFoundError(FileNotFoundError):
+    """A results folder (or one of its files) is missing or holds no data yet."""
+
+
+def _new_figure(nrows: int = 1, ncols: int = 1, size: tuple[float, float] = (7.0, 4.5)):
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
+    fig = Figure(figsize=size, dpi=DPI, layout="constrained")
+    FigureCanvasAgg(fig)
+    axes = fig.subplots(nrows, ncols, squeeze=False)
+    return fig, axes
+
+
+def _save(fig: Figure, path: Path) -> Path:
+    fig.savefig(path)
+    return path
+
+
+def _load_table(directory: Path, name: str) -> dict[str, NDArray]:
+    path = directory / name
+    if not path.is_file():
+        raise ResultsNotFoundError(f"no {name} in results folder {directory}")
+    try:
+        table = read_csv_table(path)
+    except ValueError as error:
+        raise ResultsNotFoundError(f"{path} is empty: {error}") from error
+    if not table or len(next(iter(table.values()))) == 0:
+        raise ResultsNotFoundError(f"{path} has no data rows yet")
+    return table
+
+
+def plot_energies(directory: str | os.PathLike, path: str | os.PathLike | None = None) -> Path:
+    """Kinetic, strain and total energy against time, and the total energy's drift."""
+    folder = Path(directory)
+    history = _load_table(folder, HISTORY_FILE)
+    time, total = history["time"], history["total_energy"]
+    fig, axes = _new_figure(2, 1, size=(7.0, 6.0))
+    top, bottom = axes[0, 0], axes[1, 0]
+    for column in ("kinetic_energy", "strain_energy", "total_energy"):
+        top.plot(time, history[column], label=column.replace("_", " "))
+    for column in ("frictional_dissipation", "contact_work"):
+        if column in history and history[column].dtype.kind in "iuf":
+            top.plot(time, history[column], "--", label=column.replace("_", " "))
+    top.set_ylabel("energy")
+    top.legend(loc="best", fontsize="small")
+    scale = abs(total[0])
+    drift = (total - total[0]) / scale if scale > 0 else total - total[0]
+    bottom.plot(time, drift, color="k")
+    bottom.set_ylabel("(E - E0) / |E0|" if scale > 0 else "E - E0")
+    bottom.set_xlabel("time")
+    for ax in (top, bottom):
+        ax.grid(True, alpha=0.3)
+    return _save(fig, Path(path) if path else folder / "energies.png")
+
+
+def plot_momenta(directory: str | os.PathLike, path: str | os.PathLike | None = None) -> Path:
+    """Linear momentum components and angular momentum against time."""
+    folder = Path(directory)
+    history = _load_table(folder, HISTORY_FILE)
+    fig, axes = _new_figure(2, 1, size=(7.0, 6.0))
+    top, bottom = axes[0, 0], axes[1, 0]
+    top.plot(history["time"], history["linear_momentum_x"], label="linear momentum x")
+    top.plot(history["time"], history["linear_momentum_y"], label="linear momentum y")
+    top.set_ylabel("linear momentum")
+    top.legend(loc="best", fontsize="small")
+    bottom.plot(history["time"], history["angular_momentum"], color="C2")
+    bottom.set_ylabel("angular momentum")
+    bottom.set_xlabel("time")
+    for ax in (top, bottom):
+        ax.grid(True, alpha=0.3)
+    return _save(fig, Path(path) if path else folder / "momenta.png")
+
+
+def _series(directory: Path) -> list[tuple[float, Path]]:
+    pvd = directory / PVD_FILE
+    if not pvd.is_file():
+        raise ResultsNotFoundError(f"no {PVD_FILE} in results folder {directory}")
+    series = read_pvd(pvd)
+    if not series:
+        raise ResultsNotFoundError(f"{pvd} lists no existing VTU files")
+    return series
+
+
+def _evenly_spaced(count: int, wanted: int) -> list[int]:
+    return sorted({int(i) for i in np.round(np.linspace(0, count - 1, min(count, wanted)))})
+
+
+def _nearest(available: NDArray, targets: Sequence[float]) -> list[int]:
+    picks = [int(np.argmin(np.abs(available - t))) for t in targets]
+    return list(dict.fromkeys(picks))  # unique, in the requested order
+
+
+def load_frames(
+    directory: str | os.PathLike, times: Sequence[float] | None = None, max_frames: int = 6
+) -> list[VtuFrame]:
+    """Snapshots nearest to ``times``, or up to ``max_frames`` evenly spaced; bad files skipped."""
+    series = _series(Path(directory))
+    available = np.array([t for t, _ in series])
+    if times is None:
+        indices = _evenly_spaced(len(series), max_frames)
+    else:
+        indices = _nearest(available, times)[:max_frames]
+    frames = []
+    for i in indices:
+        time, vtu = series[i]
+        try:
+            frames.append(read_vtu(vtu, time=time))
+        except Exception as error:  # a corrupt file (any parser error) must not stop the plot
+            warnings.warn(f"skipping unreadable {vtu}: {error}", stacklevel=2)
+    if not frames:
+        raise ResultsNotFoundError(f"no readable VTU files in results folder {directory}")
+    return frames
+
+
+def cell_values(frame: VtuFrame, field: str) -> NDArray[np.float64]:
+    """One value per cell: a cell field, or a point field averaged over each cell's nodes.
+
+    Vector fields are reduced to their magnitude.
+    """
+    if field in frame.cell_data:
+        values = np.asarray(frame.cell_data[field], dtype=float)
+    elif field in frame.point_data:
+        values = np.asarray(frame.point_data[field], dtype=float)[frame.cells].mean(axis=1)
+    else:
+        known = sorted(set(frame.cell_data) | set(frame.point_data))
+        raise KeyError(f"no field '{field}' in {frame.path} (available: {known})")
+    return np.linalg.norm(values, axis=1) if values.ndim == 2 else values
+
+
+def _common_view(frames: Sequence[VtuFrame], field: str):
+    """Shared colour normalisation and axis limits so panels/animation frames compare."""
+    from matplotlib.colors import Normalize
+
+    values = np.concatenate([cell_values(f, field) for f in frames])
+    finite = values[np.isfinite(values)]
+    low, high = (finite.min(), finite.max()) if finite.size else (0.0, 1.0)
+    norm = Normalize(vmin=low, vmax=high if high > low else low + 1.0)
+    points = np.vstack([f.deformed_points for f in frames])
+    lower, upper = points.min(axis=0), points.max(axis=0)
+    pad = 0.05 * max(float(np.max(upper - lower)), 1e-12)
+    return norm, (lower[0] - pad, upper[0] + pad), (lower[1] - pad, upper[1] + pad)
+
+
+def _draw_mesh(ax: Any, frame: VtuFrame, field: str, norm: Any, limits: tuple) -> Any:
+    from matplotlib.collections import PolyCollection
+
+    collection = PolyCollection(
+        frame.deformed_points[frame.cells],
+        array=cell_values(frame, field),
+        cmap="viridis",
+        norm=norm,
+        edgecolors=(0.0, 0.0, 0.0, 0.35),
+        linewidths=0.3,
+    )
+    ax.add_collection(collection)
+    ax.set_xlim(*limits[0])
+    ax.set_ylim(*limits[1])
+    ax.set_aspect("equal")
+    ax.set_title(f"t = {frame.time:.4g}", fontsize="small")
+    return collection
+
+
+def plot_deformed(
+    directory: str | os.PathLike,
+    times: Sequence[float] | None = None,
+    field: str = "von_mises",
+    path: str | os.PathLike | None = None,
+) -> Path:
+    """Deformed meshes of all bodies at up to six times, coloured by ``field``, one colour bar."""
+    folder = Path(directory)
+    frames = load_frames(folder, times, MAX_PANELS)
+    ncols = min(3, len(frames))
+    nrows = -(-len(frames) // ncols)
+    fig, axes = _new_figure(nrows, ncols, size=(3.6 * ncols + 1.0, 3.2 * nrows))
+    norm, xlim, ylim = _common_view(frames, field)
+    for ax, frame in zip(axes.flat, frames, strict=False):
+        collection = _draw_mesh(ax, frame, field, norm, (xlim, ylim))
+    for ax in list(axes.flat)[len(frames):]:
+        ax.set_visible(False)
+    fig.colorbar(collection, ax=axes.ravel().tolist(), label=field.replace("_", " "))
+    return _save(fig, Path(path) if path else folder / f"deformed_{field}.png")
+
+
+def _pick_steps(available: NDArray, steps: Sequence[int] | None) -> list[int]:
+    if steps is None:
+        return [int(available[i]) for i in _evenly_spaced(len(available), MAX_PANELS)]
+    chosen = [int(s) for s in steps if int(s) in set(available.tolist())]
+    if not chosen:
+        raise ResultsNotFoundError(f"none of steps {list(steps)} has contact rows")
+    return chosen
+
+
+def plot_contact_tractions(
+    directory: str | os.PathLike,
+    steps: Sequence[int] | None = None,
+    path: str | os.PathLike | None = None,
+) -> Path:
+    """Normal and tangential traction along each interface against x at chosen output steps."""
+    folder = Path(directory)
+    contact = _load_table(folder, CONTACT_FILE)
+    chosen = _pick_steps(np.unique(contact["step"]), steps)
+    interfaces = list(dict.fromkeys(contact["interface"].tolist()))
+    fig, axes = _new_figure(2, 1, size=(7.0, 6.0))
+    top, bottom = axes[0, 0], axes[1, 0]
+    for step in chosen:
+        for interface in interfaces:
+            rows = (contact["step"] == step) & (contact["interface"] == interface)
+            if not np.any(rows):
+                continue
+            order = np.argsort(contact["x"][rows])
+            label = f"t = {contact['time'][rows][0]:.4g}"
+            label += f" ({interface})" if len(interfaces) > 1 else ""
+            x = contact["x"][rows][order]
+            line = top.plot(x, contact["normal_traction"][rows][order], "o-", ms=3, label=label)
+            bottom.plot(x, contact["tangential_traction"][rows][order], "o-", ms=3,
+                        color=line[0].get_color())
+    top.set_ylabel("normal traction")
+    bottom.set_ylabel("tangential traction")
+    bottom.set_xlabel("x")
+    top.legend(loc="best", fontsize="small")
+    for ax in (top, bottom):
+        ax.grid(True, alpha=0.3)
+    return _save(fig, Path(path) if path else folder / "contact_tractions.png")
+
+
+def plot_all(directory: str | os.PathLike) -> list[Path]:
+    """Every figure the folder has data for; the list of PNGs written."""
+    folder = Path(directory)
+    makers = (plot_energies, plot_momenta, plot_deformed, plot_contact_tractions)
+    made = []
+    for make in makers:
+        try:
+            made.append(make(folder))
+        except ResultsNotFoundError:
+            continue
+    if not made:
+        raise ResultsNotFoundError(
+            f"no results to plot in {folder} (looked for {HISTORY_FILE}, {CONTACT_FILE}, "
+            f"{PVD_FILE})"
+        )
+    return made
+
+
+def animate(
+    directory: str | os.PathLike,
+    path_gif: str | os.PathLike,
+    max_frames: int = 60,
+    field: str = "von_mises",
+    fps: int = 10,
+) -> Path:
+    """A GIF of the deformed meshes over (up to ``max_frames`` evenly spaced) output steps."""
+    from matplotlib.animation import PillowWriter
+    from matplotlib.cm import ScalarMappable
+
+    frames = load_frames(directory, None, max_frames)
+    norm, xlim, ylim = _common_view(frames, field)
+    fig, axes = _new_figure(1, 1, size=(6.0, 4.5))
+    ax = axes[0, 0]
+    # The colour bar gets its own mappable: the mesh collection is replaced every frame.
+    fig.colorbar(ScalarMappable(norm, "viridis"), ax=ax, label=field.replace("_", " "))
+    collection = _draw_mesh(ax, frames[0], field, norm, (xlim, ylim))
+    writer = PillowWriter(fps=fps)
+    output = Path(path_gif)
+    with writer.saving(fig, output, dpi=DPI):
+        for frame in frames:
+            collection.remove()
+            collection = _draw_mesh(ax, frame, field, norm, (xlim, ylim))
+            writer.grab_frame()
+    return output

@@ -1,0 +1,161 @@
+"""Plots from a small synthetic results folder written with the real writers."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import matplotlib.image as mpimg
+import numpy as np
+import pytest
+
+from ntncontact.io.vtk import stack_bodies
+from ntncontact.io.writers import HISTORY_COLUMNS, ResultsDirectory
+from ntncontact.plotting import (
+    DPI,
+    ResultsNotFoundError,
+    animate,
+    plot_all,
+    plot_contact_tractions,
+    plot_deformed,
+    plot_energies,
+    plot_momenta,
+)
+
+N_STEPS = 5
+
+
+def grid(nx: int, ny: int, origin: tuple[float, float], size: float):
+    """A structured (nx x ny)-cell Q4 grid with counter-clockwise cells."""
+    xs = origin[0] + size * np.arange(nx + 1)
+    ys = origin[1] + size * np.arange(ny + 1)
+    points = np.array([(x, y) for y in ys for x in xs])
+    cells = [
+        [j * (nx + 1) + i, j * (nx + 1) + i + 1, (j + 1) * (nx + 1) + i + 1, (j + 1) * (nx + 1) + i]
+        for j in range(ny)
+        for i in range(nx)
+    ]
+    return points, np.array(cells)
+
+
+def write_run(folder: Path) -> None:
+    block, block_cells = grid(4, 2, (0.0, 1.0), 0.25)
+    wall, wall_cells = grid(6, 1, (-0.25, 0.0), 0.25)
+    points, cells, body_id = stack_bodies([block, wall], [block_cells, wall_cells])
+    is_block = np.arange(len(points)) < len(block)
+    with ResultsDirectory(folder, ("active_pairs",), scenario="synthetic") as out:
+        for step in range(N_STEPS):
+            time = 0.1 * step
+            drop = np.where(is_block, -0.2 * step, 0.0)
+            displacement = np.column_stack([0.02 * step * points[:, 1] * is_block, drop])
+            row = {name: float(step) for name in HISTORY_COLUMNS}
+            row.update(step=step, time=time, kinetic_energy=1.0 - 0.1 * step,
+                       strain_energy=0.1 * step, total_energy=1.0 + 1e-3 * np.sin(step),
+                       newton_iterations=3, active_pairs=3 if step >= 2 else 0)
+            out.write_history(row)
+            von_mises = np.linspace(0.0, step + 1.0, len(cells))
+            out.fields.write(step, time, points, cells,
+                             {"displacement": displacement, "velocity": displacement / 0.1},
+                             {"von_mises": von_mises, "body_id": body_id})
+            if step >= 2:
+                x = np.array([0.0, 0.5, 1.0])
+                out.contact.write_step(step, time, {
+                    "interface": "block_wall", "node_1": [0, 2, 4], "node_2": [21, 23, 25],
+                    "x": x, "y": np.zeros(3), "gap": np.zeros(3), "gap_rate": -np.ones(3),
+                    "normal_traction": -step * (1.0 - (x - 0.5) ** 2),
+                    "tangential_traction": 0.1 * step * (x - 0.5),
+                    "normal_force": -np.ones(3), "tangential_force": np.zeros(3),
+                    "status": ["stick", "slip", "stick"],
+                })
+
+
+@pytest.fixture(scope="module")
+def results(tmp_path_factory) -> Path:
+    folder = tmp_path_factory.mktemp("run")
+    write_run(folder)
+    return folder
+
+
+def assert_real_image(path: Path, width_in: float | None = None) -> None:
+    assert path.is_file() and path.stat().st_size > 0
+    image = mpimg.imread(path)
+    assert image.ndim == 3 and min(image.shape[:2]) > 100
+    if width_in is not None:
+        assert image.shape[1] == round(width_in * DPI)
+    assert float(np.var(image[..., :3])) > 0.0  # not a blank canvas
+
+
+def test_energy_and_momentum_plots(results, tmp_path):
+    assert_real_image(plot_energies(results, tmp_path / "e.png"), width_in=7.0)
+    assert_real_image(plot_momenta(results, tmp_path / "m.png"), width_in=7.0)
+
+
+def test_deformed_plot_at_chosen_times(results, tmp_path):
+    path = plot_deformed(results, times=[0.0, 0.2, 0.4], path=tmp_path / "d.png")
+    assert_real_image(path, width_in=3.6 * 3 + 1.0)
+
+
+def test_deformed_plot_by_point_field(results, tmp_path):
+    assert_real_image(plot_deformed(results, field="velocity", path=tmp_path / "v.png"))
+    with pytest.raises(KeyError, match="pressure"):
+        plot_deformed(results, field="pressure", path=tmp_path / "p.png")
+
+
+def test_contact_traction_plot(results, tmp_path):
+    assert_real_image(plot_contact_tractions(results, steps=[2, 4], path=tmp_path / "c.png"))
+    with pytest.raises(ResultsNotFoundError, match="steps"):
+        plot_contact_tractions(results, steps=[0], path=tmp_path / "none.png")
+
+
+def test_plot_all_writes_every_figure_into_the_folder(tmp_path):
+    write_run(tmp_path)
+    paths = plot_all(tmp_path)
+    assert sorted(p.name for p in paths) == [
+        "contact_tractions.png", "deformed_von_mises.png", "energies.png", "momenta.png"
+    ]
+    for path in paths:
+        assert path.parent == tmp_path
+        assert_real_image(path)
+
+
+def test_animation_gif(results, tmp_path):
+    from PIL import Image
+
+    path = animate(results, tmp_path / "run.gif", max_frames=3)
+    with Image.open(path) as gif:
+        assert gif.n_frames == 3
+        assert gif.size == (round(6.0 * DPI), round(4.5 * DPI))
+        assert np.var(np.asarray(gif.convert("RGB"))) > 0.0
+
+
+def test_partial_run_is_still_plotted(tmp_path):
+    write_run(tmp_path)
+    history = tmp_path / "history.csv"
+    history.write_text(history.read_text() + "5,0.5,0.4")  # killed mid-row
+    (tmp_path / "fields" / "fields_00004.vtu").unlink()  # fewer VTUs than listed
+    contact = tmp_path / "contact.csv"
+    contact.write_text(contact.read_text() + "5,0.5,block_wall,0,2")
+    with pytest.warns(UserWarning, match="fields_00003"):
+        (tmp_path / "fields" / "fields_00003.vtu").write_text("<VTKFile")  # half-written file
+        paths = plot_all(tmp_path)
+    assert len(paths) == 4
+    for path in paths:
+        assert_real_image(path)
+
+
+def test_history_only_folder_makes_history_plots(tmp_path):
+    with ResultsDirectory(tmp_path, write_fields=False) as out:
+        row = {name: 1.0 for name in HISTORY_COLUMNS} | {"step": 0, "newton_iterations": 2}
+        out.write_history(row)
+        out.write_history(row | {"step": 1, "time": 2.0})
+    assert sorted(p.name for p in plot_all(tmp_path)) == ["energies.png", "momenta.png"]
+
+
+def test_empty_folder_error_names_it(tmp_path):
+    empty = tmp_path / "nothing_here"
+    empty.mkdir()
+    with pytest.raises(ResultsNotFoundError, match="nothing_here"):
+        plot_all(empty)
+    with pytest.raises(ResultsNotFoundError, match="history.csv"):
+        plot_energies(empty)
+    with pytest.raises(ResultsNotFoundError, match="fields.pvd"):
+        animate(empty, tmp_path / "x.gif")
