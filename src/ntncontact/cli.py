@@ -1,0 +1,78 @@
+"""The ``ntncontact`` command: run scenarios, plot results."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+from . import __version__
+
+
+def _run(args: argparse.Namespace) -> int:
+    from tqdm import tqdm
+
+    from .builder import build_model
+    from .io.results import ResultWriter
+    from .io.scenario import load_scenario
+    from .simulation import Simulation
+
+    scenario = Path(args.scenario)
+    config = load_scenario(scenario, args.set)
+    model = build_model(config, scenario.parent)
+    out = Path(args.out)
+    writer = ResultWriter(out, model, scenario=str(scenario), title=config.title,
+                          overrides=list(args.set or []))
+    sim = Simulation(model, [writer])
+    t_end = model.analysis.t_end
+    with tqdm(total=t_end, unit="t", disable=args.quiet or None, desc=scenario.stem,
+              bar_format="{l_bar}{bar}| t={n:.4g}/{total:.4g} [{elapsed}<{remaining}]") as bar:
+
+        def progress(t: float) -> None:
+            bar.update(t - bar.n)
+
+        sim.run(progress)
+    print(f"results written to {out} (history.csv, summary.json, fields.pvd)")
+    return 0
+
+
+def _plot(args: argparse.Namespace) -> int:
+    from .plotting import plot_all
+
+    paths = plot_all(Path(args.directory))
+    for p in paths:
+        print(p)
+    return 0
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog="ntncontact", description=__doc__)
+    parser.add_argument("--version", action="version", version=f"ntncontact {__version__}")
+    sub = parser.add_subparsers(dest="command", required=True)
+    run = sub.add_parser("run", help="run a scenario file")
+    run.add_argument("scenario", help="scenario TOML file")
+    run.add_argument("--out", required=True, help="results folder")
+    run.add_argument("--set", action="append", metavar="KEY=VALUE",
+                     help="override a scenario key, e.g. analysis.mass=\"lumped\" (repeatable)")
+    run.add_argument("--quiet", action="store_true", help="no progress bar")
+    run.set_defaults(func=_run)
+    plot = sub.add_parser("plot", help="write PNG figures of a results folder")
+    plot.add_argument("directory")
+    plot.set_defaults(func=_plot)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    try:
+        return int(args.func(args))
+    except KeyboardInterrupt:
+        print("interrupted: files written so far are valid", file=sys.stderr)
+        return 130
+    except (ValueError, RuntimeError, OSError) as err:
+        print(f"error: {err}", file=sys.stderr)
+        return 1
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())

@@ -1,0 +1,111 @@
+"""External loads and prescribed displacements, each scaled by a function of time.
+
+Loads are dead loads defined on the reference configuration: a traction or pressure on an edge
+set (per unit reference length), point forces on a node set, a body force per unit reference
+volume. Their nodal vectors are computed once; at time t the external force is sum_k s_k(t) f_k.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from .q4 import N_GP, reference_gradients
+
+
+@dataclass(frozen=True)
+class TimeFunction:
+    """Piecewise-linear function of time through ``points`` (t, value), constant outside."""
+
+    times: tuple[float, ...] = (0.0,)
+    values: tuple[float, ...] = (1.0,)
+
+    def __post_init__(self) -> None:
+        if len(self.times) != len(self.values) or not self.times:
+            raise ValueError("a time function needs as many times as values (at least one)")
+        if np.any(np.diff(self.times) <= 0):
+            raise ValueError(f"time function times must increase strictly: {self.times}")
+
+    @classmethod
+    def constant(cls, value: float = 1.0) -> TimeFunction:
+        return cls((0.0,), (float(value),))
+
+    def __call__(self, t: float) -> float:
+        return float(np.interp(t, self.times, self.values))
+
+
+def edge_traction_vector(
+    X: NDArray, edges: NDArray, traction: NDArray | None, pressure: float | None, ndof: int
+) -> NDArray:
+    """Consistent nodal forces of a uniform traction (vector) or pressure on linear edges.
+
+    Edges are oriented body-on-left, so the outward reference normal of (a, b) is
+    (dy, -dx)/L; a positive pressure pushes against the surface (along -n).
+    """
+    a, b = edges[:, 0], edges[:, 1]
+    d = X[b] - X[a]
+    length = np.hypot(d[:, 0], d[:, 1])
+    if pressure is not None:
+        normal = np.column_stack([d[:, 1], -d[:, 0]]) / length[:, None]
+        per_edge = -pressure * normal * length[:, None]
+    else:
+        per_edge = np.outer(length, np.asarray(traction, dtype=float))
+    f = np.zeros((ndof // 2, 2))
+    np.add.at(f, a, 0.5 * per_edge)
+    np.add.at(f, b, 0.5 * per_edge)
+    return f.ravel()
+
+
+def point_load_vector(nodes: NDArray, force: NDArray, ndof: int) -> NDArray:
+    """The same force vector on every node of the set."""
+    f = np.zeros((ndof // 2, 2))
+    np.add.at(f, nodes, np.asarray(force, dtype=float))
+    return f.ravel()
+
+
+def body_force_vector(X: NDArray, cells: NDArray, force: NDArray, ndof: int) -> NDArray:
+    """int N_a b dV over the reference configuration for a uniform body force b."""
+    _, weight = reference_gradients(X[cells])
+    nodal = np.einsum("eg,ga->ea", weight, N_GP)
+    per_node = np.bincount(cells.ravel(), weights=nodal.ravel(), minlength=ndof // 2)
+    return (per_node[:, None] * np.asarray(force, dtype=float)).ravel()
+
+
+@dataclass(frozen=True)
+class LoadCase:
+    """Nodal force patterns and their time functions: f_ext(t) = sum_k s_k(t) f_k."""
+
+    patterns: tuple[NDArray, ...]
+    functions: tuple[TimeFunction, ...]
+
+    def __call__(self, t: float, ndof: int) -> NDArray:
+        f = np.zeros(ndof)
+        for pattern, func in zip(self.patterns, self.functions, strict=True):
+            f += func(t) * pattern
+        return f
+
+
+@dataclass(frozen=True)
+class Prescribed:
+    """Prescribed displacement components: u[dofs] = values * s(t)."""
+
+    dofs: NDArray
+    values: NDArray
+    function: TimeFunction
+
+    def at(self, t: float) -> NDArray:
+        return self.values * self.function(t)
+
+
+def dirichlet_values(prescribed: tuple[Prescribed, ...], t: float, ndof: int) -> tuple[NDArray,
+                                                                                        NDArray]:
+    """Sorted unique constrained dofs and their values at time t (later entries win)."""
+    if not prescribed:
+        return np.zeros(0, dtype=np.int64), np.zeros(0)
+    vals = np.full(ndof, np.nan)
+    for p in prescribed:
+        vals[p.dofs] = p.at(t)
+    dofs = np.flatnonzero(~np.isnan(vals))
+    return dofs, vals[dofs]

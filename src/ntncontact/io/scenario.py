@@ -1,0 +1,269 @@
+"""Scenario files (TOML) -> validated, typed configuration. Every key is in docs/scenarios.md."""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+from typing import Annotated, Any, Literal
+
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
+
+if sys.version_info >= (3, 11):
+    import tomllib
+else:  # pragma: no cover
+    import tomli as tomllib
+
+
+class ScenarioError(ValueError):
+    """A scenario file that cannot be used; the message names the file and the key."""
+
+
+class Strict(BaseModel):
+    model_config = ConfigDict(extra="forbid", frozen=True, populate_by_name=True)
+
+
+Positive = Annotated[float, Field(gt=0)]
+NonNegative = Annotated[float, Field(ge=0)]
+Vector = tuple[float, float]
+
+
+class TimeFunctionConfig(Strict):
+    """Piecewise-linear scale factor: values at strictly increasing times."""
+
+    times: list[float] = Field(min_length=1)
+    values: list[float] = Field(min_length=1)
+
+    @model_validator(mode="after")
+    def _same_length(self) -> TimeFunctionConfig:
+        if len(self.times) != len(self.values):
+            raise ValueError("'times' and 'values' must have the same length")
+        if any(b <= a for a, b in zip(self.times, self.times[1:], strict=False)):
+            raise ValueError("'times' must increase strictly")
+        return self
+
+
+class TransformConfig(Strict):
+    rotate_deg: float = 0.0
+    center: Vector = (0.0, 0.0)
+    translate: Vector = (0.0, 0.0)
+
+
+class RectangleMesh(Strict):
+    type: Literal["rectangle"]
+    width: Positive
+    height: Positive
+    nx: Annotated[int, Field(ge=1)]
+    ny: Annotated[int, Field(ge=1)]
+    origin: Vector = (0.0, 0.0)
+    grading_x: Positive = 1.0
+    grading_y: Positive = 1.0
+    transform: TransformConfig | None = None
+
+
+class AnnulusMesh(Strict):
+    type: Literal["annulus"]
+    r_inner: Positive
+    r_outer: Positive
+    n_radial: Annotated[int, Field(ge=1)]
+    n_circ: Annotated[int, Field(ge=3)]
+    center: Vector = (0.0, 0.0)
+    start_angle_deg: float = -90.0
+    transform: TransformConfig | None = None
+
+    @model_validator(mode="after")
+    def _radii(self) -> AnnulusMesh:
+        if self.r_inner >= self.r_outer:
+            raise ValueError("r_inner must be smaller than r_outer")
+        return self
+
+
+class HalfDiskMesh(Strict):
+    type: Literal["half_disk"]
+    radius: Positive
+    n_arc: Annotated[int, Field(ge=2)]
+    n_radial: Annotated[int, Field(ge=1)]
+    bottom_size: Positive | None = None
+    center: Vector = (0.0, 0.0)
+    transform: TransformConfig | None = None
+
+
+class GmshMesh(Strict):
+    type: Literal["gmsh"]
+    file: str
+    transform: TransformConfig | None = None
+
+
+MeshConfig = Annotated[
+    RectangleMesh | AnnulusMesh | HalfDiskMesh | GmshMesh, Field(discriminator="type")
+]
+
+
+class MaterialConfig(Strict):
+    """Either (E, nu) or (lambda, mu), plus the density."""
+
+    model: Literal["linear_elastic", "neo_hookean"]
+    E: Positive | None = None
+    nu: Annotated[float, Field(gt=-1.0, lt=0.5)] | None = None
+    lam: float | None = Field(default=None, alias="lambda")
+    mu: Positive | None = None
+    density: Positive
+    plane_stress: bool = False
+
+    @model_validator(mode="after")
+    def _one_pair(self) -> MaterialConfig:
+        young = self.E is not None or self.nu is not None
+        lame = self.lam is not None or self.mu is not None
+        if young == lame:
+            raise ValueError("give either E and nu, or lambda and mu (not both, not neither)")
+        if young and (self.E is None or self.nu is None):
+            raise ValueError("E and nu must be given together")
+        if lame and (self.lam is None or self.mu is None):
+            raise ValueError("lambda and mu must be given together")
+        return self
+
+
+class SupportConfig(Strict):
+    """Prescribed displacement components on a node or edge set (omitted component is free)."""
+
+    set: str
+    x: float | None = None
+    y: float | None = None
+    function: TimeFunctionConfig | None = None
+
+    @model_validator(mode="after")
+    def _some_component(self) -> SupportConfig:
+        if self.x is None and self.y is None:
+            raise ValueError("a support must prescribe 'x', 'y' or both")
+        return self
+
+
+class LoadConfig(Strict):
+    """pressure (scalar, on an edge set), traction / point (vector), body_force (vector)."""
+
+    type: Literal["pressure", "traction", "point", "body_force"]
+    set: str | None = None
+    value: float | None = None
+    vector: Vector | None = None
+    function: TimeFunctionConfig | None = None
+
+    @model_validator(mode="after")
+    def _fields(self) -> LoadConfig:
+        if self.type == "pressure" and self.value is None:
+            raise ValueError("a pressure load needs 'value'")
+        if self.type != "pressure" and self.vector is None:
+            raise ValueError(f"a {self.type} load needs 'vector'")
+        if self.type != "body_force" and self.set is None:
+            raise ValueError(f"a {self.type} load needs 'set'")
+        return self
+
+
+class InitialConfig(Strict):
+    velocity: Vector = (0.0, 0.0)
+    angular_velocity: float = 0.0
+
+
+class BodyConfig(Strict):
+    name: str
+    mesh: MeshConfig
+    material: MaterialConfig
+    mesh_motion: Literal["lagrangian", "ale"] = "lagrangian"
+    initial: InitialConfig = InitialConfig()
+    supports: list[SupportConfig] = []
+    loads: list[LoadConfig] = []
+
+
+class NewtonConfig(Strict):
+    rtol: Positive = 1e-10
+    max_iterations: Annotated[int, Field(ge=1)] = 25
+
+
+class AnalysisConfig(Strict):
+    kind: Literal["static", "dynamic"]
+    dt: Positive
+    t_end: Positive
+    mass: Literal["consistent", "lumped"] = "consistent"
+    output_interval: Positive | None = None
+    max_cutbacks: Annotated[int, Field(ge=0, le=20)] = 4
+    newton: NewtonConfig = NewtonConfig()
+
+
+class ScenarioConfig(Strict):
+    title: str = ""
+    analysis: AnalysisConfig
+    bodies: list[BodyConfig] = Field(min_length=1)
+
+    @model_validator(mode="after")
+    def _unique_names(self) -> ScenarioConfig:
+        names = [b.name for b in self.bodies]
+        if len(set(names)) != len(names):
+            raise ValueError(f"body names must be unique, got {names}")
+        return self
+
+
+def _format_error(path: Path, err: ValidationError) -> str:
+    lines = [f"{path}: invalid scenario"]
+    for e in err.errors():
+        loc = ".".join(str(p) for p in e["loc"] if not str(p).startswith("function-"))
+        msg = e["msg"]
+        if e["type"] == "extra_forbidden":
+            msg = "unknown key"
+        lines.append(f"  {loc or '(top level)'}: {msg}")
+    return "\n".join(lines)
+
+
+def parse_scenario(data: dict[str, Any], path: Path) -> ScenarioConfig:
+    """Validate a scenario mapping; errors name the file and each offending key."""
+    try:
+        return ScenarioConfig.model_validate(data)
+    except ValidationError as err:
+        raise ScenarioError(_format_error(path, err)) from None
+
+
+def load_scenario(path: str | Path, overrides: list[str] | None = None) -> ScenarioConfig:
+    """Read and validate a TOML scenario, applying ``--set key=value`` overrides first."""
+    path = Path(path)
+    if not path.is_file():
+        raise ScenarioError(f"{path}: scenario file not found")
+    try:
+        data = tomllib.loads(path.read_text())
+    except tomllib.TOMLDecodeError as err:
+        raise ScenarioError(f"{path}: not valid TOML: {err}") from None
+    for item in overrides or []:
+        apply_override(data, item, path)
+    return parse_scenario(data, path)
+
+
+def apply_override(data: dict[str, Any], item: str, path: Path) -> None:
+    """Set a dotted key (list items by index), e.g. ``contact.0.friction=0.2``; value is TOML."""
+    if "=" not in item:
+        raise ScenarioError(f"{path}: override '{item}' must look like key.path=value")
+    key, raw = item.split("=", 1)
+    try:
+        value = tomllib.loads(f"v = {raw}")["v"]
+    except tomllib.TOMLDecodeError:
+        value = raw  # a bare word is taken as a string
+    parts = key.strip().split(".")
+    node: Any = data
+    for i, part in enumerate(parts[:-1]):
+        node = _child(node, part, ".".join(parts[: i + 1]), path)
+    last = parts[-1]
+    if isinstance(node, list):
+        node[_index(node, last, key, path)] = value
+    elif isinstance(node, dict):
+        node[last] = value
+    else:
+        raise ScenarioError(f"{path}: override '{key}': '{parts[-2]}' is not a table")
+
+
+def _child(node: Any, part: str, where: str, path: Path) -> Any:
+    if isinstance(node, list):
+        return node[_index(node, part, where, path)]
+    if isinstance(node, dict):
+        return node.setdefault(part, {})
+    raise ScenarioError(f"{path}: override: '{where}' is not a table or list")
+
+
+def _index(node: list, part: str, where: str, path: Path) -> int:
+    if not part.isdigit() or int(part) >= len(node):
+        raise ScenarioError(f"{path}: override '{where}': no item {part} (list of {len(node)})")
+    return int(part)

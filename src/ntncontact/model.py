@@ -1,0 +1,118 @@
+"""The static description of a simulation: bodies stacked into global arrays, loads, supports."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Literal
+
+import numpy as np
+from numpy.typing import NDArray
+
+from .fem.assembly import Assembler, MaterialGroup
+from .fem.loads import LoadCase, Prescribed
+from .materials.models import Material
+from .mesh.quadmesh import QuadMesh
+
+MeshMotion = Literal["lagrangian", "ale"]
+
+
+@dataclass(frozen=True)
+class Body:
+    """One solid: its mesh (reference configuration), material and place in the global arrays."""
+
+    name: str
+    mesh: QuadMesh
+    material: Material
+    node_offset: int
+    cell_offset: int
+    initial_velocity: tuple[float, float] = (0.0, 0.0)
+    initial_angular_velocity: float = 0.0
+    mesh_motion: MeshMotion = "lagrangian"
+
+    @property
+    def nodes(self) -> NDArray:
+        """Global node indices of this body."""
+        return np.arange(self.node_offset, self.node_offset + self.mesh.n_nodes)
+
+    @property
+    def cells(self) -> NDArray:
+        """Global element indices of this body."""
+        return np.arange(self.cell_offset, self.cell_offset + self.mesh.n_cells)
+
+    def global_nodes(self, set_name: str) -> NDArray:
+        return self.mesh.node_set(set_name) + self.node_offset
+
+    def global_edges(self, set_name: str) -> NDArray:
+        return self.mesh.edge_set(set_name) + self.node_offset
+
+
+@dataclass(frozen=True)
+class AnalysisSettings:
+    """Time integration and solver controls."""
+
+    kind: Literal["static", "dynamic"] = "dynamic"
+    dt: float = 0.01
+    t_end: float = 1.0
+    mass: Literal["consistent", "lumped"] = "consistent"
+    output_interval: float | None = None
+    max_cutbacks: int = 4
+    newton_rtol: float = 1e-10
+    newton_max_iterations: int = 25
+
+
+@dataclass(frozen=True)
+class Model:
+    """Everything a run needs that does not change with time."""
+
+    bodies: tuple[Body, ...]
+    analysis: AnalysisSettings
+    loads: LoadCase
+    prescribed: tuple[Prescribed, ...]
+    X0: NDArray  # stacked reference coordinates (n, 2)
+    cells: NDArray  # stacked connectivity in global node numbers (ne, 4)
+    assembler: Assembler = field(repr=False)
+    interfaces: tuple = ()
+
+    @property
+    def n_nodes(self) -> int:
+        return int(self.X0.shape[0])
+
+    @property
+    def ndof(self) -> int:
+        return 2 * self.n_nodes
+
+    def body(self, name: str) -> Body:
+        for b in self.bodies:
+            if b.name == name:
+                return b
+        raise KeyError(f"no body named '{name}' (bodies: {[b.name for b in self.bodies]})")
+
+    def body_of_cell(self) -> NDArray:
+        """Body index of each global element."""
+        return np.concatenate([np.full(b.mesh.n_cells, i) for i, b in enumerate(self.bodies)])
+
+
+def stack_bodies(
+    meshes: list[tuple[str, QuadMesh, Material]],
+) -> tuple[list[tuple[str, QuadMesh, Material, int, int]], NDArray, NDArray, Assembler]:
+    """Offsets, stacked coordinates and connectivity, and the assembler of all bodies."""
+    placed = []
+    node_off = cell_off = 0
+    for name, mesh, material in meshes:
+        placed.append((name, mesh, material, node_off, cell_off))
+        node_off += mesh.n_nodes
+        cell_off += mesh.n_cells
+    X0 = np.vstack([m.nodes for _, m, _ in meshes])
+    cells = np.vstack([m.cells + off for (_, m, _, off, _) in placed])
+    lam = np.concatenate([np.full(m.n_cells, mat.effective_lambda) for _, m, mat in meshes])
+    mu = np.concatenate([np.full(m.n_cells, mat.mu) for _, m, mat in meshes])
+    rho = np.concatenate([np.full(m.n_cells, mat.density) for _, m, mat in meshes])
+    groups = []
+    for kind in ("linear_elastic", "neo_hookean"):
+        idx = np.concatenate(
+            [np.arange(c, c + m.n_cells) for (_, m, mat, _, c) in placed if mat.kind == kind]
+            or [np.zeros(0, dtype=np.int64)]
+        )
+        if idx.size:
+            groups.append(MaterialGroup(kind, idx.astype(np.int64)))
+    return placed, X0, cells, Assembler(cells, len(X0), groups, lam, mu, rho)

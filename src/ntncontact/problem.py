@@ -1,0 +1,120 @@
+"""Residual and tangent of one step (quasi-static or mid-point rule), Dirichlet dofs eliminated.
+
+Dynamic (report (5.15)-(5.19)), unknown d = d_{n+1/2}:
+    R(d) = M a_{n+1/2}(d) + f_int(X + d) - f_ext(t_{n+1/2}) + f_extra(x, v),
+    dR/dd = 4/dt^2 M + K + K_extra.
+Quasi-static, unknown d = d_{n+1}: R(d) = f_int(X + d) - f_ext(t_{n+1}) + f_extra.
+``extra`` terms (contact, convection) are callables of (x_eval, v_eval, rate_factor, x_start)
+returning a force vector and COO triplets of its derivative with respect to x_eval.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+import scipy.sparse as sp
+from numpy.typing import NDArray
+
+from .dynamics.midpoint import inertia_factor, midpoint_acceleration, midpoint_velocity
+from .fem.loads import dirichlet_values
+from .model import Model
+
+ExtraTerm = Callable[
+    [NDArray, NDArray | None, float | None, NDArray],
+    tuple[NDArray, tuple[NDArray, NDArray, NDArray]],
+]
+
+
+@dataclass(frozen=True)
+class StepState:
+    """Kinematic state at one instant; X is the material position of the particle at each node."""
+
+    step: int
+    time: float
+    X: NDArray
+    d: NDArray
+    v: NDArray
+    a: NDArray
+
+    @property
+    def x(self) -> NDArray:
+        return self.X + self.d
+
+
+@dataclass
+class StepProblem:
+    """The nonlinear equations of the step t_n -> t_n + dt, on the free dofs."""
+
+    model: Model
+    state: StepState
+    dt: float
+    mass: sp.csr_matrix | None = None  # on dofs; None for quasi-static
+    extra: Sequence[ExtraTerm] = ()
+    _cache: dict = field(default_factory=dict, repr=False)
+
+    def __post_init__(self) -> None:
+        ndof = self.model.ndof
+        t0, t1 = self.state.time, self.state.time + self.dt
+        dofs, values = dirichlet_values(self.model.prescribed, t1, ndof)
+        if self.dynamic:
+            _, values0 = dirichlet_values(self.model.prescribed, t0, ndof)
+            values = 0.5 * (values + values0)
+        self.fixed_dofs, self.fixed_values = dofs, values
+        free = np.ones(ndof, dtype=bool)
+        free[dofs] = False
+        self.free_dofs = np.flatnonzero(free)
+        t_eval = 0.5 * (t0 + t1) if self.dynamic else t1
+        self.f_ext = self.model.loads(t_eval, ndof)
+
+    @property
+    def dynamic(self) -> bool:
+        return self.mass is not None
+
+    def initial_guess(self) -> NDArray:
+        """Start from d_n (the mid-point rule's d_{n+1/2} guess d_n + v_n dt/2)."""
+        d = self.state.d.ravel()
+        if self.dynamic:
+            d = d + 0.5 * self.dt * self.state.v.ravel()
+        return d[self.free_dofs]
+
+    def full(self, y: NDArray) -> NDArray:
+        """All dofs of the unknown displacement from the free ones."""
+        d = np.empty(self.model.ndof)
+        d[self.free_dofs] = y
+        d[self.fixed_dofs] = self.fixed_values
+        return d
+
+    def _evaluate(self, y: NDArray) -> tuple[NDArray, sp.csr_matrix, float]:
+        d = self.full(y)
+        x = self.state.X.ravel() + d
+        f_int, K, _ = self.model.assembler.internal(self.state.X, x.reshape(-1, 2))
+        R = f_int - self.f_ext
+        scale = max(np.linalg.norm(f_int), np.linalg.norm(self.f_ext))
+        v_eval, rate = None, None
+        if self.dynamic:
+            d_n, v_n = self.state.d.ravel(), self.state.v.ravel()
+            inertia = self.mass @ midpoint_acceleration(d, d_n, v_n, self.dt)
+            R = R + inertia
+            K = K + inertia_factor(self.dt) * self.mass
+            scale = max(scale, np.linalg.norm(inertia))
+            v_eval, rate = midpoint_velocity(d, d_n, self.dt).reshape(-1, 2), 2.0 / self.dt
+        for term in self.extra:
+            f, (rows, cols, vals) = term(x.reshape(-1, 2), v_eval, rate, self.state.x)
+            R = R + f
+            scale = max(scale, np.linalg.norm(f))
+            if len(vals):
+                K = K + sp.csr_matrix((vals, (rows, cols)), shape=K.shape)
+        return R, K.tocsr(), float(scale)
+
+    def residual(self, y: NDArray) -> tuple[NDArray, float]:
+        R, K, scale = self._evaluate(y)
+        self._cache = {"y": y.copy(), "K": K}
+        return R[self.free_dofs], scale
+
+    def jacobian(self, y: NDArray) -> sp.csr_matrix:
+        if "y" not in self._cache or not np.array_equal(self._cache["y"], y):
+            self.residual(y)
+        K = self._cache["K"]
+        return K[self.free_dofs][:, self.free_dofs]

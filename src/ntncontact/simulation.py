@@ -1,0 +1,153 @@
+"""The time loop: Newton per step, step cut-back, diagnostics, observers."""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from typing import Protocol
+
+import numpy as np
+import scipy.sparse as sp
+from numpy.typing import NDArray
+
+from .diagnostics import Balance, balance
+from .dynamics.midpoint import end_of_step
+from .fem.q4 import InvertedElementError
+from .model import Model
+from .problem import StepProblem, StepState
+from .solvers.newton import NewtonError, NewtonSettings, newton
+
+
+class SimulationError(RuntimeError):
+    """A step could not be completed even after cutting it back."""
+
+
+@dataclass(frozen=True)
+class StepRecord:
+    """What observers receive after every completed step."""
+
+    state: StepState
+    balance: Balance
+    newton_iterations: int
+    dt: float
+    extra: dict = field(default_factory=dict)
+
+
+class Observer(Protocol):
+    def on_step(self, model: Model, record: StepRecord) -> None: ...
+
+    def on_finish(self, status: str, error: str | None) -> None: ...
+
+
+def default_linear_solve() -> Callable[[sp.spmatrix, NDArray], NDArray]:
+    """The project's sparse solver, or SuperLU (never spsolve: it may switch to UMFPACK)."""
+    try:
+        from .solvers.linear import LinearSolver
+    except ImportError:  # pragma: no cover - only while the solver module is absent
+        import scipy.sparse.linalg as spla
+
+        return lambda A, b: spla.splu(sp.csc_matrix(A), permc_spec="MMD_AT_PLUS_A").solve(b)
+    return LinearSolver().solve
+
+
+def initial_state(model: Model) -> StepState:
+    """Reference configuration, each body's initial rigid velocity (translation + spin)."""
+    n = model.n_nodes
+    v = np.zeros((n, 2))
+    for body in model.bodies:
+        nodes = body.nodes
+        centre = model.X0[nodes].mean(axis=0)
+        r = model.X0[nodes] - centre
+        omega = body.initial_angular_velocity
+        v[nodes] = np.asarray(body.initial_velocity) + omega * np.column_stack([-r[:, 1], r[:, 0]])
+    return StepState(0, 0.0, model.X0.copy(), np.zeros((n, 2)), v, np.zeros((n, 2)))
+
+
+class Simulation:
+    """Advances a model in time; the state is replaced (never mutated) each step."""
+
+    def __init__(self, model: Model, observers: Sequence[Observer] = (),
+                 linear_solve: Callable | None = None) -> None:
+        self.model = model
+        self.observers = list(observers)
+        self.solve = linear_solve or default_linear_solve()
+        self.settings = NewtonSettings(rtol=model.analysis.newton_rtol,
+                                       max_iterations=model.analysis.newton_max_iterations)
+        self.dynamic = model.analysis.kind == "dynamic"
+        self.lumped = model.analysis.mass == "lumped"
+        self.state = initial_state(model)
+        self._nodal_mass = model.assembler.nodal_mass(model.X0, self.lumped)
+        self._mass = sp.kron(self._nodal_mass, sp.eye(2), format="csr")
+        self.length_scale = float(np.ptp(model.X0, axis=0).max())
+
+    def balance(self, state: StepState) -> Balance:
+        _, _, energy = self.model.assembler.internal(state.X, state.x, need_tangent=False)
+        return balance(self._nodal_mass, state.x, state.v, energy)
+
+    def advance(self, state: StepState, dt: float) -> tuple[StepState, int]:
+        """One step of size dt from ``state``: Newton on the step problem, then the update."""
+        problem = StepProblem(self.model, state, dt, self._mass if self.dynamic else None)
+        result = newton(problem.residual, problem.jacobian, self.solve,
+                        problem.initial_guess(), self.settings, self.length_scale)
+        d = problem.full(result.y).reshape(-1, 2)
+        if self.dynamic:
+            d1, v1, a1 = end_of_step(d, state.d, state.v, dt)
+        else:
+            d1, v1, a1 = d, (d - state.d) / dt, np.zeros_like(d)
+        new = StepState(state.step + 1, state.time + dt, state.X, d1, v1, a1)
+        return new, result.iterations
+
+    def step_with_cutback(self, dt: float) -> tuple[StepState, int, float]:
+        """Advance by dt, halving (up to max_cutbacks times) sub-steps that fail."""
+        state, remaining, iterations, cuts = self.state, dt, 0, 0
+        h = dt
+        while remaining > 1e-12 * dt:
+            h = min(h, remaining)
+            try:
+                state, its = self.advance(state, h)
+            except (NewtonError, InvertedElementError, np.linalg.LinAlgError, RuntimeError) as err:
+                cuts += 1
+                if cuts > self.model.analysis.max_cutbacks:
+                    raise SimulationError(
+                        f"step {self.state.step + 1} (t = {self.state.time:.6g} -> "
+                        f"{self.state.time + dt:.6g}) failed after {cuts - 1} halvings of the "
+                        f"step: {err}"
+                    ) from err
+                h *= 0.5
+                continue
+            iterations += its
+            remaining -= h
+        return StepState(self.state.step + 1, self.state.time + dt, state.X, state.d, state.v,
+                         state.a), iterations, h
+
+    def run(self, progress: Callable[[float], None] | None = None) -> StepState:
+        """Run to t_end; observers get every step; on error they are told and it re-raises."""
+        analysis = self.model.analysis
+        n_steps = int(np.ceil(analysis.t_end / analysis.dt - 1e-9))
+        self._notify(StepRecord(self.state, self.balance(self.state), 0, 0.0))
+        try:
+            for _ in range(n_steps):
+                dt = min(analysis.dt, analysis.t_end - self.state.time)
+                if dt <= 1e-12 * analysis.dt:
+                    break
+                self.state, its, _ = self.step_with_cutback(dt)
+                self._notify(StepRecord(self.state, self.balance(self.state), its, dt))
+                if progress is not None:
+                    progress(self.state.time)
+        except KeyboardInterrupt:
+            self._finish("interrupted", "interrupted by the user")
+            raise
+        except Exception as err:
+            self._finish("failed", str(err))
+            raise
+        self._finish("completed", None)
+        return self.state
+
+    def _notify(self, record: StepRecord) -> None:
+        for obs in self.observers:
+            obs.on_step(self.model, record)
+
+    def _finish(self, status: str, error: str | None) -> None:
+        for obs in self.observers:
+            obs.on_finish(status, error)
+

@@ -1,0 +1,108 @@
+"""Newton-Raphson with backtracking line search on plain residual/Jacobian callables.
+
+Knows nothing about mechanics: the caller gives ``residual(y) -> (R, scale)`` where ``scale`` is
+the magnitude of the forces in play (so the tolerance is relative to them), and
+``jacobian(y) -> sparse matrix``. Both act on the unknowns only (Dirichlet dofs eliminated).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+import numpy as np
+import scipy.sparse as sp
+from numpy.typing import NDArray
+
+
+class NewtonError(RuntimeError):
+    """Newton did not converge: diverged, stalled or hit its iteration limit."""
+
+    def __init__(self, message: str, residual_norm: float, iterations: int) -> None:
+        super().__init__(message)
+        self.residual_norm = residual_norm
+        self.iterations = iterations
+
+
+@dataclass(frozen=True)
+class NewtonSettings:
+    """Tolerances: converged when |R| <= rtol * scale + atol and |dy| <= dtol * (|y| + length)."""
+
+    rtol: float = 1e-10
+    atol: float = 0.0
+    dtol: float = 1e-8
+    max_iterations: int = 25
+    line_search_steps: int = 5
+    divergence_factor: float = 1e8
+
+
+@dataclass
+class NewtonResult:
+    y: NDArray
+    iterations: int
+    residual_norms: list[float] = field(default_factory=list)
+
+
+Residual = Callable[[NDArray], tuple[NDArray, float]]
+Jacobian = Callable[[NDArray], sp.spmatrix]
+LinearSolve = Callable[[sp.spmatrix, NDArray], NDArray]
+
+
+def newton(
+    residual: Residual,
+    jacobian: Jacobian,
+    solve: LinearSolve,
+    y0: NDArray,
+    settings: NewtonSettings = NewtonSettings(),
+    length_scale: float = 1.0,
+) -> NewtonResult:
+    """Solve R(y) = 0 from ``y0``; raise :class:`NewtonError` with the last residual if it fails."""
+    y = np.array(y0, dtype=float)
+    R, scale = residual(y)
+    norms = [float(np.linalg.norm(R))]
+    first = norms[0]
+    if y.size == 0 or norms[0] <= settings.atol or norms[0] == 0.0:
+        return NewtonResult(y, 0, norms)
+    for it in range(1, settings.max_iterations + 1):
+        dy = -solve(jacobian(y), R)
+        if not np.all(np.isfinite(dy)):
+            raise NewtonError("linear solve returned non-finite values", norms[-1], it)
+        y, R, scale = _line_search(residual, y, dy, norms[-1], settings.line_search_steps)
+        norms.append(float(np.linalg.norm(R)))
+        limit = settings.divergence_factor * max(first, 1e-300)
+        if not np.isfinite(norms[-1]) or norms[-1] > limit:
+            raise NewtonError(f"diverged (|R| = {norms[-1]:.3e})", norms[-1], it)
+        small_r = norms[-1] <= settings.rtol * scale + settings.atol
+        small_d = np.linalg.norm(dy) <= settings.dtol * (np.linalg.norm(y) + length_scale)
+        if small_r and (small_d or norms[-1] <= 1e-3 * settings.rtol * scale):
+            return NewtonResult(y, it, norms)
+    raise NewtonError(
+        f"no convergence in {settings.max_iterations} iterations (|R| = {norms[-1]:.3e}, "
+        f"tolerance {settings.rtol * scale + settings.atol:.3e})",
+        norms[-1],
+        settings.max_iterations,
+    )
+
+
+def _line_search(
+    residual: Residual, y: NDArray, dy: NDArray, norm0: float, steps: int
+) -> tuple[NDArray, NDArray, float]:
+    """Backtrack on |R| from the full step; keep the full step if nothing is better."""
+    alpha = 1.0
+    best = None
+    for _ in range(max(steps, 1)):
+        try:
+            R, scale = residual(y + alpha * dy)
+        except (ValueError, FloatingPointError):  # e.g. an element inverted by a too-long step
+            alpha *= 0.5
+            continue
+        norm = float(np.linalg.norm(R))
+        if best is None or norm < best[0]:
+            best = (norm, alpha, R, scale)
+        if norm < norm0:
+            break
+        alpha *= 0.5
+    if best is None:
+        raise NewtonError("every line-search trial inverted an element", norm0, 0)
+    _, alpha, R, scale = best
+    return y + alpha * dy, R, scale
