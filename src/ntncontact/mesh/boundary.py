@@ -1,0 +1,151 @@
+"""Boundary edges, ordered surface chains, nodal outward normals and tributary lengths.
+
+Orientation convention (shared with :class:`QuadMesh`): an edge ``(a, b)`` has the body on its
+left, so its outward normal is ``rot(-90)(x_b - x_a) = (dy, -dx) / length`` (report 2.1, the
+outward unit normal ``n1`` used in the gap 2.4).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from ntncontact.mesh.quadmesh import MeshError, QuadMesh
+
+__all__ = [
+    "SurfaceChain",
+    "boundary_edges",
+    "chain_edge_lengths",
+    "chain_from_edges",
+    "nodal_outward_normals",
+    "nodal_tributary_lengths",
+    "surface_chain",
+]
+
+
+@dataclass(frozen=True)
+class SurfaceChain:
+    """Surface nodes in walking order (body on the left); a closed loop lists each node once."""
+
+    nodes: NDArray[np.int64]
+    closed: bool
+
+
+def _cell_edges(cells: NDArray[np.int64]) -> NDArray[np.int64]:
+    """All cell edges ``(c_k, c_k+1)``; with CCW cells each has its cell on the left."""
+    return np.stack((cells, np.roll(cells, -1, axis=1)), axis=-1).reshape(-1, 2)
+
+
+def boundary_edges(mesh: QuadMesh) -> NDArray[np.int64]:
+    """Edges used by exactly one cell, oriented with the body on the left, in cell order.
+
+    Raises :class:`MeshError` when an edge is shared by more than two cells or twice in the
+    same direction (overlapping or inverted cells), since then "boundary" is meaningless.
+    """
+    edges = _cell_edges(mesh.cells)
+    keys = np.sort(edges, axis=1)
+    _, first, inverse, counts = np.unique(
+        keys, axis=0, return_index=True, return_inverse=True, return_counts=True
+    )
+    inverse = inverse.reshape(-1)
+    if np.any(counts > 2):
+        bad = keys[first[counts > 2][0]]
+        raise MeshError(f"{mesh.name}: edge {tuple(bad)} is shared by more than two cells")
+    # an interior edge must be traversed once in each direction by its two cells
+    twice = counts[inverse] == 2
+    forward = np.bincount(inverse[twice], weights=(edges[twice, 0] < edges[twice, 1]),
+                          minlength=counts.size)
+    if np.any(forward[counts == 2] != 1):
+        bad = keys[first[(counts == 2) & (forward != 1)][0]]
+        raise MeshError(
+            f"{mesh.name}: edge {tuple(bad)} is traversed in the same direction by both of its"
+            " cells (an inverted or clockwise cell)"
+        )
+    return edges[np.sort(first[counts == 1])]
+
+
+def chain_from_edges(edges: NDArray[np.int64], label: str = "edges") -> SurfaceChain:
+    """Order oriented edges head to tail into one simple chain (open or closed).
+
+    Raises :class:`MeshError` when the edges branch, are inconsistently oriented, or form more
+    than one piece. Setup-time code: the walk is sequential by nature.
+    """
+    edges = np.asarray(edges, dtype=np.int64).reshape(-1, 2)
+    if edges.shape[0] == 0:
+        raise MeshError(f"{label}: no edges to chain")
+    starts, ends = edges[:, 0], edges[:, 1]
+    if np.unique(starts).size != starts.size or np.unique(ends).size != ends.size:
+        raise MeshError(f"{label}: a node starts or ends two edges (branching or opposite "
+                        "orientation); not a single simple chain")
+    successor = dict(zip(starts.tolist(), ends.tolist(), strict=True))
+    heads = np.setdiff1d(starts, ends)
+    if heads.size > 1:
+        raise MeshError(f"{label}: edges form {heads.size} separate pieces, not one chain")
+    closed = heads.size == 0
+    node = int(heads[0]) if not closed else int(starts[0])
+    order = [node]
+    for _ in range(edges.shape[0]):
+        node = successor.get(node, -1)
+        if node < 0 or node == order[0]:
+            break
+        order.append(node)
+    n_expected = edges.shape[0] if closed else edges.shape[0] + 1
+    if len(order) != n_expected:
+        raise MeshError(f"{label}: edges form more than one piece (a loop plus other edges)")
+    return SurfaceChain(np.asarray(order, dtype=np.int64), bool(closed))
+
+
+def surface_chain(mesh: QuadMesh, edge_set_name: str) -> SurfaceChain:
+    """The nodes of edge set ``edge_set_name`` in walking order, body on the left."""
+    return chain_from_edges(mesh.edge_set(edge_set_name), f"{mesh.name}: edge set "
+                                                          f"'{edge_set_name}'")
+
+
+def _chain_vectors(xy: NDArray[np.float64], closed: bool) -> NDArray[np.float64]:
+    """Edge vectors ``x_{i+1} - x_i`` of an ordered chain (closing edge included if closed)."""
+    xy = np.asarray(xy, dtype=float)
+    if xy.ndim != 2 or xy.shape[1] != 2 or xy.shape[0] < 2:
+        raise MeshError(f"a chain needs coordinates of shape (n >= 2, 2), got {xy.shape}")
+    nxt = np.roll(xy, -1, axis=0) if closed else xy[1:]
+    return nxt - (xy if closed else xy[:-1])
+
+
+def chain_edge_lengths(xy: NDArray[np.float64], closed: bool) -> NDArray[np.float64]:
+    """Lengths of the chain's edges: ``n - 1`` for an open chain, ``n`` for a closed one."""
+    return np.linalg.norm(_chain_vectors(xy, closed), axis=1)
+
+
+def nodal_tributary_lengths(xy: NDArray[np.float64], closed: bool) -> NDArray[np.float64]:
+    """Length attributed to each node, ``L_c = (L_{i-1,i} + L_{i,i+1}) / 2`` (report 5.5-5.6);
+    end nodes of an open chain get half of their single edge."""
+    half = 0.5 * chain_edge_lengths(xy, closed)
+    if closed:
+        return half + np.roll(half, 1)
+    return np.concatenate((half, [0.0])) + np.concatenate(([0.0], half))
+
+
+def nodal_outward_normals(xy: NDArray[np.float64], closed: bool) -> NDArray[np.float64]:
+    """Unit outward normals at the nodes of an ordered chain (body on the left).
+
+    Each node's normal is the sum of its neighbouring edges' unit normals weighted by the
+    inverse edge length, ``rot(-90)(t_a / L_a^2 + t_b / L_b^2)``: this is exactly the radius
+    direction of the circle through the node and its two neighbours, whatever their spacing,
+    so it is second-order accurate on smooth curves; chain end nodes use their single edge.
+    """
+    vec = _chain_vectors(xy, closed)
+    squared = np.einsum("ij,ij->i", vec, vec)
+    if np.any(squared == 0.0):
+        raise MeshError("a chain has a zero-length edge (coincident consecutive nodes)")
+    weighted = vec / squared[:, None]  # t / L^2
+    if closed:
+        summed = weighted + np.roll(weighted, 1, axis=0)
+    else:
+        pad = np.zeros((1, 2))
+        summed = np.vstack((weighted, pad)) + np.vstack((pad, weighted))
+    normals = np.column_stack((summed[:, 1], -summed[:, 0]))
+    norms = np.linalg.norm(normals, axis=1)
+    if np.any(norms == 0.0):
+        raise MeshError("a chain folds back on itself at a node (opposite equal edges)")
+    return normals / norms[:, None]

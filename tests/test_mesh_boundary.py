@@ -1,0 +1,141 @@
+"""Tests of boundary edges, surface chains, nodal normals and tributary lengths."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from ntncontact.mesh.boundary import (
+    SurfaceChain,
+    boundary_edges,
+    chain_edge_lengths,
+    chain_from_edges,
+    nodal_outward_normals,
+    nodal_tributary_lengths,
+    surface_chain,
+)
+from ntncontact.mesh.generators import annulus, rectangle
+from ntncontact.mesh.quadmesh import MeshError, QuadMesh
+
+EPS = np.finfo(float).eps
+
+
+def test_boundary_edges_of_rectangle_form_ccw_loop():
+    m = rectangle(2.0, 1.0, 4, 3)
+    edges = boundary_edges(m)
+    assert edges.shape == (2 * (4 + 3), 2)
+    chain = chain_from_edges(edges)
+    assert chain.closed and len(chain.nodes) == 14
+    xy = m.nodes[chain.nodes]
+    shoelace = 0.5 * np.sum(xy[:, 0] * np.roll(xy[:, 1], -1) - np.roll(xy[:, 0], -1) * xy[:, 1])
+    # counter-clockwise loop around the body encloses its area (exact binary fractions)
+    assert shoelace == pytest.approx(2.0, rel=10 * EPS)
+    # the union of the four named sides equals the boundary, with the same orientation
+    named = np.vstack([m.edge_sets[s] for s in ("bottom", "right", "top", "left")])
+    assert {tuple(e) for e in named.tolist()} == {tuple(e) for e in edges.tolist()}
+
+
+def test_boundary_edges_of_annulus_has_two_loops():
+    m = annulus(0.5, 1.0, 2, 16)
+    edges = boundary_edges(m)
+    assert len(edges) == 32
+    with pytest.raises(MeshError, match="more than one piece"):
+        chain_from_edges(edges, "ring boundary")
+
+
+def test_boundary_edges_detects_clockwise_cell():
+    m = rectangle(2.0, 1.0, 2, 1)
+    cells = m.cells.copy()
+    cells[1] = cells[1, ::-1]
+    with pytest.raises(MeshError, match="same direction"):
+        boundary_edges(QuadMesh(m.nodes, cells))
+
+
+def test_boundary_edges_detects_nonmanifold_edge():
+    nodes = np.array([[0, 0], [1, 0], [1, 1], [0, 1], [2, 0], [2, 1], [1, 2], [0, 2]], float)
+    # three cells sharing edge (1, 2) (the third overlaps the second)
+    cells = np.array([[0, 1, 2, 3], [1, 4, 5, 2], [1, 4, 6, 2]])
+    with pytest.raises(MeshError, match="more than two cells"):
+        boundary_edges(QuadMesh(nodes, cells))
+
+
+def test_surface_chain_open_and_order():
+    m = rectangle(3.0, 1.0, 3, 1)
+    chain = surface_chain(m, "top")
+    assert isinstance(chain, SurfaceChain)
+    assert not chain.closed and chain.nodes.tolist() == [7, 6, 5, 4]
+    # shuffled edges give the same chain
+    shuffled = m.edge_sets["top"][[2, 0, 1]]
+    assert chain_from_edges(shuffled).nodes.tolist() == [7, 6, 5, 4]
+
+
+def test_surface_chain_closed_loop_does_not_repeat_first_node():
+    m = annulus(0.5, 1.0, 1, 12)
+    chain = surface_chain(m, "outer")
+    assert chain.closed and len(chain.nodes) == 12 == len(np.unique(chain.nodes))
+
+
+@pytest.mark.parametrize(
+    "edges, message",
+    [
+        ([[0, 1], [1, 2], [1, 3]], "starts or ends two edges"),  # branch
+        ([[0, 1], [2, 1]], "starts or ends two edges"),  # opposite orientation
+        ([[0, 1], [5, 6]], "separate pieces"),
+        ([[0, 1], [1, 2], [2, 0], [5, 6]], "more than one piece"),
+        (np.zeros((0, 2), int), "no edges"),
+    ],
+)
+def test_chain_errors(edges, message):
+    with pytest.raises(MeshError, match=message):
+        chain_from_edges(np.asarray(edges), "test")
+
+
+def test_surface_chain_unknown_set():
+    with pytest.raises(MeshError, match="no surface"):
+        surface_chain(rectangle(1.0, 1.0, 1, 1), "nope")
+
+
+def test_nodal_normals_exact_on_circle_with_uneven_spacing():
+    rng = np.random.default_rng(7)
+    theta = np.sort(rng.uniform(0.0, 2 * np.pi, 25))
+    xy = 2.0 * np.column_stack((np.cos(theta), np.sin(theta)))
+    normals = nodal_outward_normals(xy, closed=True)  # CCW around the disk: body on the left
+    # inverse-length weighting gives the exact radius through any three points of a circle
+    assert np.abs(normals - xy / 2.0).max() < 100 * EPS
+    # walking clockwise puts the body outside the circle: normals point to the centre
+    assert np.abs(nodal_outward_normals(xy[::-1], True) + xy[::-1] / 2.0).max() < 100 * EPS
+
+
+def test_nodal_normals_open_chain_and_lengths():
+    xy = np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 2.0]])
+    normals = nodal_outward_normals(xy, closed=False)
+    # end nodes take their single edge's normal; corner weights 1/L: (0,-1)/1 + (1,0)/2
+    expected = np.array([[0.0, -1.0], [0.5, -1.0] / np.sqrt(1.25), [1.0, 0.0]])
+    assert np.abs(normals - expected).max() < 10 * EPS
+    assert chain_edge_lengths(xy, closed=False).tolist() == [1.0, 2.0]
+    assert np.allclose(chain_edge_lengths(xy, closed=True), [1.0, 2.0, np.sqrt(5.0)],
+                       rtol=10 * EPS, atol=0.0)
+    assert nodal_tributary_lengths(xy, closed=False).tolist() == [0.5, 1.5, 1.0]
+    trib = nodal_tributary_lengths(xy, closed=True)
+    # node i gets half of each edge it touches (5.5-5.6); together they share out the perimeter
+    r5 = np.sqrt(5.0)
+    assert np.allclose(trib, [(r5 + 1) / 2, 1.5, (2 + r5) / 2], rtol=10 * EPS, atol=0.0)
+    assert trib.sum() == pytest.approx(3.0 + r5, rel=10 * EPS)
+
+
+def test_nodal_normals_reject_degenerate_chains():
+    with pytest.raises(MeshError, match="zero-length"):
+        nodal_outward_normals(np.array([[0.0, 0.0], [0.0, 0.0], [1.0, 0.0]]), False)
+    with pytest.raises(MeshError, match="folds back"):
+        nodal_outward_normals(np.array([[0.0, 0.0], [1.0, 0.0], [0.0, 0.0]]), False)
+    with pytest.raises(MeshError, match="shape"):
+        chain_edge_lengths(np.zeros((1, 2)), False)
+
+
+def test_rectangle_surface_normals_point_outward():
+    m = rectangle(2.0, 1.0, 4, 2)
+    for side, outward in (("bottom", [0, -1]), ("right", [1, 0]), ("top", [0, 1]),
+                          ("left", [-1, 0])):
+        chain = surface_chain(m, side)
+        normals = nodal_outward_normals(m.nodes[chain.nodes], chain.closed)
+        assert np.abs(normals - outward).max() < 10 * EPS
