@@ -1,0 +1,134 @@
+"""Field remapping: point location, Q4 and quadratic interpolation, momentum correction."""
+
+import numpy as np
+import pytest
+
+from ntncontact.ale.remap import (
+    Remapper,
+    conservative_velocity_correction,
+    inverse_bilinear,
+    momenta,
+    q4_shape,
+    remap_fields,
+)
+from ntncontact.mesh.quadmesh import MeshError
+
+
+def perturbed_grid(nx: int, ny: int, amp: float = 0.2, seed: int = 0):
+    """Unit-spacing grid with interior nodes jittered: cells are general (non-affine) quads."""
+    xs, ys = np.meshgrid(np.arange(nx + 1.0), np.arange(ny + 1.0))
+    nodes = np.column_stack([xs.ravel(), ys.ravel()])
+    interior = (nodes[:, 0] > 0) & (nodes[:, 0] < nx) & (nodes[:, 1] > 0) & (nodes[:, 1] < ny)
+    rng = np.random.default_rng(seed)
+    nodes[interior] += rng.uniform(-amp, amp, (interior.sum(), 2))
+    i, j = np.meshgrid(np.arange(nx), np.arange(ny))
+    n0 = (j * (nx + 1) + i).ravel()
+    return nodes, np.column_stack([n0, n0 + 1, n0 + nx + 2, n0 + nx + 1])
+
+
+def random_points(nodes, cells, count, seed=1):
+    """Points inside random cells, with their exact cells."""
+    rng = np.random.default_rng(seed)
+    cell = rng.integers(0, len(cells), count)
+    xi = rng.uniform(-0.95, 0.95, (count, 2))
+    pts = np.einsum("pa,pai->pi", q4_shape(xi), nodes[cells[cell]])
+    return pts, cell, xi
+
+
+def test_shape_functions_partition_of_unity_and_kronecker():
+    corners = np.array([[-1, -1], [1, -1], [1, 1], [-1, 1]], dtype=float)
+    np.testing.assert_allclose(q4_shape(corners), np.eye(4), atol=1e-15)
+    xi = np.random.default_rng(0).uniform(-1, 1, (10, 2))
+    np.testing.assert_allclose(q4_shape(xi).sum(axis=1), 1.0, atol=1e-15)
+
+
+def test_inverse_bilinear_recovers_reference_coordinates():
+    nodes, cells = perturbed_grid(4, 3)
+    pts, cell, xi = random_points(nodes, cells, 200)
+    found, res = inverse_bilinear(nodes[cells[cell]], pts)
+    # Newton converges quadratically: round-off of O(1) coordinates
+    np.testing.assert_allclose(found, xi, atol=1e-12)
+    assert res.max() < 1e-12
+
+
+def test_locate_finds_containing_cells():
+    nodes, cells = perturbed_grid(8, 5)
+    pts, cell, xi = random_points(nodes, cells, 500)
+    loc = Remapper(nodes, cells).locate(pts)
+    np.testing.assert_array_equal(loc.cell, cell)
+    np.testing.assert_allclose(loc.xi, xi, atol=1e-12)
+    assert not loc.clamped.any()
+
+
+@pytest.mark.parametrize("method", ["linear", "quadratic"])
+def test_linear_fields_are_reproduced_exactly(method):
+    nodes, cells = perturbed_grid(6, 4)
+    coeff = np.array([[0.3, -1.0], [2.0, 0.5], [-0.7, 1.5]])  # f = c0 + c1 x + c2 y, 2 components
+    field = lambda x: coeff[0] + x[:, :1] * coeff[1] + x[:, 1:] * coeff[2]  # noqa: E731
+    pts, _, _ = random_points(nodes, cells, 300)
+    out = remap_fields(nodes, cells, field(nodes), pts, method=method)
+    # isoparametric Q4 (and any quadratic fit) contain x and y: exact up to round-off
+    np.testing.assert_allclose(out, field(pts), atol=1e-12)
+
+
+def quadratic_field(x):
+    return 1.0 + 0.5 * x[:, 0] - 0.3 * x[:, 1] + 0.2 * x[:, 0] ** 2 - 0.4 * x[:, 0] * x[:, 1] + (
+        0.1 * x[:, 1] ** 2
+    )
+
+
+def test_quadratic_option_reproduces_quadratic_fields_and_linear_does_not():
+    nodes, cells = perturbed_grid(6, 5)
+    pts, _, _ = random_points(nodes, cells, 300)
+    remapper = Remapper(nodes, cells)
+    quad = remapper.remap(quadratic_field(nodes), pts, method="quadratic")
+    # least squares of an exact quadratic: round-off amplified by the 6x6 fit conditioning
+    np.testing.assert_allclose(quad, quadratic_field(pts), atol=1e-10)
+    lin = remapper.remap(quadratic_field(nodes), pts, method="linear")
+    assert np.abs(lin - quadratic_field(pts)).max() > 1e-3
+
+
+def test_unmoved_nodes_keep_their_values_and_single_cell_falls_back_to_linear():
+    nodes, cells = perturbed_grid(4, 4)
+    field = np.sin(3.0 * nodes[:, 0]) * np.cos(2.0 * nodes[:, 1])
+    out = remap_fields(nodes, cells, field, nodes, method="quadratic")
+    np.testing.assert_array_equal(out, field)
+    one = np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]])
+    val = remap_fields(one, [[0, 1, 2, 3]], [0.0, 1.0, 2.0, 1.0], [[0.5, 0.5]], "quadratic")
+    assert val[0] == pytest.approx(1.0, abs=1e-14)  # bilinear value; 4 nodes cannot fit 6 terms
+
+
+def test_points_slightly_outside_clamp_and_far_points_raise():
+    nodes, cells = perturbed_grid(4, 2)
+    field = nodes[:, 0] * 2.0 + 1.0
+    remapper = Remapper(nodes, cells)
+    loc = remapper.locate([[2.3, -0.04], [4.03, 1.5]])
+    assert loc.clamped.all()
+    out = remapper.remap(field, [[2.3, -0.04], [4.03, 1.5]])
+    # clamped to the nearest boundary points (2.3, 0) and (4, 1.5)
+    np.testing.assert_allclose(out, [5.6, 9.0], atol=1e-12)
+    with pytest.raises(MeshError, match="outside the old mesh"):
+        remapper.locate([[2.0, -0.5]])
+
+
+def test_conservative_correction_restores_momenta_with_a_rigid_field():
+    rng = np.random.default_rng(5)
+    m = rng.uniform(0.5, 2.0, 30)
+    x = rng.uniform(-1, 3, (30, 2))
+    v = rng.normal(size=(30, 2))
+    target_p, target_l = np.array([1.5, -0.4]), 2.7
+    w = conservative_velocity_correction(m, x, v, target_p, target_l)
+    p, ang = momenta(m, x, w)
+    # sums of 30 O(1) products: round-off
+    np.testing.assert_allclose(p, target_p, atol=1e-12)
+    assert ang == pytest.approx(target_l, abs=1e-12)
+    # the correction is a rigid velocity field: a + omega e_z x r fits it exactly
+    dv = w - v
+    basis = np.zeros((60, 3))
+    basis[0::2, 0], basis[1::2, 1] = 1.0, 1.0
+    basis[0::2, 2], basis[1::2, 2] = -x[:, 1], x[:, 0]
+    coef, *_ = np.linalg.lstsq(basis, dv.ravel(), rcond=None)
+    np.testing.assert_allclose(basis @ coef, dv.ravel(), atol=1e-12)
+    # already conserving: no change
+    p0, l0 = momenta(m, x, v)
+    np.testing.assert_allclose(conservative_velocity_correction(m, x, v, p0, l0), v, atol=1e-13)
