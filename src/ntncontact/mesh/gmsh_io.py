@@ -1,0 +1,157 @@
+"""Read 2D all-quad gmsh ``.msh`` meshes (formats 2.2 and 4.x) into a :class:`QuadMesh`.
+
+Named physical groups become named sets: point groups -> node sets; line groups -> edge sets
+oriented with the body on the left (plus node sets); surface groups -> node sets. Only
+first-order quads are accepted: a triangle would need a different element in every layer.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from pathlib import Path
+
+import meshio
+import numpy as np
+from numpy.typing import NDArray
+
+from ntncontact.mesh.boundary import boundary_edges
+from ntncontact.mesh.quadmesh import MeshError, QuadMesh
+
+__all__ = ["read_msh"]
+
+_TRIANGLES = {"triangle", "triangle6", "triangle7", "triangle10"}
+_DIMENSION = {"vertex": 0, "line": 1, "quad": 2}
+
+
+def read_msh(path: str | Path, name: str | None = None) -> QuadMesh:
+    """Read a gmsh mesh of first-order quadrilaterals lying in a plane ``z = const``.
+
+    Unused nodes are dropped and the rest renumbered in file order; clockwise cells are
+    flipped to counter-clockwise. ``name`` defaults to the file stem. Raises
+    :class:`MeshError` (naming the file) for triangles, higher-order or 3D cells, a
+    non-planar mesh, degenerate cells, or a line group not on the boundary.
+    """
+    path = Path(path)
+    raw = _read_meshio(path)
+    label = str(path)
+    blocks = [(block.type, np.asarray(block.data, dtype=np.int64)) for block in raw.cells]
+    _check_cell_types(blocks, label)
+    quads = np.vstack([data for kind, data in blocks if kind == "quad"] or [np.zeros((0, 4))])
+    if quads.shape[0] == 0:
+        raise MeshError(f"{label}: no quadrilateral cells (is the surface in a physical group?)")
+    # format 2.2 repeats an element once per physical group it belongs to
+    _, first = np.unique(np.sort(quads, axis=1), axis=0, return_index=True)
+    quads = quads[np.sort(first)]
+    xy = _planar_points(np.asarray(raw.points, dtype=float), label)
+    used = np.unique(quads)
+    renumber = np.full(xy.shape[0], -1, dtype=np.int64)
+    renumber[used] = np.arange(used.size)
+    cells = _counter_clockwise(xy[used], renumber[quads], label)
+    mesh = QuadMesh(xy[used], cells, name=name or path.stem)
+    groups = _physical_groups(raw, blocks, label)
+    node_sets, edge_sets = _named_sets(mesh, groups, renumber, label)
+    return mesh.with_sets(node_sets, edge_sets)
+
+
+def _read_meshio(path: Path) -> meshio.Mesh:
+    """meshio's gmsh reader, called directly: ``meshio.read`` exits the process on bad files."""
+    if not path.is_file():
+        raise FileNotFoundError(f"gmsh mesh file not found: {path}")
+    try:
+        return meshio.gmsh.read(path)
+    except Exception as err:  # meshio raises ReadError, ValueError, KeyError, ... on bad input
+        raise MeshError(f"{path}: not a readable gmsh .msh file ({type(err).__name__}: {err})"
+                        ) from err
+
+
+def _check_cell_types(blocks: list[tuple[str, NDArray]], label: str) -> None:
+    kinds = {kind for kind, _ in blocks}
+    if kinds & _TRIANGLES:
+        raise MeshError(f"{label}: contains triangles; ntncontact needs an all-quad mesh "
+                        "(recombine in gmsh: Mesh.RecombineAll = 1 or setRecombine)")
+    unsupported = kinds - set(_DIMENSION)
+    if unsupported:
+        raise MeshError(f"{label}: unsupported cell types {sorted(unsupported)}; only first-order "
+                        "quads (with line and vertex cells for physical groups) are read")
+
+
+def _planar_points(points: NDArray[np.float64], label: str) -> NDArray[np.float64]:
+    """The x, y columns; the mesh must lie in one plane z = const."""
+    if points.shape[1] == 3:
+        z = points[:, 2]
+        scale = max(float(np.ptp(points[:, :2])), 1.0)
+        # gmsh writes 17 significant digits, so a planar mesh has z spread at round-off level
+        if z.size and float(np.ptp(z)) > 1e3 * np.finfo(float).eps * scale:
+            raise MeshError(f"{label}: nodes do not lie in a plane z = const (z spread "
+                            f"{np.ptp(z):.3g}); only 2D meshes are supported")
+    return np.ascontiguousarray(points[:, :2])
+
+
+def _counter_clockwise(xy: NDArray, cells: NDArray[np.int64], label: str) -> NDArray[np.int64]:
+    """Flip clockwise cells (negative shoelace area) to counter-clockwise."""
+    x, y = xy[cells, 0], xy[cells, 1]
+    area = 0.5 * np.sum(x * np.roll(y, -1, axis=1) - np.roll(x, -1, axis=1) * y, axis=1)
+    scale = float(np.ptp(xy, axis=0).max()) ** 2
+    if np.any(np.abs(area) <= 1e3 * np.finfo(float).eps * scale):
+        raise MeshError(f"{label}: cell {int(np.argmin(np.abs(area)))} has (near) zero area")
+    return np.where((area < 0)[:, None], cells[:, [0, 3, 2, 1]], cells)
+
+
+def _physical_groups(raw: meshio.Mesh, blocks: list[tuple[str, NDArray]], label: str
+                     ) -> dict[str, tuple[int, list[NDArray]]]:
+    """name -> (dimension, list of cell connectivity arrays of that group)."""
+    groups: dict[str, tuple[int, list[NDArray]]] = {}
+    tags = raw.cell_data.get("gmsh:physical")
+    for group_name, (tag, dim) in ((k, tuple(int(t) for t in v[:2]))
+                                   for k, v in raw.field_data.items()):
+        members = []
+        for k, (kind, data) in enumerate(blocks):
+            if _DIMENSION[kind] != dim:
+                continue
+            if raw.cell_sets.get(group_name) is not None:  # format 4.x: explicit membership
+                chosen = raw.cell_sets[group_name][k]
+                index = np.zeros(0, np.int64) if chosen is None else np.asarray(chosen, np.int64)
+            elif tags is not None:  # format 2.2: one physical tag per cell
+                index = np.flatnonzero(np.asarray(tags[k]) == tag)
+            else:
+                raise MeshError(f"{label}: physical group '{group_name}' has no cell data")
+            members.append(data[index])
+        groups[group_name] = (dim, members)
+    return groups
+
+
+def _named_sets(mesh: QuadMesh, groups: Mapping[str, tuple[int, list[NDArray]]],
+                renumber: NDArray[np.int64], label: str
+                ) -> tuple[dict[str, NDArray], dict[str, NDArray]]:
+    node_sets: dict[str, NDArray] = {}
+    edge_sets: dict[str, NDArray] = {}
+    for group_name, (dim, members) in groups.items():
+        width = {0: 1, 1: 2, 2: 4}[dim]
+        cells = renumber[np.vstack(members or [np.zeros((0, width), np.int64)])]
+        if np.any(cells < 0):
+            raise MeshError(f"{label}: physical group '{group_name}' uses nodes that belong to "
+                            "no quadrilateral")
+        nodes = np.unique(cells)
+        if group_name in node_sets:  # same name on groups of different dimension: merge
+            nodes = np.union1d(node_sets[group_name], nodes)
+        node_sets[group_name] = nodes
+        if dim == 1:
+            edge_sets[group_name] = _orient_on_boundary(mesh, cells, group_name, label)
+    return node_sets, edge_sets
+
+
+def _orient_on_boundary(mesh: QuadMesh, edges: NDArray[np.int64], group_name: str,
+                        label: str) -> NDArray[np.int64]:
+    """The group's edges (file order) with the orientation of the matching boundary edge."""
+    boundary = boundary_edges(mesh)
+    n = np.int64(mesh.n_nodes)
+    boundary_keys = np.sort(boundary, axis=1) @ np.array([n, 1])
+    order = np.argsort(boundary_keys)
+    keys = np.sort(edges, axis=1) @ np.array([n, 1])
+    pos = np.clip(np.searchsorted(boundary_keys, keys, sorter=order), 0, order.size - 1)
+    found = boundary_keys[order[pos]] == keys
+    if not np.all(found):
+        a, b = edges[np.argmin(found)]
+        raise MeshError(f"{label}: line group '{group_name}' has edge ({a}, {b}) that is not on "
+                        "the boundary of the quad mesh; surfaces must be boundary curves")
+    return boundary[order[pos]]

@@ -1,0 +1,166 @@
+"""Tests of reading gmsh .msh files into QuadMesh (gmsh API round trip and meshio-written files)."""
+
+from __future__ import annotations
+
+import meshio
+import numpy as np
+import pytest
+
+from ntncontact.mesh.boundary import boundary_edges, surface_chain
+from ntncontact.mesh.gmsh_io import read_msh
+from ntncontact.mesh.quadmesh import MeshError
+
+gmsh = pytest.importorskip("gmsh")
+
+EPS = np.finfo(float).eps
+# L-shaped domain, counter-clockwise corners; area 3
+L_CORNERS = [(0, 0), (2, 0), (2, 1), (1, 1), (1, 2), (0, 2)]
+
+
+def signed_areas(nodes, cells):
+    x, y = nodes[cells, 0], nodes[cells, 1]
+    return 0.5 * np.sum(x * np.roll(y, -1, axis=1) - np.roll(x, -1, axis=1) * y, axis=1)
+
+
+def write_l_shape(path, version=4.1, recombine=True, reverse=False, size=0.2):
+    """Mesh the L shape with gmsh; physical groups: surface, two lines, one point."""
+    gmsh.initialize()
+    try:
+        gmsh.option.setNumber("General.Terminal", 0)
+        gmsh.model.add("lshape")
+        geo = gmsh.model.geo
+        points = [geo.addPoint(x, y, 0.0, size) for x, y in L_CORNERS]
+        lines = [geo.addLine(points[k], points[(k + 1) % 6]) for k in range(6)]
+        # curve 4 drawn from (1, 2) to (1, 1): its line elements run against the body
+        lines[3] = geo.addLine(points[4], points[3])
+        loop = geo.addCurveLoop([lines[0], lines[1], lines[2], -lines[3], lines[4], lines[5]])
+        surface = geo.addPlaneSurface([loop])
+        geo.synchronize()
+        gmsh.model.addPhysicalGroup(2, [surface], name="body")
+        gmsh.model.addPhysicalGroup(1, [lines[0]], name="bottom")
+        # the two edges of the re-entrant corner
+        gmsh.model.addPhysicalGroup(1, [lines[2], lines[3]], name="step")
+        gmsh.model.addPhysicalGroup(0, [points[0]], name="origin")
+        # entities in two groups each (format 2.2 then repeats their elements)
+        gmsh.model.addPhysicalGroup(1, lines, name="outline")
+        gmsh.model.addPhysicalGroup(2, [surface], name="domain")
+        if recombine:
+            gmsh.option.setNumber("Mesh.Algorithm", 8)  # frontal-Delaunay for quads
+            gmsh.option.setNumber("Mesh.RecombinationAlgorithm", 3)  # blossom full-quad
+            gmsh.model.mesh.setRecombine(2, surface)
+        gmsh.model.mesh.generate(2)
+        if reverse:
+            gmsh.model.mesh.reverse()
+        gmsh.option.setNumber("Mesh.MshFileVersion", version)
+        gmsh.write(str(path))
+    finally:
+        gmsh.finalize()
+    return path
+
+
+@pytest.mark.parametrize("version", [4.1, 2.2])
+@pytest.mark.parametrize("reverse", [False, True])
+def test_gmsh_round_trip(tmp_path, version, reverse):
+    path = write_l_shape(tmp_path / "lshape.msh", version=version, reverse=reverse)
+    mesh = read_msh(path)
+    assert mesh.name == "lshape"
+    areas = signed_areas(mesh.nodes, mesh.cells)
+    assert np.all(areas > 0)  # clockwise cells were flipped
+    # straight-sided polygon: tiled exactly up to the 17-digit coordinates in the file
+    assert areas.sum() == pytest.approx(3.0, rel=1e3 * EPS)
+    assert set(mesh.node_sets) == {"body", "domain", "bottom", "step", "origin", "outline"}
+    assert set(mesh.edge_sets) == {"bottom", "step", "outline"}
+    assert np.array_equal(mesh.node_sets["domain"], mesh.node_sets["body"])
+    outline = surface_chain(mesh, "outline")
+    assert outline.closed and len(outline.nodes) == len(boundary_edges(mesh))
+    assert len(mesh.node_sets["body"]) == mesh.n_nodes  # unused nodes removed
+    assert np.allclose(mesh.nodes[mesh.node_sets["origin"]], [[0.0, 0.0]], atol=0.0)
+    xy = mesh.nodes
+    bottom = mesh.edge_sets["bottom"]
+    assert np.all(np.abs(xy[bottom, 1]) <= 10 * EPS)
+    assert np.all(xy[bottom[:, 1], 0] > xy[bottom[:, 0], 0])  # left to right: body above
+    # every edge set lies on the boundary with the body on its left
+    oriented = {tuple(e) for e in boundary_edges(mesh).tolist()}
+    for edges in mesh.edge_sets.values():
+        assert all(tuple(e) in oriented for e in edges.tolist())
+    step = surface_chain(mesh, "step")
+    # walking with the body on the left goes (2,1) -> (1,1) -> (1,2)
+    assert not step.closed
+    assert np.allclose(xy[step.nodes[[0, -1]]], [[2.0, 1.0], [1.0, 2.0]], atol=10 * EPS)
+    assert any(np.allclose(p, [1.0, 1.0], atol=10 * EPS) for p in xy[step.nodes])
+
+
+def test_triangles_are_rejected_with_file_name(tmp_path):
+    path = write_l_shape(tmp_path / "triangles.msh", recombine=False)
+    with pytest.raises(MeshError, match=r"triangles\.msh.*triangles"):
+        read_msh(path)
+
+
+def test_interior_line_group_is_rejected(tmp_path):
+    gmsh.initialize()
+    try:
+        gmsh.option.setNumber("General.Terminal", 0)
+        geo = gmsh.model.geo
+        p = [geo.addPoint(x, y, 0.0) for x, y in [(0, 0), (1, 0), (2, 0), (2, 1), (1, 1),
+                                                  (0, 1)]]
+        lines = [geo.addLine(p[k], p[(k + 1) % 6]) for k in range(6)]
+        middle = geo.addLine(p[1], p[4])
+        left = geo.addPlaneSurface([geo.addCurveLoop([lines[0], middle, lines[4], lines[5]])])
+        right = geo.addPlaneSurface([geo.addCurveLoop([lines[1], lines[2], lines[3], -middle])])
+        geo.synchronize()
+        for curve in [*lines, middle]:
+            gmsh.model.mesh.setTransfiniteCurve(curve, 3)
+        for s in (left, right):
+            gmsh.model.mesh.setTransfiniteSurface(s)
+            gmsh.model.mesh.setRecombine(2, s)
+        gmsh.model.addPhysicalGroup(2, [left, right], name="body")
+        gmsh.model.addPhysicalGroup(1, [middle], name="interface")
+        gmsh.model.mesh.generate(2)
+        gmsh.write(str(tmp_path / "two.msh"))
+    finally:
+        gmsh.finalize()
+    with pytest.raises(MeshError, match="'interface'.*not on the boundary"):
+        read_msh(tmp_path / "two.msh")
+
+
+def test_meshio_written_file_renumbers_and_flips(tmp_path):
+    # node 0 is unused; cell 1 is clockwise
+    points = np.array([[9.0, 9.0, 0.0], [0, 0, 0], [1, 0, 0], [2, 0, 0], [0, 1, 0], [1, 1, 0],
+                       [2, 1, 0]], dtype=float)
+    quads = np.array([[1, 2, 5, 4], [2, 5, 6, 3]])
+    lines = np.array([[6, 3]])  # right side, written top to bottom (against the body)
+    mesh = meshio.Mesh(
+        points,
+        [("quad", quads), ("line", lines)],
+        cell_data={"gmsh:physical": [np.array([1, 1]), np.array([2])],
+                   "gmsh:geometrical": [np.array([1, 1]), np.array([1])]},
+        field_data={"body": np.array([1, 2]), "right": np.array([2, 1])},
+    )
+    path = tmp_path / "tiny.msh"
+    meshio.write(path, mesh, file_format="gmsh22", binary=False)
+    out = read_msh(path, name="tiny")
+    assert out.name == "tiny" and out.n_nodes == 6
+    assert np.allclose(out.nodes[0], [0.0, 0.0], atol=0.0)  # unused node dropped
+    assert np.all(signed_areas(out.nodes, out.cells) == pytest.approx(1.0, rel=10 * EPS))
+    right = out.edge_sets["right"]
+    assert np.allclose(out.nodes[right[0]], [[2.0, 0.0], [2.0, 1.0]], atol=0.0)  # bottom -> top
+
+
+def test_unreadable_and_missing_files(tmp_path):
+    bad = tmp_path / "bad.msh"
+    bad.write_text("this is not a mesh\n")
+    with pytest.raises(MeshError, match=r"bad\.msh.*not a readable"):
+        read_msh(bad)
+    with pytest.raises(FileNotFoundError, match="missing"):
+        read_msh(tmp_path / "missing.msh")
+
+
+def test_non_planar_mesh_is_rejected(tmp_path):
+    points = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0.5], [0, 1, 0]], dtype=float)
+    mesh = meshio.Mesh(points, [("quad", np.array([[0, 1, 2, 3]]))],
+                       cell_data={"gmsh:physical": [np.array([1])],
+                                  "gmsh:geometrical": [np.array([1])]})
+    path = tmp_path / "warped.msh"
+    meshio.write(path, mesh, file_format="gmsh22", binary=False)
+    with pytest.raises(MeshError, match="plane"):
+        read_msh(path)
