@@ -56,6 +56,7 @@ class StepProblem:
 
     def __post_init__(self) -> None:
         ndof = self.model.ndof
+        self.length_scale = float(np.ptp(self.model.X0, axis=0).max())
         t0, t1 = self.state.time, self.state.time + self.dt
         dofs, values = dirichlet_values(self.model.prescribed, t1, ndof)
         if self.dynamic:
@@ -106,7 +107,9 @@ class StepProblem:
             scale = max(scale, np.linalg.norm(f))
             if len(vals):
                 K = K + sp.csr_matrix((vals, (rows, cols)), shape=K.shape)
-        return R, K.tocsr(), float(scale)
+        # Forces computed from positions of size L carry round-off ~ eps |K| L: never ask for less.
+        floor = 1e-4 * np.abs(K.diagonal()).max() * self.length_scale
+        return R, K.tocsr(), float(max(scale, floor))
 
     def residual(self, y: NDArray) -> tuple[NDArray, float]:
         R, K, scale = self._evaluate(y)

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Protocol
 
 import numpy as np
@@ -126,11 +126,12 @@ class Simulation:
         n_steps = int(np.ceil(analysis.t_end / analysis.dt - 1e-9))
         self._notify(StepRecord(self.state, self.balance(self.state), 0, 0.0))
         try:
-            for _ in range(n_steps):
-                dt = min(analysis.dt, analysis.t_end - self.state.time)
-                if dt <= 1e-12 * analysis.dt:
-                    break
+            for k in range(n_steps):
+                # target times k dt (not accumulated sums) so output times are exact
+                t_next = min((k + 1) * analysis.dt, analysis.t_end)
+                dt = t_next - self.state.time
                 self.state, its, _ = self.step_with_cutback(dt)
+                self.state = replace(self.state, time=t_next)
                 self._notify(StepRecord(self.state, self.balance(self.state), its, dt))
                 if progress is not None:
                     progress(self.state.time)

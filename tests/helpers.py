@@ -1,0 +1,34 @@
+"""Small builders shared by the tests."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from ntncontact.builder import build_model
+from ntncontact.io.scenario import load_scenario, parse_scenario
+from ntncontact.model import Model
+
+EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
+
+
+def model_from_dict(data: dict, base: Path = Path(".")) -> Model:
+    return build_model(parse_scenario(data, Path("test.toml")), base)
+
+
+def model_from_example(name: str, overrides: list[str] | None = None) -> Model:
+    path = EXAMPLES / name
+    return build_model(load_scenario(path, overrides), path.parent)
+
+
+class Recorder:
+    """Observer keeping every step record in memory."""
+
+    def __init__(self) -> None:
+        self.records = []
+        self.status = None
+
+    def on_step(self, model, record) -> None:
+        self.records.append(record)
+
+    def on_finish(self, status, error) -> None:
+        self.status = (status, error)

@@ -1,0 +1,63 @@
+"""The command line end to end: run, results folder contract, plot, errors."""
+
+import json
+
+import numpy as np
+from helpers import EXAMPLES
+
+from ntncontact.cli import main
+from ntncontact.io.writers import HISTORY_COLUMNS, read_csv_table
+
+
+def test_run_writes_history_summary_and_fields_then_plot(tmp_path, capsys):
+    out = tmp_path / "res"
+    code = main(["run", str(EXAMPLES / "spinning_block.toml"), "--out", str(out), "--quiet",
+                 "--set", "analysis.t_end=0.2"])
+    assert code == 0
+    table = read_csv_table(out / "history.csv")
+    assert list(table)[: len(HISTORY_COLUMNS)] == list(HISTORY_COLUMNS)
+    assert len(table["step"]) == 11 and table["time"][-1] == np.float64(0.2)
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["status"] == "completed" and summary["steps"] == 10
+    for key in ("wall_time_s", "energy_initial", "energy_final", "energy_max_relative_variation"):
+        assert key in summary
+    assert (out / "fields.pvd").is_file() and len(list((out / "fields").glob("*.vtu"))) == 3
+    assert main(["plot", str(out)]) == 0
+    assert len(list(out.glob("*.png"))) >= 3
+
+
+def test_run_with_bad_scenario_reports_and_fails(tmp_path, capsys):
+    bad = tmp_path / "bad.toml"
+    bad.write_text((EXAMPLES / "spinning_block.toml").read_text().replace("dt =", "dtt ="))
+    assert main(["run", str(bad), "--out", str(tmp_path / "o"), "--quiet"]) == 1
+    err = capsys.readouterr().err
+    assert "analysis.dtt: unknown key" in err and "analysis.dt: Field required" in err
+
+
+def test_a_failing_run_leaves_readable_results(tmp_path, capsys):
+    """A load far too large for one step with no cut-backs: error names the step, files stay."""
+    case = tmp_path / "crush.toml"
+    case.write_text("""
+[analysis]
+kind = "static"
+dt = 0.5
+t_end = 1.0
+max_cutbacks = 1
+newton = { max_iterations = 6 }
+[[bodies]]
+name = "pad"
+mesh = { type = "rectangle", width = 1.0, height = 1.0, nx = 4, ny = 4 }
+material = { model = "neo_hookean", E = 1.0, nu = 0.3, density = 1.0 }
+supports = [ { set = "bottom", x = 0.0, y = 0.0 } ]
+[[bodies.loads]]
+type = "pressure"
+set = "top"
+value = 50.0
+function = { times = [0.0, 0.5, 1.0], values = [0.0, 0.0001, 1.0] }
+""")
+    assert main(["run", str(case), "--out", str(tmp_path / "o"), "--quiet"]) == 1
+    err = capsys.readouterr().err
+    assert "step 2" in err and "halvings" in err
+    summary = json.loads((tmp_path / "o" / "summary.json").read_text())
+    assert summary["status"] == "failed" and "step 2" in summary["error"]
+    assert len(read_csv_table(tmp_path / "o" / "history.csv")["step"]) == 2

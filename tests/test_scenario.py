@@ -1,0 +1,81 @@
+"""Scenario validation: every bad input is one clear message naming the file and the key."""
+
+import pytest
+from helpers import EXAMPLES
+
+from ntncontact.builder import build_model
+from ntncontact.io.scenario import ScenarioError, load_scenario
+
+GOOD = """
+[analysis]
+kind = "dynamic"
+dt = 0.01
+t_end = 0.1
+
+[[bodies]]
+name = "block"
+mesh = { type = "rectangle", width = 1.0, height = 1.0, nx = 2, ny = 2 }
+material = { model = "neo_hookean", E = 10.0, nu = 0.3, density = 1.0 }
+"""
+
+
+def write(tmp_path, text):
+    path = tmp_path / "case.toml"
+    path.write_text(text)
+    return path
+
+
+def test_a_good_scenario_loads_and_builds(tmp_path):
+    cfg = load_scenario(write(tmp_path, GOOD))
+    model = build_model(cfg, tmp_path)
+    assert model.n_nodes == 9 and model.analysis.dt == 0.01
+
+
+@pytest.mark.parametrize(
+    "replace, expected",
+    [
+        (("dt = 0.01", "dt = 0.01\ndtt = 2"), "analysis.dtt: unknown key"),
+        (("dt = 0.01", 'dt = "fast"'), "analysis.dt"),
+        (("nu = 0.3", "nu = 0.5"), "bodies.0.material.nu"),
+        (("density = 1.0", "density = -1.0"), "bodies.0.material.density"),
+        (('kind = "dynamic"', 'kind = "explicit"'), "analysis.kind"),
+        (("E = 10.0, nu = 0.3", "E = 10.0, nu = 0.3, lambda = 1.0, mu = 1.0"), "either E and nu"),
+    ],
+)
+def test_bad_values_name_the_file_and_key(tmp_path, replace, expected):
+    path = write(tmp_path, GOOD.replace(*replace))
+    with pytest.raises(ScenarioError) as info:
+        load_scenario(path)
+    assert str(path) in str(info.value) and expected in str(info.value)
+
+
+def test_missing_mesh_file_and_unknown_set_are_named(tmp_path):
+    text = GOOD.replace('{ type = "rectangle", width = 1.0, height = 1.0, nx = 2, ny = 2 }',
+                        '{ type = "gmsh", file = "nowhere.msh" }')
+    with pytest.raises(ScenarioError, match="block.*mesh file not found.*nowhere.msh"):
+        build_model(load_scenario(write(tmp_path, text)), tmp_path)
+    text = GOOD + '\n[[bodies.supports]]\nset = "bottm"\ny = 0.0\n'
+    with pytest.raises(ScenarioError, match="block.*bottm"):
+        build_model(load_scenario(write(tmp_path, text)), tmp_path)
+
+
+def test_overrides_set_nested_keys_and_reject_bad_paths(tmp_path):
+    path = write(tmp_path, GOOD)
+    cfg = load_scenario(path, ["analysis.mass=lumped", "bodies.0.material.E=20.0"])
+    assert cfg.analysis.mass == "lumped" and cfg.bodies[0].material.E == 20.0
+    with pytest.raises(ScenarioError, match="no item 3"):
+        load_scenario(path, ["bodies.3.name=x"])
+    with pytest.raises(ScenarioError, match="unknown key"):
+        load_scenario(path, ["analysis.speed=2"])
+
+
+def test_missing_file_and_bad_toml(tmp_path):
+    with pytest.raises(ScenarioError, match="not found"):
+        load_scenario(tmp_path / "none.toml")
+    with pytest.raises(ScenarioError, match="not valid TOML"):
+        load_scenario(write(tmp_path, "[analysis\n"))
+
+
+@pytest.mark.parametrize("path", sorted(EXAMPLES.glob("*.toml")), ids=lambda p: p.name)
+def test_every_example_is_a_valid_scenario(path):
+    build_model(load_scenario(path), path.parent)

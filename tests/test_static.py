@@ -1,0 +1,120 @@
+"""Quasi-static verification: uniaxial Neo-Hookean stretch, Cook's membrane, Newton's rate."""
+
+import numpy as np
+import pytest
+from helpers import Recorder, model_from_dict
+
+from ntncontact.mesh.generators import rectangle
+from ntncontact.problem import StepProblem
+from ntncontact.simulation import Simulation, initial_state
+from ntncontact.solvers.newton import NewtonSettings, newton
+
+
+def stretch_model(stretch, kind="neo_hookean", steps=4):
+    return model_from_dict({
+        "analysis": {"kind": "static", "dt": 1.0 / steps, "t_end": 1.0},
+        "bodies": [{
+            "name": "strip",
+            "mesh": {"type": "rectangle", "width": 2.0, "height": 1.0, "nx": 4, "ny": 3},
+            "material": {"model": kind, "lambda": 3.0, "mu": 2.0, "density": 1.0},
+            "supports": [
+                {"set": "left", "x": 0.0},
+                {"set": "corner_bottom_left", "y": 0.0},
+                {"set": "right", "x": 2.0 * (stretch - 1.0),
+                 "function": {"times": [0.0, 1.0], "values": [0.0, 1.0]}},
+                {"set": "all", "y": 0.0},
+            ],
+        }],
+    })
+
+
+def test_uniaxial_plane_strain_stretch_matches_closed_form_stress():
+    s = 1.6
+    model = stretch_model(s)
+    sim = Simulation(model)
+    sim.run()
+    x = sim.state.x
+    f_int, _, energy = model.assembler.internal(model.X0, x, need_tangent=False)
+    right = model.bodies[0].global_nodes("right")
+    # Reaction on the right edge = P11 times the reference height 1 (P11 closed form).
+    lam, mu = 3.0, 2.0
+    p11 = mu * (s - 1 / s) + lam * np.log(s) / s
+    assert f_int.reshape(-1, 2)[right, 0].sum() == pytest.approx(p11 * 1.0, rel=1e-10)
+    w = mu / 2 * (s * s - 1) - mu * np.log(s) + lam / 2 * np.log(s) ** 2
+    assert energy == pytest.approx(w * 2.0, rel=1e-10)
+
+
+def test_newton_converges_quadratically_on_a_neo_hookean_problem():
+    model = model_from_dict({
+        "analysis": {"kind": "static", "dt": 1.0, "t_end": 1.0},
+        "bodies": [{
+            "name": "beam",
+            "mesh": {"type": "rectangle", "width": 4.0, "height": 1.0, "nx": 16, "ny": 4},
+            "material": {"model": "neo_hookean", "E": 100.0, "nu": 0.3, "density": 1.0},
+            "supports": [{"set": "left", "x": 0.0, "y": 0.0}],
+            "loads": [{"type": "traction", "set": "right", "vector": [0.0, -0.25]}],
+        }],
+    })
+    sim = Simulation(model)
+    problem = StepProblem(model, initial_state(model), 1.0)
+    result = newton(problem.residual, problem.jacobian, sim.solve, problem.initial_guess(),
+                    NewtonSettings(rtol=1e-12, max_iterations=30), sim.length_scale)
+    r = np.array(result.residual_norms) / result.residual_norms[0]
+    # Large deflection (tip moves ~ 1/4 of the length): several iterations, then quadratic:
+    # log r_{k+1} / log r_k -> 2 in the last iterations before round-off.
+    assert result.iterations >= 4
+    tail = r[r > 1e-13][-3:]
+    rates = np.log(tail[1:]) / np.log(tail[:-1])
+    assert rates.max() > 1.8, f"residual history {r}"
+    tip = problem.full(result.y).reshape(-1, 2)[model.bodies[0].global_nodes("right")]
+    assert tip[:, 1].mean() < -0.3
+
+
+def cook_membrane(n):
+    base = rectangle(1.0, 1.0, n, n, name="membrane")
+    xi, eta = base.nodes[:, 0], base.nodes[:, 1]
+    x = 48.0 * xi
+    y = 44.0 * xi + eta * (44.0 + 16.0 * xi - 44.0 * xi)
+    return base.with_nodes(np.column_stack([x, y]))
+
+
+PS = True
+
+
+def cook_tip_displacement(n):
+    """Linear plane-stress Cook's membrane, E = 1, nu = 1/3, unit shear load on the right."""
+    from ntncontact.fem.loads import LoadCase, TimeFunction, edge_traction_vector
+    from ntncontact.materials.models import Material
+    from ntncontact.model import AnalysisSettings, Body, Model, stack_bodies
+
+    mesh = cook_membrane(n)
+    mat = Material.from_young("linear_elastic", 1.0, 1.0 / 3.0, 1.0, plane_stress=PS)
+    placed, X0, cells, asm = stack_bodies([("membrane", mesh, mat)])
+    body = Body(*placed[0])
+    ndof = 2 * len(X0)
+    load = edge_traction_vector(X0, body.global_edges("right"), np.array([0.0, 1.0 / 16.0]),
+                                None, ndof)
+    from ntncontact.fem.loads import Prescribed
+
+    left = body.global_nodes("left")
+    fixed = (Prescribed(2 * left, np.zeros(len(left)), TimeFunction.constant()),
+             Prescribed(2 * left + 1, np.zeros(len(left)), TimeFunction.constant()))
+    model = Model((body,), AnalysisSettings(kind="static", dt=1.0, t_end=1.0),
+                  LoadCase((load,), (TimeFunction.constant(),)), fixed, X0, cells, asm)
+    sim = Simulation(model)
+    sim.run()
+    # The published value is the deflection at the middle of the loaded edge, (48, 52).
+    mid = np.argmin(np.hypot(X0[:, 0] - 48.0, X0[:, 1] - 52.0))
+    assert np.allclose(X0[mid], [48.0, 52.0])
+    return sim.state.d[mid, 1]
+
+
+def test_cooks_membrane_converges_to_the_published_reference():
+    # Reference 23.96 at the middle of the loaded edge (Cook 1989; Simo & Rifai 1990). Q4 is
+    # stiff in bending, so the deflection converges from below, at about O(h^2).
+    values = np.array([cook_tip_displacement(n) for n in (4, 8, 16, 32)])
+    errors = 23.96 - values
+    assert np.all(np.diff(values) > 0) and np.all(errors > 0)
+    rates = np.log2(errors[:-1] / errors[1:])
+    assert rates[-1] > 1.5, f"values {values}"
+    assert abs(errors[-1]) / 23.96 < 0.01, f"values {values}"
