@@ -1,0 +1,50 @@
+"""Contact kernels: surfaces, pairing, kinematics, constraint laws, friction, detection.
+
+Pure functions over arrays in GLOBAL numbering (node = body offset + local node,
+dof = 2 node + component). See :mod:`.evaluate` for the force/tangent convention and
+:mod:`.lagrange`, :mod:`.augmentation`, :mod:`.detection` for the step-level procedures.
+"""
+
+from .augmentation import AugmentationCheck, AugmentationTolerances, augment, check_augmentation
+from .detection import Detection, detect, release_mask
+from .evaluate import ContactResult, evaluate_contact, pair_response
+from .friction import SLIP, STICK, ReturnMapping, frictional_dissipation, return_mapping
+from .kinematics import PairKinematics, pair_kinematics
+from .lagrange import LagrangeBlocks, lagrange_blocks, release_tensile_pairs
+from .laws import ContactLaw, normal_traction
+from .pairing import Pairing, closest_pairs
+from .state import PairState, commit_step
+from .surfaces import ContactSurface, Interface, chord_normals, corner_mask
+
+__all__ = [
+    "SLIP",
+    "STICK",
+    "AugmentationCheck",
+    "AugmentationTolerances",
+    "ContactLaw",
+    "ContactResult",
+    "ContactSurface",
+    "Detection",
+    "Interface",
+    "LagrangeBlocks",
+    "PairKinematics",
+    "PairState",
+    "Pairing",
+    "ReturnMapping",
+    "augment",
+    "check_augmentation",
+    "chord_normals",
+    "closest_pairs",
+    "commit_step",
+    "corner_mask",
+    "detect",
+    "evaluate_contact",
+    "frictional_dissipation",
+    "lagrange_blocks",
+    "normal_traction",
+    "pair_kinematics",
+    "pair_response",
+    "release_mask",
+    "release_tensile_pairs",
+    "return_mapping",
+]

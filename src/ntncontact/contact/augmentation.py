@@ -1,0 +1,86 @@
+"""Nested augmented-Lagrangian updates and their stopping test (report 5.4, steps 4.1-4.2).
+
+Per step: Newton converges with the multipliers of ``state`` fixed, giving a ContactResult r_k;
+if :func:`check_augmentation` (r_{k-1}, r_k) is not converged, ``state = augment(state, r_k)``
+and the ALE motion + Newton are repeated.
+
+Update (Uzawa):   lambda_N <- <lambda_N + eps_N gdot> = t_N^(k)          (5.4 step 4.1)
+                  dlambda_T <- t_T^(k) - t_T,n                           (5.4 step 4.2)
+The tangential update covers both branches of 4.2: on a sticking pair t_T^(k) = t_T,n + dlambda_T
++ eps_T gdot_T, so dlambda_T grows by eps_T gdot_T; on a slipping pair t_T^(k) = mu t_N^(k)
+trial/|trial|, so dlambda_T = mu lambda_N^(k) trial/|trial| - t_T,n.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from .evaluate import ContactResult
+from .friction import SLIP
+from .laws import ContactLaw
+from .state import PairState
+
+__all__ = ["AugmentationCheck", "AugmentationTolerances", "augment", "check_augmentation"]
+
+
+def augment(state: PairState, result: ContactResult, law: ContactLaw) -> PairState:
+    """Multipliers for the next augmentation from the converged Newton result (module doc)."""
+    if law.method != "augmented_lagrangian":
+        raise ValueError(f"augment() applies to 'augmented_lagrangian', not {law.method!r}")
+    if not np.array_equal(result.pairs, state.pairs):
+        raise ValueError("result and state describe different active sets")
+    return replace(state, lambda_N=result.t_N.copy(), dlambda_T=result.t_T - state.t_T)
+
+
+@dataclass(frozen=True)
+class AugmentationTolerances:
+    """normal: TOL1 on max |change of gdot| (of g under the gap law);
+    tangential: TOL2 on max |change of gdot_T| (of delta g_T);
+    slip: relative slack in |t_T| <= mu t_N (report 5.4 step 4, third test);
+    constraint: optional bound on max |gdot| (|g|) over pressed pairs (t_N > 0), i.e. on the
+    constraint violation itself, which the report's change test only implies."""
+
+    normal: float
+    tangential: float
+    slip: float = 1e-10
+    constraint: float | None = None
+
+
+@dataclass(frozen=True)
+class AugmentationCheck:
+    normal_change: float
+    tangential_change: float
+    slip_excess: float
+    status_changes: int
+    constraint_violation: float
+    converged: bool
+
+
+def _max_abs(values: np.ndarray) -> float:
+    return float(np.max(np.abs(values))) if values.size else 0.0
+
+
+def check_augmentation(
+    previous: ContactResult, current: ContactResult, law: ContactLaw,
+    tol: AugmentationTolerances,
+) -> AugmentationCheck:
+    """Report 5.4 step 4 between two successive augmentations of one step.
+
+    Also requires the stick/slip status to be unchanged, since a status switch means the
+    multipliers were built for a different friction branch.
+    """
+    if not np.array_equal(previous.pairs, current.pairs):
+        raise ValueError("augmentations of one step must share the active set")
+    normal = _max_abs(current.normal_measure - previous.normal_measure)
+    tangential = _max_abs(current.slip_measure - previous.slip_measure)
+    scale = np.maximum(law.mu * current.t_N, np.finfo(float).tiny)
+    slip_excess = _max_abs(np.maximum(np.abs(current.t_T) - law.mu * current.t_N, 0.0) / scale)
+    changes = int(np.count_nonzero((current.status == SLIP) != (previous.status == SLIP)))
+    pressed = current.t_N > 0.0
+    violation = _max_abs(current.normal_measure[pressed])
+    ok = (normal <= tol.normal and tangential <= tol.tangential and slip_excess <= tol.slip
+          and (changes == 0 or not law.frictional)
+          and (tol.constraint is None or violation <= tol.constraint))
+    return AugmentationCheck(normal, tangential, slip_excess, changes, violation, bool(ok))

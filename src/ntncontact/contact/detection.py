@@ -1,0 +1,79 @@
+"""Contact detection and release (report 2.1.4, 3.2).
+
+Called once at the start of a step with the committed state of the previous step:
+- an active pair is released when its normal traction vanished, t_N <= traction_tol, and
+  * persistency law: it separates, gdot < 0, for ``release_steps`` consecutive committed steps
+    (the gap stays roughly frozen under persistency, so its sign says nothing, 3.2);
+  * gap law: its gap opened, g < 0 (Kuhn-Tucker 2.14-2.16);
+- a candidate whose surface-1 node is not active becomes active on penetration, g >= -gap_tol,
+  with approach gdot > 0, i.e. (v2 - v1) . n < 0 (persistency law), or on g >= -gap_tol alone
+  (gap law, "changes from negative to zero or positive", 2.1.4).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+
+import numpy as np
+from numpy.typing import NDArray
+
+from .kinematics import pair_kinematics
+from .state import PairState
+from .surfaces import Interface
+
+__all__ = ["Detection", "detect", "release_mask"]
+
+
+@dataclass(frozen=True)
+class Detection:
+    """The updated active set and which surface-1 nodes entered or left it."""
+
+    state: PairState
+    added: NDArray[np.int64]
+    released: NDArray[np.int64]
+
+
+def release_mask(
+    state: PairState, persistency: bool, release_steps: int = 2, traction_tol: float = 0.0
+) -> tuple[NDArray[np.bool_], NDArray[np.int64]]:
+    """(released, updated release counters) for the committed pairs of ``state``."""
+    vanished = state.t_N <= traction_tol
+    if not persistency:
+        released = vanished & (state.gap < 0.0)
+        return released, np.zeros(len(state), np.int64)
+    separating = vanished & (state.gap_rate < 0.0)  # NaN (unknown) counts as not separating
+    count = np.where(separating, state.release_count + 1, 0)
+    return count >= release_steps, count
+
+
+def detect(
+    state: PairState,
+    candidates: NDArray[np.int64],
+    x: NDArray[np.float64],
+    v: NDArray[np.float64] | None,
+    interface: Interface,
+    *,
+    persistency: bool = True,
+    release_steps: int = 2,
+    gap_tol: float = 0.0,
+    traction_tol: float = 0.0,
+) -> Detection:
+    """Release and add pairs (module docstring). ``candidates`` (C, 2) come from
+    :func:`~ntncontact.contact.pairing.closest_pairs` at the step-start positions ``x`` and
+    velocities ``v``. Kept pairs keep their partner and history; new pairs start fresh and are
+    appended after the kept ones."""
+    if release_steps < 1:
+        raise ValueError("release_steps must be >= 1")
+    released, count = release_mask(state, persistency, release_steps, traction_tol)
+    kept = replace(state.take(~released), release_count=count[~released])
+    candidates = np.asarray(candidates, dtype=np.int64).reshape(-1, 2)
+    fresh = candidates[~np.isin(candidates[:, 0], kept.pairs[:, 0])]
+    if persistency and v is None:
+        raise ValueError("detection under the persistency law needs velocities v")
+    kin = pair_kinematics(x, interface, fresh, v)
+    enter = kin.gap >= -gap_tol
+    if persistency:
+        enter &= kin.gap_rate > 0.0  # type: ignore[operator]
+    new = fresh[enter]
+    return Detection(kept.concat(PairState.from_pairs(new)), new[:, 0].copy(),
+                     state.pairs[released, 0].copy())

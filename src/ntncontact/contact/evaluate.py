@@ -1,0 +1,185 @@
+"""Contact force and consistent tangent for a GIVEN active set and fixed multipliers.
+
+Virtual work (2.57) with the tributary length L_c as the discrete measure (5.5)-(5.6):
+
+    G^c = sum_pairs L_c (t_N n + t_T e) . (w_i - w_j),
+
+so the residual R = f_int - f_ext + f_contact receives +F on node i (surface 1) and -F on node j
+(surface 2), F = L_c (t_N n + t_T e) (5.11)-(5.12); the traction on body 1 is -t_N n - t_T e
+(2.13). The tangent is the exact derivative dF/dx_eval: unlike (5.23)-(5.24) it keeps the
+derivatives of n, e and L_c with respect to the chain neighbours (so Newton converges
+quadratically) and the dependence of the slip traction on t_N. It is unsymmetric in general.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.sparse as sp
+from numpy.typing import NDArray
+
+from .friction import ReturnMapping, frictional_dissipation, return_mapping
+from .kinematics import N_SLOTS, PairKinematics, pair_kinematics
+from .laws import ContactLaw, normal_traction
+from .state import PairState
+from .surfaces import Interface
+
+__all__ = ["ContactResult", "PairResponse", "evaluate_contact", "pair_response"]
+
+
+@dataclass(frozen=True)
+class PairResponse:
+    """Kinematics, normal traction and return mapping of the active pairs (shared by
+    :func:`evaluate_contact` and the Lagrange blocks)."""
+
+    kin: PairKinematics
+    t_N: NDArray[np.float64]
+    d_t_N: NDArray[np.float64]  # (P, 6, 2)
+    friction: ReturnMapping
+    d_t_T: NDArray[np.float64]  # (P, 6, 2)
+
+
+def pair_response(
+    x_eval: NDArray[np.float64],
+    v_eval: NDArray[np.float64] | None,
+    rate_factor: float | None,
+    interface: Interface,
+    state: PairState,
+    law: ContactLaw,
+    x_start: NDArray[np.float64] | None = None,
+) -> PairResponse:
+    """Tractions t_N (2.33/2.34) and t_T (2.39-2.43) with their slot gradients."""
+    kin = pair_kinematics(x_eval, interface, state.pairs, v_eval, rate_factor, x_start)
+    t_N, dt_dmeasure = normal_traction(law, state.lambda_N, kin.normal_measure)
+    d_t_N = dt_dmeasure[:, None, None] * kin.d_normal_measure
+    dlam = state.dlambda_T if law.uses_multipliers else np.zeros(len(state))
+    rm = return_mapping(state.t_T, dlam, kin.slip_measure, t_N, law.mu, law.eps_T)
+    d_t_T = rm.d_slip[:, None, None] * kin.d_slip_measure + rm.d_normal[:, None, None] * d_t_N
+    return PairResponse(kin, t_N, d_t_N, rm, d_t_T)
+
+
+@dataclass(frozen=True)
+class ContactResult:
+    """Contact contribution to the residual and its tangent, plus per-pair diagnostics.
+
+    force: (ndof,) vector to ADD to R = f_int - f_ext + f_contact.
+    rows, cols, vals: COO triplets of d force / d x_eval in global dofs (duplicates add up).
+    Per pair (aligned with ``pairs``): gap g (2.4), gap_rate gdot (2.9; NaN without
+    velocities), slip_measure (gdot_T, or delta g_T under the gap law), t_N, t_T (tractions),
+    trial_T, normal_force = t_N L_c, tangential_force = t_T L_c, status (friction.STICK/SLIP),
+    length L_c, normal n, tangent e. dissipation: frictional work of the step (3.18).
+    """
+
+    force: NDArray[np.float64]
+    rows: NDArray[np.int64]
+    cols: NDArray[np.int64]
+    vals: NDArray[np.float64]
+    pairs: NDArray[np.int64]
+    gap: NDArray[np.float64]
+    gap_rate: NDArray[np.float64]
+    slip_measure: NDArray[np.float64]
+    t_N: NDArray[np.float64]
+    t_T: NDArray[np.float64]
+    trial_T: NDArray[np.float64]
+    status: NDArray[np.int8]
+    length: NDArray[np.float64]
+    normal: NDArray[np.float64]
+    tangent: NDArray[np.float64]
+    dissipation: float
+    rate_law: bool
+
+    @property
+    def normal_force(self) -> NDArray[np.float64]:
+        return self.t_N * self.length
+
+    @property
+    def tangential_force(self) -> NDArray[np.float64]:
+        return self.t_T * self.length
+
+    @property
+    def normal_measure(self) -> NDArray[np.float64]:
+        """The quantity the normal law constrains: gdot (rate law) or g (gap law)."""
+        return self.gap_rate if self.rate_law else self.gap
+
+    def tangent_matrix(self) -> sp.csr_matrix:
+        """The COO triplets as a square CSR matrix (duplicates summed)."""
+        n = self.force.size
+        return sp.csr_matrix((self.vals, (self.rows, self.cols)), shape=(n, n))
+
+
+def _force_jacobian(resp: PairResponse) -> tuple[NDArray, NDArray]:
+    """F = L_c (t_N n + t_T e) per pair and dF/dx_slot, (P, 2) and (P, 6, 2, 2)."""
+    k, t_N, t_T = resp.kin, resp.t_N, resp.friction.traction
+    direction = t_N[:, None] * k.normal + t_T[:, None] * k.tangent
+    outer = np.einsum  # d(L_c a)/dx = a dL_c^T + L_c da/dx
+    d_dir = (outer("pr,pkc->pkrc", k.normal, resp.d_t_N) + t_N[:, None, None, None] * k.d_normal
+             + outer("pr,pkc->pkrc", k.tangent, resp.d_t_T)
+             + t_T[:, None, None, None] * k.d_tangent)
+    jac = outer("pr,pkc->pkrc", direction, k.d_length) + k.length[:, None, None, None] * d_dir
+    return k.length[:, None] * direction, jac
+
+
+def assemble_pair_vectors(pairs: NDArray, vectors: NDArray, ndof: int) -> NDArray:
+    """Global vector with +vectors on node1 dofs and -vectors on node2 dofs."""
+    idx = np.concatenate([2 * pairs[:, 0], 2 * pairs[:, 0] + 1, 2 * pairs[:, 1],
+                          2 * pairs[:, 1] + 1])
+    w = np.concatenate([vectors[:, 0], vectors[:, 1], -vectors[:, 0], -vectors[:, 1]])
+    return np.bincount(idx, weights=w, minlength=ndof).astype(float)
+
+
+def assemble_pair_jacobian(
+    pairs: NDArray, slots: NDArray, jac: NDArray
+) -> tuple[NDArray, NDArray, NDArray]:
+    """COO of d(+F on node1, -F on node2)/dx from dF/dx_slot (P, 6, 2, 2)."""
+    p = len(pairs)
+    shape = (p, 2, N_SLOTS, 2, 2)  # pair, node (i/j), slot, force comp r, position comp c
+    comp = np.arange(2)
+    rows = 2 * pairs[:, :, None, None, None] + comp[None, None, None, :, None]
+    cols = 2 * slots[:, None, :, None, None] + comp[None, None, None, None, :]
+    sign = np.array([1.0, -1.0])[None, :, None, None, None]
+    vals = sign * jac[:, None]
+    return (np.broadcast_to(rows, shape).ravel(), np.broadcast_to(cols, shape).ravel(),
+            np.broadcast_to(vals, shape).ravel())
+
+
+def evaluate_contact(
+    x_eval: NDArray[np.float64],
+    v_eval: NDArray[np.float64] | None,
+    rate_factor: float | None,
+    interface: Interface,
+    state: PairState,
+    law: ContactLaw,
+    *,
+    x_start: NDArray[np.float64] | None = None,
+    dt: float | None = None,
+) -> ContactResult:
+    """Contact force, consistent tangent and per-pair results for the active set ``state``.
+
+    x_eval: (n_nodes, 2) positions of ALL bodies where geometry is evaluated (the mid-point
+        configuration in dynamics); v_eval: velocities with dv/dx_eval = rate_factor I.
+    rate_factor: 2/dt for the mid-point rule -> persistency law t_N = <lambda + eps_N gdot>
+        (2.34) and rate friction; None -> gap law t_N = <lambda + eps_N g> (2.33) and the
+        tangential increment since ``x_start`` (required for friction under the gap law).
+    dt: only scales the reported dissipation under the rate law (default 2/rate_factor).
+    Multipliers (lambda_N, dlambda_T) and the friction history come from ``state`` and are
+    held fixed: this is what Newton calls at every iteration.
+    """
+    ndof = 2 * x_eval.shape[0]
+    if law.frictional and rate_factor is None and x_start is None:
+        raise ValueError("friction under the gap law needs x_start (tangential increment)")
+    resp = pair_response(x_eval, v_eval, rate_factor, interface, state, law, x_start)
+    force_pp, jac = _force_jacobian(resp)
+    rows, cols, vals = assemble_pair_jacobian(state.pairs, resp.kin.slots, jac)
+    k, rm = resp.kin, resp.friction
+    step = None if rate_factor is None else (dt if dt is not None else 2.0 / rate_factor)
+    gap_rate = k.gap_rate if k.gap_rate is not None else np.full(len(state), np.nan)
+    return ContactResult(
+        force=assemble_pair_vectors(state.pairs, force_pp, ndof), rows=rows, cols=cols,
+        vals=vals, pairs=state.pairs, gap=k.gap, gap_rate=gap_rate,
+        slip_measure=k.slip_measure, t_N=resp.t_N, t_T=rm.traction, trial_T=rm.trial,
+        status=rm.status, length=k.length, normal=k.normal, tangent=k.tangent,
+        dissipation=frictional_dissipation(rm.traction, k.slip_measure, k.length, rm.status,
+                                           step),
+        rate_law=k.rate_law,
+    )

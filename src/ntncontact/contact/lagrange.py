@@ -1,0 +1,99 @@
+"""Exact normal multipliers: the blocks of a bordered (saddle-point) Newton system (report 2.2.1).
+
+Unknowns: x_eval (through the solver's d) and one multiplier t_N per active pair (traction
+units, t_N = lambda_N, as for the other methods). With ``law.method == "lagrange"``,
+:func:`~ntncontact.contact.evaluate.evaluate_contact` called with ``state.lambda_N = t_N``
+returns the contact force f_c(x, t_N) and the block K_c = df_c/dx at fixed multipliers. This
+module adds the constraint and coupling blocks, for the Newton step
+
+    [ K + K_c   B ] [dx  ]     [ R = f_int - f_ext + f_c ]
+    [ G         0 ] [dt_N] = - [ h                       ]
+
+    h_p = L_c g_p (gap law) or L_c gdot_p (persistency law): the tributary-weighted constraint,
+        work-conjugate to t_N, so that G ~ B^T (exactly at g = 0 for a fixed normal);
+    G = dh/dx_eval  (rows: pair index, columns: global dofs; the rate law's G carries the
+        factor rate_factor of dv/dx = rate_factor I: scale the row block if you prefer),
+    B = d f_c / d t_N  (rows: global dofs, columns: pair index; includes mu sign(trial) L_c e
+        on slipping pairs, whose traction is mu t_N).
+
+Activity is checked after Newton converges: a pair with t_N < 0 (tension, 2.14) is released with
+:func:`release_tensile_pairs` and the step is solved again; new penetrations enter through
+:func:`~ntncontact.contact.detection.detect` at the next step. The energy-conserving variant of
+report 5.5 borders the same system with one more row/column (lambda_E); it reuses h, G and B.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.sparse as sp
+from numpy.typing import NDArray
+
+from .evaluate import pair_response
+from .kinematics import N_SLOTS
+from .laws import ContactLaw
+from .state import PairState
+from .surfaces import Interface
+
+__all__ = ["LagrangeBlocks", "lagrange_blocks", "release_tensile_pairs"]
+
+
+@dataclass(frozen=True)
+class LagrangeBlocks:
+    """Constraint values h (P,), G = dh/dx and B = df_c/dt_N as COO triplets."""
+
+    values: NDArray[np.float64]
+    g_rows: NDArray[np.int64]
+    g_cols: NDArray[np.int64]
+    g_vals: NDArray[np.float64]
+    b_rows: NDArray[np.int64]
+    b_cols: NDArray[np.int64]
+    b_vals: NDArray[np.float64]
+
+    def matrices(self, ndof: int) -> tuple[sp.csr_matrix, sp.csr_matrix]:
+        """(G, B) as CSR matrices of shapes (P, ndof) and (ndof, P)."""
+        p = self.values.size
+        g = sp.csr_matrix((self.g_vals, (self.g_rows, self.g_cols)), shape=(p, ndof))
+        b = sp.csr_matrix((self.b_vals, (self.b_rows, self.b_cols)), shape=(ndof, p))
+        return g, b
+
+
+def lagrange_blocks(
+    x_eval: NDArray[np.float64],
+    v_eval: NDArray[np.float64] | None,
+    rate_factor: float | None,
+    interface: Interface,
+    state: PairState,
+    law: ContactLaw,
+    x_start: NDArray[np.float64] | None = None,
+) -> LagrangeBlocks:
+    """h, G and B (module docstring) at ``x_eval`` with multipliers ``state.lambda_N``."""
+    resp = pair_response(x_eval, v_eval, rate_factor, interface, state, law, x_start)
+    k = resp.kin
+    p = len(state)
+    measure, d_measure = k.normal_measure, k.d_normal_measure
+    values = k.length * measure
+    d_h = measure[:, None, None] * k.d_length + k.length[:, None, None] * d_measure
+    comp = np.arange(2)
+    g_rows = np.broadcast_to(np.arange(p)[:, None, None], (p, N_SLOTS, 2)).ravel()
+    g_cols = (2 * k.slots[:, :, None] + comp).ravel()
+    # dF/dt_N = L_c (n + d t_T/d t_N e): +on node i, -on node j
+    column = k.length[:, None] * (k.normal + resp.friction.d_normal[:, None] * k.tangent)
+    b_rows = (2 * state.pairs[:, :, None] + comp).ravel()
+    b_cols = np.repeat(np.arange(p), 4)
+    b_vals = (np.array([1.0, -1.0])[None, :, None] * column[:, None, :]).ravel()
+    return LagrangeBlocks(values, g_rows, g_cols, d_h.ravel(), b_rows, b_cols, b_vals)
+
+
+def release_tensile_pairs(
+    state: PairState, multipliers: NDArray[np.float64], tol: float = 0.0
+) -> tuple[PairState, NDArray[np.bool_]]:
+    """Drop pairs whose converged multiplier is tensile, t_N < -tol (violates 2.14).
+
+    Returns the reduced state (multipliers stored as lambda_N) and the released mask; if any
+    pair was released the step must be solved again with the reduced active set.
+    """
+    multipliers = np.asarray(multipliers, dtype=float)
+    tensile = multipliers < -tol
+    return state.with_multipliers(multipliers).take(~tensile), tensile

@@ -1,0 +1,65 @@
+"""Constraint treatment per interface and the normal traction law (report 2.2, 2.33-2.34)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Literal
+
+import numpy as np
+from numpy.typing import NDArray
+
+__all__ = ["ContactLaw", "Method", "normal_traction"]
+
+Method = Literal["penalty", "augmented_lagrangian", "lagrange"]
+_METHODS = ("penalty", "augmented_lagrangian", "lagrange")
+
+
+@dataclass(frozen=True)
+class ContactLaw:
+    """How an interface enforces contact.
+
+    method: "penalty" (lambda_N = 0 always, 2.27), "augmented_lagrangian" (nested
+        multiplier updates of report 5.4, 2.30-2.43) or "lagrange" (exact normal multipliers in a
+        bordered system; friction stays penalty-regularized with eps_T).
+    eps_N: normal penalty (2.27, 2.33-2.34); unused by "lagrange".
+    eps_T: tangential penalty (2.35-2.41); friction is off when eps_T or mu is 0.
+    mu: Coulomb coefficient mu_f (2.20).
+    """
+
+    method: Method = "augmented_lagrangian"
+    eps_N: float = 0.0
+    eps_T: float = 0.0
+    mu: float = 0.0
+
+    def __post_init__(self) -> None:
+        if self.method not in _METHODS:
+            raise ValueError(f"unknown contact method {self.method!r}; use one of {_METHODS}")
+        if min(self.eps_N, self.eps_T, self.mu) < 0.0:
+            raise ValueError("eps_N, eps_T and mu must be non-negative")
+        if self.method != "lagrange" and self.eps_N <= 0.0:
+            raise ValueError(f"method {self.method!r} needs a positive normal penalty eps_N")
+
+    @property
+    def frictional(self) -> bool:
+        return self.mu > 0.0 and self.eps_T > 0.0
+
+    @property
+    def uses_multipliers(self) -> bool:
+        return self.method != "penalty"
+
+
+def normal_traction(
+    law: ContactLaw, lambda_N: NDArray[np.float64], measure: NDArray[np.float64]
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """t_N and dt_N/d(measure) per pair.
+
+    measure is g (gap law, 2.33) or gdot (persistency law, 2.34): t_N = <lambda_N + eps_N measure>
+    (lambda_N = 0 for penalty). "lagrange": t_N = lambda_N, the multiplier itself, WITHOUT the
+    Macaulay bracket, so Newton sees a smooth system; its sign is checked after the solve.
+    """
+    if law.method == "lagrange":
+        return np.asarray(lambda_N, dtype=float).copy(), np.zeros_like(measure)
+    base = 0.0 if law.method == "penalty" else lambda_N
+    trial = base + law.eps_N * measure
+    pressed = trial > 0.0
+    return np.where(pressed, trial, 0.0), np.where(pressed, law.eps_N, 0.0)
