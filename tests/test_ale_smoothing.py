@@ -78,19 +78,25 @@ def chevron_patch() -> tuple[np.ndarray, np.ndarray]:
     return nodes, cells
 
 
-def test_inverting_move_is_refused():
+def test_inverting_move_is_refused_or_shortened():
     nodes, cells = chevron_patch()
     assert (corner_jacobians(nodes, cells) > 0).all(), "test set-up: valid start"
     fixed = np.ones(9, bool)
     fixed[8] = False
-    smoother = Smoother(cells, 9, fixed, method="laplacian")
-    proposed = smoother.candidates(nodes)
+    refusing = Smoother(cells, 9, fixed, method="laplacian", max_halvings=0)
+    proposed = refusing.candidates(nodes)
     np.testing.assert_allclose(proposed[8], [0.0, 1.2], atol=1e-12)
     assert (corner_jacobians(proposed, cells) <= 0).any(), "test set-up: the move must invert"
-    result = smoother.run(nodes, max_sweeps=5)
+    result = refusing.run(nodes, max_sweeps=5)
     np.testing.assert_array_equal(result.nodes, nodes)
     # every move refused => nothing moved => converged after one sweep
     assert result.refused_moves == 1 and result.sweeps == 1
+    # with step halving: 1/2 and 1/4 of the step still pass N (y = 0.4), 1/8 does not
+    halving = Smoother(cells, 9, fixed, method="laplacian", max_halvings=3)
+    one = halving.run(nodes, max_sweeps=1)
+    np.testing.assert_allclose(one.nodes[8], [0.0, 0.2 + 1.0 / 8], atol=1e-12)
+    assert one.shortened_moves == 1 and one.refused_moves == 0
+    assert (corner_jacobians(one.nodes, cells) > 0).all()
 
 
 def test_inverted_final_mesh_raises_with_body_name():

@@ -13,7 +13,9 @@ sweep's positions) vectorized over nodes with neighbour structures built once pe
   chosen by the angle-difference ratio r = 2|beta| / (alpha_1 + alpha_2).
 
 A move that would invert a cell (make its smallest corner Jacobian non-positive and smaller than
-before the sweep) is refused: the moved nodes of that cell keep their old positions in that sweep.
+before the sweep) is limited per node: the moving nodes of that cell retry with their steps halved
+(``max_halvings`` times, default 3) and then keep their old positions in that sweep
+(``max_halvings=0`` refuses at once).
 Cells that were already inverted may be improved, so a tangled mesh can be untangled; since the
 angle rules are meaningless in a tangled cell (its angles wrap around), the nodes of inverted cells
 follow the Laplacian rule until untangled. Uniform
@@ -95,7 +97,8 @@ class SmoothingResult:
     nodes: NDArray[np.float64]
     sweeps: int
     max_move: float
-    refused_moves: int
+    shortened_moves: int  # node moves cut short to avoid an inversion (summed over sweeps)
+    refused_moves: int  # node moves refused outright (summed over sweeps)
 
 
 class Smoother:
@@ -108,6 +111,7 @@ class Smoother:
         fixed_mask: ArrayLike | None = None,
         method: SmoothingMethod = "laplacian",
         body_name: str = "body",
+        max_halvings: int = 3,
     ) -> None:
         if method not in _METHODS:
             raise ValueError(f"unknown smoothing method {method!r}; choose one of {_METHODS}")
@@ -115,6 +119,7 @@ class Smoother:
         self.n_nodes = int(n_nodes)
         self.method = method
         self.body_name = body_name
+        self.max_halvings = int(max_halvings)
         fixed = boundary_node_mask(self.cells, n_nodes) if fixed_mask is None else fixed_mask
         self.free = ~np.asarray(fixed, bool)
         edges = unique_edges(self.cells)
@@ -199,22 +204,30 @@ class Smoother:
                 proposed[tangled] = self._laplacian(x)[tangled]
         return np.where(self.free[:, None], proposed, x)
 
-    def _sweep(self, x: NDArray) -> tuple[NDArray, int]:
-        """One Jacobi sweep with per-node refusal of inverting moves; returns (x, refused)."""
+    def _sweep(self, x: NDArray) -> tuple[NDArray, int, int]:
+        """One Jacobi sweep limiting inverting moves; returns (x, shortened, refused).
+
+        A node of a cell the sweep would invert first retries with its step halved (up to
+        ``max_halvings`` times), then keeps its old position for this sweep.
+        """
         proposed = self.candidates(x)
-        moving = self.free & np.any(proposed != x, axis=1)
+        factor = (self.free & np.any(proposed != x, axis=1)).astype(float)
+        wanted = factor > 0
         old_min = corner_jacobians(x, self.cells).min(axis=1)
-        wanted = moving.copy()
+        smallest = 0.5**self.max_halvings
         while True:
-            new = np.where(moving[:, None], proposed, x)
+            new = x + factor[:, None] * (proposed - x)
             new_min = corner_jacobians(new, self.cells).min(axis=1)
             broken = (new_min <= 0.0) & (new_min < old_min)
-            revert = np.zeros(self.n_nodes, bool)
-            revert[self.cells[broken].ravel()] = True
-            revert &= moving
-            if not revert.any():
-                return new, int(np.count_nonzero(wanted & ~moving))
-            moving &= ~revert
+            hit = np.zeros(self.n_nodes, bool)
+            hit[self.cells[broken].ravel()] = True
+            hit &= factor > 0
+            if not hit.any():
+                refused = wanted & (factor == 0)
+                return new, int(np.count_nonzero(wanted & (factor < 1) & ~refused)), int(
+                    np.count_nonzero(refused)
+                )
+            factor[hit] = np.where(factor[hit] > smallest, 0.5 * factor[hit], 0.0)
 
     def run(
         self, nodes: ArrayLike, max_sweeps: int = 100, rel_tol: float = 1e-6
@@ -225,16 +238,17 @@ class Smoother:
         """
         x = np.array(nodes, dtype=float)
         scale = np.mean(np.linalg.norm(x[self._src] - x[self._dst], axis=1))
-        max_move, refused, sweeps = 0.0, 0, 0
-        for sweeps in range(1, max_sweeps + 1):  # noqa: B007 - the count is reported
-            new, n_refused = self._sweep(x)
-            refused += n_refused
+        max_move, shortened, refused = 0.0, 0, 0
+        sweeps = 0
+        while sweeps < max_sweeps:
+            new, n_short, n_refused = self._sweep(x)
+            sweeps, shortened, refused = sweeps + 1, shortened + n_short, refused + n_refused
             max_move = float(np.max(np.linalg.norm(new - x, axis=1), initial=0.0))
             x = new
             if max_move <= rel_tol * scale:
                 break
         check_elements(x, self.cells, self.body_name)
-        return SmoothingResult(x, sweeps, max_move, refused)
+        return SmoothingResult(x, sweeps, max_move, shortened, refused)
 
     def smooth(self, nodes: ArrayLike, max_sweeps: int = 100, rel_tol: float = 1e-6) -> NDArray:
         """Smoothed node positions (see ``run``)."""
