@@ -113,3 +113,17 @@ def test_relocate_moves_active_node_to_projected_target_with_equal_spacing():
     np.testing.assert_allclose(new[:, 1], 0.0, atol=ROUND)
     np.testing.assert_allclose(new[:5, 0], np.linspace(0, 7.3, 5), atol=1e-12)
     np.testing.assert_allclose(new[4:, 0], np.linspace(7.3, 10, 7), atol=1e-12)
+
+
+def test_relocated_nodes_stay_on_a_circle_to_third_order():
+    def radial_error(n):
+        chain = arc_chain(n)
+        # the middle node chases a target 2.3 segments ahead, slightly off the circle
+        theta = np.arctan2(chain[n // 2 + 2, 1], chain[n // 2 + 2, 0]) + 0.3 * (np.pi / 2) / n
+        new, _ = relocate_surface_nodes(chain, [n // 2], [[1.01 * np.cos(theta),
+                                                           1.01 * np.sin(theta)]])
+        return np.max(np.abs(np.linalg.norm(new, axis=1) - 1.0))
+
+    errors = np.array([radial_error(n) for n in (9, 17, 33)])
+    # nodes between old nodes inherit the curve error: at least third order in h
+    assert np.all(np.log2(errors[:-1] / errors[1:]) > 2.7), errors
