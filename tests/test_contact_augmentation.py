@@ -1,0 +1,156 @@
+"""Augmented Lagrangian iterations and the exact Lagrange (bordered) solution on a small
+spring-against-wall problem (report 2.2, 5.4).
+
+Body 1: three nodes on a straight surface, each tied by a zero-length spring (stiffness k_i) to
+an anchor a height h above a tilted rigid wall, pushed into the wall and along it. Body 2: the
+wall's three fixed nodes. Gap law, frictionless, node-to-node pairs.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from ntncontact.contact import (
+    AugmentationTolerances,
+    ContactLaw,
+    ContactSurface,
+    Interface,
+    PairState,
+    augment,
+    check_augmentation,
+    evaluate_contact,
+    lagrange_blocks,
+)
+
+THETA = 0.3
+D = np.array([np.cos(THETA), np.sin(THETA)])  # wall direction
+NW = np.array([-np.sin(THETA), np.cos(THETA)])  # wall outward normal (towards body 1)
+K_SPRING = np.array([10.0, 14.0, 8.0])
+HEIGHT = 0.1
+LOAD = -3.0 * NW + 0.4 * D  # per node: into the wall and along it
+NEWTON_TOL = 1e-12  # relative residual; the problem is O(1), so this is near round-off
+
+
+def setup():
+    s = np.arange(3.0)
+    wall = s[:, None] * D
+    anchors = wall + HEIGHT * NW
+    x = np.vstack((anchors, wall))
+    interface = Interface(ContactSurface([0, 1, 2]), ContactSurface([5, 4, 3]))
+    pairs = np.array([[0, 3], [1, 4], [2, 5]])
+    return x, anchors, interface, pairs
+
+
+def spring_residual(x, anchors):
+    r = np.zeros_like(x)
+    r[:3] = K_SPRING[:, None] * (x[:3] - anchors) - LOAD
+    return r.ravel()
+
+
+FREE = np.arange(6)  # body-1 dofs; the wall is fixed
+
+
+def solve_fixed_multipliers(x, anchors, interface, state, law):
+    """Newton on the body-1 dofs with the contact multipliers of ``state`` held fixed."""
+    x = x.copy()
+    k_springs = np.diag(np.repeat(K_SPRING, 2))
+    for _ in range(30):
+        res = evaluate_contact(x, None, None, interface, state, law)
+        r = (spring_residual(x, anchors) + res.force)[FREE]
+        if np.linalg.norm(r) < NEWTON_TOL * np.linalg.norm(LOAD):
+            return x, res
+        jac = k_springs + res.tangent_matrix().toarray()[np.ix_(FREE, FREE)]
+        x[:3] -= np.linalg.solve(jac, r).reshape(-1, 2)
+    raise AssertionError("Newton did not converge")
+
+
+def solve_lagrange(x, anchors, interface, pairs):
+    """Newton on the bordered system [[K + K_c, B], [G, 0]] (module lagrange)."""
+    law = ContactLaw("lagrange")
+    x = x.copy()
+    lam = np.zeros(len(pairs))
+    k_springs = np.diag(np.repeat(K_SPRING, 2))
+    for _ in range(30):
+        state = PairState.from_pairs(pairs).with_multipliers(lam)
+        res = evaluate_contact(x, None, None, interface, state, law)
+        blocks = lagrange_blocks(x, None, None, interface, state, law)
+        g_mat, b_mat = blocks.matrices(x.size)
+        r = np.concatenate(((spring_residual(x, anchors) + res.force)[FREE], blocks.values))
+        if np.linalg.norm(r) < NEWTON_TOL * np.linalg.norm(LOAD):
+            return x, lam
+        top = np.hstack((k_springs + res.tangent_matrix().toarray()[np.ix_(FREE, FREE)],
+                         b_mat.toarray()[FREE]))
+        bottom = np.hstack((g_mat.toarray()[:, FREE], np.zeros((len(pairs), len(pairs)))))
+        step = np.linalg.solve(np.vstack((top, bottom)), -r)
+        x[:3] += step[:6].reshape(-1, 2)
+        lam += step[6:]
+    raise AssertionError("bordered Newton did not converge")
+
+
+def test_lagrange_solution_is_exact():
+    x0, anchors, interface, pairs = setup()
+    x, lam = solve_lagrange(x0, anchors, interface, pairs)
+    res = evaluate_contact(x, None, None, interface,
+                           PairState.from_pairs(pairs).with_multipliers(lam),
+                           ContactLaw("lagrange"))
+    assert np.max(np.abs(res.gap)) < 1e-12  # constraint met to Newton's round-off level
+    assert np.all(lam > 0.0)  # every pair in compression: the active set is right
+    # global balance normal to the wall: spring forces + load + contact = 0
+    normal_load = np.sum((LOAD - K_SPRING[:, None] * (x[:3] - anchors)) @ NW)
+    np.testing.assert_allclose(np.sum(res.normal_force), -normal_load, rtol=1e-10)
+
+
+@pytest.mark.parametrize("eps_N", [20.0, 200.0])
+def test_augmentation_converges_to_lagrange(eps_N):
+    x0, anchors, interface, pairs = setup()
+    x_exact, lam_exact = solve_lagrange(x0, anchors, interface, pairs)
+    law = ContactLaw("augmented_lagrangian", eps_N=eps_N)
+    state = PairState.from_pairs(pairs)
+    gaps, errors, results = [], [], []
+    for _ in range(12):
+        x, res = solve_fixed_multipliers(x0, anchors, interface, state, law)
+        gaps.append(np.max(res.gap))
+        errors.append(np.max(np.abs(res.t_N - lam_exact)))
+        results.append(res)
+        state = augment(state, res, law)
+    gaps, errors = np.array(gaps), np.array(errors)
+    assert np.all(gaps > 0.0)  # penalty-type methods never over-correct here
+    assert np.all(np.diff(gaps) < 0.0)  # each augmentation reduces the penetration
+    assert np.all(np.diff(errors) < 0.0)  # and moves the tractions toward the exact ones
+    # linear contraction ~ k / (k + eps_N L_c) <= 14/(14 + 10) per iteration for eps_N = 20
+    assert gaps[-1] < 1e-3 * gaps[0]
+    np.testing.assert_allclose(x[:3], x_exact[:3], atol=10 * gaps[-1])
+    tol = AugmentationTolerances(normal=1e-3 * gaps[0], tangential=1e-12)
+    assert check_augmentation(results[-2], results[-1], law, tol).converged
+    assert not check_augmentation(results[0], results[1], law, tol).converged
+
+
+def test_penalty_does_not_augment():
+    x0, anchors, interface, pairs = setup()
+    law = ContactLaw("penalty", eps_N=20.0)
+    _, res = solve_fixed_multipliers(x0, anchors, interface, PairState.from_pairs(pairs), law)
+    assert np.max(res.gap) > 0.01  # a penalty solution penetrates visibly at this eps_N
+    with pytest.raises(ValueError):
+        augment(PairState.from_pairs(pairs), res, law)
+
+
+def test_augment_tangential_update():
+    """dlambda_T <- t_T^(k) - t_T,n (report 5.4 step 4.2), lambda_N <- t_N^(k) (step 4.1)."""
+    x0, anchors, interface, pairs = setup()
+    law = ContactLaw("augmented_lagrangian", eps_N=20.0, eps_T=5.0, mu=0.2)
+    state = PairState.from_pairs(pairs)
+    x = x0.copy()
+    x[:3] = x0[3:] - 0.03 * NW  # pressed: t_N = eps_N 0.03 = 0.6, cone mu t_N = 0.12
+    x_start = x.copy()
+    x_start[:3] -= np.array([0.01, 0.05, 0.005])[:, None] * D  # trials 0.05, 0.25, 0.025
+    res = evaluate_contact(x, None, None, interface, state, law, x_start=x_start)
+    new = augment(state, res, law)
+    np.testing.assert_array_equal(new.lambda_N, res.t_N)
+    np.testing.assert_array_equal(new.dlambda_T, res.t_T - state.t_T)
+    again = evaluate_contact(x, None, None, interface, new, law, x_start=x_start)
+    stick = res.status == 0
+    np.testing.assert_array_equal(stick, [True, False, True])
+    # a sticking pair's trial grows by eps_T delta g_T at the same configuration
+    np.testing.assert_allclose(again.trial_T[stick], res.t_T[stick]
+                               + law.eps_T * res.slip_measure[stick], rtol=1e-14, atol=1e-14)

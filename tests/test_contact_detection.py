@@ -1,0 +1,120 @@
+"""Detection and release sequences (report 2.1.4, 3.2)."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from ntncontact.contact import (
+    ContactSurface,
+    Interface,
+    PairState,
+    closest_pairs,
+    detect,
+    release_tensile_pairs,
+)
+
+
+def blocks(offset_y: float):
+    """Body 1 (nodes 0-3) above body 2 (nodes 4-7); offset_y < 0 means penetration."""
+    xs = np.arange(4.0)
+    x = np.vstack((np.column_stack((xs, np.full(4, offset_y))), np.column_stack((xs[::-1],
+                                                                                  np.zeros(4)))))
+    return x, Interface(ContactSurface([0, 1, 2, 3]), ContactSurface([4, 5, 6, 7]))
+
+
+def velocities(vy1: float) -> np.ndarray:
+    v = np.zeros((8, 2))
+    v[:4, 1] = vy1
+    return v
+
+
+def test_entry_needs_penetration_and_approach():
+    x, interface = blocks(-0.01)
+    cand = closest_pairs(x, interface).pairs
+    state = PairState.empty()
+    assert len(detect(state, cand, x, velocities(+1.0), interface).state) == 0  # leaving
+    got = detect(state, cand, x, velocities(-1.0), interface)  # approaching
+    np.testing.assert_array_equal(got.added, [0, 1, 2, 3])
+    np.testing.assert_array_equal(got.state.pairs, [[0, 7], [1, 6], [2, 5], [3, 4]])
+    x_apart, _ = blocks(+0.01)
+    assert len(detect(state, cand, x_apart, velocities(-1.0), interface).state) == 0
+    # gap law: penetration (or touching) suffices, velocities are not needed
+    gap_law = detect(state, cand, x, None, interface, persistency=False)
+    assert len(gap_law.state) == 4
+    x_touch, _ = blocks(0.0)
+    assert len(detect(state, cand, x_touch, None, interface, persistency=False).state) == 4
+    assert len(detect(state, cand, x_apart, None, interface, persistency=False).state) == 0
+
+
+def committed(pairs, t_N, gap, gap_rate, count=0):
+    n = len(pairs)
+    s = PairState.from_pairs(pairs)
+    return replace(s, t_N=np.broadcast_to(t_N, n).astype(float),
+                   gap=np.broadcast_to(gap, n).astype(float),
+                   gap_rate=np.broadcast_to(gap_rate, n).astype(float),
+                   release_count=np.broadcast_to(count, n).astype(np.int64),
+                   t_T=np.arange(n, dtype=float))
+
+
+def test_persistency_release_after_consecutive_steps():
+    x, interface = blocks(0.01)  # geometrically apart, irrelevant under persistency
+    no_cand = np.zeros((0, 2), np.int64)
+    state = committed([[0, 7], [1, 6]], t_N=[0.0, 0.0], gap=0.02, gap_rate=[-1.0, +0.5])
+    first = detect(state, no_cand, x, velocities(0.0), interface, release_steps=2)
+    assert len(first.state) == 2 and first.released.size == 0
+    np.testing.assert_array_equal(first.state.release_count, [1, 0])  # only pair 0 separates
+    np.testing.assert_array_equal(first.state.t_T, state.t_T)  # history kept
+    # the next committed step: pair 0 still free and separating -> released
+    nxt = replace(first.state, t_N=np.zeros(2), gap_rate=np.array([-0.5, -0.5]))
+    second = detect(nxt, no_cand, x, velocities(0.0), interface, release_steps=2)
+    np.testing.assert_array_equal(second.released, [0])
+    np.testing.assert_array_equal(second.state.pairs, [[1, 6]])
+    np.testing.assert_array_equal(second.state.release_count, [1])
+    # a pressed step in between resets the counter
+    pressed = replace(first.state, t_N=np.array([0.3, 0.0]), gap_rate=np.array([-0.5, -0.5]))
+    again = detect(pressed, no_cand, x, velocities(0.0), interface, release_steps=2)
+    np.testing.assert_array_equal(again.state.release_count, [0, 1])
+
+
+def test_persistency_ignores_gap_sign():
+    """An active pair with an open gap but a positive t_N stays (3.2)."""
+    x, interface = blocks(0.05)
+    state = committed([[0, 7]], t_N=0.4, gap=-0.05, gap_rate=-1.0, count=5)
+    out = detect(state, np.zeros((0, 2), np.int64), x, velocities(0.0), interface)
+    assert len(out.state) == 1 and out.state.release_count[0] == 0
+
+
+def test_gap_law_release():
+    x, interface = blocks(0.05)
+    state = committed([[0, 7], [1, 6], [2, 5]], t_N=[0.0, 0.0, 0.2], gap=[-0.01, 0.0, -0.01],
+                      gap_rate=-1.0)
+    out = detect(state, np.zeros((0, 2), np.int64), x, None, interface, persistency=False)
+    np.testing.assert_array_equal(out.released, [0])  # t_N = 0 and g < 0
+    np.testing.assert_array_equal(out.state.pairs[:, 0], [1, 2])
+
+
+def test_active_nodes_keep_partner_and_new_ones_append():
+    x, interface = blocks(-0.01)
+    state = committed([[1, 7]], t_N=1.0, gap=0.01, gap_rate=0.0)  # odd partner, kept as is
+    cand = closest_pairs(x, interface).pairs
+    out = detect(state, cand, x, velocities(-1.0), interface)
+    np.testing.assert_array_equal(out.state.pairs, [[1, 7], [0, 7], [2, 5], [3, 4]])
+    np.testing.assert_array_equal(out.added, [0, 2, 3])
+    assert out.state.t_N[0] == 1.0 and not out.state.t_N[1:].any()  # fresh pairs start at 0
+
+
+def test_invalid_arguments_and_lagrange_release():
+    x, interface = blocks(-0.01)
+    with pytest.raises(ValueError):
+        detect(PairState.empty(), np.zeros((0, 2), np.int64), x, None, interface)
+    with pytest.raises(ValueError):
+        detect(PairState.empty(), np.zeros((0, 2), np.int64), x, None, interface,
+               persistency=False, release_steps=0)
+    state = PairState.from_pairs([[0, 7], [1, 6], [2, 5]])
+    kept, tensile = release_tensile_pairs(state, np.array([0.5, -0.2, 1e-14]))
+    np.testing.assert_array_equal(tensile, [False, True, False])
+    np.testing.assert_array_equal(kept.pairs[:, 0], [0, 2])
+    np.testing.assert_array_equal(kept.lambda_N, [0.5, 1e-14])
