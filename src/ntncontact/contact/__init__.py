@@ -7,7 +7,7 @@ dof = 2 node + component). See :mod:`.evaluate` for the force/tangent convention
 
 from .augmentation import AugmentationCheck, AugmentationTolerances, augment, check_augmentation
 from .detection import Detection, detect, release_mask
-from .evaluate import ContactResult, evaluate_contact, pair_response
+from .evaluate import ContactResult, contact_term, evaluate_contact, pair_response
 from .friction import SLIP, STICK, ReturnMapping, frictional_dissipation, return_mapping
 from .kinematics import PairKinematics, pair_kinematics
 from .lagrange import LagrangeBlocks, lagrange_blocks, release_tensile_pairs
@@ -36,6 +36,7 @@ __all__ = [
     "chord_normals",
     "closest_pairs",
     "commit_step",
+    "contact_term",
     "corner_mask",
     "detect",
     "evaluate_contact",

@@ -13,6 +13,7 @@ quadratically) and the dependence of the slip traction on t_N. It is unsymmetric
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -25,7 +26,14 @@ from .laws import ContactLaw, normal_traction
 from .state import PairState
 from .surfaces import Interface
 
-__all__ = ["ContactResult", "PairResponse", "evaluate_contact", "pair_response"]
+__all__ = [
+    "ContactResult",
+    "ContactTerm",
+    "PairResponse",
+    "contact_term",
+    "evaluate_contact",
+    "pair_response",
+]
 
 
 @dataclass(frozen=True)
@@ -183,3 +191,26 @@ def evaluate_contact(
                                            step),
         rate_law=k.rate_law,
     )
+
+
+ContactTerm = Callable[
+    [NDArray, NDArray | None, float | None, NDArray | None],
+    tuple[NDArray, tuple[NDArray, NDArray, NDArray]],
+]
+
+
+def contact_term(
+    interface: Interface, state: PairState, law: ContactLaw, dt: float | None = None
+) -> ContactTerm:
+    """Adapter to the ``extra`` term signature of :class:`ntncontact.problem.StepProblem`:
+    (x_eval, v_eval, rate_factor, x_start) -> (force, (rows, cols, vals)), multipliers fixed."""
+
+    def term(
+        x_eval: NDArray, v_eval: NDArray | None, rate_factor: float | None,
+        x_start: NDArray | None,
+    ) -> tuple[NDArray, tuple[NDArray, NDArray, NDArray]]:
+        res = evaluate_contact(x_eval, v_eval, rate_factor, interface, state, law,
+                               x_start=x_start, dt=dt)
+        return res.force, (res.rows, res.cols, res.vals)
+
+    return term
