@@ -6,6 +6,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .contact import AugmentationTolerances, ContactLaw, ContactSurface, Interface, corner_mask
 from .fem.loads import (
     LoadCase,
     Prescribed,
@@ -16,6 +17,7 @@ from .fem.loads import (
 )
 from .io.scenario import (
     BodyConfig,
+    ContactConfig,
     MaterialConfig,
     MeshConfig,
     ScenarioConfig,
@@ -24,9 +26,10 @@ from .io.scenario import (
 )
 from .materials.models import Material, MaterialError
 from .mesh import generators
+from .mesh.boundary import surface_chain
 from .mesh.quadmesh import MeshError, QuadMesh
 from .mesh.quality import check_elements
-from .model import AnalysisSettings, Body, Model, stack_bodies
+from .model import AnalysisSettings, Body, ContactInterface, Model, stack_bodies
 
 
 def build_mesh(cfg: MeshConfig, name: str, base_dir: Path) -> QuadMesh:
@@ -121,7 +124,47 @@ def build_model(config: ScenarioConfig, base_dir: str | Path = ".") -> Model:
         patterns += p
         functions += f
     a = config.analysis
+    interfaces = tuple(_interface(c, i, bodies, a.kind) for i, c in enumerate(config.contact))
     analysis = AnalysisSettings(a.kind, a.dt, a.t_end, a.mass, a.output_interval,
                                 a.max_cutbacks, a.newton.rtol, a.newton.max_iterations)
     return Model(bodies, analysis, LoadCase(tuple(patterns), tuple(functions)),
-                 tuple(prescribed), X0, cells, assembler)
+                 tuple(prescribed), X0, cells, assembler, interfaces)
+
+
+def _interface(cfg: ContactConfig, index: int, bodies: tuple[Body, ...],
+               kind: str) -> ContactInterface:
+    """Surfaces, law and settings of one ``[[contact]]`` entry; errors name the entry."""
+    where = f"contact.{index}"
+    by_name = {b.name: b for b in bodies}
+    b1, b2 = by_name[cfg.body_1], by_name[cfg.body_2]
+    try:
+        chain1 = surface_chain(b1.mesh, cfg.surface_1)
+        chain2 = surface_chain(b2.mesh, cfg.surface_2)
+        excluded = np.concatenate([b1.global_nodes(n) for n in cfg.exclude] or [np.zeros(0, int)])
+        corners = np.concatenate([b1.global_nodes(n) for n in cfg.corners] or [np.zeros(0, int)])
+    except MeshError as err:
+        raise ScenarioError(f"{where}: {err}") from None
+    if cfg.method == "lagrange":
+        raise ScenarioError(f"{where}.method: 'lagrange' is not available in the time loop yet; "
+                            "use 'augmented_lagrangian' (same accuracy) or 'penalty'")
+    surface1 = ContactSurface.from_chain(chain1, b1.node_offset)
+    # corners of body 1 (kinks and the ends of an open surface) take the partner's normal (6.6)
+    auto = surface1.nodes[corner_mask(_xy(b1, surface1), surface1, include_ends=True)]
+    surface1 = ContactSurface(surface1.nodes, surface1.closed,
+                              np.isin(surface1.nodes, np.concatenate([auto, corners])))
+    surface2 = ContactSurface.from_chain(chain2, b2.node_offset)
+    law = ContactLaw(cfg.method, cfg.penalty_normal, cfg.penalty_tangential, cfg.friction)
+    persistency = (cfg.law or ("persistency" if kind == "dynamic" else "gap")) == "persistency"
+    aug = cfg.augmentation
+    tol = AugmentationTolerances(aug.gap_tolerance, aug.slip_tolerance, aug.traction_tolerance)
+    candidates = surface1.nodes[~np.isin(surface1.nodes, excluded)]
+    max_aug = aug.max_iterations if cfg.method == "augmented_lagrangian" else 1
+    return ContactInterface(cfg.name or f"interface{index}", Interface(surface1, surface2), law,
+                            persistency, candidates, cfg.release_steps, tol, max_aug)
+
+
+def _xy(body: Body, surface: ContactSurface) -> np.ndarray:
+    """Reference coordinates indexed by global node (only the surface's rows are filled)."""
+    xy = np.zeros((surface.nodes.max() + 1, 2))
+    xy[surface.nodes] = body.mesh.nodes[surface.nodes - body.node_offset]
+    return xy

@@ -116,3 +116,17 @@ def stack_bodies(
         if idx.size:
             groups.append(MaterialGroup(kind, idx.astype(np.int64)))
     return placed, X0, cells, Assembler(cells, len(X0), groups, lam, mu, rho)
+
+
+@dataclass(frozen=True)
+class ContactInterface:
+    """One contact interface as the time loop uses it (kernels in :mod:`ntncontact.contact`)."""
+
+    name: str
+    interface: object  # contact.surfaces.Interface
+    law: object  # contact.laws.ContactLaw
+    persistency: bool
+    candidates: NDArray  # surface-1 global nodes that may enter the active set
+    release_steps: int
+    tolerances: object  # contact.augmentation.AugmentationTolerances
+    max_augmentations: int

@@ -37,6 +37,7 @@ class StepState:
     d: NDArray
     v: NDArray
     a: NDArray
+    contact: tuple = ()  # one contact.PairState per interface (active set and history)
 
     @property
     def x(self) -> NDArray:

@@ -10,9 +10,18 @@ import numpy as np
 import scipy.sparse as sp
 from numpy.typing import NDArray
 
+from .contact import PairState
 from .diagnostics import Balance, balance
-from .dynamics.midpoint import end_of_step
+from .dynamics.midpoint import end_of_step, midpoint_velocity, velocity_factor
 from .fem.q4 import InvertedElementError
+from .interfaces import (
+    augment_all,
+    commit_all,
+    contact_rows,
+    contact_terms,
+    detect_all,
+    evaluate_all,
+)
 from .model import Model
 from .problem import StepProblem, StepState
 from .solvers.newton import NewtonError, NewtonSettings, newton
@@ -79,23 +88,54 @@ class Simulation:
         self._nodal_mass = model.assembler.nodal_mass(model.X0, self.lumped)
         self._mass = sp.kron(self._nodal_mass, sp.eye(2), format="csr")
         self.length_scale = float(np.ptp(model.X0, axis=0).max())
+        self.max_augmentations = max([ci.max_augmentations for ci in model.interfaces] or [1])
+        self.initial_contact = tuple(PairState.empty() for _ in model.interfaces)
+        self.state = replace(self.state, contact=self.initial_contact)
+        self._last_contact: tuple = ((), 0)
+        self.dissipation = 0.0
 
     def balance(self, state: StepState) -> Balance:
         _, _, energy = self.model.assembler.internal(state.X, state.x, need_tangent=False)
         return balance(self._nodal_mass, state.x, state.v, energy)
 
     def advance(self, state: StepState, dt: float) -> tuple[StepState, int]:
-        """One step of size dt from ``state``: Newton on the step problem, then the update."""
-        problem = StepProblem(self.model, state, dt, self._mass if self.dynamic else None)
-        result = newton(problem.residual, problem.jacobian, self.solve,
-                        problem.initial_guess(), self.settings, self.length_scale)
-        d = problem.full(result.y).reshape(-1, 2)
+        """One step of size dt from ``state`` (report 5.4): detection, then Newton with the
+        contact multipliers fixed, augmented until converged, then the kinematic update."""
+        interfaces = self.model.interfaces
+        contact = detect_all(interfaces, state.contact, state.x, state.v) if interfaces else ()
+        mass = self._mass if self.dynamic else None
+        previous, iterations, guess = None, 0, None
+        for augmentation in range(1, self.max_augmentations + 1):  # noqa: B007 (used after)
+            problem = StepProblem(self.model, state, dt, mass, contact_terms(interfaces, contact,
+                                                                             dt))
+            y0 = problem.initial_guess() if guess is None else guess
+            result = newton(problem.residual, problem.jacobian, self.solve, y0, self.settings,
+                            self.length_scale)
+            iterations += result.iterations
+            guess = result.y
+            d = problem.full(result.y).reshape(-1, 2)
+            results = self._contact_results(interfaces, contact, state, d, dt)
+            used = contact
+            contact, done = augment_all(interfaces, contact, previous, results)
+            if done:
+                break
+            previous = results
         if self.dynamic:
             d1, v1, a1 = end_of_step(d, state.d, state.v, dt)
         else:
             d1, v1, a1 = d, (d - state.d) / dt, np.zeros_like(d)
-        new = StepState(state.step + 1, state.time + dt, state.X, d1, v1, a1)
-        return new, result.iterations
+        committed = commit_all(interfaces, used, results) if interfaces else ()
+        self._last_contact = (results if interfaces else (), augmentation)
+        new = StepState(state.step + 1, state.time + dt, state.X, d1, v1, a1, committed)
+        return new, iterations
+
+    def _contact_results(self, interfaces, contact, state: StepState, d: NDArray, dt: float):
+        if not interfaces:
+            return ()
+        x_eval = state.X + d
+        v_eval = midpoint_velocity(d, state.d, dt) if self.dynamic else None
+        rate = velocity_factor(dt) if self.dynamic else None
+        return evaluate_all(interfaces, contact, x_eval, v_eval, rate, state.x, dt)
 
     def step_with_cutback(self, dt: float) -> tuple[StepState, int, float]:
         """Advance by dt, halving (up to max_cutbacks times) sub-steps that fail."""
@@ -117,8 +157,7 @@ class Simulation:
                 continue
             iterations += its
             remaining -= h
-        return StepState(self.state.step + 1, self.state.time + dt, state.X, state.d, state.v,
-                         state.a), iterations, h
+        return replace(state, step=self.state.step + 1, time=self.state.time + dt), iterations, h
 
     def run(self, progress: Callable[[float], None] | None = None) -> StepState:
         """Run to t_end; observers get every step; on error they are told and it re-raises."""
@@ -132,7 +171,8 @@ class Simulation:
                 dt = t_next - self.state.time
                 self.state, its, _ = self.step_with_cutback(dt)
                 self.state = replace(self.state, time=t_next)
-                self._notify(StepRecord(self.state, self.balance(self.state), its, dt))
+                self._notify(StepRecord(self.state, self.balance(self.state), its, dt,
+                                        self._contact_extra()))
                 if progress is not None:
                     progress(self.state.time)
         except KeyboardInterrupt:
@@ -143,6 +183,19 @@ class Simulation:
             raise
         self._finish("completed", None)
         return self.state
+
+    def _contact_extra(self) -> dict:
+        """History columns and contact.csv rows of the step just completed."""
+        results, augmentations = self._last_contact
+        if not self.model.interfaces:
+            return {}
+        self.dissipation += sum(r.dissipation for r in results if r is not None)
+        return {
+            "active_pairs": sum(len(r.pairs) for r in results if r is not None),
+            "frictional_dissipation": self.dissipation,
+            "augmentations": augmentations,
+            "contact_rows": contact_rows(self.model.interfaces, results, self.state.x),
+        }
 
     def _notify(self, record: StepRecord) -> None:
         for obs in self.observers:

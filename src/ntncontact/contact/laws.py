@@ -61,5 +61,7 @@ def normal_traction(
         return np.asarray(lambda_N, dtype=float).copy(), np.zeros_like(measure)
     base = 0.0 if law.method == "penalty" else lambda_N
     trial = base + law.eps_N * measure
-    pressed = trial > 0.0
+    # An active pair exactly at the kink (touching, g = 0) takes the pressed branch's
+    # derivative: otherwise a body held only by contact has a singular tangent at first touch.
+    pressed = trial >= 0.0
     return np.where(pressed, trial, 0.0), np.where(pressed, law.eps_N, 0.0)

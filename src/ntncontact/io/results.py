@@ -4,10 +4,14 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import numpy as np
+
 from ..model import Model
 from ..postprocess import element_von_mises
 from ..simulation import StepRecord
 from .writers import ResultsDirectory
+
+CONTACT_HISTORY = ("active_pairs", "frictional_dissipation", "augmentations")
 
 
 class ResultWriter:
@@ -15,6 +19,10 @@ class ResultWriter:
 
     def __init__(self, directory: str | Path, model: Model, extra_history: tuple[str, ...] = (),
                  **summary_extra: object) -> None:
+        if model.interfaces:
+            extra_history = extra_history + CONTACT_HISTORY
+            summary_extra = {"contact_start_time": None, "contact_end_time": None,
+                             "max_penetration": 0.0, "max_active_pairs": 0} | summary_extra
         self.results = ResultsDirectory(directory, history_columns=extra_history,
                                         **summary_extra)
         self.model = model
@@ -35,8 +43,27 @@ class ResultWriter:
         }
         row |= {k: record.extra.get(k, 0.0) for k in self.extra_history}
         self.results.write_history(row)
+        rows = record.extra.get("contact_rows")
+        if rows is not None:
+            self._write_contact(s.step, s.time, record.dt, rows)
         if self._due(s.time, model):
             self._write_fields(model, record)
+
+    def _write_contact(self, step: int, time: float, dt: float, rows: dict) -> None:
+        """contact.csv rows and the contact summary. Contact lasts from the start of the first
+        step that carried a positive normal traction to the end of the last such step."""
+        if len(rows["node_1"]) == 0:
+            return
+        self.results.contact.write_step(step, time, rows)
+        summary = self.results.summary.data
+        penetration = max(float(np.max(rows["gap"])), summary.get("max_penetration") or 0.0)
+        fields = {"max_penetration": penetration,
+                  "max_active_pairs": max(len(rows["node_1"]), summary["max_active_pairs"])}
+        if np.any(rows["normal_traction"] > 0.0):
+            if summary.get("contact_start_time") is None:
+                fields["contact_start_time"] = time - dt
+            fields["contact_end_time"] = time
+        self.results.summary.update(**fields)
 
     def _due(self, time: float, model: Model) -> bool:
         last = time >= model.analysis.t_end - 1e-9 * model.analysis.dt

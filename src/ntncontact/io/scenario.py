@@ -187,16 +187,59 @@ class AnalysisConfig(Strict):
     newton: NewtonConfig = NewtonConfig()
 
 
+class AugmentationConfig(Strict):
+    """Nested augmented-Lagrangian loop of report 5.4 (tolerances on the changes per update)."""
+
+    max_iterations: Annotated[int, Field(ge=1)] = 20
+    gap_tolerance: Positive = 1e-8
+    slip_tolerance: Positive = 1e-8
+    traction_tolerance: Positive = 1e-8
+
+
+class ContactConfig(Strict):
+    """A contact interface between a surface of body 1 (carries the normal) and of body 2."""
+
+    name: str | None = None
+    body_1: str
+    surface_1: str
+    body_2: str
+    surface_2: str
+    method: Literal["penalty", "augmented_lagrangian", "lagrange"] = "augmented_lagrangian"
+    law: Literal["gap", "persistency"] | None = None
+    penalty_normal: NonNegative = 0.0
+    penalty_tangential: NonNegative = 0.0
+    friction: NonNegative = 0.0
+    exclude: list[str] = []
+    corners: list[str] = []
+    release_steps: Annotated[int, Field(ge=1)] = 2
+    augmentation: AugmentationConfig = AugmentationConfig()
+
+    @model_validator(mode="after")
+    def _sides(self) -> ContactConfig:
+        if (self.body_1, self.surface_1) == (self.body_2, self.surface_2):
+            raise ValueError("the same surface cannot be on both sides of an interface")
+        if self.method != "lagrange" and self.penalty_normal <= 0.0:
+            raise ValueError(f"method '{self.method}' needs penalty_normal > 0")
+        if self.friction > 0.0 and self.penalty_tangential <= 0.0:
+            raise ValueError("friction > 0 needs penalty_tangential > 0")
+        return self
+
+
 class ScenarioConfig(Strict):
     title: str = ""
     analysis: AnalysisConfig
     bodies: list[BodyConfig] = Field(min_length=1)
+    contact: list[ContactConfig] = []
 
     @model_validator(mode="after")
     def _unique_names(self) -> ScenarioConfig:
         names = [b.name for b in self.bodies]
         if len(set(names)) != len(names):
             raise ValueError(f"body names must be unique, got {names}")
+        for i, c in enumerate(self.contact):
+            for key in ("body_1", "body_2"):
+                if getattr(c, key) not in names:
+                    raise ValueError(f"contact.{i}.{key}: no body named '{getattr(c, key)}'")
         return self
 
 

@@ -1,0 +1,128 @@
+"""Step-level contact procedures over all interfaces: detection, Newton terms, augmentation.
+
+The time loop calls, per step: :func:`detect_all` at the step start, then repeatedly
+:func:`contact_terms` (Newton with fixed multipliers), :func:`evaluate_all` and
+:func:`augment_all` until converged (report 5.4), then :func:`commit_all`.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+from numpy.typing import NDArray
+
+from .contact import (
+    ContactResult,
+    PairState,
+    augment,
+    check_augmentation,
+    closest_pairs,
+    commit_step,
+    detect,
+    evaluate_contact,
+)
+from .model import ContactInterface
+
+
+def detect_all(
+    interfaces: Sequence[ContactInterface], states: Sequence[PairState], x: NDArray,
+    v: NDArray,
+) -> tuple[PairState, ...]:
+    """Release finished pairs and add penetrating, approaching candidates (2.1.4, 3.2)."""
+    out = []
+    for ci, state in zip(interfaces, states, strict=True):
+        pairing = closest_pairs(x, ci.interface, ci.candidates, unique=True)
+        found = detect(state, pairing.pairs, x, v, ci.interface, persistency=ci.persistency,
+                       release_steps=ci.release_steps)
+        out.append(found.state)
+    return tuple(out)
+
+
+def contact_terms(interfaces: Sequence[ContactInterface], states: Sequence[PairState],
+                  dt: float):
+    """Newton terms (force, COO tangent) of every interface with its multipliers held fixed."""
+    terms = []
+    for ci, state in zip(interfaces, states, strict=True):
+        if len(state) == 0:
+            continue
+
+        def term(x_eval, v_eval, rate, x_start, ci=ci, state=state):
+            rate_eval = rate if ci.persistency else None
+            r = evaluate_contact(x_eval, v_eval if ci.persistency else None, rate_eval,
+                                 ci.interface, state, ci.law, x_start=x_start, dt=dt)
+            return r.force, (r.rows, r.cols, r.vals)
+
+        terms.append(term)
+    return terms
+
+
+def evaluate_all(
+    interfaces: Sequence[ContactInterface], states: Sequence[PairState], x_eval: NDArray,
+    v_eval: NDArray | None, rate: float | None, x_start: NDArray, dt: float,
+) -> tuple[ContactResult | None, ...]:
+    """Per-pair results at a converged Newton solution (None for an empty active set)."""
+    out = []
+    for ci, state in zip(interfaces, states, strict=True):
+        if len(state) == 0:
+            out.append(None)
+            continue
+        out.append(evaluate_contact(x_eval, v_eval if ci.persistency else None,
+                                    rate if ci.persistency else None, ci.interface, state,
+                                    ci.law, x_start=x_start, dt=dt))
+    return tuple(out)
+
+
+def augment_all(
+    interfaces: Sequence[ContactInterface], states: Sequence[PairState],
+    previous: Sequence[ContactResult | None] | None, current: Sequence[ContactResult | None],
+) -> tuple[tuple[PairState, ...], bool]:
+    """Check report 5.4's convergence test and augment where needed; True when all converged."""
+    new_states, done = [], True
+    for i, (ci, state, res) in enumerate(zip(interfaces, states, current, strict=True)):
+        if res is None or ci.law.method != "augmented_lagrangian":
+            new_states.append(state)
+            continue
+        prev = None if previous is None else previous[i]
+        converged = prev is not None and check_augmentation(prev, res, ci.law,
+                                                            ci.tolerances).converged
+        done &= converged
+        new_states.append(state if converged else augment(state, res, ci.law))
+    return tuple(new_states), done
+
+
+def commit_all(
+    interfaces: Sequence[ContactInterface], states: Sequence[PairState],
+    results: Sequence[ContactResult | None],
+) -> tuple[PairState, ...]:
+    return tuple(
+        state if res is None else commit_step(state, res, ci.law)
+        for ci, state, res in zip(interfaces, states, results, strict=True)
+    )
+
+
+def contact_rows(
+    interfaces: Sequence[ContactInterface], results: Sequence[ContactResult | None],
+    x: NDArray,
+) -> dict[str, NDArray]:
+    """Columns of contact.csv for the active pairs of every interface."""
+    cols: dict[str, list] = {k: [] for k in (
+        "interface", "node_1", "node_2", "x", "y", "gap", "gap_rate", "normal_traction",
+        "tangential_traction", "normal_force", "tangential_force", "status")}
+    for ci, res in zip(interfaces, results, strict=True):
+        if res is None:
+            continue
+        n1 = res.pairs[:, 0]
+        cols["interface"] += [ci.name] * len(n1)
+        cols["node_1"].append(n1)
+        cols["node_2"].append(res.pairs[:, 1])
+        cols["x"].append(x[n1, 0])
+        cols["y"].append(x[n1, 1])
+        for key, val in (("gap", res.gap), ("gap_rate", res.gap_rate),
+                         ("normal_traction", res.t_N), ("tangential_traction", res.t_T),
+                         ("normal_force", res.normal_force),
+                         ("tangential_force", res.tangential_force)):
+            cols[key].append(val)
+        cols["status"] += ["slip" if s else "stick" for s in (res.status == 1)]
+    return {k: (np.concatenate(v) if v and not isinstance(v[0], str) else np.asarray(v))
+            for k, v in cols.items()}

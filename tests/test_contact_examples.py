@@ -1,0 +1,84 @@
+"""Contact in the time loop: rod impact (report 3.2), stacked blocks under uniform pressure."""
+
+import numpy as np
+import pytest
+from helpers import Recorder, model_from_dict, model_from_example
+
+from ntncontact.simulation import Simulation
+
+
+def body_mean_velocity(model, state, body):
+    M = model.assembler.nodal_mass(model.X0, lumped=True).diagonal()
+    nodes = model.body(body).nodes
+    return (M[nodes, None] * state.v[nodes]).sum(axis=0) / M[nodes].sum()
+
+
+def test_rod_impact_lasts_two_wave_transits_and_exchanges_velocities():
+    model = model_from_example("rod_impact.toml")
+    rec = Recorder()
+    sim = Simulation(model, [rec])
+    sim.run()
+    pressed = [r for r in rec.records
+               if r.extra and np.any(r.extra["contact_rows"]["normal_traction"] > 0)]
+    start, end = pressed[0].state.time - pressed[0].dt, pressed[-1].state.time
+    # Theory 2 L / c = 2 (the report computes 2.05); the issue asks for 3 %.
+    assert end - start == pytest.approx(2.0, rel=0.03)
+    # Velocities exchanged: mean velocities after release ~ (0, 1) (elastic waves remain, so
+    # the means oscillate by the wave content; 2 % of the impact velocity).
+    v_left = body_mean_velocity(model, sim.state, "rod_left")
+    v_right = body_mean_velocity(model, sim.state, "rod_right")
+    assert abs(v_left[0]) < 0.02 and v_right[0] == pytest.approx(1.0, abs=0.02)
+    # Frictionless persistency contact conserves energy (3.3.1) and the mid-point rule momentum.
+    energy = np.array([r.balance.total_energy for r in rec.records])
+    assert np.abs(energy - energy[0]).max() < 1e-8 * energy[0]
+    px = np.array([r.balance.linear_momentum[0] for r in rec.records])
+    assert np.abs(px - 10.0).max() < 1e-9
+    # Mean contact pressure = rho c v / 2 = 5 over the contact period (the nodal value
+    # oscillates with the mesh's dispersion).
+    tn = np.concatenate([r.extra["contact_rows"]["normal_traction"] for r in pressed])
+    assert tn.mean() == pytest.approx(5.0, rel=0.05)
+
+
+def stacked_blocks(method="augmented_lagrangian", nx_top=6):
+    return model_from_dict({
+        "analysis": {"kind": "static", "dt": 0.5, "t_end": 1.0},
+        "bodies": [
+            {"name": "top",
+             "mesh": {"type": "rectangle", "width": 2.0, "height": 1.0, "nx": nx_top, "ny": 3,
+                      "origin": [0.0, 1.0]},
+             "material": {"model": "linear_elastic", "E": 100.0, "nu": 0.0, "density": 1.0},
+             "supports": [{"set": "left", "x": 0.0}],
+             "loads": [{"type": "pressure", "set": "top", "value": 2.0,
+                        "function": {"times": [0.0, 1.0], "values": [0.0, 1.0]}}]},
+            {"name": "base",
+             "mesh": {"type": "rectangle", "width": 2.0, "height": 1.0, "nx": 6, "ny": 3},
+             "material": {"model": "linear_elastic", "E": 100.0, "nu": 0.0, "density": 1.0},
+             "supports": [{"set": "bottom", "y": 0.0}, {"set": "left", "x": 0.0}]},
+        ],
+        "contact": [{"body_1": "top", "surface_1": "bottom", "body_2": "base",
+                     "surface_2": "top", "method": method, "penalty_normal": 1e4,
+                     "augmentation": {"gap_tolerance": 1e-12}}],
+    })
+
+
+def test_stacked_blocks_with_matched_meshes_carry_uniform_pressure():
+    rec = Recorder()
+    Simulation(stacked_blocks(), [rec]).run()
+    rows = rec.records[-1].extra["contact_rows"]
+    assert len(rows["node_1"]) == 7
+    # nu = 0 and matched meshes: the contact pressure is the applied 2.0 everywhere, to the
+    # augmentation tolerance (gap change 1e-12 times eps_N 1e4 = 1e-8).
+    np.testing.assert_allclose(rows["normal_traction"], 2.0, rtol=1e-7)
+    # ... while the nodal forces follow the tributary lengths (half at the two ends)
+    lengths = np.where(np.isin(rows["x"], [0.0, 2.0]), 1 / 6, 1 / 3)
+    np.testing.assert_allclose(rows["normal_force"], 2.0 * lengths, rtol=1e-7)
+    # the augmented Lagrangian drives the gap to zero; penalty leaves t_N / eps_N
+    assert np.abs(rows["gap"]).max() < 1e-10
+
+
+def test_penalty_leaves_a_penetration_of_traction_over_penalty():
+    rec = Recorder()
+    Simulation(stacked_blocks("penalty"), [rec]).run()
+    rows = rec.records[-1].extra["contact_rows"]
+    np.testing.assert_allclose(rows["gap"], 2.0 / 1e4, rtol=1e-6)
+    np.testing.assert_allclose(rows["normal_traction"], 2.0, rtol=1e-7)
