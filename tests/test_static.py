@@ -2,7 +2,7 @@
 
 import numpy as np
 import pytest
-from helpers import Recorder, model_from_dict
+from helpers import model_from_dict
 
 from ntncontact.mesh.generators import rectangle
 from ntncontact.problem import StepProblem
