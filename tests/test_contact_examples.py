@@ -82,3 +82,44 @@ def test_penalty_leaves_a_penetration_of_traction_over_penalty():
     rows = rec.records[-1].extra["contact_rows"]
     np.testing.assert_allclose(rows["gap"], 2.0 / 1e4, rtol=1e-6)
     np.testing.assert_allclose(rows["normal_traction"], 2.0, rtol=1e-7)
+
+
+def pulled_block(pull=0.6, mu=0.5):
+    return model_from_dict({
+        "analysis": {"kind": "static", "dt": 0.25, "t_end": 1.0},
+        "bodies": [
+            {"name": "block",
+             "mesh": {"type": "rectangle", "width": 4.0, "height": 1.0, "nx": 8, "ny": 2,
+                      "origin": [0.0, 1.0]},
+             "material": {"model": "linear_elastic", "E": 100.0, "nu": 0.3, "density": 1.0},
+             "loads": [
+                 {"type": "pressure", "set": "top", "value": 1.0},
+                 {"type": "traction", "set": "right", "vector": [pull, 0.0],
+                  "function": {"times": [0.0, 1.0], "values": [0.0, 1.0]}}]},
+            {"name": "foundation",
+             "mesh": {"type": "rectangle", "width": 4.0, "height": 1.0, "nx": 8, "ny": 2},
+             "material": {"model": "linear_elastic", "E": 1e6, "nu": 0.0, "density": 1.0},
+             "supports": [{"set": "bottom", "x": 0.0, "y": 0.0}]},
+        ],
+        "contact": [{"body_1": "block", "surface_1": "bottom", "body_2": "foundation",
+                     "surface_2": "top", "penalty_normal": 1e4, "penalty_tangential": 1e4,
+                     "friction": mu, "augmentation": {"gap_tolerance": 1e-10,
+                                                      "slip_tolerance": 1e-10}}],
+    })
+
+
+def test_pulled_block_has_stick_and_slip_zones_within_the_coulomb_cone():
+    rec = Recorder()
+    Simulation(pulled_block(), [rec]).run()
+    rows = rec.records[-1].extra["contact_rows"]
+    tn, tt = rows["normal_traction"], rows["tangential_traction"]
+    # Coulomb cone (2.20) holds at every pair, to round-off of the return mapping
+    assert np.all(np.abs(tt) <= 0.5 * tn * (1 + 1e-12) + 1e-14)
+    # equilibrium: the contact forces carry the applied resultants (pressure 4, pull 0.6); the
+    # deformed surface's normals turn by ~1e-5 rad, which mixes the two sums at that level
+    assert rows["normal_force"].sum() == pytest.approx(4.0, rel=1e-4)
+    assert abs(rows["tangential_force"].sum()) == pytest.approx(0.6, rel=1e-4)
+    status = set(rows["status"])
+    assert status == {"stick", "slip"}, status
+    dissipation = np.array([r.extra["frictional_dissipation"] for r in rec.records[1:]])
+    assert np.all(dissipation >= 0.0) and np.all(np.diff(dissipation) >= -1e-15)

@@ -65,8 +65,10 @@ def return_mapping(
         return ReturnMapping(zero, zero, np.full(p, SLIP), np.zeros(p, bool), zero, zero)
     trial = t_prev + dlambda + eps_T * slip_measure
     limit = mu * t_N
-    # an unloaded pair (t_N = 0) carries no friction: treat it as sliding, not as stuck at 0
-    beyond = (np.abs(trial) > limit) | (limit <= 0.0)
+    # an unloaded pair (t_N = 0) carries no friction: treat it as sliding, not as stuck at 0;
+    # except at trial = 0 (first touch, no slip yet), where the stick branch's stiffness keeps
+    # a body held only by friction from being singular in its first Newton iteration
+    beyond = (np.abs(trial) > limit) | ((limit <= 0.0) & (trial != 0.0))
     # trial beyond the cone yet pointing against the motion: the sliding direction reversed
     reversed_ = beyond & (slip_measure * trial < 0.0)
     slip = beyond & ~reversed_
