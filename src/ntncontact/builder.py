@@ -144,9 +144,6 @@ def _interface(cfg: ContactConfig, index: int, bodies: tuple[Body, ...],
         corners = np.concatenate([b1.global_nodes(n) for n in cfg.corners] or [np.zeros(0, int)])
     except MeshError as err:
         raise ScenarioError(f"{where}: {err}") from None
-    if cfg.method == "lagrange":
-        raise ScenarioError(f"{where}.method: 'lagrange' is not available in the time loop yet; "
-                            "use 'augmented_lagrangian' (same accuracy) or 'penalty'")
     surface1 = ContactSurface.from_chain(chain1, b1.node_offset)
     # corners of body 1 (kinks and the ends of an open surface) take the partner's normal (6.6)
     auto = surface1.nodes[corner_mask(_xy(b1, surface1), surface1, include_ends=True)]
@@ -158,7 +155,7 @@ def _interface(cfg: ContactConfig, index: int, bodies: tuple[Body, ...],
     aug = cfg.augmentation
     tol = AugmentationTolerances(aug.gap_tolerance, aug.slip_tolerance, aug.traction_tolerance)
     candidates = surface1.nodes[~np.isin(surface1.nodes, excluded)]
-    max_aug = aug.max_iterations if cfg.method == "augmented_lagrangian" else 1
+    max_aug = 1 if cfg.method == "penalty" else aug.max_iterations
     return ContactInterface(cfg.name or f"interface{index}", Interface(surface1, surface2), law,
                             persistency, candidates, cfg.release_steps, tol, max_aug)
 

@@ -8,6 +8,7 @@ The time loop calls, per step: :func:`detect_all` at the step start, then repeat
 from __future__ import annotations
 
 from collections.abc import Sequence
+from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
@@ -21,6 +22,8 @@ from .contact import (
     commit_step,
     detect,
     evaluate_contact,
+    lagrange_blocks,
+    release_tensile_pairs,
 )
 from .model import ContactInterface
 
@@ -44,7 +47,7 @@ def contact_terms(interfaces: Sequence[ContactInterface], states: Sequence[PairS
     """Newton terms (force, COO tangent) of every interface with its multipliers held fixed."""
     terms = []
     for ci, state in zip(interfaces, states, strict=True):
-        if len(state) == 0:
+        if len(state) == 0 or ci.law.method == "lagrange":
             continue
 
         def term(x_eval, v_eval, rate, x_start, ci=ci, state=state):
@@ -55,6 +58,48 @@ def contact_terms(interfaces: Sequence[ContactInterface], states: Sequence[PairS
 
         terms.append(term)
     return terms
+
+
+@dataclass
+class LagrangeTerm:
+    """Exact normal multipliers of one interface as a bordered-system constraint term."""
+
+    ci: ContactInterface
+    state: PairState
+    dt: float
+
+    @property
+    def size(self) -> int:
+        return len(self.state)
+
+    @property
+    def initial(self) -> NDArray:
+        return self.state.lambda_N
+
+    def __call__(self, x, v_eval, rate, x_start, lam):
+        ci, st = self.ci, self.state.with_multipliers(lam)
+        v, r = (v_eval, rate) if ci.persistency else (None, None)
+        res = evaluate_contact(x, v, r, ci.interface, st, ci.law, x_start=x_start, dt=self.dt)
+        b = lagrange_blocks(x, v, r, ci.interface, st, ci.law, x_start)
+        return (res.force, (res.rows, res.cols, res.vals), b.values,
+                (b.g_rows, b.g_cols, b.g_vals), (b.b_rows, b.b_cols, b.b_vals))
+
+
+def lagrange_terms(interfaces: Sequence[ContactInterface], states: Sequence[PairState],
+                   dt: float) -> list[LagrangeTerm]:
+    return [LagrangeTerm(ci, st, dt) for ci, st in zip(interfaces, states, strict=True)
+            if ci.law.method == "lagrange" and len(st)]
+
+
+def with_solved_multipliers(
+    interfaces: Sequence[ContactInterface], states: Sequence[PairState],
+    multipliers: Sequence[NDArray],
+) -> tuple[PairState, ...]:
+    """Store the multipliers of a bordered solve in the Lagrange interfaces' states."""
+    values = iter(multipliers)
+    return tuple(st.with_multipliers(next(values))
+                 if ci.law.method == "lagrange" and len(st) else st
+                 for ci, st in zip(interfaces, states, strict=True))
 
 
 def evaluate_all(
@@ -80,6 +125,12 @@ def augment_all(
     """Check report 5.4's convergence test and augment where needed; True when all converged."""
     new_states, done = [], True
     for i, (ci, state, res) in enumerate(zip(interfaces, states, current, strict=True)):
+        if res is not None and ci.law.method == "lagrange":
+            # exact multipliers: a tensile pair (t_N < 0, 2.14) leaves and the step is re-solved
+            kept, tensile = release_tensile_pairs(state, state.lambda_N)
+            done &= not tensile.any()
+            new_states.append(kept)
+            continue
         if res is None or ci.law.method != "augmented_lagrangian":
             new_states.append(state)
             continue

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
+from typing import Protocol
 
 import numpy as np
 import scipy.sparse as sp
@@ -25,6 +26,21 @@ ExtraTerm = Callable[
     [NDArray, NDArray | None, float | None, NDArray],
     tuple[NDArray, tuple[NDArray, NDArray, NDArray]],
 ]
+
+
+class ConstraintTerm(Protocol):
+    """Exact constraints h(x) = 0 with multipliers (bordered Newton system, report 2.2.1).
+
+    ``size`` multipliers start at ``initial``; a call at (x_eval, v_eval, rate, x_start, lam)
+    returns the force, its tangent (COO), h, G = dh/dx (COO, rows = multiplier index) and
+    B = d force / d lam (COO, cols = multiplier index).
+    """
+
+    size: int
+    initial: NDArray
+
+    def __call__(self, x_eval: NDArray, v_eval: NDArray | None, rate: float | None,
+                 x_start: NDArray, lam: NDArray) -> tuple: ...
 
 
 @dataclass(frozen=True)
@@ -53,6 +69,7 @@ class StepProblem:
     dt: float
     mass: sp.csr_matrix | None = None  # on dofs; None for quasi-static
     extra: Sequence[ExtraTerm] = ()
+    constraints: Sequence[ConstraintTerm] = ()
     _cache: dict = field(default_factory=dict, repr=False)
 
     def __post_init__(self) -> None:
@@ -74,19 +91,32 @@ class StepProblem:
     def dynamic(self) -> bool:
         return self.mass is not None
 
+    @property
+    def n_multipliers(self) -> int:
+        return sum(c.size for c in self.constraints)
+
     def initial_guess(self) -> NDArray:
-        """Start from d_n (the mid-point rule's d_{n+1/2} guess d_n + v_n dt/2)."""
+        """Start from d_n (the mid-point rule's d_{n+1/2} guess d_n + v_n dt/2), then the
+        constraints' multipliers."""
         d = self.state.d.ravel()
         if self.dynamic:
             d = d + 0.5 * self.dt * self.state.v.ravel()
-        return d[self.free_dofs]
+        return np.concatenate([d[self.free_dofs]] + [c.initial for c in self.constraints])
 
     def full(self, y: NDArray) -> NDArray:
-        """All dofs of the unknown displacement from the free ones."""
+        """All dofs of the unknown displacement from the free ones (multipliers dropped)."""
         d = np.empty(self.model.ndof)
-        d[self.free_dofs] = y
+        d[self.free_dofs] = y[: self.free_dofs.size]
         d[self.fixed_dofs] = self.fixed_values
         return d
+
+    def multipliers(self, y: NDArray) -> list[NDArray]:
+        """The multipliers of each constraint term, in order."""
+        out, start = [], self.free_dofs.size
+        for c in self.constraints:
+            out.append(y[start:start + c.size])
+            start += c.size
+        return out
 
     def _evaluate(self, y: NDArray) -> tuple[NDArray, sp.csr_matrix, float]:
         d = self.full(y)
@@ -108,17 +138,44 @@ class StepProblem:
             scale = max(scale, np.linalg.norm(f))
             if len(vals):
                 K = K + sp.csr_matrix((vals, (rows, cols)), shape=K.shape)
+        h, G, B = self._constraints(x.reshape(-1, 2), v_eval, rate, y, K.shape[0])
+        if h.size:
+            R = R + self._constraint_force
+            K = K + self._constraint_tangent
         # Forces computed from positions of size L carry round-off ~ eps |K| L: never ask for less.
         floor = 1e-4 * np.abs(K.diagonal()).max() * self.length_scale
+        self._blocks = (h, G, B)
         return R, K.tocsr(), float(max(scale, floor))
+
+    def _constraints(self, x, v_eval, rate, y, ndof):
+        """h, G (m x ndof), B (ndof x m) of all constraint terms, their force and its tangent."""
+        self._constraint_tangent = sp.csr_matrix((ndof, ndof))
+        self._constraint_force = np.zeros(ndof)
+        if not self.constraints:
+            return np.zeros(0), None, None
+        hs, gs, bs = [], [], []
+        for c, lam in zip(self.constraints, self.multipliers(y), strict=True):
+            f, (kr, kc, kv), h, (gr, gc, gv), (br, bc, bv) = c(x, v_eval, rate, self.state.x, lam)
+            self._constraint_force += f
+            self._constraint_tangent = self._constraint_tangent + sp.csr_matrix(
+                (kv, (kr, kc)), shape=(ndof, ndof))
+            hs.append(h)
+            gs.append(sp.csr_matrix((gv, (gr, gc)), shape=(c.size, ndof)))
+            bs.append(sp.csr_matrix((bv, (br, bc)), shape=(ndof, c.size)))
+        return np.concatenate(hs), sp.vstack(gs).tocsr(), sp.hstack(bs).tocsr()
 
     def residual(self, y: NDArray) -> tuple[NDArray, float]:
         R, K, scale = self._evaluate(y)
-        self._cache = {"y": y.copy(), "K": K}
-        return R[self.free_dofs], scale
+        self._cache = {"y": y.copy(), "K": K, "blocks": self._blocks}
+        h = self._blocks[0]
+        return np.concatenate([R[self.free_dofs], h]), scale
 
     def jacobian(self, y: NDArray) -> sp.csr_matrix:
         if "y" not in self._cache or not np.array_equal(self._cache["y"], y):
             self.residual(y)
         K = self._cache["K"]
-        return K[self.free_dofs][:, self.free_dofs]
+        Kff = K[self.free_dofs][:, self.free_dofs]
+        h, G, B = self._cache["blocks"]
+        if not h.size:
+            return Kff
+        return sp.bmat([[Kff, B[self.free_dofs]], [G[:, self.free_dofs], None]], format="csr")

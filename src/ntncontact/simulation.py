@@ -21,6 +21,8 @@ from .interfaces import (
     contact_terms,
     detect_all,
     evaluate_all,
+    lagrange_terms,
+    with_solved_multipliers,
 )
 from .model import Model
 from .problem import StepProblem, StepState
@@ -106,14 +108,18 @@ class Simulation:
         mass = self._mass if self.dynamic else None
         previous, iterations, guess = None, 0, None
         for augmentation in range(1, self.max_augmentations + 1):  # noqa: B007 (used after)
-            problem = StepProblem(self.model, state, dt, mass, contact_terms(interfaces, contact,
-                                                                             dt))
-            y0 = problem.initial_guess() if guess is None else guess
+            problem = StepProblem(self.model, state, dt, mass,
+                                  contact_terms(interfaces, contact, dt),
+                                  lagrange_terms(interfaces, contact, dt))
+            y0 = problem.initial_guess()
+            if guess is not None and guess.size == y0.size:
+                y0 = guess
             result = newton(problem.residual, problem.jacobian, self.solve, y0, self.settings,
                             self.length_scale)
             iterations += result.iterations
             guess = result.y
             d = problem.full(result.y).reshape(-1, 2)
+            contact = with_solved_multipliers(interfaces, contact, problem.multipliers(result.y))
             results = self._contact_results(interfaces, contact, state, d, dt)
             used = contact
             contact, done = augment_all(interfaces, contact, previous, results)
