@@ -79,3 +79,45 @@ def test_missing_file_and_bad_toml(tmp_path):
 @pytest.mark.parametrize("path", sorted(EXAMPLES.glob("*.toml")), ids=lambda p: p.name)
 def test_every_example_is_a_valid_scenario(path):
     build_model(load_scenario(path), path.parent)
+
+
+CONTACT = GOOD + """
+[[bodies]]
+name = "base"
+mesh = { type = "rectangle", width = 1.0, height = 1.0, nx = 2, ny = 2, origin = [0.0, -1.0] }
+material = { model = "linear_elastic", E = 10.0, nu = 0.3, density = 1.0 }
+
+[[contact]]
+body_1 = "block"
+surface_1 = "bottom"
+body_2 = "base"
+surface_2 = "top"
+penalty_normal = 100.0
+"""
+
+
+@pytest.mark.parametrize(
+    "replace, expected",
+    [
+        (('surface_1 = "bottom"', 'surface_1 = "botom"'), "contact.0: .*botom"),
+        (('body_2 = "base"\nsurface_2 = "top"', 'body_2 = "block"\nsurface_2 = "bottom"'),
+         "same surface"),
+        (("penalty_normal = 100.0", "penalty_normal = 100.0\nfriction = -0.1"),
+         "contact.0.friction"),
+        (("penalty_normal = 100.0", "penalty_normal = -1.0"), "contact.0.penalty_normal"),
+        (("penalty_normal = 100.0", "penalty_normal = 100.0\nfriction = 0.2"),
+         "penalty_tangential"),
+        (('body_1 = "block"', 'body_1 = "blok"'), "no body named 'blok'"),
+    ],
+)
+def test_bad_contact_entries_are_clear_errors(tmp_path, replace, expected):
+    path = write(tmp_path, CONTACT.replace(*replace))
+    with pytest.raises(ScenarioError, match=expected):
+        build_model(load_scenario(path), tmp_path)
+
+
+def test_a_contact_scenario_builds_its_interface(tmp_path):
+    model = build_model(load_scenario(write(tmp_path, CONTACT)), tmp_path)
+    (ci,) = model.interfaces
+    assert ci.name == "interface0" and ci.persistency  # the dynamic default is persistency
+    assert ci.interface.surface1.size == 3 and ci.interface.surface2.size == 3
