@@ -155,3 +155,24 @@ def test_augmentations_shrink_the_penetration_towards_the_lagrange_solution():
         gaps.append(np.abs(rows["gap"][rows["normal_traction"] > 0]).max())
     gaps = np.array(gaps)
     assert np.all(np.diff(gaps) < 0) and gaps[-1] < 1e-2 * gaps[0], gaps
+
+
+def test_three_bodies_and_two_interfaces_carry_the_same_pressure():
+    data = _stacked_dict()
+    top, block = data["bodies"]
+    middle = {**block, "name": "middle", "supports": [{"set": "left", "x": 0.0}]}
+    base = {**block, "name": "base", "mesh": {**block["mesh"], "origin": [0.0, -1.0]}}
+    data["bodies"] = [top, middle, base]
+    data["contact"] = [
+        {"name": "upper", "body_1": "top", "surface_1": "bottom", "body_2": "middle",
+         "surface_2": "top", "penalty_normal": 1e4, "augmentation": {"gap_tolerance": 1e-12}},
+        {"name": "lower", "body_1": "middle", "surface_1": "bottom", "body_2": "base",
+         "surface_2": "top", "method": "lagrange"},
+    ]
+    rec = Recorder()
+    Simulation(model_from_dict(data), [rec]).run()
+    rows = rec.records[-1].extra["contact_rows"]
+    for name in ("upper", "lower"):
+        mine = rows["interface"] == name
+        assert mine.sum() == 7
+        np.testing.assert_allclose(rows["normal_traction"][mine], 2.0, rtol=1e-7)
