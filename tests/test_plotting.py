@@ -110,7 +110,8 @@ def test_plot_all_writes_every_figure_into_the_folder(tmp_path):
     write_run(tmp_path)
     paths = plot_all(tmp_path)
     assert sorted(p.name for p in paths) == [
-        "contact_tractions.png", "deformed_von_mises.png", "energies.png", "momenta.png"
+        "contact_tractions.png", "deformed_von_mises.png", "energies.png", "momenta.png",
+        "pair_history.png",
     ]
     for path in paths:
         assert path.parent == tmp_path
@@ -137,7 +138,7 @@ def test_partial_run_is_still_plotted(tmp_path):
     with pytest.warns(UserWarning, match="fields_00003"):
         (tmp_path / "fields" / "fields_00003.vtu").write_text("<VTKFile")  # half-written file
         paths = plot_all(tmp_path)
-    assert len(paths) == 4
+    assert len(paths) == 5  # every figure, pair history included
     for path in paths:
         assert_real_image(path)
 

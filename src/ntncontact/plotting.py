@@ -254,10 +254,47 @@ def plot_contact_tractions(
     return _save(fig, Path(path) if path else folder / "contact_tractions.png")
 
 
+def plot_pair_history(
+    directory: str | os.PathLike, path: str | os.PathLike | None = None
+) -> Path:
+    """History of the longest-lived contact pair (report Figs 3.3-3.5): its normal traction
+    normalized by its peak, and the displacement and velocity (x and y) of both of its nodes
+    from the VTU series (as many samples as were written)."""
+    folder = Path(directory)
+    contact = _load_table(folder, CONTACT_FILE)
+    nodes, counts = np.unique(contact["node_1"], return_counts=True)
+    node_1 = int(nodes[np.argmax(counts)])
+    rows = contact["node_1"] == node_1
+    node_2 = int(np.bincount(contact["node_2"][rows]).argmax())
+    fig, axes = _new_figure(3, 1, size=(7.0, 8.0))
+    tn = contact["normal_traction"][rows]
+    peak = np.abs(tn).max() or 1.0
+    axes[0, 0].plot(contact["time"][rows], tn / peak, "o-", ms=3)
+    axes[0, 0].set_ylabel(f"normal traction / {peak:.4g}")
+    axes[0, 0].set_title(f"pair ({node_1}, {node_2})")
+    try:
+        frames = load_frames(folder, max_frames=10**6)
+    except ResultsNotFoundError:
+        frames = []
+    times = np.array([f.time for f in frames])
+    for ax, field in ((axes[1, 0], "displacement"), (axes[2, 0], "velocity")):
+        for node, style in ((node_1, "-"), (node_2, "--")):
+            values = np.array([f.point_data[field][node] for f in frames]).reshape(-1, 2)
+            for comp, name in ((0, "x"), (1, "y")):
+                ax.plot(times, values[:, comp], style, label=f"node {node} {name}")
+        ax.set_ylabel(field)
+        ax.legend(loc="best", fontsize="small")
+    axes[2, 0].set_xlabel("time")
+    for ax in axes[:, 0]:
+        ax.grid(True, alpha=0.3)
+    return _save(fig, Path(path) if path else folder / "pair_history.png")
+
+
 def plot_all(directory: str | os.PathLike) -> list[Path]:
     """Every figure the folder has data for; the list of PNGs written."""
     folder = Path(directory)
-    makers = (plot_energies, plot_momenta, plot_deformed, plot_contact_tractions)
+    makers = (plot_energies, plot_momenta, plot_deformed, plot_contact_tractions,
+              plot_pair_history)
     made = []
     for make in makers:
         try:
