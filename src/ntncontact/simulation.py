@@ -95,6 +95,7 @@ class Simulation:
         self.state = replace(self.state, contact=self.initial_contact)
         self._last_contact: tuple = ((), 0)
         self.dissipation = 0.0
+        self._step_dissipation = 0.0
 
     def balance(self, state: StepState) -> Balance:
         _, _, energy = self.model.assembler.internal(state.X, state.x, need_tangent=False)
@@ -132,6 +133,7 @@ class Simulation:
             d1, v1, a1 = d, (d - state.d) / dt, np.zeros_like(d)
         committed = commit_all(interfaces, used, results) if interfaces else ()
         self._last_contact = (results if interfaces else (), augmentation)
+        self._step_dissipation += sum(r.dissipation for r in results if r is not None)
         new = StepState(state.step + 1, state.time + dt, state.X, d1, v1, a1, committed)
         return new, iterations
 
@@ -147,9 +149,11 @@ class Simulation:
         """Advance by dt, halving (up to max_cutbacks times) sub-steps that fail."""
         state, remaining, iterations, cuts = self.state, dt, 0, 0
         h = dt
+        self._step_dissipation = 0.0  # summed over the accepted sub-steps
         while remaining > 1e-12 * dt:
             h = min(h, remaining)
             try:
+                before = self._step_dissipation
                 state, its = self.advance(state, h)
             except (NewtonError, InvertedElementError, np.linalg.LinAlgError, RuntimeError) as err:
                 cuts += 1
@@ -159,6 +163,7 @@ class Simulation:
                         f"{self.state.time + dt:.6g}) failed after {cuts - 1} halvings of the "
                         f"step: {err}"
                     ) from err
+                self._step_dissipation = before
                 h *= 0.5
                 continue
             iterations += its
@@ -195,7 +200,7 @@ class Simulation:
         results, augmentations = self._last_contact
         if not self.model.interfaces:
             return {}
-        self.dissipation += sum(r.dissipation for r in results if r is not None)
+        self.dissipation += self._step_dissipation
         return {
             "active_pairs": sum(len(r.pairs) for r in results if r is not None),
             "frictional_dissipation": self.dissipation,
