@@ -1,0 +1,308 @@
+"""ALE mesh update of one body (ale.motion): exactness of the remap under uniform motion and
+homogeneous deformation, large slides (Fig. 4.2), momentum correction, corners and clamping."""
+
+import numpy as np
+import pytest
+
+from ntncontact.ale.example_mesh_motion import layer_mesh
+from ntncontact.ale.motion import AleBody, lumped_masses, move_ale_body
+from ntncontact.ale.remap import momenta
+from ntncontact.mesh.generators import annulus, rectangle
+from ntncontact.mesh.quadmesh import MeshError
+from ntncontact.mesh.quality import corner_angles_deg, corner_jacobians
+
+DT = 0.01
+# coordinates and fields are O(1): round-off of a few interpolations and arc-length inversions
+ROUND = 1e-12
+
+
+def fields(mesh, F=((1.0, 0.0), (0.0, 1.0)), shift=(0.0, 0.0), v=(0.0, 0.0), a=(0.0, 0.0)):
+    """t_n state of a body under x = F X + shift with uniform v and a."""
+    X = mesh.nodes.copy()
+    d = X @ (np.asarray(F) - np.eye(2)).T + np.asarray(shift)
+    n = len(X)
+    return X, d, np.tile(np.asarray(v, float), (n, 1)), np.tile(np.asarray(a, float), (n, 1))
+
+
+def slide_targets(x, nodes, shifts, tangent, v, gap=(0.0, 0.0)):
+    """x_pred = x_n + dt v and targets shifted along the surface (plus an optional normal gap)."""
+    x_pred = x[nodes] + DT * v[nodes]
+    return np.asarray(shifts)[:, None] * np.asarray(tangent) + x_pred + np.asarray(gap), x_pred
+
+
+def element_F(X, x, cells):
+    """Deformation gradient at the corners of every cell: (dx/dxi)(dX/dxi)^-1, (m, 4, 2, 2)."""
+    xi = np.array([[-1.0, -1.0], [1.0, -1.0], [1.0, 1.0], [-1.0, 1.0]])
+    dn = 0.25 * np.stack([xi[:, 0] * (1 + xi[:, 1] * xi[:, 1:2]),
+                          xi[:, 1] * (1 + xi[:, 0] * xi[:, 0:1])], axis=-1)  # (corner, a, k)
+    jx = np.einsum("gak,eai->egik", dn, x[cells])
+    jX = np.einsum("gak,eai->egik", dn, X[cells])
+    return jx @ np.linalg.inv(jX)
+
+
+def reference_area(X, cells):
+    return lumped_masses(X, cells).sum()
+
+
+def test_no_active_node_returns_the_input_unchanged():
+    mesh = rectangle(2.0, 1.0, 8, 4)
+    body = AleBody.from_mesh(mesh, "top")
+    rng = np.random.default_rng(0)
+    X, d, v, a = (rng.normal(size=(mesh.n_nodes, 2)) for _ in range(4))
+    out = move_ale_body(body, X, d, v, a, [], np.zeros((0, 2)), np.zeros((0, 2)), DT)
+    for new, old in ((out.X, X), (out.d, d), (out.v, v), (out.a, a)):
+        np.testing.assert_array_equal(new, old)
+    np.testing.assert_array_equal(out.x_mesh, X + d)
+    assert not out.mesh_velocity.any() and out.clamped.size == 0 and not out.moved.any()
+
+
+@pytest.mark.parametrize("method", ["laplacian", "angle", "weighted_angle"])
+def test_uniform_translation_is_unchanged_by_an_arbitrary_surface_move(method):
+    """METHOD_NOTES test 1: a translating body's physics does not see the mesh motion."""
+    mesh = rectangle(3.0, 1.0, 15, 5, grading_x=2.0, grading_y=0.5)
+    body = AleBody.from_mesh(mesh, "top", smoothing=method)
+    X, d, v, a = fields(mesh, shift=(0.3, -0.1), v=(2.0, -1.0), a=(0.5, 0.25))
+    x = X + d
+    top = body.surface  # walks right to left: tangent -x
+    active = top[[3, 7, 11]]
+    h = 0.2
+    x_target, x_pred = slide_targets(x, active, [1.7 * h, -0.8 * h, 1.3 * h], (-1.0, 0.0), v,
+                                     gap=(0.0, -0.01))
+    out = move_ale_body(body, X, d, v, a, active, x_target, x_pred, DT)
+    # the normal gap is not the mesh's business: the node lands on the target's tangential part
+    np.testing.assert_allclose(out.x_mesh[active, 0], x_target[:, 0] - DT * v[active, 0],
+                               atol=ROUND)
+    np.testing.assert_allclose(out.x_mesh[active, 1], x[active, 1], atol=ROUND)
+    assert out.mismatch < ROUND and out.clamped.size == 0
+    assert out.moved.sum() > 3 * len(active)  # surface respaced and interior smoothed
+    np.testing.assert_allclose(out.X + out.d, out.x_mesh, atol=ROUND)
+    np.testing.assert_allclose(out.d, d, atol=ROUND)
+    np.testing.assert_allclose(out.v, v, atol=ROUND)
+    np.testing.assert_allclose(out.a, a, atol=ROUND)
+    lo, hi = mesh.nodes.min(axis=0), mesh.nodes.max(axis=0)
+    assert np.all(out.X >= lo - ROUND) and np.all(out.X <= hi + ROUND)
+    np.testing.assert_allclose(out.X[top, 1], 1.0, atol=ROUND)  # still on the reference surface
+    np.testing.assert_allclose(out.mesh_velocity, (out.x_mesh - x) / DT)
+    assert np.abs(out.mesh_velocity).max() > 1.0  # the mesh did move
+
+
+@pytest.mark.parametrize("remap", ["linear", "quadratic"])
+def test_homogeneous_deformation_is_remapped_exactly(remap):
+    """Linear fields (X, v of x = F X + c) are reproduced by both interpolants: F is unchanged
+    in every element and the X-image keeps its area, so the strain energy W(F) A is unchanged."""
+    mesh = layer_mesh(width=2.0, height=0.5, nx=20, ny=6, jitter=0.25)
+    body = AleBody.from_mesh(mesh, "top", remap=remap, conserve_momentum=False)
+    F = np.array([[1.1, 0.3], [-0.05, 0.9]])
+    X, d, _, a = fields(mesh, F=F, shift=(0.2, 0.1))
+    v = X @ np.array([[0.5, -1.0], [2.0, 0.3]]).T + [1.0, -2.0]  # linear velocity field
+    x = X + d
+    top = body.surface
+    tangent = F @ [-1.0, 0.0] / np.linalg.norm(F @ [-1.0, 0.0])
+    active = top[[5, 12]]
+    x_target, x_pred = slide_targets(x, active, [0.25, -0.15], tangent, v)
+    out = move_ale_body(body, X, d, v, a, active, x_target, x_pred, DT)
+    assert out.moved.sum() > 2 and out.mismatch < ROUND
+    np.testing.assert_allclose(element_F(out.X, out.x_mesh, mesh.cells), np.broadcast_to(
+        F, (mesh.n_cells, 4, 2, 2)), atol=1e-10)  # cond(dX/dxi) ~ 10 on the thin top row
+    np.testing.assert_allclose(out.x_mesh, out.X @ F.T + [0.2, 0.1], atol=ROUND)
+    np.testing.assert_allclose(out.v, out.X @ np.array([[0.5, -1.0], [2.0, 0.3]]).T
+                               + [1.0, -2.0], atol=1e-11)
+    np.testing.assert_allclose(reference_area(out.X, mesh.cells), reference_area(X, mesh.cells),
+                               rtol=ROUND)
+
+
+@pytest.mark.parametrize("n_active", [1, 5])
+def test_slide_over_several_elements_lands_on_target_without_inversion(n_active):
+    """Fig. 4.2: a node dragged 3.6 element lengths; order kept, mesh valid, smoothing helps."""
+    mesh = layer_mesh()  # 30 x 7, graded to the top, jittered
+    h = 2.0 / 30
+    X, d, v, a = fields(mesh, v=(-1.0, 0.0))
+    x = X + d
+    top_chain = AleBody.from_mesh(mesh, "top").surface
+    active = top_chain[13:13 + n_active]
+    x_target, x_pred = slide_targets(x, active, np.full(n_active, 3.6 * h), (1.0, 0.0), v)
+    smoothed = move_ale_body(AleBody.from_mesh(mesh, "top"), X, d, v, a, active, x_target,
+                             x_pred, DT)
+    # moving the surface alone inverts a thin top element of the jittered mesh (cf. Fig. 4.2)
+    surface_only = AleBody.from_mesh(mesh, "top", smoothing_layers=0)
+    with pytest.raises(MeshError, match=r"body 'layer': element \d+ is inverted"):
+        move_ale_body(surface_only, X, d, v, a, active, x_target, x_pred, DT)
+    assert smoothed.mismatch < ROUND and smoothed.clamped.size == 0
+    np.testing.assert_allclose(smoothed.x_mesh[active], x[active] + [3.6 * h, 0.0], atol=ROUND)
+    assert np.all(np.diff(smoothed.x_mesh[top_chain, 0]) < 0)  # chain order preserved
+    assert corner_jacobians(smoothed.x_mesh, mesh.cells).min() > 0
+    assert corner_jacobians(smoothed.X, mesh.cells).min() > 0
+    assert corner_angles_deg(smoothed.x_mesh, mesh.cells).min() > 20.0
+    # nodes beyond the smoothing layers keep their position and fields exactly
+    far = mesh.nodes[:, 1] < 0.1
+    np.testing.assert_array_equal(smoothed.x_mesh[far], x[far])
+    np.testing.assert_array_equal(smoothed.X[far], X[far])
+
+
+def test_ring_slide_stays_on_the_circle():
+    """A closed chain with no corner: the node slides along the circle (curve error O(h^3))."""
+    radius = 1.0
+    mesh = annulus(0.6, radius, 4, 48)
+    body = AleBody.from_mesh(mesh, "outer")
+    assert body.closed and not body.corner.any()
+    X, d, v, a = fields(mesh)
+    bottom = int(mesh.node_sets["bottom"][0])
+    theta = 2.5 * 2 * np.pi / 48  # 2.5 element lengths counter-clockwise
+    start = np.array([[0.0, -radius]])
+    target = radius * np.array([[np.sin(theta), -np.cos(theta)]]) * 1.01  # with a normal gap
+    out = move_ale_body(body, X, d, v, a, [bottom], target, start, DT)
+    h = 2 * np.pi * radius / 48
+    # the quadratic surface curve misses the circle by O(h^3 / R^2) (measured 0.003 h^3)
+    np.testing.assert_allclose(np.linalg.norm(out.x_mesh[body.surface], axis=1), radius,
+                               atol=0.01 * h**3 / radius**2)
+    angle = np.arctan2(out.x_mesh[bottom, 0], -out.x_mesh[bottom, 1])
+    assert abs(angle - theta) < 1e-6 * theta  # the radial gap is projected away exactly
+    assert out.mismatch < ROUND and out.clamped.size == 0
+    far = body.surface[24]  # the opposite node anchors the opened chain
+    np.testing.assert_array_equal(out.x_mesh[far], X[far])
+
+
+def momentum_case(conserve: bool):
+    mesh = layer_mesh(width=2.0, height=0.5, nx=20, ny=6, jitter=0.25)
+    body = AleBody.from_mesh(mesh, "top", conserve_momentum=conserve, density=7.8)
+    X, d, _, a = fields(mesh, F=[[1.05, 0.1], [0.0, 0.97]])
+    x = X + d
+    v = 0.8 * np.column_stack([-x[:, 1], x[:, 0]]) + np.column_stack(
+        [np.sin(3 * x[:, 0]) + 2.0, np.cos(5 * x[:, 1]) * x[:, 0]])  # rotation plus a wave
+    active = body.surface[[6, 7, 8]]
+    x_target, x_pred = slide_targets(x, active, [0.21, 0.21, 0.21], (-1.0, 0.0), v)
+    out = move_ale_body(body, X, d, v, a, active, x_target, x_pred, DT)
+    old = momenta(lumped_masses(X, mesh.cells, 7.8), x, v)
+    new = momenta(lumped_masses(out.X, mesh.cells, 7.8), out.x_mesh, out.v)
+    m = lumped_masses(X, mesh.cells, 7.8)
+    scale_p = m @ np.linalg.norm(v, axis=1)
+    scale_l = m @ (np.linalg.norm(x, axis=1) * np.linalg.norm(v, axis=1))
+    drift = (np.linalg.norm(new[0] - old[0]) / scale_p, abs(new[1] - old[1]) / scale_l)
+    return out, v, drift
+
+
+def test_momentum_correction_restores_linear_and_angular_momentum():
+    out, v, drift = momentum_case(conserve=True)
+    assert drift[0] < ROUND and drift[1] < ROUND
+    np.testing.assert_array_equal(out.v[~out.moved], v[~out.moved])  # supports keep their v
+    plain, _, plain_drift = momentum_case(conserve=False)
+    # plain interpolation drifts (measured 6.5e-4 and 7.8e-4 here): the correction works
+    assert plain_drift[0] > 1e-4 and plain_drift[1] > 1e-4
+    change = np.linalg.norm(plain.momentum_change[0])
+    assert change > 0 and np.allclose(plain.momentum_change[0], out.momentum_change[0])
+    # a small rigid velocity on the remapped nodes (drift / their mass fraction), not a rewrite
+    assert np.abs(out.v - plain.v).max() < 1e-2 * np.abs(v).max()
+
+
+def corner_body(**options):
+    """A 10 x 4 rectangle whose contact chain runs up the right side and left along the top."""
+    mesh = rectangle(2.0, 0.8, 10, 4)
+    edges = np.vstack([mesh.edge_sets["right"], mesh.edge_sets["top"]])
+    mesh = mesh.with_sets(edge_sets={"right_top": edges})
+    return mesh, AleBody.from_mesh(mesh, "right_top", **options)
+
+
+def test_corners_stay_fixed_and_slides_past_them_are_clamped():
+    mesh, body = corner_body()
+    corner = int(mesh.node_sets["corner_top_right"][0])
+    end = int(mesh.node_sets["corner_top_left"][0])
+    np.testing.assert_array_equal(body.surface[body.corner], [corner])  # detected by its angle
+    X, d, v, a = fields(mesh)
+    x = X + d
+    h = 0.2
+    top = mesh.node_sets["top"]  # right to left
+    near_corner, near_end, free = top[2], top[-3], top[5]
+    active = np.array([near_corner, free, near_end, corner])
+    shifts = [5 * h, 0.5 * h, -4 * h, 0.3 * h]  # past the corner, free, past the end, outward
+    x_target, x_pred = slide_targets(x, active, shifts, (1.0, 0.0), v)
+    out = move_ale_body(body, X, d, v, a, active, x_target, x_pred, DT)
+    np.testing.assert_array_equal(np.sort(out.clamped), np.sort([near_corner, near_end, corner]))
+    np.testing.assert_array_equal(out.x_mesh[[corner, end]], x[[corner, end]])
+    # clamped 2 segments before the break with min_spacing_ratio 0.25 of the smallest spacing
+    np.testing.assert_allclose(out.x_mesh[near_corner], [2.0 - 2 * 0.25 * h, 0.8], atol=ROUND)
+    np.testing.assert_allclose(out.x_mesh[near_end], [2 * 0.25 * h, 0.8], atol=ROUND)
+    np.testing.assert_allclose(out.x_mesh[free], x[free] + [0.5 * h, 0.0], atol=ROUND)
+    right = mesh.node_sets["right"]
+    np.testing.assert_array_equal(out.x_mesh[right], x[right])  # nothing slid round the corner
+    # the clamp shows in the mismatch: 5 h wanted, 1.5 h allowed
+    np.testing.assert_allclose(out.mismatch, 3.5 * h, atol=ROUND)
+
+
+def test_crossing_targets_raise_mesh_error_naming_the_body():
+    mesh = rectangle(2.0, 0.8, 10, 4, name="foundation")
+    body = AleBody.from_mesh(mesh, "top")
+    X, d, v, a = fields(mesh)
+    x = X + d
+    active = body.surface[[3, 4]]
+    x_target, x_pred = slide_targets(x, active, [0.3, -0.3], (-1.0, 0.0), v)
+    with pytest.raises(MeshError, match="body 'foundation'.*swap order"):
+        move_ale_body(body, X, d, v, a, active, x_target, x_pred, DT)
+
+
+def test_later_augmentation_from_the_original_state_with_x_start():
+    """Augmentation 2 from the t_n state with x_start = the moved node equals a direct move."""
+    mesh = rectangle(2.0, 0.8, 10, 4)
+    body = AleBody.from_mesh(mesh, "top")
+    X, d, v, a = fields(mesh, v=(1.0, -0.5))
+    x = X + d
+    node = body.surface[[4]]
+    t1, p1 = slide_targets(x, node, [0.13], (-1.0, 0.0), v)
+    first = move_ale_body(body, X, d, v, a, node, t1, p1, DT)
+    t2 = x[node] + DT * v[node] + [-0.27, 0.0]
+    p2 = first.x_mesh[node] + DT * v[node]  # last iterate of the particle at the moved node
+    second = move_ale_body(body, X, d, v, a, node, t2, p2, DT, x_start=first.x_mesh[node])
+    direct = move_ale_body(body, X, d, v, a, node, t2, x[node] + DT * v[node], DT)
+    np.testing.assert_allclose(second.x_mesh, direct.x_mesh, atol=ROUND)
+    np.testing.assert_allclose(second.x_mesh[node], x[node] + [-0.27, 0.0], atol=ROUND)
+    assert second.mismatch < ROUND
+
+
+def test_options_are_validated():
+    mesh = rectangle(2.0, 0.8, 10, 4)
+    with pytest.raises(ValueError, match="smoothing"):
+        AleBody.from_mesh(mesh, "top", smoothing="spline")
+    body = AleBody.from_mesh(mesh, "top")
+    X, d, v, a = fields(mesh)
+    with pytest.raises(ValueError, match="not on the ALE contact surface"):
+        move_ale_body(body, X, d, v, a, [0], X[[5]], X[[5]], DT)  # node 0 is on the bottom
+
+
+def test_respacing_keeps_the_original_mesh_proportions():
+    """Free surface nodes are placed in the ORIGINAL spacing proportions between the anchors,
+    not the current (non-uniformly stretched) ones, so a grading survives repeated moves."""
+    mesh = rectangle(2.0, 0.8, 10, 4, grading_x=3.0)
+    body = AleBody.from_mesh(mesh, "top")
+    X = mesh.nodes.copy()
+    d = np.column_stack([0.15 * X[:, 0] ** 2, np.zeros(len(X))])  # stretched non-uniformly
+    v, a = np.zeros_like(X), np.zeros_like(X)
+    x = X + d
+    top = body.surface  # right to left; ends are the top corners
+    node = top[[6]]
+    out = move_ale_body(body, X, d, v, a, node, x[node] + [0.1, 0.0], x[node], DT)
+    free = top[6:]  # from the moved node to the left end
+    ratio_new = (out.x_mesh[free, 0] - x[top[-1], 0]) / (out.x_mesh[node, 0] - x[top[-1], 0])
+    ratio_ref = (X[free, 0] - X[top[-1], 0]) / (X[node, 0] - X[top[-1], 0])
+    np.testing.assert_allclose(ratio_new, ratio_ref, atol=ROUND)
+    ratio_cur = (x[free, 0] - x[top[-1], 0]) / (x[node, 0] - x[top[-1], 0])
+    assert np.abs(ratio_cur - ratio_ref).max() > 0.01  # the current spacing is different
+
+
+def test_closed_chain_with_corners_moves_only_its_own_side():
+    """The whole boundary as one closed chain: cut at a corner, every corner stays a break."""
+    mesh = rectangle(2.0, 0.8, 10, 4)
+    loop = np.vstack([mesh.edge_sets[k] for k in ("bottom", "right", "top", "left")])
+    mesh = mesh.with_sets(edge_sets={"loop": loop})
+    body = AleBody.from_mesh(mesh, "loop")
+    assert body.closed and body.corner.sum() == 4
+    X, d, v, a = fields(mesh, shift=(0.1, 0.0))
+    x = X + d
+    top = mesh.node_sets["top"]
+    active = top[[3, 7]]
+    out = move_ale_body(body, X, d, v, a, active, x[active] + [[0.13, 0.0], [-0.21, 0.0]],
+                        x[active], DT)
+    np.testing.assert_allclose(out.x_mesh[active], x[active] + [[0.13, 0.0], [-0.21, 0.0]],
+                               atol=ROUND)
+    others = np.setdiff1d(np.concatenate([mesh.node_sets[k] for k in
+                                          ("bottom", "right", "left")]), top[1:-1])
+    np.testing.assert_array_equal(out.x_mesh[others], x[others])
+    assert out.mismatch < ROUND and out.clamped.size == 0
