@@ -6,6 +6,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .ale.motion import AleBody
 from .contact import AugmentationTolerances, ContactLaw, ContactSurface, Interface, corner_mask
 from .fem.loads import (
     LoadCase,
@@ -29,7 +30,7 @@ from .mesh import generators
 from .mesh.boundary import surface_chain
 from .mesh.quadmesh import MeshError, QuadMesh
 from .mesh.quality import check_elements
-from .model import AnalysisSettings, Body, ContactInterface, Model, stack_bodies
+from .model import AleSetup, AnalysisSettings, Body, ContactInterface, Model, stack_bodies
 
 
 def build_mesh(cfg: MeshConfig, name: str, base_dir: Path) -> QuadMesh:
@@ -125,10 +126,29 @@ def build_model(config: ScenarioConfig, base_dir: str | Path = ".") -> Model:
         functions += f
     a = config.analysis
     interfaces = tuple(_interface(c, i, bodies, a.kind) for i, c in enumerate(config.contact))
+    ale_bodies = tuple(_ale_setup(i, body, bc, config) for i, (body, bc)
+                       in enumerate(zip(bodies, config.bodies, strict=True))
+                       if bc.mesh_motion == "ale")
     analysis = AnalysisSettings(a.kind, a.dt, a.t_end, a.mass, a.output_interval,
                                 a.max_cutbacks, a.newton.rtol, a.newton.max_iterations)
     return Model(bodies, analysis, LoadCase(tuple(patterns), tuple(functions)),
-                 tuple(prescribed), X0, cells, assembler, interfaces)
+                 tuple(prescribed), X0, cells, assembler, interfaces, ale_bodies)
+
+
+def _ale_setup(index: int, body: Body, cfg: BodyConfig, config: ScenarioConfig) -> AleSetup:
+    """The ALE body's contact surface is the one it has in the scenario's interfaces."""
+    surfaces = {c.surface_1 for c in config.contact if c.body_1 == body.name}
+    surfaces |= {c.surface_2 for c in config.contact if c.body_2 == body.name}
+    where = f"bodies.{index} ('{body.name}').mesh_motion"
+    if len(surfaces) != 1:
+        raise ScenarioError(f"{where}: an ALE body needs exactly one contact surface, "
+                            f"found {sorted(surfaces) or 'none'}")
+    opts = cfg.ale
+    motion = AleBody.from_mesh(body.mesh, surfaces.pop(), smoothing=opts.smoothing,
+                               smoothing_layers=opts.smoothing_layers, sweeps=opts.sweeps,
+                               remap=opts.remap, conserve_momentum=opts.conserve_momentum,
+                               density=body.material.density, name=body.name)
+    return AleSetup(index, body.node_offset, body.mesh.n_nodes, motion)
 
 
 def _interface(cfg: ContactConfig, index: int, bodies: tuple[Body, ...],
@@ -156,8 +176,9 @@ def _interface(cfg: ContactConfig, index: int, bodies: tuple[Body, ...],
     tol = AugmentationTolerances(aug.gap_tolerance, aug.slip_tolerance, aug.traction_tolerance)
     candidates = surface1.nodes[~np.isin(surface1.nodes, excluded)]
     max_aug = 1 if cfg.method == "penalty" else aug.max_iterations
+    ordered = "ale" in (b1.mesh_motion, b2.mesh_motion)
     return ContactInterface(cfg.name or f"interface{index}", Interface(surface1, surface2), law,
-                            persistency, candidates, cfg.release_steps, tol, max_aug)
+                            persistency, candidates, cfg.release_steps, tol, max_aug, ordered)
 
 
 def _xy(body: Body, surface: ContactSurface) -> np.ndarray:

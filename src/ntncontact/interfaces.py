@@ -23,6 +23,7 @@ from .contact import (
     detect,
     evaluate_contact,
     lagrange_blocks,
+    ordered_partners,
     release_tensile_pairs,
 )
 from .model import ContactInterface
@@ -35,11 +36,21 @@ def detect_all(
     """Release finished pairs and add penetrating, approaching candidates (2.1.4, 3.2)."""
     out = []
     for ci, state in zip(interfaces, states, strict=True):
-        pairing = closest_pairs(x, ci.interface, ci.candidates, unique=True)
-        found = detect(state, pairing.pairs, x, v, ci.interface, persistency=ci.persistency,
+        if ci.ordered_pairing and not ci.interface.surface2.closed:
+            candidates = _ordered_candidates(x, ci, state)
+        else:
+            candidates = closest_pairs(x, ci.interface, ci.candidates, unique=True).pairs
+        found = detect(state, candidates, x, v, ci.interface, persistency=ci.persistency,
                        release_steps=ci.release_steps)
         out.append(found.state)
     return tuple(out)
+
+
+def _ordered_candidates(x: NDArray, ci: ContactInterface, state: PairState) -> NDArray:
+    """Distinct, order-preserving partners for the free candidates (ALE partner surface)."""
+    free = ci.candidates[~np.isin(ci.candidates, state.pairs[:, 0])]
+    partners = ordered_partners(x, ci.interface, free, taken=state.pairs[:, 1])
+    return np.column_stack([free, partners])[partners >= 0]
 
 
 def contact_terms(interfaces: Sequence[ContactInterface], states: Sequence[PairState],

@@ -72,6 +72,7 @@ class Model:
     cells: NDArray  # stacked connectivity in global node numbers (ne, 4)
     assembler: Assembler = field(repr=False)
     interfaces: tuple = ()
+    ale_bodies: tuple = ()  # AleSetup per body with mesh_motion = "ale"
 
     @property
     def n_nodes(self) -> int:
@@ -130,3 +131,14 @@ class ContactInterface:
     release_steps: int
     tolerances: object  # contact.augmentation.AugmentationTolerances
     max_augmentations: int
+    ordered_pairing: bool = False  # distinct partners in surface order (ALE partner surface)
+
+
+@dataclass(frozen=True)
+class AleSetup:
+    """An ALE body: its mesh-motion data and place in the global arrays."""
+
+    body_index: int
+    node_offset: int
+    n_nodes: int
+    motion: object  # ale.motion.AleBody (local numbering)

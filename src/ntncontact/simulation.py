@@ -24,6 +24,7 @@ from .interfaces import (
     lagrange_terms,
     with_solved_multipliers,
 )
+from .mesh_motion import move_meshes
 from .model import Model
 from .problem import StepProblem, StepState
 from .solvers.newton import NewtonError, NewtonSettings, newton
@@ -96,24 +97,31 @@ class Simulation:
         self._last_contact: tuple = ((), 0)
         self.dissipation = 0.0
         self._step_dissipation = 0.0
+        self._last_mismatch = 0.0
 
     def balance(self, state: StepState) -> Balance:
         _, _, energy = self.model.assembler.internal(state.X, state.x, need_tangent=False)
-        return balance(self._nodal_mass, state.x, state.v, energy)
+        return balance(self._nodal(state), state.x, state.v, energy)
 
     def advance(self, state: StepState, dt: float) -> tuple[StepState, int]:
-        """One step of size dt from ``state`` (report 5.4): detection, then Newton with the
-        contact multipliers fixed, augmented until converged, then the kinematic update."""
+        """One step of size dt from ``state`` (report 5.4): detection, then per augmentation
+        the ALE mesh motion and Newton with the contact multipliers fixed, until converged;
+        then the kinematic update."""
         interfaces = self.model.interfaces
         contact = detect_all(interfaces, state.contact, state.x, state.v) if interfaces else ()
-        mass = self._mass if self.dynamic else None
+        base, motion = state, None
+        x_pred = state.x + dt * state.v  # first prediction of the end-of-step positions
         previous, iterations, guess = None, 0, None
         for augmentation in range(1, self.max_augmentations + 1):  # noqa: B007 (used after)
+            if self.model.ale_bodies and any(len(c) for c in contact):
+                motion = move_meshes(self.model, base, contact, x_pred, dt, motion)
+                state = motion.state
+            mass = self._dof_mass(state) if self.dynamic else None
             problem = StepProblem(self.model, state, dt, mass,
                                   contact_terms(interfaces, contact, dt),
                                   lagrange_terms(interfaces, contact, dt))
             y0 = problem.initial_guess()
-            if guess is not None and guess.size == y0.size:
+            if guess is not None and guess.size == y0.size and motion is None:
                 y0 = guess
             result = newton(problem.residual, problem.jacobian, self.solve, y0, self.settings,
                             self.length_scale)
@@ -124,6 +132,7 @@ class Simulation:
             results = self._contact_results(interfaces, contact, state, d, dt)
             used = contact
             contact, done = augment_all(interfaces, contact, previous, results)
+            x_pred = state.X + (2.0 * d - state.d if self.dynamic else d)
             if done:
                 break
             previous = results
@@ -133,9 +142,21 @@ class Simulation:
             d1, v1, a1 = d, (d - state.d) / dt, np.zeros_like(d)
         committed = commit_all(interfaces, used, results) if interfaces else ()
         self._last_contact = (results if interfaces else (), augmentation)
+        self._last_mismatch = motion.mismatch if motion is not None else 0.0
         self._step_dissipation += sum(r.dissipation for r in results if r is not None)
         new = StepState(state.step + 1, state.time + dt, state.X, d1, v1, a1, committed)
         return new, iterations
+
+    def _dof_mass(self, state: StepState) -> sp.csr_matrix:
+        """The mass on dofs; ALE bodies carry new particles at their nodes, so it is rebuilt."""
+        if not self.model.ale_bodies:
+            return self._mass
+        return sp.kron(self._nodal(state), sp.eye(2), format="csr")
+
+    def _nodal(self, state: StepState) -> sp.csr_matrix:
+        if not self.model.ale_bodies:
+            return self._nodal_mass
+        return self.model.assembler.nodal_mass(state.X, self.lumped)
 
     def _contact_results(self, interfaces, contact, state: StepState, d: NDArray, dt: float):
         if not interfaces:
@@ -205,6 +226,7 @@ class Simulation:
             "active_pairs": sum(len(r.pairs) for r in results if r is not None),
             "frictional_dissipation": self.dissipation,
             "augmentations": augmentations,
+            "ale_mismatch": self._last_mismatch,
             "contact_rows": contact_rows(self.model.interfaces, results, self.state.x),
         }
 

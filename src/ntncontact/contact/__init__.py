@@ -12,7 +12,7 @@ from .friction import SLIP, STICK, ReturnMapping, frictional_dissipation, return
 from .kinematics import PairKinematics, pair_kinematics
 from .lagrange import LagrangeBlocks, lagrange_blocks, release_tensile_pairs
 from .laws import ContactLaw, normal_traction
-from .pairing import Pairing, closest_pairs
+from .pairing import Pairing, closest_pairs, ordered_partners
 from .state import PairState, commit_step
 from .surfaces import ContactSurface, Interface, chord_normals, corner_mask
 
@@ -30,6 +30,7 @@ __all__ = [
     "PairKinematics",
     "PairState",
     "Pairing",
+    "ordered_partners",
     "ReturnMapping",
     "augment",
     "check_augmentation",

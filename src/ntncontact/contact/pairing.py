@@ -111,3 +111,54 @@ def closest_pairs(
     _, inv, cnt = np.unique(node2, return_inverse=True, return_counts=True)
     return Pairing(node1, node2, np.asarray(node_distance, float), seg, xi, point, dist,
                    kin.gap, proj_gap, cnt[inv.reshape(-1)] > 1)
+
+
+def ordered_partners(
+    x: NDArray[np.float64], interface: Interface, node1: ArrayLike, taken: ArrayLike = ()
+) -> NDArray[np.int64]:
+    """Distinct surface-2 partners for ``node1``, in the same order along both surfaces.
+
+    For node-to-node contact with an ALE partner surface, nearest-node pairing can give two
+    nodes the same partner (graded or coarser partner meshes). This picks strictly increasing
+    chain positions j_1 < ... < j_m for the candidates sorted along surface 2 (by their closest
+    projection) minimizing the summed distances |x1_i - x2_{j_i}| (dynamic programming, O(m N)).
+    Nodes in ``taken`` are not used. Open partner surfaces only; returns -1 where no partner
+    can be assigned (more candidates than free nodes).
+    """
+    node1 = np.asarray(node1, dtype=np.int64)
+    s2 = interface.surface2
+    out = np.full(node1.size, -1, dtype=np.int64)
+    if node1.size == 0:
+        return out
+    proj = closest_pairs(x, interface, candidates=node1)
+    order = np.argsort(proj.segment + proj.xi, kind="stable")
+    dist = np.linalg.norm(x[node1[order], None, :] - x[s2.nodes][None, :, :], axis=2)
+    dist[:, np.isin(s2.nodes, np.asarray(taken, dtype=np.int64))] = np.inf
+    m, n = dist.shape
+    if m > n:
+        return out
+    cost = np.full((m, n), np.inf)
+    choice = np.zeros((m, n), dtype=np.int64)
+    cost[0] = dist[0]
+    for i in range(1, m):  # loop over candidates (a handful per step), vectorized over nodes
+        best = np.minimum.accumulate(cost[i - 1])
+        arg = _running_argmin(cost[i - 1])
+        cost[i, 1:] = best[:-1] + dist[i, 1:]
+        choice[i, 1:] = arg[:-1]
+    if not np.isfinite(cost[-1].min()):
+        return out
+    j = int(np.argmin(cost[-1]))
+    picks = np.empty(m, dtype=np.int64)
+    for i in range(m - 1, -1, -1):
+        picks[i] = j
+        j = choice[i, j]
+    out[order] = s2.nodes[picks]
+    return out
+
+
+def _running_argmin(values: NDArray[np.float64]) -> NDArray[np.int64]:
+    """Index of the minimum of values[:k+1] for every k."""
+    idx = np.arange(values.size)
+    best = np.minimum.accumulate(values)
+    is_new = values <= best
+    return np.maximum.accumulate(np.where(is_new, idx, 0))

@@ -6,7 +6,13 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..materials.models import MaterialKind, stress_and_tangent
-from .q4 import N_GP, check_current_jacobian, kinematics, reference_gradients
+from .q4 import (
+    N_GP,
+    InvertedElementError,
+    check_current_jacobian,
+    kinematics,
+    reference_gradients,
+)
 
 #: Elements processed per chunk: bounds temporary memory (~8 kB per element) at large sizes.
 CHUNK = 32768
@@ -31,9 +37,12 @@ def element_force_tangent(
     W = np.empty(ne)
     for start in range(0, ne, CHUNK):
         sl = slice(start, min(start + CHUNK, ne))
-        kin = kinematics(X_e[sl], x_e[sl])
-        if kind == "neo_hookean":
-            check_current_jacobian(kin.F)
+        try:
+            kin = kinematics(X_e[sl], x_e[sl])
+            if kind == "neo_hookean":
+                check_current_jacobian(kin.F)
+        except InvertedElementError as err:  # the index is local to the chunk
+            raise renumbered(err, start + err.element) from None
         P, A, Wd = stress_and_tangent(kind, kin.F, lam[sl, None], mu[sl, None])
         gw = kin.grad * kin.weight[..., None, None]
         f[sl] = np.einsum("egiJ,egaJ->eai", P, gw).reshape(-1, 8)
@@ -42,6 +51,12 @@ def element_force_tangent(
             AG = np.einsum("egiJkL,egbL->egiJbk", A, kin.grad)
             K[sl] = np.einsum("egaJ,egiJbk->eaibk", gw, AG).reshape(-1, 8, 8)
     return f, K, W
+
+
+def renumbered(err: InvertedElementError, element: int) -> InvertedElementError:
+    """The same inversion error naming ``element`` instead (chunk or group index made global)."""
+    where = "current configuration" if "current" in str(err) else "reference configuration"
+    return InvertedElementError(element, err.value, where)
 
 
 def element_mass(X_e: NDArray, rho: NDArray) -> NDArray:

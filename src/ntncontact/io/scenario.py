@@ -162,11 +162,22 @@ class InitialConfig(Strict):
     angular_velocity: float = 0.0
 
 
+class AleConfig(Strict):
+    """How an ALE body's mesh follows its contact partners (report chapter 4)."""
+
+    smoothing: Literal["laplacian", "angle", "weighted_angle"] = "laplacian"
+    smoothing_layers: Annotated[int, Field(ge=0)] = 3
+    sweeps: Annotated[int, Field(ge=0)] = 10
+    remap: Literal["linear", "quadratic"] = "linear"
+    conserve_momentum: bool = True
+
+
 class BodyConfig(Strict):
     name: str
     mesh: MeshConfig
     material: MaterialConfig
     mesh_motion: Literal["lagrangian", "ale"] = "lagrangian"
+    ale: AleConfig = AleConfig()
     initial: InitialConfig = InitialConfig()
     supports: list[SupportConfig] = []
     loads: list[LoadConfig] = []

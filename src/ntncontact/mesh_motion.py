@@ -1,0 +1,74 @@
+"""ALE bodies in the time loop: move each ALE mesh so its contact nodes meet their partners.
+
+Called at every augmentation of a step (report 5.4 step 2) with the ORIGINAL t_n state, the
+active pairs and the predicted end-of-step positions of all nodes from the last iterate (see
+:mod:`ntncontact.ale.motion` for the operator-split formulation: remap at t_n, then a plain
+Lagrangian step, hence no convective term).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass, replace
+
+import numpy as np
+from numpy.typing import NDArray
+
+from .ale.motion import AleUpdate, move_ale_body
+from .contact import PairState
+from .model import AleSetup, Model
+from .problem import StepState
+
+
+@dataclass(frozen=True)
+class MeshMotion:
+    """The moved t_n state and, per ALE body, its update (None where nothing moved)."""
+
+    state: StepState
+    updates: tuple[AleUpdate | None, ...]
+
+    @property
+    def mismatch(self) -> float:
+        return max([u.mismatch for u in self.updates if u is not None] or [0.0])
+
+
+def _ale_nodes_and_partners(setup: AleSetup, contact: Sequence[PairState]):
+    """Active global nodes of this ALE body and their partners, over all interfaces."""
+    lo, hi = setup.node_offset, setup.node_offset + setup.n_nodes
+    own, partner = [], []
+    for state in contact:
+        for side in (1, 0):  # prefer moving the body-2 node (the report's choice)
+            nodes = state.pairs[:, side]
+            mine = (nodes >= lo) & (nodes < hi)
+            own.append(nodes[mine])
+            partner.append(state.pairs[mine, 1 - side])
+    own, partner = np.concatenate(own), np.concatenate(partner)
+    _, first = np.unique(own, return_index=True)
+    return own[np.sort(first)], partner[np.sort(first)]
+
+
+def move_meshes(
+    model: Model, base: StepState, contact: Sequence[PairState], x_pred: NDArray, dt: float,
+    previous: MeshMotion | None,
+) -> MeshMotion:
+    """Move every ALE body of ``model`` from the t_n state ``base``.
+
+    ``x_pred`` (n, 2): predicted end-of-step position of the particle at each node of the mesh
+    that produced the last iterate (``previous``; the unmoved mesh when None).
+    """
+    X, d, v, a = (arr.copy() for arr in (base.X, base.d, base.v, base.a))
+    updates = []
+    for i, setup in enumerate(model.ale_bodies):
+        nodes, partners = _ale_nodes_and_partners(setup, contact)
+        if nodes.size == 0:
+            updates.append(None)
+            continue
+        rows = slice(setup.node_offset, setup.node_offset + setup.n_nodes)
+        prev = previous.updates[i] if previous is not None else None
+        x_start = prev.x_mesh[nodes - setup.node_offset] if prev is not None else None
+        up = move_ale_body(setup.motion, base.X[rows], base.d[rows], base.v[rows], base.a[rows],
+                           nodes - setup.node_offset, x_pred[partners], x_pred[nodes], dt,
+                           x_start)
+        X[rows], d[rows], v[rows], a[rows] = up.X, up.d, up.v, up.a
+        updates.append(up)
+    return MeshMotion(replace(base, X=X, d=d, v=v, a=a), tuple(updates))
