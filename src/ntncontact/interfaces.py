@@ -36,19 +36,32 @@ def detect_all(
     """Release finished pairs and add penetrating, approaching candidates (2.1.4, 3.2)."""
     out = []
     for ci, state in zip(interfaces, states, strict=True):
+        near = _near_candidates(x, ci)
         if ci.ordered_pairing and not ci.interface.surface2.closed:
-            candidates = _ordered_candidates(x, ci, state)
+            candidates = _ordered_candidates(x, ci, state, near)
         else:
-            candidates = closest_pairs(x, ci.interface, ci.candidates, unique=True).pairs
+            candidates = closest_pairs(x, ci.interface, near, unique=True).pairs
         found = detect(state, candidates, x, v, ci.interface, persistency=ci.persistency,
                        release_steps=ci.release_steps)
         out.append(found.state)
     return tuple(out)
 
 
-def _ordered_candidates(x: NDArray, ci: ContactInterface, state: PairState) -> NDArray:
+def _near_candidates(x: NDArray, ci: ContactInterface) -> NDArray:
+    """Surface-1 candidates lying on or behind surface 2 (projection gap >= 0) within one
+    segment length of it: far nodes "behind" the surface (the far side of a ring) are not
+    penetrating, whatever the sign of their gap."""
+    pairing = closest_pairs(x, ci.interface, ci.candidates)
+    edges = [s.edges() for s in (ci.interface.surface1, ci.interface.surface2)]
+    radius = max(np.linalg.norm(x[e[:, 1]] - x[e[:, 0]], axis=1).max() for e in edges)
+    keep = (pairing.projection_gap >= 0.0) & (pairing.distance <= radius)
+    return pairing.node1[keep]
+
+
+def _ordered_candidates(x: NDArray, ci: ContactInterface, state: PairState,
+                        near: NDArray) -> NDArray:
     """Distinct, order-preserving partners for the free candidates (ALE partner surface)."""
-    free = ci.candidates[~np.isin(ci.candidates, state.pairs[:, 0])]
+    free = near[~np.isin(near, state.pairs[:, 0])]
     partners = ordered_partners(x, ci.interface, free, taken=state.pairs[:, 1])
     return np.column_stack([free, partners])[partners >= 0]
 
