@@ -77,3 +77,17 @@ def test_contact_run_writes_contact_csv_summary_and_pair_plots(tmp_path):
     assert {"active_pairs", "frictional_dissipation", "augmentations"} <= set(history)
     assert main(["plot", str(out)]) == 0
     assert (out / "pair_history.png").is_file() and (out / "contact_tractions.png").is_file()
+
+
+def test_mesh_quality_command_and_summary(tmp_path, capsys):
+    assert main(["mesh-quality", str(EXAMPLES / "spinning_block.toml")]) == 0
+    out = capsys.readouterr().out
+    assert "block:" in out and "min_angle_deg" in out and "90" in out
+    res = tmp_path / "r"
+    assert main(["run", str(EXAMPLES / "spinning_block.toml"), "--out", str(res), "--quiet",
+                 "--set", "analysis.t_end=0.04"]) == 0
+    quality = json.loads((res / "summary.json").read_text())["mesh_quality"]["block"]
+    # a spinning, deforming block: angles move away from 90 but the mesh stays valid
+    assert 45.0 < quality["min_angle_deg"] < 90.0 < quality["max_angle_deg"] < 135.0
+    vtu = sorted((res / "fields").glob("*.vtu"))[-1]
+    assert main(["mesh-quality", str(vtu)]) == 0

@@ -45,6 +45,29 @@ def _plot(args: argparse.Namespace) -> int:
     return 0
 
 
+def _mesh_quality(args: argparse.Namespace) -> int:
+    """Table 4.1 statistics of every body of a scenario (reference meshes) or of a VTU file."""
+    from .mesh.quality import quality_statistics
+
+    path = Path(args.path)
+    if path.suffix == ".vtu":
+        from .io.vtk import read_vtu
+
+        frame = read_vtu(path)
+        tables = {path.name: quality_statistics(frame.deformed_points, frame.cells)}
+    else:
+        from .builder import build_model
+        from .io.scenario import load_scenario
+
+        model = build_model(load_scenario(path, args.set), path.parent)
+        tables = {b.name: quality_statistics(b.mesh) for b in model.bodies}
+    for name, stats in tables.items():
+        print(f"{name}:")
+        for key, value in stats.items():
+            print(f"  {key:22s} {value:.6g}")
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="ntncontact", description=__doc__)
     parser.add_argument("--version", action="version", version=f"ntncontact {__version__}")
@@ -59,6 +82,12 @@ def build_parser() -> argparse.ArgumentParser:
     plot = sub.add_parser("plot", help="write PNG figures of a results folder")
     plot.add_argument("directory")
     plot.set_defaults(func=_plot)
+    quality = sub.add_parser("mesh-quality",
+                             help="edge and angle statistics (report Table 4.1) of a scenario's "
+                                  "meshes or of a VTU snapshot")
+    quality.add_argument("path", help="scenario TOML or results VTU file")
+    quality.add_argument("--set", action="append", metavar="KEY=VALUE")
+    quality.set_defaults(func=_mesh_quality)
     return parser
 
 

@@ -30,6 +30,7 @@ class ResultWriter:
         self.interval = model.analysis.output_interval
         self._next_output = 0.0
         self._body_id = model.body_of_cell().astype(float)
+        self._last: StepRecord | None = None
 
     def on_step(self, model: Model, record: StepRecord) -> None:
         s, b = record.state, record.balance
@@ -43,6 +44,7 @@ class ResultWriter:
         }
         row |= {k: record.extra.get(k, 0.0) for k in self.extra_history}
         self.results.write_history(row)
+        self._last = record
         rows = record.extra.get("contact_rows")
         if rows is not None:
             self._write_contact(s.step, s.time, record.dt, rows)
@@ -86,7 +88,16 @@ class ResultWriter:
 
     def on_finish(self, status: str, error: str | None) -> None:
         self.results.close()
-        self.results.summary.finish(status, error)
+        self.results.summary.finish(status, error, mesh_quality=self._mesh_quality())
+
+    def _mesh_quality(self) -> dict:
+        """Table 4.1 statistics of each body's current mesh (node positions x) at the end."""
+        from ..mesh.quality import quality_statistics
+
+        if self._last is None:
+            return {}
+        x = self._last.state.x
+        return {b.name: quality_statistics(x[b.nodes], b.mesh.cells) for b in self.model.bodies}
 
     def update_summary(self, **fields: object) -> None:
         self.results.summary.update(**fields)
