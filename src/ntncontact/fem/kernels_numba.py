@@ -23,6 +23,8 @@ from .q4 import DN_GP, GAUSS_WEIGHTS, InvertedElementError
 
 #: Integer codes of the constitutive models compiled into the kernel.
 MODEL_CODES: dict[str, int] = {"linear_elastic": 0, "neo_hookean": 1}
+#: Below this many elements per thread the serial loop is used (thread start-up dominates).
+MIN_ELEMENTS_PER_THREAD = 2000
 #: Codes of where an inverted element was found (``status[1]``).
 _WHERE = {1: "reference configuration", 2: "current configuration"}
 
@@ -202,18 +204,16 @@ def block_partition(cells: NDArray, elements: NDArray, nblocks: int) -> tuple[ND
     """Split ``elements`` into contiguous blocks that share no node, plus deferred elements.
 
     Returns (block elements concatenated, block start offsets (nblocks + 1,), deferred elements).
-    An element touching a node also used by another block is deferred; for a mesh numbered
-    row by row only the elements along block seams are deferred.
+    An element is kept in its block only if none of its nodes is used by an earlier block, so
+    every node (and CSR row) written by a block belongs to that block alone; for a mesh numbered
+    row by row only one row of elements per seam is deferred.
     """
     elements = np.asarray(elements, dtype=np.int64)
     block = np.arange(elements.size) * nblocks // max(elements.size, 1)
     nodes = cells[elements]
-    n_nodes = int(cells.max()) + 1 if cells.size else 0
-    lo = np.full(n_nodes, nblocks, dtype=np.int64)
-    hi = np.full(n_nodes, -1, dtype=np.int64)
-    np.minimum.at(lo, nodes.ravel(), np.repeat(block, 4))
-    np.maximum.at(hi, nodes.ravel(), np.repeat(block, 4))
-    own = ((lo[nodes] == block[:, None]) & (hi[nodes] == block[:, None])).all(axis=1)
+    first = np.full(int(cells.max()) + 1 if cells.size else 0, nblocks, dtype=np.int64)
+    np.minimum.at(first, nodes.ravel(), np.repeat(block, nodes.shape[1]))
+    own = (first[nodes] == block[:, None]).all(axis=1)
     starts = np.zeros(nblocks + 1, dtype=np.int64)
     starts[1:] = np.cumsum(np.bincount(block[own], minlength=nblocks))
     return elements[own], starts, elements[~own]
@@ -223,7 +223,8 @@ class NumbaAssembly:
     """Force/tangent assembly of one material group with the compiled kernel.
 
     Holds the group's element list (and its thread partition), and adds into caller-owned
-    ``force`` and CSR ``data`` arrays. Threads are used when ``threads > 1``.
+    ``force`` and CSR ``data`` arrays. ``threads`` defaults to Numba's thread count, reduced so
+    that each thread has at least :data:`MIN_ELEMENTS_PER_THREAD` elements; 1 means serial.
     """
 
     def __init__(self, kind: MaterialKind, cells: NDArray, elements: NDArray,
@@ -231,7 +232,9 @@ class NumbaAssembly:
         self.model = MODEL_CODES[kind]
         self.cells = np.ascontiguousarray(cells, dtype=np.int64)
         self.elements = np.ascontiguousarray(elements, dtype=np.int64)
-        self.threads = numba.get_num_threads() if threads is None else int(threads)
+        if threads is None:
+            threads = min(numba.get_num_threads(), self.elements.size // MIN_ELEMENTS_PER_THREAD)
+        self.threads = max(int(threads), 1)
         if self.threads > 1:
             self.blocks = block_partition(self.cells, self.elements, self.threads)
 

@@ -1,0 +1,140 @@
+"""The Numba assembly kernel against the NumPy reference kernel, and its error reporting."""
+
+import numpy as np
+import pytest
+
+from ntncontact.fem import assembly
+from ntncontact.fem.assembly import Assembler, MaterialGroup
+from ntncontact.fem.kernels_numba import NumbaAssembly, block_partition
+from ntncontact.fem.q4 import InvertedElementError
+
+# Both kernels evaluate the same formulas in a different order: differences are a few ulps of
+# the largest terms summed, far below 1e-12 of the largest entry for meshes of <= 1000 elements.
+RTOL = 1e-12
+
+
+def distorted_grid(nx, ny, rng, jitter=0.25):
+    """Structured grid over [0, 2] x [0, 1] with every node moved: no two elements alike."""
+    xs, ys = np.meshgrid(np.linspace(0, 2.0, nx + 1), np.linspace(0, 1.0, ny + 1))
+    nodes = np.column_stack([xs.ravel(), ys.ravel()])
+    nodes += jitter * rng.uniform(-1, 1, nodes.shape) / max(nx, ny)
+    i, j = np.meshgrid(np.arange(nx), np.arange(ny))
+    n0 = (j * (nx + 1) + i).ravel()
+    return nodes, np.column_stack([n0, n0 + 1, n0 + nx + 2, n0 + nx + 1])
+
+
+def deformed(nodes, rng, h, amount=0.15):
+    """A finite homogeneous stretch/shear, a rotation and a random nodal perturbation of 5% of
+    the element size h (large enough to vary F between elements, small enough not to fold)."""
+    G = np.array([[0.3, 0.2], [-0.1, -0.2]]) * amount / 0.15
+    th = 0.7
+    R = np.array([[np.cos(th), -np.sin(th)], [np.sin(th), np.cos(th)]])
+    return (nodes + nodes @ G.T) @ R.T + 0.05 * h * rng.standard_normal(nodes.shape)
+
+
+def make_assembler(nodes, cells, groups, rng):
+    ne = len(cells)
+    lam = rng.uniform(0.5, 3.0, ne)  # per-element parameters catch indexing mistakes
+    mu = rng.uniform(0.5, 2.0, ne)
+    return Assembler(cells, len(nodes), groups, lam, mu, np.ones(ne))
+
+
+def both_kernels(monkeypatch, asm, X, x, need_tangent=True):
+    monkeypatch.setattr(assembly, "KERNEL", "numpy")
+    reference = asm.internal(X, x, need_tangent)
+    monkeypatch.setattr(assembly, "KERNEL", "numba")
+    return reference, asm.internal(X, x, need_tangent)
+
+
+def assert_same(reference, result):
+    (f0, K0, W0), (f1, K1, W1) = reference, result
+    assert np.abs(f1 - f0).max() <= RTOL * np.abs(f0).max()
+    assert abs(W1 - W0) <= RTOL * abs(W0)
+    if K0 is not None:
+        # identical pattern, so the data arrays compare entry by entry
+        assert np.array_equal(K0.indices, K1.indices) and np.array_equal(K0.indptr, K1.indptr)
+        assert np.abs(K1.data - K0.data).max() <= RTOL * np.abs(K0.data).max()
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+@pytest.mark.parametrize("kind", ["neo_hookean", "linear_elastic"])
+def test_numba_matches_numpy_on_random_distorted_meshes(monkeypatch, kind, seed):
+    rng = np.random.default_rng(seed)
+    nodes, cells = distorted_grid(12, 7, rng)
+    asm = make_assembler(nodes, cells, [MaterialGroup(kind, np.arange(len(cells)))], rng)
+    x = deformed(nodes, rng, 1 / 7)
+    reference, result = both_kernels(monkeypatch, asm, nodes, x)
+    assert_same(reference, result)
+    assert_same(*both_kernels(monkeypatch, asm, nodes, x, need_tangent=False))
+
+
+@pytest.mark.parametrize("threads", [1, 2])
+def test_mixed_groups_and_threaded_blocks_match_numpy(monkeypatch, threads):
+    rng = np.random.default_rng(5)
+    nodes, cells = distorted_grid(30, 20, rng)
+    ne = len(cells)
+    neo = rng.permutation(ne)[: ne // 2]  # scattered, unsorted element subsets
+    lin = np.setdiff1d(np.arange(ne), neo)
+    groups = [MaterialGroup("neo_hookean", neo), MaterialGroup("linear_elastic", lin)]
+    asm = make_assembler(nodes, cells, groups, rng)
+    asm._numba_groups = [NumbaAssembly(g.kind, cells, g.elements, threads) for g in groups]
+    assert_same(*both_kernels(monkeypatch, asm, nodes, deformed(nodes, rng, 1 / 20)))
+
+
+def test_block_partition_blocks_share_no_node():
+    rng = np.random.default_rng(3)
+    _, cells = distorted_grid(40, 30, rng)
+    elements = np.arange(len(cells))
+    elems, starts, deferred = block_partition(cells, elements, 3)
+    assert np.array_equal(np.sort(np.concatenate([elems, deferred])), elements)
+    node_sets = [set(cells[elems[starts[t]:starts[t + 1]]].ravel()) for t in range(3)]
+    for t in range(3):
+        assert node_sets[t]  # every block has work
+        for u in range(t):
+            assert not node_sets[t] & node_sets[u]
+    assert deferred.size < 0.1 * len(cells)  # row-ordered mesh: only seam rows are deferred
+
+
+@pytest.mark.parametrize("threads", [1, 2])
+def test_inverted_element_is_named_by_global_index(threads):
+    rng = np.random.default_rng(4)
+    nodes, cells = distorted_grid(20, 10, rng, jitter=0.0)
+    bad = 157  # in the second half: the second thread's block
+    kernel = NumbaAssembly("neo_hookean", cells, np.arange(len(cells)), threads)
+    lam, mu = np.ones(len(cells)), np.ones(len(cells))
+    force = np.zeros(2 * len(nodes))
+    x = nodes.copy()
+    x[cells[bad, 2]] = x[cells[bad, 0]] - [0.01, 0.01]  # fold element `bad` over its corner
+    entry_map = np.zeros(64 * len(cells), dtype=np.int64)
+    with pytest.raises(InvertedElementError, match=r"element 1[45]\d .*current") as info:
+        kernel.add(nodes, x, lam, mu, entry_map, force, None)
+    # the moved node is shared by up to four elements: the first of them is named
+    first = min(e for e in range(len(cells)) if cells[bad, 2] in cells[e])
+    assert info.value.element == first and info.value.value < 0.0
+
+
+def test_reference_inversion_is_reported_for_both_models(monkeypatch):
+    rng = np.random.default_rng(6)
+    nodes, cells = distorted_grid(4, 3, rng, jitter=0.0)
+    cells = cells.copy()
+    cells[5] = cells[5, ::-1]  # clockwise element: negative reference Jacobian
+    for kind in ("neo_hookean", "linear_elastic"):
+        asm = make_assembler(nodes, cells, [MaterialGroup(kind, np.arange(len(cells)))], rng)
+        for name in ("numpy", "numba"):
+            monkeypatch.setattr(assembly, "KERNEL", name)
+            with pytest.raises(InvertedElementError, match="element 5 .*reference"):
+                asm.internal(nodes, nodes)
+
+
+def test_numpy_path_names_global_element_of_a_group(monkeypatch):
+    rng = np.random.default_rng(7)
+    nodes, cells = distorted_grid(4, 2, rng, jitter=0.0)
+    groups = [MaterialGroup("linear_elastic", np.arange(4)), MaterialGroup("neo_hookean",
+                                                                          np.arange(4, 8))]
+    asm = make_assembler(nodes, cells, groups, rng)
+    x = nodes.copy()
+    x[cells[6, 2]] = x[cells[6, 0]] - [0.05, 0.05]  # node 2 of element 6 is in elements 6, 7
+    for name in ("numpy", "numba"):
+        monkeypatch.setattr(assembly, "KERNEL", name)
+        with pytest.raises(InvertedElementError, match="element 6 .*current"):
+            asm.internal(nodes, x)
