@@ -1,0 +1,180 @@
+"""LinearSolver: accuracy on SPD, indefinite and unsymmetric systems, reuse, singular detection."""
+
+import numpy as np
+import pytest
+import scipy.sparse as sp
+
+from ntncontact.fem.assembly import Assembler, MaterialGroup
+from ntncontact.solvers.linear import LinearSolver, LinearSolverError, pardiso_available
+
+BACKENDS = [
+    "superlu",
+    pytest.param("pardiso", marks=pytest.mark.skipif(not pardiso_available(),
+                                                     reason="pypardiso not installed")),
+]
+EPS = np.finfo(float).eps
+
+
+def block(nx=12, ny=8, kind="neo_hookean", stretch=0.1, seed=0):
+    """Tangent of a distorted Q4 block under a finite homogeneous deformation, and its nodes."""
+    rng = np.random.default_rng(seed)
+    xs, ys = np.meshgrid(np.linspace(0, 1.5, nx + 1), np.linspace(0, 1.0, ny + 1))
+    nodes = np.column_stack([xs.ravel(), ys.ravel()])
+    nodes += 0.2 * rng.uniform(-1, 1, nodes.shape) / max(nx, ny)
+    i, j = np.meshgrid(np.arange(nx), np.arange(ny))
+    n0 = (j * (nx + 1) + i).ravel()
+    cells = np.column_stack([n0, n0 + 1, n0 + nx + 2, n0 + nx + 1])
+    ne = len(cells)
+    asm = Assembler(cells, len(nodes), [MaterialGroup(kind, np.arange(ne))],
+                    np.full(ne, 2.0), np.full(ne, 1.0), np.ones(ne))
+    x = nodes + stretch * nodes @ np.array([[1.0, 0.5], [0.0, -0.8]]).T
+    _, K, _ = asm.internal(nodes, x)
+    return K, nodes
+
+
+def supported(K, nodes):
+    """Eliminate the dofs of the nodes on the bottom edge (a clamped block)."""
+    free = np.flatnonzero(np.repeat(nodes[:, 1] > 0.02, 2))
+    return sp.csr_matrix(K[free][:, free])
+
+
+def spd_matrix():
+    K, nodes = block(stretch=0.0, kind="linear_elastic")
+    return supported(K, nodes)
+
+
+def indefinite_matrix():
+    """Supported stiffness shifted past its lowest eigenvalues: symmetric, both signs."""
+    A = spd_matrix()
+    lowest = np.linalg.eigvalsh(A.toarray())[:20]
+    shift = 0.5 * (lowest[9] + lowest[10])  # midway between two eigenvalues: well conditioned
+    return sp.csr_matrix(A - shift * sp.eye(A.shape[0]))
+
+
+def saddle_point_matrix():
+    """[[K, B^T], [B, 0]]: Lagrange multipliers tying 5 dof pairs (zero diagonal block)."""
+    K = spd_matrix()
+    n = K.shape[0]
+    rows = np.repeat(np.arange(5), 2)
+    cols = np.column_stack([np.arange(5) * 7, np.arange(5) * 7 + 40]).ravel()
+    B = sp.csr_matrix((np.tile([1.0, -1.0], 5), (rows, cols)), shape=(5, n))
+    return sp.bmat([[K, B.T], [B, None]], format="csr")
+
+
+def unsymmetric_matrix(seed=1):
+    """Neo-Hookean tangent plus an unsymmetric part on its own pattern (friction-like)."""
+    K, nodes = block(stretch=0.15)
+    A = supported(K, nodes)
+    rng = np.random.default_rng(seed)
+    A.data = A.data + 0.3 * np.abs(A.data).max() * rng.uniform(-1, 1, A.nnz) * (A.data != 0)
+    return A
+
+
+def assert_accurate(A, b, x):
+    """Backward error at round-off level; forward error bounded by cond(A) eps."""
+    dense = A.toarray()
+    backward = np.linalg.norm(A @ x - b) / (np.linalg.norm(dense, 2) * np.linalg.norm(x))
+    assert backward < 1e3 * EPS  # a stable direct solve: a modest multiple of eps
+    exact = np.linalg.solve(dense, b)
+    forward = np.linalg.norm(x - exact) / np.linalg.norm(exact)
+    assert forward < 1e3 * EPS * np.linalg.cond(dense)
+
+
+MATRICES = {
+    "spd": spd_matrix,
+    "indefinite": indefinite_matrix,
+    "saddle_point": saddle_point_matrix,
+    "unsymmetric": unsymmetric_matrix,
+}
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+@pytest.mark.parametrize("name", list(MATRICES))
+def test_solution_is_accurate(backend, name):
+    A = MATRICES[name]()
+    if name == "indefinite":
+        eig = np.linalg.eigvalsh(A.toarray())
+        assert eig.min() < 0 < eig.max()  # the test matrix really is indefinite
+    if name == "unsymmetric":
+        assert abs(A - A.T).max() > 0.1 * abs(A).max()
+    b = np.random.default_rng(2).standard_normal(A.shape[0])
+    assert_accurate(A, b, LinearSolver(backend).solve(A, b))
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_several_right_hand_sides(backend):
+    A = unsymmetric_matrix()
+    B = np.random.default_rng(3).standard_normal((A.shape[0], 3))
+    X = LinearSolver(backend).solve(A, B)
+    assert X.shape == B.shape
+    for k in range(3):
+        assert_accurate(A, B[:, k], X[:, k])
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_analysis_is_reused_while_the_pattern_holds(backend):
+    solver = LinearSolver(backend)
+    b = np.ones(spd_matrix().shape[0])
+    for stretch in (0.0, 0.05, 0.1):  # Newton-like sequence: same pattern, new values
+        K, nodes = block(stretch=stretch)
+        A = supported(K, nodes)
+        assert_accurate(A, b, solver.solve(A, b))
+    assert solver.stats.analyses == 1 and solver.stats.factorizations == 3
+    A = saddle_point_matrix()  # a new pattern (as when contact pairs change)
+    b2 = np.ones(A.shape[0])
+    assert_accurate(A, b2, solver.solve(A, b2))
+    assert solver.stats.analyses == 2
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_symmetry_is_detected_per_matrix(backend):
+    """The same pattern alternately with symmetric and unsymmetric values."""
+    solver = LinearSolver(backend)
+    sym = spd_matrix()
+    unsym = unsymmetric_matrix()
+    assert np.array_equal(sym.indices, unsym.indices)
+    b = np.random.default_rng(4).standard_normal(sym.shape[0])
+    for A in (sym, unsym, sym, unsym):
+        assert_accurate(A, b, solver.solve(A, b))
+    # each mode's analysis is kept: PARDISO analyses once per mode, SuperLU once
+    assert solver.stats.analyses == (2 if solver.backend == "pardiso" else 1)
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+@pytest.mark.parametrize("kind", ["linear_elastic", "neo_hookean"])
+def test_unsupported_body_is_singular(backend, kind):
+    """No supports: rigid translations (and for linear elasticity the rotation) are free."""
+    K, _ = block(kind=kind, stretch=0.1)
+    with pytest.raises(LinearSolverError, match="singular"):
+        LinearSolver(backend).solve(K, np.ones(K.shape[0]))
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_singular_after_reuse_is_detected(backend):
+    """A singular matrix with a pattern analysed before (its support then removed)."""
+    solver = LinearSolver(backend)
+    A = spd_matrix()
+    b = np.ones(A.shape[0])
+    solver.solve(A, b)
+    singular = A.copy()
+    rows = np.repeat(np.arange(A.shape[0]), np.diff(A.indptr))
+    singular.data[(rows == 0) | (A.indices == 0)] = 0.0  # dof 0 loses its stiffness
+    with pytest.raises(LinearSolverError, match="singular"):
+        solver.solve(singular, b)
+    assert_accurate(A, b, solver.solve(A, b))  # still usable after the failure
+
+
+def test_bad_input_is_reported():
+    solver = LinearSolver("superlu")
+    with pytest.raises(LinearSolverError, match="square"):
+        solver.solve(sp.csr_matrix(np.ones((2, 3))), np.ones(2))
+    with pytest.raises(LinearSolverError, match="row 1 is empty"):
+        solver.solve(sp.csr_matrix(np.array([[1.0, 0.0], [0.0, 0.0]])), np.ones(2))
+    with pytest.raises(LinearSolverError, match="non-finite"):
+        solver.solve(sp.csr_matrix(np.array([[1.0, 0.0], [0.0, np.nan]])), np.ones(2))
+    with pytest.raises(ValueError, match="unknown"):
+        LinearSolver("umfpack")
+
+
+def test_auto_prefers_pardiso_when_installed():
+    assert LinearSolver().backend == ("pardiso" if pardiso_available() else "superlu")
