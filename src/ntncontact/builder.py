@@ -126,11 +126,14 @@ def build_model(config: ScenarioConfig, base_dir: str | Path = ".") -> Model:
         functions += f
     a = config.analysis
     interfaces = tuple(_interface(c, i, bodies, a.kind) for i, c in enumerate(config.contact))
+    if a.energy_conserving and a.kind != "dynamic":
+        raise ScenarioError("analysis.energy_conserving: only for dynamic analyses (report 5.5)")
     ale_bodies = tuple(_ale_setup(i, body, bc, config) for i, (body, bc)
                        in enumerate(zip(bodies, config.bodies, strict=True))
                        if bc.mesh_motion == "ale")
     analysis = AnalysisSettings(a.kind, a.dt, a.t_end, a.mass, a.output_interval,
-                                a.max_cutbacks, a.newton.rtol, a.newton.max_iterations)
+                                a.max_cutbacks, a.newton.rtol, a.newton.max_iterations,
+                                a.energy_conserving)
     return Model(bodies, analysis, LoadCase(tuple(patterns), tuple(functions)),
                  tuple(prescribed), X0, cells, assembler, interfaces, ale_bodies)
 
@@ -177,8 +180,12 @@ def _interface(cfg: ContactConfig, index: int, bodies: tuple[Body, ...],
     candidates = surface1.nodes[~np.isin(surface1.nodes, excluded)]
     max_aug = 1 if cfg.method == "penalty" else aug.max_iterations
     ordered = "ale" in (b1.mesh_motion, b2.mesh_motion)
+    # exact gap constraints must not inherit a step's penetration: detect before touching
+    predicted = (cfg.detection or ("predicted" if cfg.method == "lagrange" and not persistency
+                                   else "penetration")) == "predicted"
     return ContactInterface(cfg.name or f"interface{index}", Interface(surface1, surface2), law,
-                            persistency, candidates, cfg.release_steps, tol, max_aug, ordered)
+                            persistency, candidates, cfg.release_steps, tol, max_aug, ordered,
+                            predicted)
 
 
 def _xy(body: Body, surface: ContactSurface) -> np.ndarray:

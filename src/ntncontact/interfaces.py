@@ -31,11 +31,16 @@ from .model import ContactInterface
 
 def detect_all(
     interfaces: Sequence[ContactInterface], states: Sequence[PairState], x: NDArray,
-    v: NDArray,
+    v: NDArray, dt: float,
 ) -> tuple[PairState, ...]:
-    """Release finished pairs and add penetrating, approaching candidates (2.1.4, 3.2)."""
+    """Release finished pairs and add penetrating, approaching candidates (2.1.4, 3.2).
+
+    With ``predicted`` detection the penetration test uses the positions predicted for the end
+    of the step, x + dt v, so that a pair enters the step in which it touches (needed by exact
+    gap constraints, which would otherwise close a whole step's penetration at once)."""
     out = []
     for ci, state in zip(interfaces, states, strict=True):
+        x = x + dt * v if ci.predicted_detection else x
         near = _near_candidates(x, ci)
         if ci.ordered_pairing and not ci.interface.surface2.closed:
             candidates = _ordered_candidates(x, ci, state, near)

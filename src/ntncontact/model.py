@@ -58,6 +58,7 @@ class AnalysisSettings:
     max_cutbacks: int = 4
     newton_rtol: float = 1e-10
     newton_max_iterations: int = 25
+    energy_conserving: bool = False  # report 5.5: energy multiplier bordering the contact step
 
 
 @dataclass(frozen=True)
@@ -132,6 +133,7 @@ class ContactInterface:
     tolerances: object  # contact.augmentation.AugmentationTolerances
     max_augmentations: int
     ordered_pairing: bool = False  # distinct partners in surface order (ALE partner surface)
+    predicted_detection: bool = False  # penetration tested at x + dt v (see interfaces)
 
 
 @dataclass(frozen=True)

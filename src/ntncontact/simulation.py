@@ -12,6 +12,7 @@ from numpy.typing import NDArray
 
 from .contact import PairState
 from .diagnostics import Balance, balance
+from .dynamics.energy import EnergyConstraint
 from .dynamics.midpoint import end_of_step, midpoint_velocity, velocity_factor
 from .fem.q4 import InvertedElementError
 from .interfaces import (
@@ -98,6 +99,7 @@ class Simulation:
         self.dissipation = 0.0
         self._step_dissipation = 0.0
         self._last_mismatch = 0.0
+        self._energy_multiplier = 0.0
 
     def balance(self, state: StepState) -> Balance:
         _, _, energy = self.model.assembler.internal(state.X, state.x, need_tangent=False)
@@ -108,7 +110,8 @@ class Simulation:
         the ALE mesh motion and Newton with the contact multipliers fixed, until converged;
         then the kinematic update."""
         interfaces = self.model.interfaces
-        contact = detect_all(interfaces, state.contact, state.x, state.v) if interfaces else ()
+        contact = (detect_all(interfaces, state.contact, state.x, state.v, dt) if interfaces
+                   else ())
         base, motion = state, None
         x_pred = state.x + dt * state.v  # first prediction of the end-of-step positions
         previous, iterations, guess = None, 0, None
@@ -126,7 +129,10 @@ class Simulation:
             result = newton(problem.residual, problem.jacobian, self.solve, y0, self.settings,
                             self.length_scale)
             iterations += result.iterations
-            guess = result.y
+            if self.model.analysis.energy_conserving and any(len(c) for c in contact):
+                problem, result, its = self._conserve_energy(problem, result, mass)
+                iterations += its
+            guess = None if self._energy_multiplier else result.y
             d = problem.full(result.y).reshape(-1, 2)
             contact = with_solved_multipliers(interfaces, contact, problem.multipliers(result.y))
             results = self._contact_results(interfaces, contact, state, d, dt)
@@ -146,6 +152,26 @@ class Simulation:
         self._step_dissipation += sum(r.dissipation for r in results if r is not None)
         new = StepState(state.step + 1, state.time + dt, state.X, d1, v1, a1, committed)
         return new, iterations
+
+    def _conserve_energy(self, problem: StepProblem, result, mass):
+        """Report 5.5: if the step changed the total energy, solve again bordered by the
+        energy multiplier. When the step already conserves it (e.g. a persistency or a linear
+        gap constraint) the bordered system would be singular, so it is only used when needed.
+        """
+        state, dt = problem.state, problem.dt
+        energy = EnergyConstraint(self.model.assembler, mass, state.X, state.d.ravel(),
+                                  state.v.ravel(), dt, self.balance(state).total_energy)
+        d = problem.full(result.y)
+        violation = abs(energy.end_energy(d)[0] - energy.energy_n)
+        self._energy_multiplier = 0.0
+        if violation <= self.settings.rtol * max(abs(energy.energy_n), 1e-300):
+            return problem, result, 0
+        bordered = StepProblem(self.model, state, dt, mass, problem.extra,
+                               list(problem.constraints) + [energy])
+        new = newton(bordered.residual, bordered.jacobian, self.solve,
+                     np.append(result.y, 0.0), self.settings, self.length_scale)
+        self._energy_multiplier = float(new.y[-1])
+        return bordered, new, new.iterations
 
     def _dof_mass(self, state: StepState) -> sp.csr_matrix:
         """The mass on dofs; ALE bodies carry new particles at their nodes, so it is rebuilt."""
@@ -227,6 +253,7 @@ class Simulation:
             "frictional_dissipation": self.dissipation,
             "augmentations": augmentations,
             "ale_mismatch": self._last_mismatch,
+            "energy_multiplier": self._energy_multiplier,
             "contact_rows": contact_rows(self.model.interfaces, results, self.state.x),
         }
 

@@ -11,7 +11,8 @@ from ..postprocess import element_von_mises
 from ..simulation import StepRecord
 from .writers import ResultsDirectory
 
-CONTACT_HISTORY = ("active_pairs", "frictional_dissipation", "augmentations", "ale_mismatch")
+CONTACT_HISTORY = ("active_pairs", "frictional_dissipation", "augmentations", "ale_mismatch",
+                   "energy_multiplier")
 
 
 class ResultWriter:

@@ -196,6 +196,7 @@ class AnalysisConfig(Strict):
     output_interval: Positive | None = None
     max_cutbacks: Annotated[int, Field(ge=0, le=20)] = 4
     newton: NewtonConfig = NewtonConfig()
+    energy_conserving: bool = False
 
 
 class AugmentationConfig(Strict):
@@ -223,6 +224,7 @@ class ContactConfig(Strict):
     exclude: list[str] = []
     corners: list[str] = []
     release_steps: Annotated[int, Field(ge=1)] = 2
+    detection: Literal["penetration", "predicted"] | None = None
     augmentation: AugmentationConfig = AugmentationConfig()
 
     @model_validator(mode="after")
