@@ -1,9 +1,10 @@
 """The Numba assembly kernel against the NumPy reference kernel, and its error reporting."""
 
+import numba
 import numpy as np
 import pytest
 
-from ntncontact.fem import assembly
+from ntncontact.fem import assembly, kernels_numba
 from ntncontact.fem.assembly import Assembler, MaterialGroup
 from ntncontact.fem.kernels_numba import NumbaAssembly, block_partition
 from ntncontact.fem.q4 import InvertedElementError
@@ -56,6 +57,12 @@ def assert_same(reference, result):
         assert np.abs(K1.data - K0.data).max() <= RTOL * np.abs(K0.data).max()
 
 
+def test_serial_kernel_by_default():
+    _, cells = distorted_grid(100, 50, np.random.default_rng(0))
+    assert kernels_numba.THREADS == 1
+    assert NumbaAssembly("neo_hookean", cells, np.arange(len(cells))).threads == 1
+
+
 @pytest.mark.parametrize("seed", [0, 1, 2])
 @pytest.mark.parametrize("kind", ["neo_hookean", "linear_elastic"])
 def test_numba_matches_numpy_on_random_distorted_meshes(monkeypatch, kind, seed):
@@ -77,7 +84,9 @@ def test_mixed_groups_and_threaded_blocks_match_numpy(monkeypatch, threads):
     lin = np.setdiff1d(np.arange(ne), neo)
     groups = [MaterialGroup("neo_hookean", neo), MaterialGroup("linear_elastic", lin)]
     asm = make_assembler(nodes, cells, groups, rng)
+    monkeypatch.setattr(kernels_numba, "MIN_ELEMENTS_PER_THREAD", 10)  # thread small groups
     asm._numba_groups = [NumbaAssembly(g.kind, cells, g.elements, threads) for g in groups]
+    assert asm._numba_groups[0].threads == min(threads, numba.get_num_threads())
     assert_same(*both_kernels(monkeypatch, asm, nodes, deformed(nodes, rng, 1 / 20)))
 
 
@@ -96,11 +105,13 @@ def test_block_partition_blocks_share_no_node():
 
 
 @pytest.mark.parametrize("threads", [1, 2])
-def test_inverted_element_is_named_by_global_index(threads):
+def test_inverted_element_is_named_by_global_index(monkeypatch, threads):
+    monkeypatch.setattr(kernels_numba, "MIN_ELEMENTS_PER_THREAD", 10)
     rng = np.random.default_rng(4)
     nodes, cells = distorted_grid(20, 10, rng, jitter=0.0)
     bad = 157  # in the second half: the second thread's block
     kernel = NumbaAssembly("neo_hookean", cells, np.arange(len(cells)), threads)
+    assert kernel.threads == min(threads, numba.get_num_threads())
     lam, mu = np.ones(len(cells)), np.ones(len(cells))
     force = np.zeros(2 * len(nodes))
     x = nodes.copy()

@@ -23,6 +23,10 @@ from .q4 import DN_GP, GAUSS_WEIGHTS, InvertedElementError
 
 #: Integer codes of the constitutive models compiled into the kernel.
 MODEL_CODES: dict[str, int] = {"linear_elastic": 0, "neo_hookean": 1}
+#: Threads used by :class:`NumbaAssembly` when not given. Serial by default: two threads made
+#: assembly alone ~1.5x faster on 2 cores, but a Newton iteration is dominated by the
+#: factorization, whose MKL threads then compete with Numba's (see benchmarks/README.md).
+THREADS = 1
 #: Below this many elements per thread the serial loop is used (thread start-up dominates).
 MIN_ELEMENTS_PER_THREAD = 2000
 #: Codes of where an inverted element was found (``status[1]``).
@@ -223,8 +227,9 @@ class NumbaAssembly:
     """Force/tangent assembly of one material group with the compiled kernel.
 
     Holds the group's element list (and its thread partition), and adds into caller-owned
-    ``force`` and CSR ``data`` arrays. ``threads`` defaults to Numba's thread count, reduced so
-    that each thread has at least :data:`MIN_ELEMENTS_PER_THREAD` elements; 1 means serial.
+    ``force`` and CSR ``data`` arrays. ``threads`` defaults to :data:`THREADS`; it is reduced
+    so that each thread has at least :data:`MIN_ELEMENTS_PER_THREAD` elements and to Numba's
+    thread count; 1 means the serial loop.
     """
 
     def __init__(self, kind: MaterialKind, cells: NDArray, elements: NDArray,
@@ -232,9 +237,11 @@ class NumbaAssembly:
         self.model = MODEL_CODES[kind]
         self.cells = np.ascontiguousarray(cells, dtype=np.int64)
         self.elements = np.ascontiguousarray(elements, dtype=np.int64)
-        if threads is None:
-            threads = min(numba.get_num_threads(), self.elements.size // MIN_ELEMENTS_PER_THREAD)
-        self.threads = max(int(threads), 1)
+        threads = THREADS if threads is None else int(threads)
+        if threads > 1:  # only now start Numba's thread pool
+            threads = min(threads, numba.get_num_threads(),
+                          self.elements.size // MIN_ELEMENTS_PER_THREAD)
+        self.threads = max(threads, 1)
         if self.threads > 1:
             self.blocks = block_partition(self.cells, self.elements, self.threads)
 
