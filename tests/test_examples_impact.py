@@ -1,0 +1,63 @@
+"""Impact examples of the report (6.4-6.6) against its tables (slow: full runs)."""
+
+import numpy as np
+import pytest
+from helpers import Recorder, model_from_example
+
+from ntncontact.simulation import Simulation
+
+pytestmark = pytest.mark.slow
+
+
+def run(name, overrides=()):
+    rec = Recorder()
+    sim = Simulation(model_from_example(name, list(overrides)), [rec])
+    sim.run()
+    energy = np.array([r.balance.total_energy for r in rec.records])
+    momentum = np.array([r.balance.linear_momentum for r in rec.records])
+    angular = np.array([r.balance.angular_momentum for r in rec.records])
+    pressed = [r.state.time for r in rec.records
+               if r.extra and np.any(r.extra["contact_rows"]["normal_traction"] > 0)]
+    return rec, energy, momentum, angular, pressed
+
+
+def test_fast_sliding_frictionless_conserves_energy_and_momentum():
+    rec, energy, momentum, _, pressed = run("blocks_fast_sliding.toml")
+    # Table 6.8 (mu = 0, consistent): 1.56 -> at most 1.5622 (0.14 %); the issue asks for 1 %.
+    assert np.abs(energy - energy[0]).max() / energy[0] < 0.01
+    assert energy[0] == pytest.approx(1.56, rel=1e-12)  # 1/2 0.24 (3^2 + 2^2)
+    # the mid-point rule and equal and opposite contact forces: momentum to round-off (the
+    # report's 1-4 % drifts come from its remap; ours conserves momentum in the remap too)
+    assert np.abs(momentum - momentum[0]).max() < 1e-9
+    # contact starts at 0.048 as in the report (initial gap 0.096 at vy = -2)
+    assert pressed[0] - 0.003 == pytest.approx(0.048, abs=0.0031)
+
+
+@pytest.mark.parametrize("mu, dissipated", [(0.1, 0.14), (0.2, 0.225)])
+def test_fast_sliding_friction_dissipates_what_the_report_finds(mu, dissipated):
+    rec, energy, momentum, _, _ = run("blocks_fast_sliding.toml",
+                                      [f"contact.0.friction={mu}"])
+    lost = (energy[0] - energy[-1]) / energy[0]
+    # Table 6.8: 14 % and 22.5 %; the issue allows 3 points
+    assert lost == pytest.approx(dissipated, abs=0.03)
+    # the ledger: what friction dissipated is what the bodies lost (the rest is the scheme's
+    # own error, which the frictionless run bounds at ~0.2 %)
+    ledger = rec.records[-1].extra["frictional_dissipation"]
+    assert ledger == pytest.approx(energy[0] - energy[-1], rel=0.02)
+    assert np.abs(momentum - momentum[0]).max() < 1e-9
+
+
+def test_tilted_blocks_conserve_energy_and_momenta():
+    rec, energy, momentum, angular, pressed = run("tilted_blocks.toml")
+    assert energy[0] == pytest.approx(0.120, rel=1e-12)  # 1/2 0.24 1^2
+    # Table 6.10: ripple 0.75 % (consistent mass); the issue asks for 1 %
+    assert np.abs(energy - energy[0]).max() / energy[0] < 0.01
+    # linear momentum of the free system: report within 2.75 %; the mid-point rule with
+    # momentum-conserving remap keeps it to round-off
+    np.testing.assert_allclose(momentum[0], [0.0, -0.24], atol=1e-12)
+    assert np.abs(momentum - momentum[0]).max() < 1e-9
+    # angular momentum: starts at 0; the pair forces act at the two nodes of a pair, apart by
+    # the penetration (~1e-3), so the torque they exert is that times the impulse (~0.5):
+    # ~5e-4 at most; the report reaches 0.0022 (Table 6.10)
+    assert abs(angular[0]) < 1e-15 and np.abs(angular).max() < 1e-3
+    assert pressed and pressed[0] == pytest.approx(0.06 + 0.003, abs=0.0031)
