@@ -68,6 +68,17 @@ def _mesh_quality(args: argparse.Namespace) -> int:
     return 0
 
 
+def _compare(args: argparse.Namespace) -> int:
+    """The run's headline numbers beside the report's; also DIR/comparison.csv."""
+    from .reference import compare, format_comparison, write_comparison_csv
+
+    directory = Path(args.directory)
+    label, rows = compare(directory)
+    print(format_comparison(label, rows))
+    write_comparison_csv(directory / "comparison.csv", rows)
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="ntncontact", description=__doc__)
     parser.add_argument("--version", action="version", version=f"ntncontact {__version__}")
@@ -82,6 +93,9 @@ def build_parser() -> argparse.ArgumentParser:
     plot = sub.add_parser("plot", help="write PNG figures of a results folder")
     plot.add_argument("directory")
     plot.set_defaults(func=_plot)
+    comp = sub.add_parser("compare", help="compare a results folder with the report's numbers")
+    comp.add_argument("directory")
+    comp.set_defaults(func=_compare)
     quality = sub.add_parser("mesh-quality",
                              help="edge and angle statistics (report Table 4.1) of a scenario's "
                                   "meshes or of a VTU snapshot")
