@@ -79,6 +79,29 @@ def _compare(args: argparse.Namespace) -> int:
     return 0
 
 
+def _validate(args: argparse.Namespace) -> int:
+    """Run every example of the report and write DIR/report.html and report.md."""
+    from tqdm import tqdm
+
+    from .validation import CASES, validate
+
+    out = Path(args.out)
+    started: list[str] = []
+    with tqdm(total=len(CASES), unit="case", disable=None) as bar:
+
+        def progress(name: str) -> None:  # called as each case starts: count the finished one
+            bar.update(1 if started else 0)
+            started.append(name)
+            bar.set_description(name)
+
+        results = validate(out, quick=args.quick, progress=progress)
+        bar.update(bar.total - bar.n)
+    failed = [r.case.name for r in results if not r.passed()]
+    print(f"report: {out / 'report.html'} ({len(results) - len(failed)} passed, "
+          f"{len(failed)} failed{': ' + ', '.join(failed) if failed else ''})")
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="ntncontact", description=__doc__)
     parser.add_argument("--version", action="version", version=f"ntncontact {__version__}")
@@ -93,6 +116,10 @@ def build_parser() -> argparse.ArgumentParser:
     plot = sub.add_parser("plot", help="write PNG figures of a results folder")
     plot.add_argument("directory")
     plot.set_defaults(func=_plot)
+    val = sub.add_parser("validate", help="run the report's examples and write a report")
+    val.add_argument("--out", required=True)
+    val.add_argument("--quick", action="store_true", help="shortened runs (for CI)")
+    val.set_defaults(func=_validate)
     comp = sub.add_parser("compare", help="compare a results folder with the report's numbers")
     comp.add_argument("directory")
     comp.set_defaults(func=_compare)
