@@ -78,7 +78,7 @@ class _Pattern:
         self.indptr = A.indptr.copy()
         self.indices = A.indices.copy()
         rows = np.repeat(np.arange(self.n), np.diff(self.indptr))
-        self.transpose = _transpose_map(rows, self.indices, self.n)
+        self.transpose = _transpose_map(self.indptr, self.indices, self.n)
         self.upper = np.flatnonzero(self.indices >= rows)  # entries kept in symmetric mode
         self.upper_indptr = np.zeros(self.n + 1, dtype=np.int32)
         self.upper_indptr[1:] = np.cumsum(np.bincount(rows[self.upper], minlength=self.n))
@@ -99,16 +99,16 @@ class _Pattern:
         return bool(np.abs(data - data[self.transpose]).max(initial=0.0) <= SYMMETRY_RTOL * scale)
 
 
-def _transpose_map(rows: NDArray, cols: NDArray, n: int) -> NDArray | None:
+def _transpose_map(indptr: NDArray, indices: NDArray, n: int) -> NDArray | None:
     """Position of entry (j, i) for each entry (i, j) of a sorted CSR pattern, or None if some
-    (j, i) is structurally absent."""
-    keys = rows.astype(np.int64) * n + cols
-    tkeys = cols.astype(np.int64) * n + rows
-    pos = np.searchsorted(keys, tkeys)  # keys are sorted: CSR with sorted indices
-    pos = np.minimum(pos, keys.size - 1)
-    if keys.size and not np.array_equal(keys[pos], tkeys):
+    (j, i) is structurally absent. Transposes a matrix holding entry positions (SciPy's C++)."""
+    nnz = indices.size
+    tracer = sp.csr_matrix((np.arange(nnz, dtype=float), indices, indptr), shape=(n, n))
+    transposed = tracer.T.tocsr()  # sorted indices; values exact: positions < 2**53
+    if not (np.array_equal(transposed.indptr, indptr)
+            and np.array_equal(transposed.indices, indices)):
         return None
-    return pos
+    return transposed.data.astype(np.int64)
 
 
 class LinearSolver:
