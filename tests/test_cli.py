@@ -75,8 +75,9 @@ def test_contact_run_writes_contact_csv_summary_and_pair_plots(tmp_path):
     assert abs(summary["max_penetration"] - 0.05) < 1e-9  # v dt: persistency freezes the gap
     history = read_csv_table(out / "history.csv")
     assert {"active_pairs", "frictional_dissipation", "augmentations"} <= set(history)
-    assert main(["plot", str(out)]) == 0
+    assert main(["plot", str(out), "--gif", "--times", "0.1", "0.3"]) == 0
     assert (out / "pair_history.png").is_file() and (out / "contact_tractions.png").is_file()
+    assert (out / "snapshots.png").is_file() and (out / "animation.gif").stat().st_size > 1000
 
 
 def test_mesh_quality_command_and_summary(tmp_path, capsys):

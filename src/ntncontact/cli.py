@@ -37,9 +37,14 @@ def _run(args: argparse.Namespace) -> int:
 
 
 def _plot(args: argparse.Namespace) -> int:
-    from .plotting import plot_all
+    from .plotting import animate, plot_all, plot_deformed
 
-    paths = plot_all(Path(args.directory))
+    directory = Path(args.directory)
+    paths = plot_all(directory)
+    if args.times:
+        paths.append(plot_deformed(directory, args.times, path=directory / "snapshots.png"))
+    if args.gif:
+        paths.append(animate(directory, directory / "animation.gif"))
     for p in paths:
         print(p)
     return 0
@@ -115,6 +120,9 @@ def build_parser() -> argparse.ArgumentParser:
     run.set_defaults(func=_run)
     plot = sub.add_parser("plot", help="write PNG figures of a results folder")
     plot.add_argument("directory")
+    plot.add_argument("--times", type=float, nargs="+", metavar="T",
+                      help="also draw the deformed meshes nearest to these times (snapshots.png)")
+    plot.add_argument("--gif", action="store_true", help="also write animation.gif")
     plot.set_defaults(func=_plot)
     val = sub.add_parser("validate", help="run the report's examples and write a report")
     val.add_argument("--out", required=True)
