@@ -1,19 +1,21 @@
-"""The energy-conserving Lagrange-multiplier variant (report 5.5)."""
+"""The energy-conserving Lagrange-multiplier variant (report 5.5, see dynamics/energy.py)."""
 
 import numpy as np
 import pytest
 from helpers import Recorder, model_from_example
 
 from ntncontact.contact import PairState
-from ntncontact.dynamics.energy import EnergyConstraint
+from ntncontact.dynamics.energy import EndEnergy, EnergyConsistentContact
+from ntncontact.dynamics.midpoint import end_of_step
 from ntncontact.interfaces import contact_terms, lagrange_terms
 from ntncontact.problem import StepProblem, StepState
 from ntncontact.simulation import Simulation
 
+LAGRANGE_GAP = ['contact.0.method="lagrange"', 'contact.0.law="gap"']
+
 
 def rods_in_contact():
-    model = model_from_example("rod_impact.toml", [
-        'contact.0.method="lagrange"', 'contact.0.law="gap"', "analysis.energy_conserving=true"])
+    model = model_from_example("rod_impact.toml", LAGRANGE_GAP)
     sim = Simulation(model)
     rng = np.random.default_rng(3)
     ci = model.interfaces[0]
@@ -30,16 +32,17 @@ def test_bordered_energy_system_jacobian_matches_central_differences():
     model, sim, state = rods_in_contact()
     dt = 0.05
     mass = sim._dof_mass(state)
-    energy = EnergyConstraint(model.assembler, mass, state.X, state.d.ravel(), state.v.ravel(),
-                              dt, sim.balance(state).total_energy, lambda_start=0.1)
-    problem = StepProblem(model, state, dt, mass, contact_terms(model.interfaces, state.contact,
-                                                                dt),
-                          lagrange_terms(model.interfaces, state.contact, dt) + [energy])
-    y = problem.initial_guess() + 1e-3 * np.random.default_rng(4).standard_normal(
-        problem.initial_guess().size)
+    end = EndEnergy(model.assembler, mass, state.X, state.d.ravel(), state.v.ravel(), dt)
+    terms = lagrange_terms(model.interfaces, state.contact, dt)
+    combined = EnergyConsistentContact(terms, [t.h_at(state.x) for t in terms], end, 5.0)
+    problem = StepProblem(model, state, dt, mass,
+                          contact_terms(model.interfaces, state.contact, dt), [combined])
+    rng = np.random.default_rng(4)
+    y = problem.initial_guess() + 1e-3 * rng.standard_normal(problem.initial_guess().size)
+    y[-1] = 0.3  # theta
     J = problem.jacobian(y).toarray()
     h = 1e-6
-    for k in np.random.default_rng(5).choice(y.size, 12, replace=False).tolist() + [y.size - 1]:
+    for k in rng.choice(y.size - 3, 10, replace=False).tolist() + [y.size - 3, y.size - 1]:
         e = np.zeros(y.size)
         e[k] = h
         fd = (problem.residual(y + e)[0] - problem.residual(y - e)[0]) / (2 * h)
@@ -47,27 +50,34 @@ def test_bordered_energy_system_jacobian_matches_central_differences():
         np.testing.assert_allclose(fd, J[:, k], rtol=1e-5, atol=1e-6 * np.abs(J).max())
 
 
-@pytest.mark.slow
-def test_energy_conserving_rod_impact_keeps_energy_to_the_solver_tolerance():
-    model = model_from_example("rod_impact.toml", [
-        'contact.0.method="lagrange"', 'contact.0.law="gap"', "analysis.energy_conserving=true"])
-    rec = Recorder()
-    Simulation(model, [rec]).run()
-    energy = np.array([r.balance.total_energy for r in rec.records])
-    assert np.abs(energy - energy[0]).max() < 1e-8 * energy[0]
-    px = np.array([r.balance.linear_momentum[0] for r in rec.records])
-    assert np.abs(px - px[0]).max() < 1e-9
-
-
 def test_end_energy_is_the_energy_of_the_mid_point_update():
-    """E_{n+1}(d_{n+1/2}) equals the balance of the state the mid-point update produces."""
-    from ntncontact.dynamics.midpoint import end_of_step
-
     model, sim, state = rods_in_contact()
     dt = 0.05
-    energy = EnergyConstraint(model.assembler, sim._dof_mass(state), state.X, state.d.ravel(),
-                              state.v.ravel(), dt, 0.0)
+    end = EndEnergy(model.assembler, sim._dof_mass(state), state.X, state.d.ravel(),
+                    state.v.ravel(), dt)
     d_half = state.d + 0.5 * dt * state.v + 1e-3
     d1, v1, a1 = end_of_step(d_half, state.d, state.v, dt)
     expected = sim.balance(StepState(4, 0.15, state.X, d1, v1, a1)).total_energy
-    assert energy.end_energy(d_half.ravel())[0] == pytest.approx(expected, rel=1e-13)
+    assert end(d_half.ravel())[0] == pytest.approx(expected, rel=1e-13)
+
+
+@pytest.mark.slow
+def test_energy_variant_conserves_the_ring_impact_energy_where_the_gap_law_does_not():
+    base = ['bodies.1.mesh_motion="lagrangian"', "analysis.t_end=0.3"] + LAGRANGE_GAP
+    results = {}
+    for flag in ("false", "true"):
+        rec = Recorder()
+        model = model_from_example("ring_impact.toml", base + [f"analysis.energy_conserving={flag}"])
+        Simulation(model, [rec]).run()
+        energy = np.array([r.balance.total_energy for r in rec.records])
+        momentum = np.array([r.balance.linear_momentum for r in rec.records])
+        results[flag] = (np.abs(energy - energy[0]).max() / energy[0],
+                         np.abs(momentum - momentum[0]).max(), rec)
+    # exact gap constraints on non-matching nodes do work: the energy drifts by a lot
+    assert results["false"][0] > 0.05
+    # the energy equation holds it on every step with active pairs; what is left (1.7e-6
+    # measured) is the mid-point rule's own Neo-Hookean energy error on the few (sub)steps
+    # whose pairs were all released, which no contact constraint can touch
+    assert results["true"][0] < 1e-5 and results["true"][1] < 1e-9
+    thetas = [r.extra["energy_multiplier"] for r in results["true"][2].records if r.extra]
+    assert any(t != 0.0 for t in thetas)  # the energy equation was really used

@@ -96,6 +96,7 @@ class LagrangeTerm:
     ci: ContactInterface
     state: PairState
     dt: float
+    order: int = 0  # position among the step's Lagrange interfaces
 
     @property
     def size(self) -> int:
@@ -113,11 +114,18 @@ class LagrangeTerm:
         return (res.force, (res.rows, res.cols, res.vals), b.values,
                 (b.g_rows, b.g_cols, b.g_vals), (b.b_rows, b.b_cols, b.b_vals))
 
+    def h_at(self, x: NDArray) -> NDArray:
+        """The constraint values L_c g at positions x (gap law), e.g. at the step start."""
+        return lagrange_blocks(x, None, None, self.ci.interface, self.state, self.ci.law).values
+
 
 def lagrange_terms(interfaces: Sequence[ContactInterface], states: Sequence[PairState],
                    dt: float) -> list[LagrangeTerm]:
-    return [LagrangeTerm(ci, st, dt) for ci, st in zip(interfaces, states, strict=True)
-            if ci.law.method == "lagrange" and len(st)]
+    terms = [LagrangeTerm(ci, st, dt) for ci, st in zip(interfaces, states, strict=True)
+             if ci.law.method == "lagrange" and len(st)]
+    for i, t in enumerate(terms):
+        t.order = i
+    return terms
 
 
 def with_solved_multipliers(

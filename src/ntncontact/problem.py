@@ -32,8 +32,8 @@ class ConstraintTerm(Protocol):
     """Exact constraints h(x) = 0 with multipliers (bordered Newton system, report 2.2.1).
 
     ``size`` multipliers start at ``initial``; a call at (x_eval, v_eval, rate, x_start, lam)
-    returns the force, its tangent (COO), h, G = dh/dx (COO, rows = multiplier index) and
-    B = d force / d lam (COO, cols = multiplier index).
+    returns the force, its tangent (COO), h, G = dh/dx (COO, rows = multiplier index),
+    B = d force / d lam (COO, cols = multiplier index) and optionally C = dh/dlam (COO).
     """
 
     size: int
@@ -153,20 +153,27 @@ class StepProblem:
         self._constraint_force = np.zeros(ndof)
         if not self.constraints:
             return np.zeros(0), None, None
-        hs, gs, bs = [], [], []
+        hs, gs, bs, cs = [], [], [], []
         for c, lam in zip(self.constraints, self.multipliers(y), strict=True):
-            f, (kr, kc, kv), h, (gr, gc, gv), (br, bc, bv) = c(x, v_eval, rate, self.state.x, lam)
+            f, (kr, kc, kv), h, (gr, gc, gv), (br, bc, bv), *rest = c(
+                x, v_eval, rate, self.state.x, lam)
+            # optional dh/dlam block of a term whose constraints depend on its own multipliers
+            cs.append(sp.csr_matrix((rest[0][2], (rest[0][0], rest[0][1])),
+                                    shape=(c.size, c.size)) if rest else
+                      sp.csr_matrix((c.size, c.size)))
             self._constraint_force += f
             self._constraint_tangent = self._constraint_tangent + sp.csr_matrix(
                 (kv, (kr, kc)), shape=(ndof, ndof))
             hs.append(h)
             gs.append(sp.csr_matrix((gv, (gr, gc)), shape=(c.size, ndof)))
             bs.append(sp.csr_matrix((bv, (br, bc)), shape=(ndof, c.size)))
+        self._multiplier_block = sp.block_diag(cs, format="csr")
         return np.concatenate(hs), sp.vstack(gs).tocsr(), sp.hstack(bs).tocsr()
 
     def residual(self, y: NDArray) -> tuple[NDArray, float]:
         R, K, scale = self._evaluate(y)
-        self._cache = {"y": y.copy(), "K": K, "blocks": self._blocks}
+        self._cache = {"y": y.copy(), "K": K, "blocks": self._blocks,
+                       "C": getattr(self, "_multiplier_block", None)}
         h = self._blocks[0]
         return np.concatenate([R[self.free_dofs], h]), scale
 
@@ -178,4 +185,5 @@ class StepProblem:
         h, G, B = self._cache["blocks"]
         if not h.size:
             return Kff
-        return sp.bmat([[Kff, B[self.free_dofs]], [G[:, self.free_dofs], None]], format="csr")
+        C = self._cache["C"]
+        return sp.bmat([[Kff, B[self.free_dofs]], [G[:, self.free_dofs], C]], format="csr")

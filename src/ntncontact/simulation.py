@@ -12,10 +12,11 @@ from numpy.typing import NDArray
 
 from .contact import PairState
 from .diagnostics import Balance, balance
-from .dynamics.energy import EnergyConstraint
+from .dynamics.energy import EndEnergy, EnergyConsistentContact
 from .dynamics.midpoint import end_of_step, midpoint_velocity, velocity_factor
 from .fem.q4 import InvertedElementError
 from .interfaces import (
+    LagrangeTerm,
     augment_all,
     commit_all,
     contact_rows,
@@ -130,11 +131,14 @@ class Simulation:
                             self.length_scale)
             iterations += result.iterations
             if self.model.analysis.energy_conserving and any(len(c) for c in contact):
-                problem, result, its = self._conserve_energy(problem, result, mass)
+                problem, result, its, split = self._conserve_energy(problem, result, mass)
                 iterations += its
-            guess = None if self._energy_multiplier else result.y
+            else:
+                split = None
+            guess = None if split else result.y
             d = problem.full(result.y).reshape(-1, 2)
-            contact = with_solved_multipliers(interfaces, contact, problem.multipliers(result.y))
+            contact = with_solved_multipliers(interfaces, contact,
+                                              self._lagrange_multipliers(problem, result, split))
             results = self._contact_results(interfaces, contact, state, d, dt)
             used = contact
             contact, done = augment_all(interfaces, contact, previous, results)
@@ -154,24 +158,47 @@ class Simulation:
         return new, iterations
 
     def _conserve_energy(self, problem: StepProblem, result, mass):
-        """Report 5.5: if the step changed the total energy, solve again bordered by the
-        energy multiplier. When the step already conserves it (e.g. a persistency or a linear
-        gap constraint) the bordered system would be singular, so it is only used when needed.
-        """
+        """Report 5.5 (see ``dynamics.energy``): if the Lagrange step changed the total energy,
+        solve it again with the energy equation and theta, which relaxes the gap constraints
+        towards persistency just enough. When the step already conserves energy (persistency,
+        or no residual gap) theta would be undetermined, so it is only added when needed."""
         state, dt = problem.state, problem.dt
-        energy = EnergyConstraint(self.model.assembler, mass, state.X, state.d.ravel(),
-                                  state.v.ravel(), dt, self.balance(state).total_energy)
-        d = problem.full(result.y)
-        violation = abs(energy.end_energy(d)[0] - energy.energy_n)
+        end_energy = EndEnergy(self.model.assembler, mass, state.X, state.d.ravel(),
+                               state.v.ravel(), dt)
+        energy_n = self.balance(state).total_energy
+        violation = abs(end_energy(problem.full(result.y))[0] - energy_n)
         self._energy_multiplier = 0.0
-        if violation <= self.settings.rtol * max(abs(energy.energy_n), 1e-300):
-            return problem, result, 0
-        bordered = StepProblem(self.model, state, dt, mass, problem.extra,
-                               list(problem.constraints) + [energy])
-        new = newton(bordered.residual, bordered.jacobian, self.solve,
-                     np.append(result.y, 0.0), self.settings, self.length_scale)
-        self._energy_multiplier = float(new.y[-1])
-        return bordered, new, new.iterations
+        gap_terms = [t for t in problem.constraints if isinstance(t, LagrangeTerm)
+                     and not t.ci.persistency]
+        if not gap_terms or violation <= self.settings.rtol * max(abs(energy_n), 1e-300):
+            return problem, result, 0, None
+        others = [t for t in problem.constraints if t not in gap_terms]
+        combined = EnergyConsistentContact(gap_terms, [t.h_at(state.x) for t in gap_terms],
+                                           end_energy, energy_n)
+        bordered = StepProblem(self.model, state, dt, mass, problem.extra, others + [combined])
+        y0 = np.concatenate([result.y[: problem.free_dofs.size]]
+                            + [t.initial for t in others] + [combined.initial])
+        y0[-combined.size:-1] = np.concatenate(
+            [m for t, m in zip(problem.constraints, problem.multipliers(result.y), strict=True)
+             if t in gap_terms])
+        new = newton(bordered.residual, bordered.jacobian, self.solve, y0, self.settings,
+                     self.length_scale)
+        lams, theta = combined.split(bordered.multipliers(new.y)[-1])
+        self._energy_multiplier = theta
+        return bordered, new, new.iterations, (others, lams)
+
+    @staticmethod
+    def _lagrange_multipliers(problem: StepProblem, result, split) -> list:
+        """Multipliers of the Lagrange interfaces in interface order (see _conserve_energy)."""
+        values = problem.multipliers(result.y)
+        if split is None:
+            return values
+        others, lams = split
+        by_term = dict(zip(map(id, others), values[:-1], strict=True))
+        combined = problem.constraints[-1]
+        by_term |= dict(zip(map(id, combined.terms), lams, strict=True))
+        order = sorted(list(others) + list(combined.terms), key=lambda t: t.order)
+        return [by_term[id(t)] for t in order]
 
     def _dof_mass(self, state: StepState) -> sp.csr_matrix:
         """The mass on dofs; ALE bodies carry new particles at their nodes, so it is rebuilt."""

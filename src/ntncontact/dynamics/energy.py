@@ -1,19 +1,21 @@
-"""The energy-conserving variant of report 5.5: one more multiplier lambda_E per step.
+"""The energy-conserving Lagrange-multiplier variant (report 5.5), in a form that is solvable.
 
-Unknowns d = d_{n+1/2}, the contact multipliers, and lambda_E. The mid-point equations are
-bordered as in (5.30)/(5.34):
+Report 5.5 borders the mid-point equations with an energy multiplier lambda_E acting along
+M a + K d (5.30). At a solution of a contact step without external loads, M a + f_int = -B lambda
+(the contact forces), so that column lies in the range of the contact columns and the bordered
+system (5.34) is singular; we verified this numerically. We keep the report's idea (one extra
+unknown and the discrete energy equation E_{n+1} = E_n appended to the Lagrange-multiplier
+system) but let the extra unknown theta relax the geometric constraint of every active pair
+towards persistency:
 
-    R(d) + lambda_E (M a_{n+1/2}(d) + f_int(x_{n+1/2})) = 0,
-    h_E(d) = E_{n+1}(d) - E_n = 0,
+    h_p = (L_c g)_p(x_{n+1/2}) - theta (L_c g)_p(x_n) = 0,      h_E = E_{n+1}(d) - E_n = 0.
 
-with E = 1/2 v.Mv + W the total (kinetic + strain) energy and E_{n+1} evaluated at
-x_{n+1} = X + 2 d - d_n, v_{n+1} = 4 (d - d_n)/dt - v_n. The first line is
-(1 + lambda_E)(M a + f_int) + f_contact - f_ext = 0: lambda_E rescales the contact impulse just
-enough to conserve the energy exactly, and since contact forces come in equal and opposite pairs
-linear and angular momentum stay conserved. The report writes E at n +- 1/2 and the linear K d;
-we use the end-of-step energies and the nonlinear f_int so that the constraint is exact for
-Neo-Hookean bodies (external loads are zero in the report's derivation; they are allowed here,
-but then E_n is not conserved by the physics and the variant should not be used).
+theta = 0 is the exact gap constraint (impenetrable, but closing a residual gap g_n does work);
+theta = 1 freezes the tributary-weighted gap over the step, i.e. the persistency condition,
+which conserves energy (report 3.3.1). The energy equation picks the theta in between that
+conserves energy exactly. Contact forces stay equal and opposite pair forces, so linear and
+angular momentum are conserved as in the mid-point rule. E is the kinetic plus strain energy at
+t_{n+1}: x_{n+1} = X + 2 d - d_n, v_{n+1} = 4 (d - d_n)/dt - v_n with d = d_{n+1/2}.
 """
 
 from __future__ import annotations
@@ -25,12 +27,11 @@ import scipy.sparse as sp
 from numpy.typing import NDArray
 
 from ..fem.assembly import Assembler
-from .midpoint import inertia_factor, midpoint_acceleration
 
 
 @dataclass
-class EnergyConstraint:
-    """A bordered-system constraint term (see ``problem.ConstraintTerm``) with one multiplier."""
+class EndEnergy:
+    """E_{n+1} as a function of the mid-point unknown d = d_{n+1/2}, and its gradient."""
 
     assembler: Assembler
     mass: sp.csr_matrix  # on dofs
@@ -38,37 +39,67 @@ class EnergyConstraint:
     d_n: NDArray  # (ndof,)
     v_n: NDArray  # (ndof,)
     dt: float
-    energy_n: float
-    lambda_start: float = 0.0
 
-    size: int = 1
-
-    @property
-    def initial(self) -> NDArray:
-        return np.array([self.lambda_start])
-
-    def end_energy(self, d: NDArray) -> tuple[float, NDArray]:
-        """E_{n+1}(d) and its gradient with respect to d = d_{n+1/2}."""
+    def __call__(self, d: NDArray) -> tuple[float, NDArray]:
         v1 = 4.0 * (d - self.d_n) / self.dt - self.v_n  # 2 v_{n+1/2} - v_n
         x1 = self.X.ravel() + 2.0 * d - self.d_n
         f1, _, w1 = self.assembler.internal(self.X, x1.reshape(-1, 2), need_tangent=False)
         Mv1 = self.mass @ v1
         return 0.5 * float(v1 @ Mv1) + w1, (4.0 / self.dt) * Mv1 + 2.0 * f1
 
+
+@dataclass
+class EnergyConsistentContact:
+    """All Lagrange gap-law interfaces of a step plus theta, as one bordered-system term.
+
+    ``terms`` are the per-interface Lagrange terms (see ``interfaces.LagrangeTerm``), each with
+    ``blocks_at(x, lam)`` giving (force, K, h, G, B); ``h_start`` their h at x_n.
+    """
+
+    terms: list
+    h_start: list[NDArray]
+    end_energy: EndEnergy
+    energy_n: float
+
+    @property
+    def size(self) -> int:
+        return sum(t.size for t in self.terms) + 1
+
+    @property
+    def initial(self) -> NDArray:
+        return np.concatenate([t.initial for t in self.terms] + [np.zeros(1)])
+
+    def split(self, lam: NDArray) -> tuple[list[NDArray], float]:
+        out, start = [], 0
+        for t in self.terms:
+            out.append(lam[start:start + t.size])
+            start += t.size
+        return out, float(lam[-1])
+
     def __call__(self, x_eval, v_eval, rate, x_start, lam):
-        d = x_eval.ravel() - self.X.ravel()
-        lam_e = float(lam[0])
-        f_int, K, _ = self.assembler.internal(self.X, x_eval)
-        inertia = self.mass @ midpoint_acceleration(d, self.d_n, self.v_n, self.dt)
-        column = inertia + f_int  # d(force)/d(lambda_E)
-        tangent = (lam_e * (K + inertia_factor(self.dt) * self.mass)).tocoo()
-        energy, grad = self.end_energy(d)
-        rows = np.flatnonzero(grad)
-        cols = np.flatnonzero(column)
-        return (
-            lam_e * column,
-            (tangent.row, tangent.col, tangent.data),
-            np.array([energy - self.energy_n]),
-            (np.zeros(rows.size, dtype=np.int64), rows, grad[rows]),
-            (cols, np.zeros(cols.size, dtype=np.int64), column[cols]),
-        )
+        lams, theta = self.split(lam)
+        ndof = x_eval.size
+        force, k_parts, hs, g_parts, b_parts, c_rows, c_vals = np.zeros(ndof), [], [], [], [], \
+            [], []
+        row = 0
+        for t, lam_t, h0 in zip(self.terms, lams, self.h_start, strict=True):
+            f, (kr, kc, kv), h, (gr, gc, gv), (br, bc, bv) = t(x_eval, v_eval, rate, x_start,
+                                                               lam_t)
+            force += f
+            k_parts.append((kr, kc, kv))
+            hs.append(h - theta * h0)
+            g_parts.append((gr + row, gc, gv))
+            b_parts.append((br, bc + row, bv))
+            c_rows.append(row + np.arange(t.size))
+            c_vals.append(-h0)
+            row += t.size
+        energy, grad = self.end_energy(x_eval.ravel() - self.end_energy.X.ravel())
+        nz = np.flatnonzero(grad)
+        g_parts.append((np.full(nz.size, row), nz, grad[nz]))
+        hs.append(np.array([energy - self.energy_n]))
+        cat = [np.concatenate(p) for p in zip(*k_parts, strict=True)]
+        gcat = [np.concatenate(p) for p in zip(*g_parts, strict=True)]
+        bcat = [np.concatenate(p) for p in zip(*b_parts, strict=True)]
+        crow = np.concatenate(c_rows)
+        return (force, tuple(cat), np.concatenate(hs), tuple(gcat), tuple(bcat),
+                (crow, np.full(crow.size, row), np.concatenate(c_vals)))
