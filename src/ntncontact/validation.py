@@ -200,5 +200,10 @@ def write_html(path: Path, results: list[CaseResult], quick: bool) -> None:
             parts.append(f"<img src='{esc(p.relative_to(path.parent).as_posix())}' "
                          f"alt='{esc(p.stem)}'>")
         parts.append("</section>")
+    # marks each image once the browser has decoded it (checked by a headless-browser test)
+    parts.append("<script>window.addEventListener('load',()=>{let n=0;"
+                 "document.querySelectorAll('img').forEach(i=>{if(i.naturalWidth>0){"
+                 "i.dataset.loaded='yes';n++}});document.body.dataset.imagesLoaded=n;});"
+                 "</script>")
     parts.append("</body></html>")
     path.write_text("\n".join(parts))
