@@ -3,7 +3,14 @@
 import numpy as np
 import pytest
 
-from ntncontact.ale.smoothing import Smoother, boundary_node_mask, nodes_within_layers
+from ntncontact.ale.smoothing import (
+    Smoother,
+    boundary_node_mask,
+    cell_min_sines,
+    harmonic_extension,
+    node_adjacency,
+    nodes_within_layers,
+)
 from ntncontact.mesh.quadmesh import MeshError
 from ntncontact.mesh.quality import corner_angles_deg, corner_jacobians
 
@@ -111,3 +118,38 @@ def test_unknown_method_rejected():
     nodes, cells = grid(1, 1)
     with pytest.raises(ValueError, match="unknown smoothing method"):
         Smoother(cells, len(nodes), method="spring")
+
+
+@pytest.mark.parametrize("dense_limit", [400, 0])  # dense and sparse solves
+def test_harmonic_extension_reproduces_linear_moves_and_leaves_the_rest_in_place(dense_limit):
+    """On a uniform grid the graph Laplacian of a linear field vanishes: the extension of a
+    linear boundary move is that linear move; nodes outside the free set keep their moves."""
+    nodes, cells = grid(8, 6, hx=0.5, hy=0.3)
+    n = len(nodes)
+    adjacency = node_adjacency(cells, n)
+    free = ~boundary_node_mask(cells, n)
+    linear = nodes @ np.array([[0.01, -0.02], [0.03, 0.005]]).T + [0.002, -0.001]
+    moves = np.where(free[:, None], 0.0, linear)
+    out = harmonic_extension(adjacency, moves, free, dense_limit=dense_limit)
+    np.testing.assert_allclose(out, linear, atol=1e-15)  # O(0.01) moves: round-off
+    # zero given moves: exactly zero, whatever the free set
+    assert not harmonic_extension(adjacency, np.zeros((n, 2)), free, dense_limit).any()
+    # one top node moved, only the two rows below it free: everything else stays exactly put
+    top = 6 * 9 + 4  # the node at (2, 1.8), middle of the top side
+    moves = np.zeros((n, 2))
+    moves[top] = [0.1, 0.0]
+    near = free & (nodes[:, 1] > 1.0) & (np.abs(nodes[:, 0] - 2.0) < 1.1)  # 2 rows of 5
+    out = harmonic_extension(adjacency, moves, near, dense_limit=dense_limit)
+    np.testing.assert_array_equal(out[~near & (np.arange(n) != top)], 0.0)
+    assert np.all(out[near, 0] > 0.0) and np.all(out[near, 0] < 0.1)  # maximum principle
+    assert near.sum() == 10 and out[top - 9, 0] == out[near, 0].max()  # the one right below
+
+
+def test_cell_min_sines():
+    nodes, cells = grid(2, 1)
+    np.testing.assert_allclose(cell_min_sines(nodes, cells), 1.0, atol=1e-15)
+    sheared = nodes + np.column_stack([nodes[:, 1], np.zeros(len(nodes))])  # 45 degree shear
+    np.testing.assert_allclose(cell_min_sines(sheared, cells), np.sin(np.pi / 4), atol=1e-15)
+    flipped = nodes.copy()
+    flipped[0] = [1.5, 0.5]  # node 0 pulled across its cell
+    assert cell_min_sines(flipped, cells)[0] < 0.0 < cell_min_sines(flipped, cells)[1]

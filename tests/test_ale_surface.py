@@ -5,6 +5,7 @@ import pytest
 
 from ntncontact.ale.surface import (
     SurfaceCurve,
+    local_slides,
     point_at,
     project_to_surface,
     relocate_surface_nodes,
@@ -127,3 +128,123 @@ def test_relocated_nodes_stay_on_a_circle_to_third_order():
     errors = np.array([radial_error(n) for n in (9, 17, 33)])
     # nodes between old nodes inherit the curve error: at least third order in h
     assert np.all(np.log2(errors[:-1] / errors[1:]) > 2.7), errors
+
+
+def segments_in_band(s, ref, anchors, tol):
+    """Every segment within [1 - t, 1/(1 - t)] of its reference length scaled by its run."""
+    seg, ok = np.diff(s), True
+    for a, b in zip(anchors[:-1], anchors[1:], strict=True):
+        target = ref[a:b] * seg[a:b].sum() / ref[a:b].sum()
+        ratio = seg[a:b] / target
+        ok &= bool(np.all(ratio >= 1 - tol - 1e-12) and np.all(ratio <= 1 / (1 - tol) + 1e-12))
+    return ok
+
+
+def test_local_slides_move_only_the_buffer_next_to_a_sliding_anchor():
+    s, ref = np.arange(11.0), np.ones(10)
+    # no slide: nothing moves, exactly
+    out, resets = local_slides(s, ref, [0, 3, 10], [0.0, 0.0, 0.0])
+    assert not out.any() and resets == 0
+    # a slide the neighbouring segment can absorb within the band (t = 0.5: lengths >= 0.5)
+    out, _ = local_slides(s, ref, [0, 3, 10], [0.0, 0.3, 0.0])
+    np.testing.assert_array_equal(np.flatnonzero(out), [3])
+    # 1.3 into the right run needs three segments (slack 0.5 each), shared equally; the left
+    # run grows (slack 1 each up to twice the length): two segments
+    out, resets = local_slides(s, ref, [0, 3, 10], [0.0, 1.3, 0.0])
+    np.testing.assert_allclose(out, [0, 0, 0.65, 1.3, 1.3 - 1.3 / 3, 1.3 / 3, 0, 0, 0, 0, 0],
+                               atol=1e-15)
+    assert resets == 0
+    # two anchors sliding the same way with room between them: two buffers, middle untouched
+    out, _ = local_slides(s, ref, [0, 3, 6, 10], [0.0, 0.2, 0.2, 0.0])
+    np.testing.assert_array_equal(np.flatnonzero(out), [3, 6])
+    # adjacent anchors sliding together (buffers overlap): the run between moves rigidly
+    out, _ = local_slides(s, ref, [0, 3, 5, 10], [0.0, 0.6, 0.6, 0.0])
+    assert out[4] == 0.6
+
+
+def test_local_slides_carry_saturated_segments_and_keep_the_band_under_repeated_slides():
+    """A node sliding the same way step after step compresses a neighbourhood that widens only
+    as its segments reach the band, never leaves the band, and moves far fewer nodes than
+    respacing the run every time."""
+    n = 41
+    ref = 1.0 + 0.5 * np.sin(np.arange(n - 1.0))  # graded reference spacing
+    s = np.concatenate([[0.0], np.cumsum(ref)])
+    anchors, node = np.array([0, 10, n - 1]), 10
+    moved_per_step = []
+    for _ in range(40):
+        out, resets = local_slides(s, ref, anchors, [0.0, 0.1, 0.0], tolerance=0.5)
+        assert resets == 0
+        moved_per_step.append(np.count_nonzero(out))
+        s = s + out
+        assert segments_in_band(s, ref, anchors, 0.5)
+        assert np.all(np.diff(s) > 0)
+    assert s[node] == pytest.approx(np.sum(ref[:10]) + 4.0, abs=1e-12)
+    assert moved_per_step[0] <= 2 < moved_per_step[-1] < n - 2  # the buffer widened gradually
+    # a segment at the band's edge is carried rigidly: segment 3-4 of 6/13 is half its target
+    # (run 3-10 of length 6/13 + 6 over 7 reference segments: target 12/13)
+    s = np.concatenate([np.arange(4.0), 3.0 + 6.0 / 13.0 + np.arange(7.0)])
+    out, _ = local_slides(s, np.ones(10), [0, 3, 10], [0.0, 0.2, 0.0], tolerance=0.5)
+    assert out[4] == pytest.approx(0.2, abs=1e-12) and not out[5:].any()
+
+
+def test_local_slides_reset_a_run_that_cannot_absorb_the_slide():
+    s, ref = np.arange(6.0), np.ones(5)
+    # 3.5 into a run of length 5 cannot keep its 5 segments above 0.5 each: reference respacing
+    out, resets = local_slides(np.arange(11.0), np.ones(10), [0, 4, 10], [0.0, 3.5, 0.0])
+    assert resets == 1
+    new = np.arange(11.0) + out
+    np.testing.assert_allclose(np.diff(new[4:]), (10 - 7.5) / 6, atol=1e-12)  # even spacing
+    with pytest.raises(ValueError, match="tolerance"):
+        local_slides(s, ref, [0, 5], [0.0, 0.0], tolerance=1.0)
+    with pytest.raises(ValueError, match="increasing"):
+        local_slides(s, ref, [5, 0], [0.0, 0.0])
+
+
+def test_node_tangents_match_the_curve_tangents_at_the_nodes():
+    chain = arc_chain(9)
+    corner = np.zeros(9, bool)
+    corner[4] = True
+    for curve in (SurfaceCurve.from_chain(chain), SurfaceCurve.from_chain(chain, corner)):
+        nodes = np.arange(9)
+        np.testing.assert_allclose(curve.node_tangents(nodes), curve.tangent_at(curve.node_s),
+                                   atol=1e-12)
+    # on the circle the tangent is perpendicular to the radius, to the curve's accuracy
+    t = SurfaceCurve.from_chain(chain).node_tangents(np.arange(9))
+    assert np.abs(np.einsum("ij,ij->i", t, chain)).max() < 1e-2
+
+
+def test_normal_foot_is_well_defined_at_the_nodes_of_a_curved_chain():
+    """The averaged parabolas leave tiny tangent kinks at the nodes of a curved chain, so the
+    closest point to a point straight below a node is one of two points a hair either side of
+    it (the choice flips with round-off); the normal foot is the node itself."""
+    x = np.linspace(-1.0, 1.0, 9)
+    chain = np.column_stack([x, 0.05 * x**2 + 0.02 * x**4])  # symmetric, curved, non-uniform h''
+    curve = SurfaceCurve.from_chain(chain)
+    below = chain[4] - [0.0, 0.01]
+    s_close, _ = curve.closest(below)
+    s_foot, foot = curve.normal_foot(below)
+    assert abs(s_close[0] - curve.node_s[4]) > 1e-9  # the closest point is off the node
+    assert s_foot[0] == pytest.approx(curve.node_s[4], abs=1e-15)
+    np.testing.assert_allclose(foot[0], chain[4], atol=1e-15)
+    # mirrored points get mirrored feet, and the foot moves smoothly through the node
+    offsets = np.array([-1e-6, -1e-9, 1e-9, 1e-6])
+    s = curve.normal_foot(below + offsets[:, None] * [1.0, 0.0])[0] - curve.node_s[4]
+    np.testing.assert_allclose(s[::-1], -s, atol=1e-15)
+    assert np.all(np.diff(s) > 0) and np.all(np.abs(s) < 2.0 * np.abs(offsets))
+
+
+def test_normal_foot_is_the_orthogonal_projection_on_a_straight_chain_and_stops_at_breaks():
+    chain = np.column_stack([np.linspace(0.0, 4.0, 5), np.zeros(5)])
+    curve = SurfaceCurve.from_chain(chain)
+    pts = np.array([[0.3, 0.7], [2.0, -0.4], [3.99, 0.1]])
+    s, foot = curve.normal_foot(pts)
+    np.testing.assert_allclose(s, pts[:, 0], atol=1e-14)
+    np.testing.assert_allclose(foot, np.column_stack([pts[:, 0], np.zeros(3)]), atol=1e-14)
+    s, foot = curve.normal_foot([[-0.5, 0.2], [4.5, -0.1]])  # beyond the chain ends
+    np.testing.assert_allclose(s, [0.0, 4.0], atol=1e-14)
+    # on an arc the normal foot of a radial point is on that radius (to the curve's accuracy)
+    arc = arc_chain(17)
+    angles = np.array([0.1, 0.55, 1.2])
+    s, foot = SurfaceCurve.from_chain(arc).normal_foot(
+        1.2 * np.column_stack([np.cos(angles), np.sin(angles)]))
+    np.testing.assert_allclose(np.arctan2(foot[:, 1], foot[:, 0]), angles, atol=1e-4)

@@ -4,30 +4,65 @@ Formulation: operator split per augmentation. The ALE body's mesh is moved IN TH
 CONFIGURATION and the t_n fields are remapped onto the moved nodes; the following Lagrangian
 mid-point step then runs on the moved mesh with no convective term.
 
+The update is incremental: a node moves only when a contact node has to slide, and every moved
+node costs a remap, i.e. an interpolation that diffuses the fields (numerical dissipation), so
+nothing is moved that need not be.
+
 1. Surface relocation (4.1.1, Figs 4.2-4.4). An active contact node at x_n whose particle is
    predicted to end the step at ``x_pred`` (first augmentation: x_n + dt v_n; later ones: the last
    iterate) must hold, at t_{n+1}, the particle that lands on its partner's predicted position
    ``x_target``. With the step increment Delta = x_pred - x_n taken as locally uniform, that
    particle sits now at x_target - Delta; the node slides along its own t_n surface (the
-   piecewise-quadratic curve of ``ale.surface``) to the closest point. On a straight surface this
+   piecewise-quadratic curve of ``ale.surface``) to the foot of the normal through that point
+   (normals from the continuous nodal-tangent field: the closest point is ill-defined within
+   O(gap h^2) of a node, where the curve has tiny tangent kinks, and flipped with round-off,
+   which broke symmetric problems and made contact nodes chatter). On a straight surface this
    is exactly the arc-length slide s = (x_target - x_pred) . e (e the unit surface tangent); on a
-   curved one it is its exact generalization (the tangent formula is its linearization). The
-   normal part of x_target - x_pred is the gap, which contact, not the mesh, closes.
+   curved one it is its generalization (the tangent formula is its linearization). The
+   normal part of x_target - x_pred is the gap, which contact, not the mesh, closes. A slide
+   below ``slide_tolerance`` times the node's smaller adjacent surface spacing is not made: the
+   node keeps its position and fields bit for bit (its miss shows in ``mismatch``).
 2. Corners and chain ends stay fixed, and a node never slides past one: its slide is clamped so
    that the free nodes between it and the break keep at least ``min_spacing_ratio`` times the
    smallest surface spacing of that stretch; clamped nodes are reported.
-3. The other surface nodes of the chain are respaced between the anchors (breaks, moved active
-   nodes) in the proportions of the ORIGINAL mesh's surface spacing, so the grading is kept.
-4. Interior nodes within ``smoothing_layers`` element layers of the moved surface nodes are
-   smoothed (4.1.2) with the whole boundary fixed; the rest keeps its grading. The smoother
-   refuses inverting moves; a final inverted element (current or reference image) raises
-   MeshError naming the body and the element, and the time loop cuts the step back.
+3. The other surface nodes follow (``respace``):
+   ``"local"`` (default): each moved anchor's slide is absorbed by the fewest neighbouring
+   surface segments whose slack suffices, each shrinking or growing in proportion to its slack,
+   the room it has before leaving a band [1 - t, 1/(1 - t)] (t = ``spacing_tolerance``) around
+   its ORIGINAL proportion; nothing beyond moves, and a segment at the edge of the band is
+   carried rigidly, so repeated slides one way compress a widening neighbourhood instead of
+   crushing one segment. A run whose whole slack does not suffice is respaced in the original
+   proportions, restoring the grading (``ale.surface.local_slides``; counted in
+   ``AleUpdate.resets``; never happened in the ring impact of report 6.4).
+   ``"reference"``: every free surface node is respaced between the anchors in the original
+   proportions at every update (nodes move whenever the deformed spacing differs from them).
+4. The interior follows (``interior``) as far as the mesh quality needs. A cell is acceptable
+   when its smallest corner sine is at least ``min_quality`` times that of the same cell in the
+   ORIGINAL mesh, or not lower than at t_n (a move never has to repair what it did not spoil).
+   ``"minimal"`` (default) tries, in order, until every cell it changes is acceptable:
+   (a) nothing: only the surface nodes move (the fewest remaps);
+   (b) the surface moves u = x~_n - x_n are extended harmonically into the interior nodes within
+   ``smoothing_layers`` element layers of the moved surface nodes (the Laplacian rule on the
+   displacement, ``ale.smoothing.harmonic_extension``), every other node, the rest of the
+   boundary included, keeping a zero move: untouched regions do not move, and a deformed or
+   graded mesh is not dragged towards a smoother's fixed point;
+   (c) the interior nodes within those layers are smoothed in position (4.1.2, rule
+   ``smoothing``, ``sweeps`` Jacobi sweeps, the whole boundary fixed, inverting moves refused),
+   as a slide of several elements (Fig. 4.2) or accumulated shear needs; this also repairs the
+   distortion that (a) and (b) let build up.
+   ``"displacement"`` starts at (b), ``"position"`` always does (c) (the earlier behaviour: the
+   interior moves at every update since a deformed mesh is no fixed point of the smoother).
+   ``AleUpdate.interior`` tells which stage was used.
+   A final inverted element (current or reference image) raises MeshError naming the body and
+   the element, and the time loop cuts the step back.
 5. Remap (4.3): the fields at t_n are interpolated from the old mesh (nodes at x_n) at the new
    node positions x~_n: X_new = X(x~_n) (the material point now at the node), d = x~_n - X_new,
-   v and a likewise ("linear" Q4 of (4.18) or the "quadratic" patch fit in the spirit of 4.19).
-   Nodes that did not move keep their values exactly. With ``conserve_momentum`` a rigid velocity
-   is added to the remapped nodes so that the body's linear and angular momentum, with lumped
-   masses from the new X, equal the old ones (METHOD_NOTES: plain interpolation drifts).
+   v and a likewise ("linear" Q4 of (4.18) or the third-order gradient-enhanced "quadratic"
+   interpolant in the spirit of 4.19, see ``ale.remap``). Nodes that did not move keep their
+   values exactly. With ``conserve_momentum`` a rigid velocity is added to the remapped nodes
+   (to the nodes of the cells around a single remapped node) so that the body's linear and
+   angular momentum, with lumped masses from the new X, equal the old ones (METHOD_NOTES: plain
+   interpolation drifts).
 
 Because the remap carries the convection, the step needs no convective term (no double
 counting: the report's term with c = v - v_hat (4.5-4.6, 5.9) is what the remap replaces). In
@@ -42,6 +77,11 @@ positions those particles had at t_n, i.e. the active nodes' positions on the me
 that iterate (``AleUpdate.x_mesh`` of augmentation k - 1; default: the passed x_n). Then
 ``mesh_velocity`` is already the whole step's. Passing the previously moved state instead also
 works (x_start defaults correctly), but remaps twice and the mesh velocities must be summed.
+
+Cost: everything that depends only on the t_n state (the old surface curve, the point locator,
+the recovered nodal gradients of the quadratic remap, the old masses and cell qualities) is
+built once per t_n state and reused by the following augmentations of the step (the body keeps
+the last state's data, recognised by its bytes); topology-only structures are built once.
 """
 
 from __future__ import annotations
@@ -49,8 +89,10 @@ from __future__ import annotations
 import copy
 from dataclasses import dataclass
 from functools import cached_property
+from typing import Literal
 
 import numpy as np
+import scipy.sparse as sp
 from numpy.typing import ArrayLike, NDArray
 
 from ntncontact.ale.remap import (
@@ -64,19 +106,26 @@ from ntncontact.ale.smoothing import (
     SmoothingMethod,
     SmoothingResult,
     boundary_node_mask,
-    nodes_within_layers,
+    cell_min_sines,
+    harmonic_extension,
+    node_adjacency,
 )
-from ntncontact.ale.surface import SurfaceCurve, respace_surface
+from ntncontact.ale.surface import SurfaceCurve, local_slides
 from ntncontact.mesh.boundary import chain_edge_lengths, surface_chain
 from ntncontact.mesh.quadmesh import MeshError, QuadMesh
 from ntncontact.mesh.quality import check_elements
 
 __all__ = ["AleBody", "AleUpdate", "lumped_masses", "move_ale_body"]
 
+RespaceMethod = Literal["local", "reference"]
+InteriorMethod = Literal["minimal", "displacement", "position"]
 _SMOOTHING = ("laplacian", "angle", "weighted_angle")
 _REMAP = ("linear", "quadratic")
-# a surface move below this fraction of the smallest surface spacing is round-off of the curve
-# evaluation (point_at inverts arc length by Newton): such nodes keep their old position exactly
+_RESPACE = ("local", "reference")
+_INTERIOR = ("minimal", "displacement", "position")
+# a move below this fraction of the smallest surface spacing is round-off (of the curve
+# evaluation, whose arc-length inversion is iterative, or of the sparse solve): such nodes keep
+# their old position exactly
 _SNAP = 1e-10
 # 2 x 2 Gauss points (weights 1) and the Q4 corner signs
 _XI = np.array([[-1.0, -1.0], [1.0, -1.0], [1.0, 1.0], [-1.0, 1.0]])
@@ -97,7 +146,9 @@ class AleBody:
     contact chain (body on the left), ``corner`` flags its body corners (fixed, curve breaks),
     ``reference_spacing`` the chain's segment lengths in the original mesh (n - 1 segments, n
     when closed; the respacing keeps their proportions). ``density`` (scalar or per cell) only
-    weighs the lumped masses of the momentum correction.
+    weighs the lumped masses of the momentum correction. ``reference_quality`` is the smallest
+    corner sine of every cell of the original mesh (``from_mesh`` computes it; default 1, a
+    rectangle). The other options are described in the module docstring (items 1-5).
     """
 
     cells: NDArray[np.int64]
@@ -114,6 +165,12 @@ class AleBody:
     min_spacing_ratio: float = 0.25
     density: float | NDArray[np.float64] = 1.0
     name: str = "body"
+    respace: RespaceMethod = "local"
+    interior: InteriorMethod = "minimal"
+    slide_tolerance: float = 1e-8
+    spacing_tolerance: float = 0.5
+    min_quality: float = 0.5
+    reference_quality: NDArray[np.float64] | None = None
 
     def __post_init__(self) -> None:
         cells = _frozen(self.cells, np.int64).reshape(-1, 4)
@@ -131,8 +188,19 @@ class AleBody:
         if self.smoothing not in _SMOOTHING or self.remap not in _REMAP:
             raise ValueError(f"{self.name}: smoothing must be one of {_SMOOTHING} and remap one "
                              f"of {_REMAP}, got {self.smoothing!r}, {self.remap!r}")
-        if not 0.0 < self.min_spacing_ratio < 1.0:
-            raise ValueError(f"{self.name}: min_spacing_ratio must lie in (0, 1)")
+        if self.respace not in _RESPACE or self.interior not in _INTERIOR:
+            raise ValueError(f"{self.name}: respace must be one of {_RESPACE} and interior one "
+                             f"of {_INTERIOR}, got {self.respace!r}, {self.interior!r}")
+        quality = np.ones(len(cells)) if self.reference_quality is None else _frozen(
+            self.reference_quality, np.float64).reshape(-1)
+        if quality.shape != (len(cells),):
+            raise ValueError(f"{self.name}: reference_quality needs one value per cell")
+        object.__setattr__(self, "reference_quality", quality)
+        for key in ("min_spacing_ratio", "spacing_tolerance", "min_quality"):
+            if not 0.0 < getattr(self, key) < 1.0:
+                raise ValueError(f"{self.name}: {key} must lie in (0, 1)")
+        if not 0.0 <= self.slide_tolerance < 1.0:
+            raise ValueError(f"{self.name}: slide_tolerance must lie in [0, 1)")
         for key, value in (("cells", cells), ("surface", surface), ("corner", corner),
                            ("reference_spacing", spacing)):
             object.__setattr__(self, key, value)
@@ -158,6 +226,7 @@ class AleBody:
         if corner_angle_deg is not None:
             corner |= _kinks(xy, chain.closed, corner_angle_deg)
         options.setdefault("name", mesh.name)
+        options.setdefault("reference_quality", cell_min_sines(mesh.nodes, mesh.cells))
         return cls(mesh.cells, chain.nodes, chain.closed, corner, mesh.n_nodes,
                    chain_edge_lengths(xy, chain.closed), **options)  # type: ignore[arg-type]
 
@@ -176,8 +245,137 @@ class AleBody:
         return out
 
     @cached_property
+    def adjacency(self) -> sp.csr_matrix:
+        """Node adjacency through cell edges (the harmonic extension's graph)."""
+        return node_adjacency(self.cells, self.n_nodes)
+
+    @cached_property
+    def _incidence(self) -> sp.csr_matrix:
+        rows = np.repeat(np.arange(len(self.cells)), 4)
+        return sp.csr_matrix((np.ones(rows.size), (rows, self.cells.ravel())),
+                             shape=(len(self.cells), self.n_nodes))
+
+    @cached_property
+    def _incidence_t(self) -> sp.csr_matrix:
+        return self._incidence.T.tocsr()
+
+    def cells_touching(self, nodes: NDArray[np.bool_]) -> NDArray[np.bool_]:
+        """Mask of the cells with a node in the mask ``nodes``."""
+        return (self._incidence @ nodes.astype(float)) > 0
+
+    def within_layers(self, seeds: NDArray[np.bool_], layers: int) -> NDArray[np.bool_]:
+        """Nodes reachable from the mask ``seeds`` through at most ``layers`` shared cells."""
+        mask = seeds.copy()
+        for _ in range(layers):
+            mask = (self._incidence_t @ self.cells_touching(mask).astype(float)) > 0
+        return mask
+
+    @cached_property
+    def _node_cell(self) -> NDArray[np.int64]:
+        """One cell around each node (the remap's first guess for a node moved a little)."""
+        out = np.full(self.n_nodes, -1)
+        out[self.cells.ravel()] = np.repeat(np.arange(len(self.cells)), 4)
+        return out
+
+    @cached_property
+    def _edge_keys(self) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
+        """Sorted keys lo * n + hi of every cell edge and the cell of each."""
+        lo = np.minimum(self.cells, np.roll(self.cells, -1, axis=1)).ravel()
+        hi = np.maximum(self.cells, np.roll(self.cells, -1, axis=1)).ravel()
+        keys = lo * self.n_nodes + hi
+        order = np.argsort(keys, kind="stable")
+        return keys[order], np.repeat(np.arange(len(self.cells)), 4)[order]
+
+    def segment_cells(self, chain_nodes: NDArray[np.int64]) -> NDArray[np.int64]:
+        """The cell owning each segment (boundary edge) of a chain of surface nodes."""
+        a, b = chain_nodes[:-1], chain_nodes[1:]
+        keys, owner = self._edge_keys
+        at = np.searchsorted(keys, np.minimum(a, b) * self.n_nodes + np.maximum(a, b))
+        return owner[np.minimum(at, keys.size - 1)]
+
+    @cached_property
     def cell_density(self) -> NDArray[np.float64]:
         return np.broadcast_to(np.asarray(self.density, dtype=float), (len(self.cells),))
+
+    @cached_property
+    def _last_state(self) -> dict:
+        return {}
+
+    def _tn_state(self, X: NDArray, d: NDArray, v: NDArray, a: NDArray) -> _TnState:
+        """The t_n data of these fields, rebuilt only when the fields change."""
+        key = b"".join(np.ascontiguousarray(f).tobytes() for f in (X, d, v, a))
+        state = self._last_state.get("tn")
+        if state is None or state.key != key:
+            state = _TnState(self, key, X, d, v, a)
+            self._last_state["tn"] = state
+        return state
+
+
+class _TnState:
+    """Data that depend only on one t_n state of a body, shared by the step's augmentations."""
+
+    def __init__(self, body: AleBody, key: bytes, X: NDArray, d: NDArray, v: NDArray,
+                 a: NDArray) -> None:
+        self.body, self.key = body, key
+        self.X, self.v, self.a = X.copy(), v.copy(), a.copy()
+        self.x = X + d
+        self._curves: dict[int, SurfaceCurve] = {}
+        self._owners: dict[int, NDArray[np.int64]] = {}
+
+    def segment_cells(self, chain: _Chain) -> NDArray[np.int64]:
+        """The cell owning each segment of the opened chain (one per opening)."""
+        start = int(chain.nodes[0])
+        if start not in self._owners:
+            self._owners[start] = self.body.segment_cells(chain.nodes)
+        return self._owners[start]
+
+    def curve(self, chain: _Chain) -> SurfaceCurve:
+        """The t_n surface curve of the opened chain (one per opening)."""
+        start = int(chain.nodes[0])
+        if start not in self._curves:
+            self._curves[start] = SurfaceCurve.from_chain(self.x[chain.nodes], chain.breaks)
+        return self._curves[start]
+
+    @cached_property
+    def fields(self) -> NDArray[np.float64]:
+        return np.hstack([self.X, self.v, self.a])
+
+    @cached_property
+    def remapper(self) -> Remapper:
+        return Remapper(self.x, self.body.cells)
+
+    @cached_property
+    def gradients(self) -> NDArray[np.float64]:
+        return self.remapper.nodal_gradients(self.fields)
+
+    @cached_property
+    def element_masses(self) -> NDArray[np.float64]:
+        return _element_masses(self.X, self.body.cells, self.body.cell_density)
+
+    @cached_property
+    def masses(self) -> NDArray[np.float64]:
+        return np.bincount(self.body.cells.ravel(), self.element_masses.ravel(), len(self.X))
+
+    def masses_after(self, X_new: NDArray, cells: NDArray[np.bool_]) -> NDArray[np.float64]:
+        """Lumped masses with the masked cells' reference images replaced by those of X_new."""
+        body = self.body
+        change = _element_masses(X_new, body.cells[cells], body.cell_density[cells])
+        change -= self.element_masses[cells]
+        return self.masses + np.bincount(body.cells[cells].ravel(), change.ravel(), len(X_new))
+
+    @cached_property
+    def momenta(self) -> tuple[NDArray[np.float64], float]:
+        return momenta(self.masses, self.x, self.v)
+
+    @cached_property
+    def quality(self) -> NDArray[np.float64]:
+        return cell_min_sines(self.x, self.body.cells)
+
+    @cached_property
+    def h_min(self) -> float:
+        """Smallest surface spacing at t_n: the length scale of round-off snapping."""
+        xy = self.x[self.body.surface]
+        return float(chain_edge_lengths(xy, self.body.closed).min())
 
 
 def _kinks(xy: NDArray, closed: bool, angle_deg: float) -> NDArray[np.bool_]:
@@ -206,7 +404,9 @@ class AleUpdate:
     clamped: NDArray[np.int64]  # local active nodes whose slide was clamped at a break
     moved: NDArray[np.bool_]  # nodes whose fields were remapped
     momentum_change: tuple[NDArray[np.float64], float]  # of the plain remap (before correction)
-    smoothing: SmoothingResult | None = None
+    smoothing: SmoothingResult | None = None  # of the position smoother, when it ran
+    interior: str = "none"  # stage used for the interior: none, surface, displacement, position
+    resets: int = 0  # surface runs respaced in the original proportions ("local" respacing)
 
     @property
     def convective(self) -> NDArray[np.float64]:
@@ -221,6 +421,11 @@ def lumped_masses(X: ArrayLike, cells: ArrayLike, density: ArrayLike = 1.0) -> N
     """
     X = np.asarray(X, dtype=float)
     cell_arr = np.asarray(cells, dtype=np.int64).reshape(-1, 4)
+    return np.bincount(cell_arr.ravel(), _element_masses(X, cell_arr, density).ravel(), len(X))
+
+
+def _element_masses(X: NDArray, cell_arr: NDArray, density: ArrayLike) -> NDArray:
+    """Per cell the 4 lumped nodal masses, (m, 4)."""
     xe = X[cell_arr]
     dn = 0.25 * np.stack([_XI[:, 0] * (1.0 + _XI[:, 1] * _GP[:, 1:2]),
                           _XI[:, 1] * (1.0 + _XI[:, 0] * _GP[:, 0:1])], axis=-1)  # (g, a, k)
@@ -228,8 +433,7 @@ def lumped_masses(X: ArrayLike, cells: ArrayLike, density: ArrayLike = 1.0) -> N
     det = jac[..., 0, 0] * jac[..., 1, 1] - jac[..., 0, 1] * jac[..., 1, 0]
     shape = 0.25 * (1.0 + _GP[:, None, 0] * _XI[:, 0]) * (1.0 + _GP[:, None, 1] * _XI[:, 1])
     rho = np.broadcast_to(np.asarray(density, dtype=float), (len(cell_arr),))
-    me = np.einsum("eg,ga->ea", det * rho[:, None], shape)
-    return np.bincount(cell_arr.ravel(), me.ravel(), len(X))
+    return np.einsum("eg,ga->ea", det * rho[:, None], shape)
 
 
 @dataclass(frozen=True)
@@ -305,101 +509,146 @@ def _check_anchor_order(chain: _Chain, node_s: NDArray, targets: NDArray, name: 
 
 
 def _wanted_arc(curve: SurfaceCurve, points: NDArray, tangents: NDArray) -> NDArray:
-    """Arc-length parameter where each point wants its node: the closest point of the curve,
-    continued past a break (corner or chain end) along ``tangents`` by the overshoot, so that a
+    """Arc-length parameter where each point wants its node: the foot of its normal on the
+    curve (``SurfaceCurve.normal_foot``, the closest point up to O(h^2) kinks), continued past a
+    break (corner or chain end) along ``tangents`` by the overshoot, so that a
     target beyond a break is seen (and clamped) instead of silently stopping at the break."""
-    s = curve.project(points)
+    s, foot = curve.normal_foot(points)
     h_min = np.diff(curve.node_s).min()
     gap = np.abs(s[:, None] - curve.node_s[curve.breaks][None, :]).min(axis=1)
-    residual = points - curve.point_at(s)
+    residual = points - foot
     over = np.einsum("ij,ij->i", residual, tangents)
     return s + np.where(gap <= _SNAP * h_min, over, 0.0)
 
 
-def _relocate_surface(
-    body: AleBody, x_old: NDArray, chain: _Chain, wanted_xy: NDArray
-) -> tuple[NDArray, NDArray]:
-    """New positions of all nodes after moving the surface only; (x, clamped mask per active)."""
-    curve = SurfaceCurve.from_chain(x_old[chain.nodes], chain.breaks)
-    tangents = curve.tangent_at(curve.node_s[chain.position])
-    wanted = _wanted_arc(curve, wanted_xy, tangents)
-    targets, clamped = _clamp_slides(curve.node_s, chain.breaks, chain.position, wanted,
-                                     body.min_spacing_ratio)
-    _check_anchor_order(chain, curve.node_s, targets, body.name)
-    anchors = np.zeros(chain.nodes.size, bool)
-    anchors[chain.position] = True
-    s_all = np.zeros(chain.nodes.size)
-    s_all[chain.position] = targets
-    new_xy = respace_surface(curve.points, anchors, s_all, chain.breaks, chain.spacing)
-    h_min = np.diff(curve.node_s).min()
-    still = (np.linalg.norm(new_xy - curve.points, axis=1) <= _SNAP * h_min) | chain.breaks
-    new_xy[still] = curve.points[still]
-    x_new = x_old.copy()
-    x_new[chain.nodes] = new_xy
-    return x_new, clamped
+def _surface_slides(
+    body: AleBody, curve: SurfaceCurve, chain: _Chain, wanted_xy: NDArray
+) -> tuple[NDArray, NDArray, float, int]:
+    """Arc-length slide of every chain node; (slides, clamped mask per active, mismatch, resets).
+
+    Slides below the tolerance are not made, so such nodes get exactly 0.
+    """
+    node_s, pos = curve.node_s, chain.position
+    wanted = _wanted_arc(curve, wanted_xy, curve.node_tangents(pos))
+    seg = np.diff(node_s)
+    near = np.minimum(seg[np.maximum(pos - 1, 0)], seg[np.minimum(pos, seg.size - 1)])
+    still = np.abs(wanted - node_s[pos]) <= body.slide_tolerance * near
+    targets, clamped = _clamp_slides(node_s, chain.breaks, pos, np.where(still, node_s[pos],
+                                     wanted), body.min_spacing_ratio)
+    _check_anchor_order(chain, node_s, targets, body.name)
+    mismatch = float(np.max(np.abs(wanted - targets), initial=0.0))
+    anchor = chain.breaks.copy()
+    anchor[pos] = True
+    idx = np.flatnonzero(anchor)
+    anchor_slide = np.zeros(node_s.size)
+    anchor_slide[pos] = targets - node_s[pos]
+    if body.respace == "local":
+        slides, resets = local_slides(node_s, chain.spacing, idx, anchor_slide[idx],
+                                      body.spacing_tolerance)
+        return slides, clamped, mismatch, resets
+    ref = np.concatenate([[0.0], np.cumsum(chain.spacing)])
+    s_new = np.interp(ref, ref[idx], node_s[idx] + anchor_slide[idx])
+    slides = s_new - node_s
+    slides[idx] = anchor_slide[idx]
+    return slides, clamped, mismatch, 0
 
 
-def _smooth_interior(
-    body: AleBody, x_old: NDArray, x_surf: NDArray
-) -> tuple[NDArray, SmoothingResult | None]:
-    """Smooth the interior nodes within ``smoothing_layers`` of the moved surface nodes."""
-    seeds = np.flatnonzero(np.any(x_surf != x_old, axis=1))
-    if seeds.size == 0 or body.smoothing_layers <= 0 or body.sweeps <= 0:
-        return x_surf, None
-    free = nodes_within_layers(body.cells, body.n_nodes, seeds, body.smoothing_layers)
-    smoother = body.smoother(free)
-    if not smoother.free.any():
-        return x_surf, None
-    result = smoother.run(x_surf, max_sweeps=body.sweeps, rel_tol=1e-6)
-    return result.nodes, result
+def _move_surface(
+    tn: _TnState, curve: SurfaceCurve, chain: _Chain, slides: NDArray
+) -> NDArray[np.float64]:
+    """Node positions with the chain nodes slid along the t_n curve (others unchanged)."""
+    x_new = tn.x.copy()
+    move = (slides != 0.0) & ~chain.breaks
+    if move.any():
+        new_xy = curve.point_at(curve.node_s[move] + slides[move])
+        old_xy = curve.points[move]
+        real = np.linalg.norm(new_xy - old_xy, axis=1) > _SNAP * tn.h_min
+        x_new[chain.nodes[move][real]] = new_xy[real]
+    return x_new
+
+
+def _acceptable(body: AleBody, tn: _TnState, x_new: NDArray) -> bool:
+    """Every cell changed by the move keeps min_quality of its original quality, or does not
+    get worse than at t_n."""
+    cells = body.cells_touching(np.any(x_new != tn.x, axis=1))
+    q = cell_min_sines(x_new, body.cells[cells])
+    floor = np.minimum(body.min_quality * body.reference_quality[cells], tn.quality[cells])
+    return bool(np.all(q >= floor))
+
+
+def _move_interior(
+    body: AleBody, tn: _TnState, x_surf: NDArray
+) -> tuple[NDArray, SmoothingResult | None, str]:
+    """Interior nodes within ``smoothing_layers`` of the moved surface nodes follow them as far
+    as needed; (positions, position-smoothing result, stage used)."""
+    seeds = np.any(x_surf != tn.x, axis=1)
+    if not seeds.any():
+        return x_surf, None, "none"
+    if body.interior == "minimal" and _acceptable(body, tn, x_surf):
+        return x_surf, None, "surface"
+    free = body.within_layers(seeds, body.smoothing_layers) & ~body.boundary
+    if body.smoothing_layers <= 0 or not free.any():
+        return x_surf, None, "surface"
+    x_new = x_surf
+    if body.interior != "position":
+        u = harmonic_extension(body.adjacency, x_surf - tn.x, free)
+        u[np.linalg.norm(u, axis=1) <= _SNAP * tn.h_min] = 0.0
+        x_new = np.where(free[:, None], tn.x + u, x_surf)
+        if _acceptable(body, tn, x_new) or body.sweeps <= 0:
+            return x_new, None, "displacement"
+    if body.sweeps <= 0:
+        return x_surf, None, "surface"
+    result = body.smoother(free).run(x_surf, max_sweeps=body.sweeps, rel_tol=1e-6)
+    return result.nodes, result, "position"
+
+
+def _hints(body: AleBody, tn: _TnState, chain: _Chain, curve: SurfaceCurve, slides: NDArray,
+           moved: NDArray) -> NDArray[np.int64]:
+    """Likely old cell of every moved node: for a slid surface node the cell of the segment it
+    landed on, otherwise a cell around its old position."""
+    hint = body._node_cell.copy()
+    slid = slides != 0.0
+    seg = np.searchsorted(curve.node_s, curve.node_s[slid] + slides[slid], side="right") - 1
+    owner = tn.segment_cells(chain)
+    hint[chain.nodes[slid]] = owner[np.clip(seg, 0, owner.size - 1)]
+    return hint[moved]
+
+
+def _check_cells(body: AleBody, x: NDArray, cells: NDArray, label: str) -> None:
+    """MeshError (naming the element) if one of the masked cells is inverted or degenerate."""
+    if np.any(cell_min_sines(x, body.cells[cells]) <= 1e-10):
+        check_elements(x, body.cells, label)
 
 
 def _conserve_momentum(
-    masses: tuple[NDArray, NDArray], x: tuple[NDArray, NDArray], v_old: NDArray,
-    v_new: NDArray, moved: NDArray,
+    tn: _TnState, mass_new: NDArray, x_new: NDArray, v_new: NDArray, moved: NDArray,
 ) -> tuple[NDArray, tuple[NDArray, float]]:
     """Momentum change of the plain remap and the velocity corrected on the remapped nodes.
 
     The rigid correction acts on the remapped nodes only (supported nodes elsewhere keep their
-    velocity); with fewer than two remapped nodes it acts on the whole body.
+    velocity); a single remapped node cannot take a rigid velocity (two momenta, one node), so
+    then it acts on the nodes of the cells around it.
     """
-    p_old, l_old = momenta(masses[0], x[0], v_old)
-    p_new, l_new = momenta(masses[1], x[1], v_new)
+    p_old, l_old = tn.momenta
+    p_new, l_new = momenta(mass_new, x_new, v_new)
     change = (p_new - p_old, l_new - l_old)
-    sub = moved if np.count_nonzero(moved) >= 2 else np.ones_like(moved)
-    p_rest, l_rest = momenta(masses[1][~sub], x[1][~sub], v_new[~sub])
+    sub = moved
+    if np.count_nonzero(moved) < 2:
+        sub = np.zeros_like(moved)
+        sub[tn.body.cells[tn.body.cells_touching(moved)].ravel()] = True
+    p_rest, l_rest = momenta(mass_new[~sub], x_new[~sub], v_new[~sub])
     out = v_new.copy()
-    out[sub] = conservative_velocity_correction(masses[1][sub], x[1][sub], v_new[sub],
+    out[sub] = conservative_velocity_correction(mass_new[sub], x_new[sub], v_new[sub],
                                                 p_old - p_rest, l_old - l_rest)
     return out, change
 
 
-def _mismatch(x_new: NDArray, chain: _Chain, wanted_xy: NDArray) -> float:
-    """Largest distance along the moved surface between an active node and where its target
-    wants it (x_target - Delta): the tangential miss of the predicted end position. The normal
-    part is the gap, which the contact law (not the mesh) closes."""
-    curve = SurfaceCurve.from_chain(x_new[chain.nodes], chain.breaks)
-    s_node = curve.node_s[chain.position]
-    wanted = _wanted_arc(curve, wanted_xy, curve.tangent_at(s_node))
-    return float(np.max(np.abs(wanted - s_node), initial=0.0))
-
-
-def _remap(
-    body: AleBody, x_old: NDArray, points: NDArray, moved: NDArray, fields: tuple
-) -> tuple[NDArray, NDArray, NDArray]:
-    """Old (X, v, a) interpolated at the moved nodes' new positions (4.18); others copied."""
-    out = tuple(f.copy() for f in fields)
-    if moved.any():
-        values = Remapper(x_old, body.cells).remap(np.hstack(fields), points, body.remap)
-        for f, part in zip(out, np.split(values, len(fields), axis=1), strict=True):
-            f[moved] = part
-    return out  # type: ignore[return-value]
-
-
-def _unchanged(X: NDArray, d: NDArray, v: NDArray, a: NDArray) -> AleUpdate:
+def _unchanged(X: NDArray, d: NDArray, v: NDArray, a: NDArray, mismatch: float = 0.0,
+               clamped: NDArray | None = None) -> AleUpdate:
     n = len(X)
-    return AleUpdate(X.copy(), d.copy(), v.copy(), a.copy(), X + d, np.zeros((n, 2)), 0.0,
-                     np.zeros(0, np.int64), np.zeros(n, bool), (np.zeros(2), 0.0))
+    return AleUpdate(X.copy(), d.copy(), v.copy(), a.copy(), X + d, np.zeros((n, 2)), mismatch,
+                     np.zeros(0, np.int64) if clamped is None else clamped, np.zeros(n, bool),
+                     (np.zeros(2), 0.0))
 
 
 def move_ale_body(
@@ -419,9 +668,10 @@ def move_ale_body(
     ``X, d, v, a`` are the body's rows at t_n (local numbering). ``active_local`` are local
     surface nodes in contact; ``x_target`` (k, 2) their partners' predicted end-of-step
     positions, ``x_pred`` (k, 2) the predicted end positions of the particles that were at
-    ``x_start`` (k, 2; default: the active nodes' x_n). With no active node the input is
-    returned unchanged. Raises MeshError (naming body and element) if the moved mesh or its
-    reference image has an inverted element, or if two active nodes' targets cross.
+    ``x_start`` (k, 2; default: the active nodes' x_n). With no active node, or no slide above
+    the tolerance, the input is returned unchanged. Raises MeshError (naming body and element)
+    if the moved mesh or its reference image has an inverted element, or if two active nodes'
+    targets cross.
     """
     X, d, v, a = (np.asarray(f, dtype=float) for f in (X, d, v, a))
     active = np.asarray(active_local, dtype=np.int64).reshape(-1)
@@ -431,25 +681,34 @@ def move_ale_body(
         raise ValueError(f"{body.name}: an active node is listed twice")
     if not dt > 0.0:
         raise ValueError(f"time step must be positive, got {dt}")
-    x_old = X + d
+    tn = body._tn_state(X, d, v, a)
+    x_old = tn.x
     start = x_old[active] if x_start is None else np.asarray(x_start, float).reshape(-1, 2)
     increment = np.asarray(x_pred, dtype=float).reshape(-1, 2) - start
     chain = _open_chain(body, active)
+    curve = tn.curve(chain)
     wanted_xy = np.asarray(x_target, dtype=float).reshape(-1, 2) - increment
-    x_surf, clamped = _relocate_surface(body, x_old, chain, wanted_xy)
-    x_new, smoothing = _smooth_interior(body, x_old, x_surf)
-    check_elements(x_new, body.cells, body.name)
+    slides, clamped, mismatch, resets = _surface_slides(body, curve, chain, wanted_xy)
+    x_surf = _move_surface(tn, curve, chain, slides)
+    x_new, smoothing, stage = _move_interior(body, tn, x_surf)
     moved = np.any(x_new != x_old, axis=1)
-    X_new, v_new, a_new = _remap(body, x_old, x_new[moved], moved, (X, v, a))
-    check_elements(X_new, body.cells, f"{body.name} (reference image)")
-    masses = (lumped_masses(X, body.cells, body.cell_density),
-              lumped_masses(X_new, body.cells, body.cell_density))
-    v_fixed, change = _conserve_momentum(masses, (x_old, x_new), v, v_new, moved)
-    if body.conserve_momentum and moved.any():
+    if not moved.any():
+        return _unchanged(X, d, v, a, mismatch, active[clamped])
+    touched = body.cells_touching(moved)
+    _check_cells(body, x_new, touched, body.name)
+    gradients = tn.gradients if body.remap == "quadratic" else None
+    values = tn.remapper.remap(tn.fields, x_new[moved], body.remap, gradients=gradients,
+                               hint=_hints(body, tn, chain, curve, slides, moved))
+    X_new, v_new, a_new = X.copy(), v.copy(), a.copy()
+    X_new[moved], v_new[moved], a_new[moved] = values[:, :2], values[:, 2:4], values[:, 4:]
+    _check_cells(body, X_new, touched, f"{body.name} (reference image)")
+    mass_new = tn.masses_after(X_new, touched)
+    v_fixed, change = _conserve_momentum(tn, mass_new, x_new, v_new, moved)
+    if body.conserve_momentum:
         v_new = v_fixed
     return AleUpdate(
         X=X_new, d=np.where(moved[:, None], x_new - X_new, d), v=v_new, a=a_new, x_mesh=x_new,
-        mesh_velocity=(x_new - x_old) / dt,
-        mismatch=_mismatch(x_new, chain, wanted_xy),
-        clamped=active[clamped], moved=moved, momentum_change=change, smoothing=smoothing,
+        mesh_velocity=(x_new - x_old) / dt, mismatch=mismatch, clamped=active[clamped],
+        moved=moved, momentum_change=change, smoothing=smoothing, interior=stage,
+        resets=resets,
     )

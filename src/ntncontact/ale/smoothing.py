@@ -21,6 +21,12 @@ angle rules are meaningless in a tangled cell (its angles wrap around), the node
 follow the Laplacian rule until untangled. Uniform
 rectangular grids are a fixed point of all three rules; graded meshes are not a fixed point of the
 Laplacian rule, so free only the disturbed region (``nodes_within_layers``) to keep a grading.
+
+``harmonic_extension`` smooths the mesh DISPLACEMENT instead of the positions: given the moves of
+some nodes (the moved surface nodes of an ALE body), the free nodes take the graph-Laplacian
+(harmonic) extension of those moves, every other node keeping a zero move. Since only moves are
+diffused, a deformed or graded mesh that is not a fixed point of the position smoothers is left
+exactly as it is where nothing pushes it: zero surface moves give zero interior moves.
 """
 
 from __future__ import annotations
@@ -30,6 +36,7 @@ from typing import Literal
 
 import numpy as np
 import scipy.sparse as sp
+import scipy.sparse.linalg as spla
 from numpy.typing import ArrayLike, NDArray
 
 from ntncontact.mesh.quality import check_elements, corner_jacobians, unique_edges
@@ -39,12 +46,16 @@ __all__ = [
     "SmoothingResult",
     "Smoother",
     "boundary_node_mask",
+    "cell_min_sines",
+    "harmonic_extension",
+    "node_adjacency",
     "nodes_within_layers",
 ]
 
 SmoothingMethod = Literal["laplacian", "angle", "weighted_angle"]
 _METHODS = ("laplacian", "angle", "weighted_angle")
 _TWO_PI = 2.0 * np.pi
+_DENSE_LIMIT = 400  # free nodes up to which the harmonic extension solves a dense system
 
 
 def boundary_node_mask(cells: ArrayLike, n_nodes: int) -> NDArray[np.bool_]:
@@ -70,6 +81,71 @@ def nodes_within_layers(
     for _ in range(layers):
         mask = (incidence.T @ (incidence @ mask.astype(float))) > 0
     return mask
+
+
+def node_adjacency(cells: ArrayLike, n_nodes: int) -> sp.csr_matrix:
+    """Symmetric 0/1 node adjacency through the cells' edges, (n, n) CSR."""
+    edges = unique_edges(np.asarray(cells, dtype=np.int64).reshape(-1, 4))
+    rows = np.concatenate([edges[:, 0], edges[:, 1]])
+    cols = np.concatenate([edges[:, 1], edges[:, 0]])
+    return sp.csr_matrix((np.ones(rows.size), (rows, cols)), shape=(n_nodes, n_nodes))
+
+
+def harmonic_extension(
+    adjacency: sp.csr_matrix, moves: ArrayLike, free: ArrayLike, dense_limit: int = _DENSE_LIMIT
+) -> NDArray[np.float64]:
+    """Moves (n, 2) with the free nodes' rows replaced by the harmonic extension of the rest.
+
+    Every free node's move is the average of its edge neighbours' moves (the Laplacian rule of
+    (4.7-4.9) applied to the displacement), solved exactly (sparse LU, one solve for both
+    components) rather than by sweeps. Non-free nodes keep their given moves, so nodes outside
+    the free region and the rest of the boundary act as zero-move anchors when given zero. A
+    free region not connected to any moving node gets exactly zero. Up to ``dense_limit`` free
+    nodes the system is solved dense, beyond by sparse LU.
+    """
+    u = np.array(moves, dtype=float)
+    idx = np.flatnonzero(np.asarray(free, bool))
+    if idx.size == 0:
+        return u
+    # the free rows of the adjacency, read straight from the CSR arrays (no scipy slicing)
+    starts, counts = adjacency.indptr[idx], np.diff(adjacency.indptr)[idx]
+    row = np.repeat(np.arange(idx.size), counts)
+    at = np.repeat(starts - np.cumsum(counts) + counts, counts) + np.arange(counts.sum())
+    col, weight = adjacency.indices[at], adjacency.data[at]
+    local = np.full(len(u), -1)
+    local[idx] = np.arange(idx.size)
+    inner = local[col] >= 0
+    degree = np.bincount(row, weight, idx.size)
+    outer_w = weight[~inner]
+    rhs = np.stack([np.bincount(row[~inner], outer_w * u[col[~inner], k], idx.size)
+                    for k in range(u.shape[1])], axis=1)
+    if not np.any(rhs):
+        u[idx] = 0.0
+        return u
+    if np.any(degree == 0):
+        raise ValueError("a free node without neighbours has no harmonic extension")
+    if idx.size <= dense_limit:
+        system = np.diag(degree)
+        np.add.at(system, (row[inner], local[col[inner]]), -weight[inner])
+        u[idx] = np.linalg.solve(system, rhs)
+    else:
+        system = sp.csc_matrix((np.concatenate([degree, -weight[inner]]),
+                                (np.concatenate([np.arange(idx.size), row[inner]]),
+                                 np.concatenate([np.arange(idx.size), local[col[inner]]]))),
+                               shape=(idx.size, idx.size))
+        u[idx] = spla.splu(system, permc_spec="MMD_AT_PLUS_A").solve(rhs)
+    return u
+
+
+def cell_min_sines(nodes: ArrayLike, cells: ArrayLike) -> NDArray[np.float64]:
+    """Smallest corner sine (corner Jacobian over the two edge lengths) of every cell, (m,):
+    1 for a rectangle, <= 0 for an inverted or degenerate corner."""
+    x = np.asarray(nodes, dtype=float)[np.asarray(cells, dtype=np.int64).reshape(-1, 4)]
+    a, b = np.roll(x, -1, axis=1) - x, np.roll(x, 1, axis=1) - x
+    cross = a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]
+    scale = np.sqrt(np.einsum("...i,...i->...", a, a) * np.einsum("...i,...i->...", b, b))
+    sines = np.divide(cross, scale, out=np.full_like(cross, -1.0), where=scale > 0)
+    return sines.min(axis=1)
 
 
 def _ccw_angle(a: NDArray, b: NDArray) -> NDArray:

@@ -15,6 +15,12 @@ The error of the curve against a smooth surface is O(h^3).
 
 The chain is open: its end nodes are breaks and are never moved by ``respace_surface``. For a
 closed boundary with corners, start and end the chain at a corner.
+
+``respace_surface`` places every free node between the anchors in given proportions, so nodes move
+whenever the current spacing differs from those proportions, slide or no slide. ``local_slides``
+is the incremental alternative used by the ALE update: it spreads each anchor's slide over as few
+neighbouring segments as keep the spacing within a tolerance of the original proportions and
+moves nothing else (see its docstring).
 """
 
 from __future__ import annotations
@@ -26,6 +32,7 @@ from numpy.typing import ArrayLike, NDArray
 
 __all__ = [
     "SurfaceCurve",
+    "local_slides",
     "point_at",
     "project_to_surface",
     "relocate_surface_nodes",
@@ -36,6 +43,7 @@ __all__ = [
 _GAUSS_X, _GAUSS_W = np.polynomial.legendre.leggauss(8)
 _GAUSS_U = 0.5 * (_GAUSS_X + 1.0)
 _GAUSS_W = 0.5 * _GAUSS_W
+_CONVERGED = 1e-14  # Newton updates of a local parameter u in [0, 1] below this: round-off
 
 
 def _break_mask(n: int, corner_mask: ArrayLike | None) -> NDArray[np.bool_]:
@@ -110,6 +118,8 @@ class SurfaceCurve:
             speed = np.linalg.norm(dx, axis=-1)
             step = np.divide(self._arc(seg, u) - ds, speed, out=np.zeros_like(u), where=speed > 0)
             u = np.clip(u - step, 0.0, 1.0)
+            if not np.any(np.abs(step) > _CONVERGED):
+                break
         return seg, u
 
     def point_at(self, s: ArrayLike) -> NDArray[np.float64]:
@@ -124,27 +134,124 @@ class SurfaceCurve:
         dx = self._eval(seg, u)[1]
         return dx / np.linalg.norm(dx, axis=-1, keepdims=True)
 
+    def node_tangents(self, nodes: ArrayLike) -> NDArray[np.float64]:
+        """Unit tangents (p, 2) at chain nodes (same as ``tangent_at(node_s[nodes])``)."""
+        i = np.asarray(nodes, dtype=np.int64).reshape(-1)
+        seg = np.minimum(i, len(self.bulge) - 1)
+        u = (i > seg).astype(float)  # the last node is the end (u = 1) of the last segment
+        dx = self.points[seg + 1] - self.points[seg] + (2.0 * u - 1.0)[:, None] * self.bulge[seg]
+        return dx / np.linalg.norm(dx, axis=-1, keepdims=True)
+
     def project(self, points: ArrayLike) -> NDArray[np.float64]:
         """Arc-length parameter of the closest point on the curve to each point (p,)."""
+        return self.closest(points)[0]
+
+    def closest(self, points: ArrayLike) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """Arc-length parameters (p,) and positions (p, 2) of the closest curve points."""
         pts = np.atleast_2d(np.asarray(points, dtype=float))
         n_seg = len(self.bulge)
-        seg = np.broadcast_to(np.arange(n_seg), (len(pts), n_seg))
-        # coarse sampling on every segment, then Newton on d|x(u) - p|^2/du = 0 per segment
+        # coarse sampling on every segment, then Newton on d|x(u) - p|^2/du = 0 on the few
+        # segments with the closest samples
         samples = np.linspace(0.0, 1.0, 9)
-        xs, _ = self._eval(seg[..., None], np.broadcast_to(samples, (*seg.shape, 9)))
+        all_seg = np.broadcast_to(np.arange(n_seg), (len(pts), n_seg))
+        xs, _ = self._eval(all_seg[..., None], np.broadcast_to(samples, (*all_seg.shape, 9)))
         dist = np.linalg.norm(xs - pts[:, None, None, :], axis=-1)
-        u = samples[np.argmin(dist, axis=-1)]
+        nearest = dist.min(axis=-1)
+        keep = min(3, n_seg)
+        seg = np.argsort(nearest, axis=1, kind="stable")[:, :keep]
+        u = samples[np.take_along_axis(np.argmin(dist, axis=-1), seg, axis=1)]
         for _ in range(5):
             x, dx = self._eval(seg, u)
             r = x - pts[:, None, :]
             grad = np.einsum("psi,psi->ps", r, dx)
-            hess = np.einsum("psi,psi->ps", dx, dx) + 2.0 * np.einsum("psi,si->ps", r, self.bulge)
+            hess = np.einsum("psi,psi->ps", dx, dx) + 2.0 * np.einsum(
+                "psi,psi->ps", r, self.bulge[seg])
             ok = hess > 0  # away from a convex well keep the sampled value
-            u = np.clip(np.where(ok, u - grad / np.where(ok, hess, 1.0), u), 0.0, 1.0)
-        d = np.linalg.norm(self._eval(seg, u)[0] - pts[:, None, :], axis=-1)
-        best = np.argmin(d, axis=1)
+            new = np.clip(np.where(ok, u - grad / np.where(ok, hess, 1.0), u), 0.0, 1.0)
+            done = not np.any(np.abs(new - u) > _CONVERGED)
+            u = new
+            if done:
+                break
+        foot = self._eval(seg, u)[0]
+        best = np.argmin(np.linalg.norm(foot - pts[:, None, :], axis=-1), axis=1)
         rows = np.arange(len(pts))
-        return self.node_s[best] + self._arc(best, u[rows, best])
+        best_seg, best_u = seg[rows, best], u[rows, best]
+        return self.node_s[best_seg] + self._arc(best_seg, best_u), foot[rows, best]
+
+    def _nearest_segments(self, pts: NDArray, keep: int = 3) -> NDArray[np.int64]:
+        """Per point the ``keep`` segments with the closest of 9 samples each, (p, keep)."""
+        n_seg = len(self.bulge)
+        samples = np.linspace(0.0, 1.0, 9)
+        all_seg = np.broadcast_to(np.arange(n_seg), (len(pts), n_seg))
+        xs, _ = self._eval(all_seg[..., None], np.broadcast_to(samples, (*all_seg.shape, 9)))
+        nearest = np.linalg.norm(xs - pts[:, None, None, :], axis=-1).min(axis=-1)
+        return np.argsort(nearest, axis=1, kind="stable")[:, :min(keep, n_seg)]
+
+    def _end_tangents(self) -> tuple[NDArray, NDArray]:
+        """Unit tangents at the start and end of every segment from the continuous nodal
+        tangent field: at a smooth node the normalized mean of the two segments' one-sided
+        tangents (so both segments share it), at a break the segment's own."""
+        d = np.diff(self.points, axis=0)
+        start, end = d - self.bulge, d + self.bulge
+        start /= np.linalg.norm(start, axis=1, keepdims=True)
+        end /= np.linalg.norm(end, axis=1, keepdims=True)
+        inner = ~self.breaks[1:-1]  # node i + 1 joins segments i and i + 1
+        mean = end[:-1] + start[1:]
+        mean /= np.linalg.norm(mean, axis=1, keepdims=True)
+        end[:-1][inner], start[1:][inner] = mean[inner], mean[inner]
+        return start, end
+
+    def normal_foot(self, points: ArrayLike) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """Arc-length parameters (p,) and positions (p, 2) of the curve points whose normal
+        passes through each point, the normal taken from the continuous tangent field that
+        interpolates linearly (in u) between the nodal tangents of ``_end_tangents``.
+
+        Unlike the closest point this is well defined and smooth at the nodes: the averaged
+        parabolas leave O(h^2) tangent kinks at the nodes, so a point at distance g straight
+        off a node of a curved chain can have two closest points about g times the kink angle
+        either side of it, and the choice between them flips with round-off. On a straight
+        chain both coincide with the orthogonal projection. A point beyond a break (no normal
+        through it on the adjacent segment) gets the break.
+        """
+        pts = np.atleast_2d(np.asarray(points, dtype=float))
+        seg = self._nearest_segments(pts)
+        t_start, t_end = self._end_tangents()
+        t0, t1 = t_start[seg], t_end[seg]
+        p = pts[:, None, :]
+
+        def residual(u: NDArray) -> tuple[NDArray, NDArray]:
+            """f(u) = (p - x(u)) . t(u), decreasing through the foot, and df/du."""
+            x, dx = self._eval(seg, u)
+            t = t0 + u[..., None] * (t1 - t0)
+            r = p - x
+            return (np.einsum("psi,psi->ps", r, t),
+                    np.einsum("psi,psi->ps", r, t1 - t0) - np.einsum("psi,psi->ps", dx, t))
+
+        f0, _ = residual(np.zeros(seg.shape))
+        f1, _ = residual(np.ones(seg.shape))
+        root = (f0 >= 0.0) & (f1 <= 0.0)
+        lo, hi = np.zeros(seg.shape), np.ones(seg.shape)
+        u = np.where(root, f0 / np.where(root & (f0 > f1), f0 - f1, 1.0), np.where(f0 < 0, 0, 1))
+        for _ in range(30):  # Newton on the bracketed cubic, bisection when it leaves the bracket
+            f, df = residual(u)
+            lo, hi = np.where(f > 0.0, u, lo), np.where(f > 0.0, hi, u)
+            step = np.divide(f, df, out=np.full_like(f, np.inf), where=df < 0.0)
+            new = u - step
+            new = np.where((new > lo) & (new < hi), new, 0.5 * (lo + hi))
+            new = np.where(root & (f != 0.0), new, u)
+            done = not np.any(np.abs(new - u) > _CONVERGED)
+            u = new
+            if done:
+                break
+        foot = self._eval(seg, u)[0]
+        dist = np.linalg.norm(foot - p, axis=-1) + np.where(root, 0.0, np.inf)
+        best = np.argmin(dist, axis=1)
+        rows = np.arange(len(pts))
+        none = ~root.any(axis=1)  # beyond a break: the nearest candidate's nearer end
+        ends = np.linalg.norm(self._eval(seg, np.where(f0 < 0, 0.0, 1.0))[0] - p, axis=-1)
+        best = np.where(none, np.argmin(ends, axis=1), best)
+        best_seg, best_u = seg[rows, best], u[rows, best]
+        return self.node_s[best_seg] + self._arc(best_seg, best_u), foot[rows, best]
 
 
 def point_at(
@@ -218,3 +325,89 @@ def relocate_surface_nodes(
     targets[active_idx] = s_active
     new_xy = respace_surface(curve.points, mask, targets, curve.breaks, spacing)
     return new_xy, s_active
+
+
+def _slack(cur: NDArray, target: NDArray, change: float, lo: float, hi: float) -> NDArray:
+    """How much each segment can shrink (change < 0) or grow (change > 0) within the band."""
+    room = cur - lo * target if change < 0.0 else hi * target - cur
+    return np.maximum(room, 0.0)
+
+
+def _buffer(cur: NDArray, target: NDArray, slide: float, lo: float, hi: float) -> NDArray | None:
+    """Length changes of the fewest leading segments that absorb a slide of their first node
+    within the band, each in proportion to its slack; None if the whole run cannot."""
+    change = -slide  # the leading segments shrink when the first node slides into the run
+    slack = _slack(cur, target, change, lo, hi)
+    total = np.cumsum(slack)
+    enough = np.flatnonzero(total >= abs(change))
+    if enough.size == 0:
+        return None
+    m = int(enough[0]) + 1
+    return change * slack[:m] / total[m - 1]
+
+
+def local_slides(
+    node_s: ArrayLike,
+    reference_spacing: ArrayLike,
+    anchors: ArrayLike,
+    anchor_slides: ArrayLike,
+    tolerance: float = 0.5,
+) -> tuple[NDArray[np.float64], int]:
+    """Arc-length slides of all chain nodes given the slides of the anchors; (slides, resets).
+
+    ``node_s`` are the nodes' current arc-length positions, ``reference_spacing`` the n - 1
+    segment lengths of the original mesh, ``anchors`` increasing chain indices (including both
+    chain ends and every corner, which should slide 0) and ``anchor_slides`` their slides. A
+    segment's target length is its reference length scaled by the current stretch of its run
+    (the stretch between two consecutive anchors); its length must stay in the band
+    [1 - t, 1 / (1 - t)] times that (t = ``tolerance``), and its slack is how far it may still
+    shrink (or grow) inside the band. Per run between anchors a < b:
+
+    * both slides zero: nothing moves (slides exactly 0);
+    * otherwise each moving anchor's slide is absorbed by the fewest segments next to it (a
+      "buffer") whose slack suffices, each shrinking or growing in proportion to its slack (a
+      segment already at the edge of the band is carried along rigidly); nodes beyond the
+      buffers do not move. Repeated slides the same way thus compress a neighbourhood that
+      widens as it saturates, and never push a segment out of the band;
+    * if the two buffers would overlap, the run's length change is shared by all its segments
+      the same way (equal slides: a rigid shift of the run);
+    * if the run's slack does not suffice (only when it was already outside the band, or the
+      slide is larger than the band allows), the run is respaced in the reference proportions;
+      ``resets`` counts these runs.
+    """
+    s = np.asarray(node_s, dtype=float)
+    ref = np.asarray(reference_spacing, dtype=float)
+    idx = np.asarray(anchors, dtype=np.int64).reshape(-1)
+    slide = np.asarray(anchor_slides, dtype=float).reshape(-1)
+    if not 0.0 < tolerance < 1.0:
+        raise ValueError(f"tolerance must lie in (0, 1), got {tolerance}")
+    if idx.shape != slide.shape or ref.shape != (s.size - 1,) or np.any(np.diff(idx) <= 0):
+        raise ValueError("anchors must be increasing chain indices with one slide each and "
+                         "reference_spacing must have one length per segment")
+    lo, hi = 1.0 - tolerance, 1.0 / (1.0 - tolerance)
+    out = np.zeros(s.size)
+    out[idx] = slide
+    seg = np.diff(s)
+    resets = 0
+    for k in np.flatnonzero((np.diff(idx) >= 2) & ((slide[:-1] != 0.0) | (slide[1:] != 0.0))):
+        a, b, sa, sb = idx[k], idx[k + 1], slide[k], slide[k + 1]
+        cur, rseg = seg[a:b], ref[a:b]
+        target = rseg * (cur.sum() / rseg.sum())
+        head = _buffer(cur, target, sa, lo, hi) if sa != 0.0 else np.zeros(0)
+        tail = _buffer(cur[::-1], target[::-1], -sb, lo, hi) if sb != 0.0 else np.zeros(0)
+        if head is not None and tail is not None and head.size + tail.size <= b - a:
+            out[a + 1:a + head.size] = sa + np.cumsum(head)[:-1]
+            out[b - tail.size + 1:b] = (sb - np.cumsum(tail)[:-1])[::-1]
+            continue
+        change = sb - sa  # of the run's length
+        slack = _slack(cur, target, change, lo, hi)
+        if change == 0.0:
+            out[a + 1:b] = sa
+        elif slack.sum() >= abs(change):
+            out[a + 1:b] = sa + change * np.cumsum(slack)[:-1] / slack.sum()
+        else:
+            resets += 1
+            cum = np.concatenate([[0.0], np.cumsum(rseg)])
+            local = s[a:b + 1] - s[a]
+            out[a + 1:b] = sa + cum[1:-1] / cum[-1] * (local[-1] + change) - local[1:-1]
+    return out, resets
