@@ -47,6 +47,23 @@ class StepRecord:
     extra: dict = field(default_factory=dict)
 
 
+#: Quasi-static steps are re-solved at most this many times when new pairs penetrate.
+ACTIVE_SET_PASSES = 5
+
+
+@dataclass(frozen=True)
+class SolvedStep:
+    """The converged solution of one step before the kinematic update."""
+
+    state: StepState  # the t_n state the step was solved from (ALE: the moved mesh)
+    d: NDArray  # d_{n+1/2} (dynamic) or d_{n+1} (static), (n, 2)
+    used: tuple  # the contact states the final solve used
+    results: tuple
+    augmentations: int
+    iterations: int
+    mismatch: float
+
+
 class Observer(Protocol):
     def on_step(self, model: Model, record: StepRecord) -> None: ...
 
@@ -107,12 +124,49 @@ class Simulation:
         return balance(self._nodal(state), state.x, state.v, energy)
 
     def advance(self, state: StepState, dt: float) -> tuple[StepState, int]:
-        """One step of size dt from ``state`` (report 5.4): detection, then per augmentation
-        the ALE mesh motion and Newton with the contact multipliers fixed, until converged;
-        then the kinematic update."""
+        """One step of size dt from ``state`` (report 5.4): detection, then the augmented
+        solve; quasi-static steps repeat the solve while the converged configuration shows
+        new penetrations (an active-set iteration), then the kinematic update."""
         interfaces = self.model.interfaces
         contact = (detect_all(interfaces, state.contact, state.x, state.v, dt) if interfaces
                    else ())
+        iterations = 0
+        for _ in range(ACTIVE_SET_PASSES):
+            solved = self._solve_step(state, contact, dt)
+            iterations += solved.iterations
+            if self.dynamic or not interfaces:
+                break
+            grown = self._with_new_penetrations(solved.used, solved.state.X + solved.d)
+            if grown is None:
+                break
+            contact = grown
+        s, d = solved.state, solved.d
+        if self.dynamic:
+            d1, v1, a1 = end_of_step(d, s.d, s.v, dt)
+        else:
+            d1, v1, a1 = d, (d - s.d) / dt, np.zeros_like(d)
+        results = solved.results
+        committed = commit_all(interfaces, solved.used, results) if interfaces else ()
+        self._last_contact = (results if interfaces else (), solved.augmentations)
+        self._last_mismatch = solved.mismatch
+        self._step_dissipation += sum(r.dissipation for r in results if r is not None)
+        new = StepState(s.step + 1, s.time + dt, s.X, d1, v1, a1, committed)
+        return new, iterations
+
+    def _with_new_penetrations(self, contact, x_end: NDArray):
+        """The active sets grown by the pairs that penetrate at x_end, or None if none do."""
+        found = detect_all(self.model.interfaces, contact, x_end, np.zeros_like(x_end), 0.0)
+        grown, added = [], False
+        for old, new in zip(contact, found, strict=True):
+            fresh = ~np.isin(new.pairs[:, 0], old.pairs[:, 0])
+            added |= bool(fresh.any())
+            grown.append(old.concat(PairState.from_pairs(new.pairs[fresh])))
+        return tuple(grown) if added else None
+
+    def _solve_step(self, state: StepState, contact, dt: float) -> SolvedStep:
+        """Per augmentation: the ALE mesh motion and Newton with the contact multipliers
+        fixed, then the multiplier update, until report 5.4's test is met."""
+        interfaces = self.model.interfaces
         base, motion = state, None
         x_pred = state.x + dt * state.v  # first prediction of the end-of-step positions
         previous, iterations, guess = None, 0, None
@@ -130,11 +184,10 @@ class Simulation:
             result = newton(problem.residual, problem.jacobian, self.solve, y0, self.settings,
                             self.length_scale)
             iterations += result.iterations
+            split = None
             if self.model.analysis.energy_conserving and any(len(c) for c in contact):
                 problem, result, its, split = self._conserve_energy(problem, result, mass)
                 iterations += its
-            else:
-                split = None
             guess = None if split else result.y
             d = problem.full(result.y).reshape(-1, 2)
             contact = with_solved_multipliers(interfaces, contact,
@@ -146,16 +199,8 @@ class Simulation:
             if done:
                 break
             previous = results
-        if self.dynamic:
-            d1, v1, a1 = end_of_step(d, state.d, state.v, dt)
-        else:
-            d1, v1, a1 = d, (d - state.d) / dt, np.zeros_like(d)
-        committed = commit_all(interfaces, used, results) if interfaces else ()
-        self._last_contact = (results if interfaces else (), augmentation)
-        self._last_mismatch = motion.mismatch if motion is not None else 0.0
-        self._step_dissipation += sum(r.dissipation for r in results if r is not None)
-        new = StepState(state.step + 1, state.time + dt, state.X, d1, v1, a1, committed)
-        return new, iterations
+        mismatch = motion.mismatch if motion is not None else 0.0
+        return SolvedStep(state, d, used, results, augmentation, iterations, mismatch)
 
     def _conserve_energy(self, problem: StepProblem, result, mass):
         """Report 5.5 (see ``dynamics.energy``): if the Lagrange step changed the total energy,
