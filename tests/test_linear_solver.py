@@ -187,3 +187,15 @@ def test_bad_input_is_reported():
 
 def test_auto_prefers_pardiso_when_installed():
     assert LinearSolver().backend == ("pardiso" if pardiso_available() else "superlu")
+
+
+def test_auto_uses_superlu_for_small_systems():
+    from ntncontact.solvers import linear
+
+    solver = LinearSolver()
+    n = 50
+    A = sp.diags([2.0 * np.ones(n), -np.ones(n - 1), -np.ones(n - 1)], [0, 1, -1], format="csr")
+    x = solver.solve(A, np.ones(n))
+    np.testing.assert_allclose(A @ x, np.ones(n), rtol=1e-12)
+    assert n < linear.PARDISO_MIN_UNKNOWNS
+    assert all(isinstance(i, linear._SuperLUBackend) for i in solver._impls.values())
