@@ -135,12 +135,14 @@ class SurfaceCurve:
         return dx / np.linalg.norm(dx, axis=-1, keepdims=True)
 
     def node_tangents(self, nodes: ArrayLike) -> NDArray[np.float64]:
-        """Unit tangents (p, 2) at chain nodes (same as ``tangent_at(node_s[nodes])``)."""
+        """Unit tangents (p, 2) of the continuous tangent field at chain nodes: the mean of the
+        two segments' one-sided tangents at a smooth node, the adjacent segment's at a break
+        (see ``normal_foot``)."""
         i = np.asarray(nodes, dtype=np.int64).reshape(-1)
-        seg = np.minimum(i, len(self.bulge) - 1)
-        u = (i > seg).astype(float)  # the last node is the end (u = 1) of the last segment
-        dx = self.points[seg + 1] - self.points[seg] + (2.0 * u - 1.0)[:, None] * self.bulge[seg]
-        return dx / np.linalg.norm(dx, axis=-1, keepdims=True)
+        start, end = self._end_tangents()
+        last = i == len(self.points) - 1
+        return np.where(last[:, None], end[np.maximum(i - 1, 0)],
+                        start[np.minimum(i, len(start) - 1)])
 
     def project(self, points: ArrayLike) -> NDArray[np.float64]:
         """Arc-length parameter of the closest point on the curve to each point (p,)."""
@@ -237,7 +239,7 @@ class SurfaceCurve:
             lo, hi = np.where(f > 0.0, u, lo), np.where(f > 0.0, hi, u)
             step = np.divide(f, df, out=np.full_like(f, np.inf), where=df < 0.0)
             new = u - step
-            new = np.where((new > lo) & (new < hi), new, 0.5 * (lo + hi))
+            new = np.where((new >= lo) & (new <= hi), new, 0.5 * (lo + hi))
             new = np.where(root & (f != 0.0), new, u)
             done = not np.any(np.abs(new - u) > _CONVERGED)
             u = new
