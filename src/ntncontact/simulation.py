@@ -29,6 +29,7 @@ from .interfaces import (
 from .mesh_motion import move_meshes
 from .model import Model
 from .problem import StepProblem, StepState
+from .solvers.linear import LinearSolverError
 from .solvers.newton import NewtonError, NewtonSettings, newton
 
 
@@ -220,17 +221,31 @@ class Simulation:
         others = [t for t in problem.constraints if t not in gap_terms]
         combined = EnergyConsistentContact(gap_terms, [t.h_at(state.x) for t in gap_terms],
                                            end_energy, energy_n)
-        bordered = StepProblem(self.model, state, dt, mass, problem.extra, others + [combined])
         y0 = np.concatenate([result.y[: problem.free_dofs.size]]
                             + [t.initial for t in others] + [combined.initial])
         y0[-combined.size:-1] = np.concatenate(
             [m for t, m in zip(problem.constraints, problem.multipliers(result.y), strict=True)
              if t in gap_terms])
-        new = newton(bordered.residual, bordered.jacobian, self.solve, y0, self.settings,
-                     self.length_scale)
+        if np.abs(np.concatenate(combined.h_start)).max() <= 1e-12 * self.length_scale**2:
+            combined = combined.with_theta(1.0)  # no gap to relax: theta is undetermined
+        try:
+            bordered, new = self._solve_bordered(problem, others, combined, y0)
+        except (NewtonError, LinearSolverError):
+            # the energy equation cannot be met on this step (nearly closed gaps): fall back
+            # to theta = 1, the persistency condition, which conserves energy by itself
+            combined = combined.with_theta(1.0)
+            y0[-1] = 1.0
+            bordered, new = self._solve_bordered(problem, others, combined, y0)
         lams, theta = combined.split(bordered.multipliers(new.y)[-1])
         self._energy_multiplier = theta
         return bordered, new, new.iterations, (others, lams)
+
+    def _solve_bordered(self, problem: StepProblem, others: list, combined, y0: NDArray):
+        bordered = StepProblem(self.model, problem.state, problem.dt, problem.mass,
+                               problem.extra, others + [combined])
+        new = newton(bordered.residual, bordered.jacobian, self.solve, y0, self.settings,
+                     self.length_scale)
+        return bordered, new
 
     @staticmethod
     def _lagrange_multipliers(problem: StepProblem, result, split) -> list:

@@ -60,6 +60,7 @@ class EnergyConsistentContact:
     h_start: list[NDArray]
     end_energy: EndEnergy
     energy_n: float
+    fixed_theta: float | None = None  # replace the energy equation by theta = fixed_theta
 
     @property
     def size(self) -> int:
@@ -93,13 +94,23 @@ class EnergyConsistentContact:
             c_rows.append(row + np.arange(t.size))
             c_vals.append(-h0)
             row += t.size
-        energy, grad = self.end_energy(x_eval.ravel() - self.end_energy.X.ravel())
-        nz = np.flatnonzero(grad)
-        g_parts.append((np.full(nz.size, row), nz, grad[nz]))
-        hs.append(np.array([energy - self.energy_n]))
+        if self.fixed_theta is None:
+            energy, grad = self.end_energy(x_eval.ravel() - self.end_energy.X.ravel())
+            nz = np.flatnonzero(grad)
+            g_parts.append((np.full(nz.size, row), nz, grad[nz]))
+            hs.append(np.array([energy - self.energy_n]))
+        else:  # theta = fixed_theta: a plain row on the multiplier itself
+            hs.append(np.array([theta - self.fixed_theta]))
+            c_rows.append(np.array([row]))
+            c_vals.append(np.array([1.0]))
         cat = [np.concatenate(p) for p in zip(*k_parts, strict=True)]
         gcat = [np.concatenate(p) for p in zip(*g_parts, strict=True)]
         bcat = [np.concatenate(p) for p in zip(*b_parts, strict=True)]
         crow = np.concatenate(c_rows)
         return (force, tuple(cat), np.concatenate(hs), tuple(gcat), tuple(bcat),
                 (crow, np.full(crow.size, row), np.concatenate(c_vals)))
+
+    def with_theta(self, theta: float) -> EnergyConsistentContact:
+        """The same term with theta held fixed (theta = 1: the persistency condition)."""
+        return EnergyConsistentContact(self.terms, self.h_start, self.end_energy, self.energy_n,
+                                       theta)
