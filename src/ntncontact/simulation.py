@@ -180,8 +180,9 @@ class Simulation:
                                   contact_terms(interfaces, contact, dt),
                                   lagrange_terms(interfaces, contact, dt))
             y0 = problem.initial_guess()
-            if guess is not None and guess.size == y0.size and motion is None:
-                y0 = guess
+            if guess is not None:  # warm start: the last solution, shifted by the remap
+                d_guess = guess[0] + (state.d - guess[1]).ravel()
+                y0[: problem.free_dofs.size] = d_guess[problem.free_dofs]
             result = newton(problem.residual, problem.jacobian, self.solve, y0, self.settings,
                             self.length_scale)
             iterations += result.iterations
@@ -189,8 +190,8 @@ class Simulation:
             if self.model.analysis.energy_conserving and any(len(c) for c in contact):
                 problem, result, its, split = self._conserve_energy(problem, result, mass)
                 iterations += its
-            guess = None if split else result.y
             d = problem.full(result.y).reshape(-1, 2)
+            guess = (d.ravel(), state.d)
             contact = with_solved_multipliers(interfaces, contact,
                                               self._lagrange_multipliers(problem, result, split))
             results = self._contact_results(interfaces, contact, state, d, dt)
