@@ -44,6 +44,10 @@ def test_fast_sliding_friction_dissipates_what_the_report_finds(mu, dissipated):
     # own error, which the frictionless run bounds at ~0.2 %)
     ledger = rec.records[-1].extra["frictional_dissipation"]
     assert ledger == pytest.approx(energy[0] - energy[-1], rel=0.02)
+    # the work of the contact forces is (minus) what friction dissipated: the normal forces
+    # do no work under the persistency condition (report 3.3.1)
+    contact_work = rec.records[-1].extra["contact_work"]
+    assert contact_work == pytest.approx(-ledger, rel=0.02)
     assert np.abs(momentum - momentum[0]).max() < 1e-9
 
 

@@ -48,6 +48,9 @@ class StepRecord:
     extra: dict = field(default_factory=dict)
 
 
+#: Energy ledger columns accumulated over the run (history.csv).
+LEDGER = ("external_work", "contact_work", "frictional_dissipation")
+
 #: Quasi-static steps are re-solved at most this many times when new pairs penetrate.
 ACTIVE_SET_PASSES = 5
 
@@ -115,8 +118,8 @@ class Simulation:
         self.initial_contact = tuple(PairState.empty() for _ in model.interfaces)
         self.state = replace(self.state, contact=self.initial_contact)
         self._last_contact: tuple = ((), 0)
-        self.dissipation = 0.0
-        self._step_dissipation = 0.0
+        self.ledger = dict.fromkeys(LEDGER, 0.0)  # cumulative energy ledger
+        self._step_work = dict.fromkeys(LEDGER, 0.0)
         self._last_mismatch = 0.0
         self._energy_multiplier = 0.0
 
@@ -150,7 +153,7 @@ class Simulation:
         committed = commit_all(interfaces, solved.used, results) if interfaces else ()
         self._last_contact = (results if interfaces else (), solved.augmentations)
         self._last_mismatch = solved.mismatch
-        self._step_dissipation += sum(r.dissipation for r in results if r is not None)
+        self._accumulate_work(s, d1, results, dt)
         new = StepState(s.step + 1, s.time + dt, s.X, d1, v1, a1, committed)
         return new, iterations
 
@@ -284,11 +287,11 @@ class Simulation:
         """Advance by dt, halving (up to max_cutbacks times) sub-steps that fail."""
         state, remaining, iterations, cuts = self.state, dt, 0, 0
         h = dt
-        self._step_dissipation = 0.0  # summed over the accepted sub-steps
+        self._step_work = dict.fromkeys(LEDGER, 0.0)  # summed over the accepted sub-steps
         while remaining > 1e-12 * dt:
             h = min(h, remaining)
             try:
-                before = self._step_dissipation
+                before = dict(self._step_work)
                 state, its = self.advance(state, h)
             except (NewtonError, InvertedElementError, np.linalg.LinAlgError, RuntimeError) as err:
                 cuts += 1
@@ -298,7 +301,7 @@ class Simulation:
                         f"{self.state.time + dt:.6g}) failed after {cuts - 1} halvings of the "
                         f"step: {err}"
                     ) from err
-                self._step_dissipation = before
+                self._step_work = before
                 h *= 0.5
                 continue
             iterations += its
@@ -317,8 +320,8 @@ class Simulation:
                 dt = t_next - self.state.time
                 self.state, its, _ = self.step_with_cutback(dt)
                 self.state = replace(self.state, time=t_next)
-                self._notify(StepRecord(self.state, self.balance(self.state), its, dt,
-                                        self._contact_extra()))
+                extra = self._ledger_extra() | self._contact_extra()
+                self._notify(StepRecord(self.state, self.balance(self.state), its, dt, extra))
                 if progress is not None:
                     progress(self.state.time)
         except KeyboardInterrupt:
@@ -330,15 +333,31 @@ class Simulation:
         self._finish("completed", None)
         return self.state
 
+    def _accumulate_work(self, s: StepState, d1: NDArray, results, dt: float) -> None:
+        """Work of the external and contact forces over the step, and the frictional
+        dissipation: E_{n+1} - E_n = external + contact work (+ the scheme's own error)."""
+        dx = (s.X + d1 - s.x).ravel()
+        t_eval = s.time + (0.5 * dt if self.dynamic else dt)
+        self._step_work["external_work"] += float(self.model.loads(t_eval, dx.size) @ dx)
+        active = [r for r in results if r is not None]
+        if active:
+            self._step_work["contact_work"] -= float(sum(r.force for r in active) @ dx)
+            self._step_work["frictional_dissipation"] += sum(r.dissipation for r in active)
+
+    def _ledger_extra(self) -> dict:
+        for key, value in self._step_work.items():
+            self.ledger[key] += value
+        return {"external_work": self.ledger["external_work"]}
+
     def _contact_extra(self) -> dict:
         """History columns and contact.csv rows of the step just completed."""
         results, augmentations = self._last_contact
         if not self.model.interfaces:
             return {}
-        self.dissipation += self._step_dissipation
         return {
             "active_pairs": sum(len(r.pairs) for r in results if r is not None),
-            "frictional_dissipation": self.dissipation,
+            "frictional_dissipation": self.ledger["frictional_dissipation"],
+            "contact_work": self.ledger["contact_work"],
             "augmentations": augmentations,
             "ale_mismatch": self._last_mismatch,
             "energy_multiplier": self._energy_multiplier,

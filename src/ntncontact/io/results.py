@@ -11,8 +11,8 @@ from ..postprocess import element_von_mises
 from ..simulation import StepRecord
 from .writers import ResultsDirectory
 
-CONTACT_HISTORY = ("active_pairs", "frictional_dissipation", "augmentations", "ale_mismatch",
-                   "energy_multiplier")
+CONTACT_HISTORY = ("active_pairs", "frictional_dissipation", "contact_work", "augmentations",
+                   "ale_mismatch", "energy_multiplier")
 
 
 class ResultWriter:
@@ -20,6 +20,7 @@ class ResultWriter:
 
     def __init__(self, directory: str | Path, model: Model, extra_history: tuple[str, ...] = (),
                  **summary_extra: object) -> None:
+        extra_history = ("external_work",) + extra_history
         if model.interfaces:
             extra_history = extra_history + CONTACT_HISTORY
             summary_extra = {"contact_start_time": None, "contact_end_time": None,
