@@ -150,6 +150,8 @@ def _ale_setup(index: int, body: Body, cfg: BodyConfig, config: ScenarioConfig) 
     motion = AleBody.from_mesh(body.mesh, surfaces.pop(), smoothing=opts.smoothing,
                                smoothing_layers=opts.smoothing_layers, sweeps=opts.sweeps,
                                remap=opts.remap, conserve_momentum=opts.conserve_momentum,
+                               respace=opts.respace, interior=opts.interior,
+                               slide_tolerance=opts.slide_tolerance,
                                density=body.material.density, name=body.name)
     return AleSetup(index, body.node_offset, body.mesh.n_nodes, motion)
 

@@ -170,6 +170,9 @@ class AleConfig(Strict):
     sweeps: Annotated[int, Field(ge=0)] = 10
     remap: Literal["linear", "quadratic"] = "linear"
     conserve_momentum: bool = True
+    respace: Literal["local", "reference"] = "local"
+    interior: Literal["minimal", "displacement", "position"] = "minimal"
+    slide_tolerance: Positive = 1e-8
 
 
 class BodyConfig(Strict):
