@@ -1,0 +1,68 @@
+"""Cost of the ALE mesh motion: the same impact run with the partner body ALE and Lagrangian.
+
+Usage: .venv/bin/python benchmarks/ale_step.py [--example ring_impact.toml] [--t-end 0.4]
+
+Reports steps/s of both runs, the time spent in the mesh update (surface relocation,
+respacing, smoothing, remap) and its share of the ALE run, and the per-step overhead ratio.
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+from pathlib import Path
+
+from ntncontact import simulation
+from ntncontact.builder import build_model
+from ntncontact.io.scenario import load_scenario
+
+EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
+
+
+def timed_run(example: str, t_end: float, motion: str) -> tuple[float, int, float]:
+    """(wall time, steps, time inside the ALE mesh update) of one run."""
+    path = EXAMPLES / example
+    config = load_scenario(path, [f"analysis.t_end={t_end}",
+                                  f'bodies.1.mesh_motion="{motion}"'])
+    model = build_model(config, path.parent)
+    spent = [0.0]
+    original = simulation.move_meshes
+
+    def timed_move(*args, **kwargs):
+        start = time.perf_counter()
+        try:
+            return original(*args, **kwargs)
+        finally:
+            spent[0] += time.perf_counter() - start
+
+    simulation.move_meshes = timed_move
+    try:
+        sim = simulation.Simulation(model)
+        start = time.perf_counter()
+        sim.run()
+        wall = time.perf_counter() - start
+    finally:
+        simulation.move_meshes = original
+    return wall, sim.state.step, spent[0]
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__)
+    parser.add_argument("--example", default="ring_impact.toml")
+    parser.add_argument("--t-end", type=float, default=0.4)
+    args = parser.parse_args()
+    timed_run(args.example, 0.02, "lagrangian")  # warm up Numba and imports
+    lag, steps, _ = timed_run(args.example, args.t_end, "lagrangian")
+    ale, steps_ale, motion = timed_run(args.example, args.t_end, "ale")
+    print(f"{args.example} to t = {args.t_end} ({steps} steps)")
+    print("| run | wall s | steps/s | mesh update s | share |")
+    print("| --- | ---: | ---: | ---: | ---: |")
+    print(f"| Lagrangian partner | {lag:.2f} | {steps / lag:.1f} | - | - |")
+    print(f"| ALE partner | {ale:.2f} | {steps_ale / ale:.1f} | {motion:.2f} | "
+          f"{motion / ale:.0%} |")
+    print(f"ALE run / Lagrangian run: {ale / lag:.2f}; mesh update alone adds "
+          f"{motion / lag:.0%} to the Lagrangian run's time")
+
+
+if __name__ == "__main__":
+    main()
