@@ -15,6 +15,9 @@ from helpers import EXAMPLES, Recorder, model_from_example
 from ntncontact.ale.example_mesh_motion import STAGES, mesh_motion_example
 from ntncontact.mesh.boundary import nodal_tributary_lengths, surface_chain
 from ntncontact.mesh.quality import corner_jacobians
+from ntncontact.reference import fit_hertz_ellipse as fit_ellipse
+from ntncontact.reference import hertz_plane_strain as hertz
+from ntncontact.reference import smoother_ranking as ranking
 from ntncontact.reference import table
 from ntncontact.simulation import Simulation
 
@@ -167,12 +170,6 @@ LEVEL_OVERRIDES = {
 }
 
 
-def hertz(load: float) -> tuple[float, float]:
-    """Plane-strain half-width and peak pressure of a cylinder on a rigid flat."""
-    a = np.sqrt(4.0 * load * R_HERTZ * (1.0 - NU_HERTZ**2) / (np.pi * E_HERTZ))
-    return a, 2.0 * load / (np.pi * a)
-
-
 # the report's snapshots (26.6 %, 60 %, 100 % of the load) end hold steps t = 5, 11, 18
 SNAPSHOTS = {5: 4.0 / 15.0, 11: 9.0 / 15.0, 18: 1.0}
 
@@ -218,16 +215,6 @@ def below_foundation(model, x: np.ndarray, exclude: np.ndarray) -> np.ndarray:
     arc = arc[~np.isin(arc, exclude)]
     surface = x[top][np.argsort(x[top, 0])]
     return np.interp(x[arc, 0], surface[:, 0], surface[:, 1]) - x[arc, 1]
-
-
-def fit_ellipse(X: np.ndarray, p: np.ndarray, a0: float, p0: float) -> tuple[float, float]:
-    """Least-squares (a, p0) of p0 sqrt(1 - X^2/a^2) through the pressed nodes."""
-    from scipy.optimize import least_squares
-
-    def misfit(z):
-        return z[1] * np.sqrt(np.clip(1.0 - (X / z[0]) ** 2, 0.0, None)) - p
-
-    return tuple(least_squares(misfit, [a0, p0]).x)
 
 
 def check_hertz_level(level: int) -> dict[str, float]:
@@ -451,10 +438,6 @@ def table_4_1(measure: str) -> dict[str, float]:
     row = list(TABLE_4_1["measure"]).index(measure)
     return {stage: float(TABLE_4_1[stage][row]) for stage in ("original", "before_smoothing",
                                                               *SMOOTHERS)}
-
-
-def ranking(values: dict[str, float], larger_is_better: bool) -> list[str]:
-    return sorted(SMOOTHERS, key=lambda s: -values[s] if larger_is_better else values[s])
 
 
 def test_mesh_motion_smoothers_rank_as_in_table_4_1():

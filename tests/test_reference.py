@@ -7,7 +7,22 @@ import pytest
 
 from ntncontact.cli import main
 from ntncontact.io.writers import HistoryWriter
-from ntncontact.reference import compare, report_values, table
+from ntncontact.reference import (
+    HERTZ_LOAD,
+    Comparison,
+    compare,
+    first_slip_node,
+    fit_hertz_ellipse,
+    hertz_plane_strain,
+    our_values,
+    report_values,
+    smoother_ranking,
+    start_of_last_run,
+    table,
+    table_4_1,
+    table_6_1_first_slip_node,
+    write_comparison_csv,
+)
 
 
 def test_reference_tables_ship_with_the_package():
@@ -43,3 +58,82 @@ def test_compare_reads_a_results_folder(tmp_path, capsys):
     assert "energy_dissipated_fraction" in capsys.readouterr().out
     assert np.isfinite(float((tmp_path / "comparison.csv").read_text().splitlines()[1]
                              .split(",")[1]))
+
+
+def test_comparison_modes():
+    assert Comparison("q", 1.04, 1.0, 0.05).passed()
+    assert not Comparison("q", 1.06, 1.0, 0.05).passed()
+    assert Comparison("q", 1.06, 1.0, 0.05, atol=0.1).passed()  # either tolerance
+    assert Comparison("q", 0.9, 1.0).passed() is None  # information only
+    assert Comparison("q", 1.5, 1.0, 0.5, "absolute").passed()
+    assert not Comparison("q", 1.6, 1.0, 0.5, "absolute").passed()
+    assert Comparison("q", 0.0081, 0.008, 0.05, "at_most").passed()
+    assert not Comparison("q", 0.009, 0.008, 0.05, "at_most").passed()
+    assert Comparison("q", 33.0, 32.0, 0.0, "at_least").passed()
+    assert not Comparison("q", 30.0, 32.0, 0.0, "at_least").passed()
+    assert Comparison("q", 2.0, 38.1, 0.0, "same_sign").passed()
+    assert not Comparison("q", -2.0, 38.1, 0.0, "same_sign").passed()
+    assert Comparison("q", "L > W > S", "L > W > S", 0.0, "equal").passed()
+    assert not Comparison("q", "W > L > S", "L > W > S", 0.0, "equal").passed()
+    assert not Comparison("q", float("nan"), 1.0, 0.5).passed()  # not measured: fails
+    assert np.isnan(Comparison("q", "a", "b").relative)
+    with pytest.raises(ValueError, match="unknown comparison mode"):
+        Comparison("q", 1.0, 1.0, 0.1, "roughly")
+
+
+def test_hertz_formulas_and_the_ellipse_fit():
+    a, p0 = hertz_plane_strain(HERTZ_LOAD)
+    assert (a, p0) == pytest.approx((47.17, 3239.4), abs=0.01)  # docs/examples.md
+    assert p0 * np.pi * a / 2.0 == pytest.approx(HERTZ_LOAD)  # the ellipse carries the load
+    X = np.linspace(-45.0, 45.0, 16)
+    p = 3000.0 * np.sqrt(1.0 - (X / 46.0) ** 2)
+    assert fit_hertz_ellipse(X, p, a, p0) == pytest.approx((46.0, 3000.0), rel=1e-6)
+
+
+def test_table_4_1_ranking_and_table_6_1_slip_boundary():
+    t41 = table_4_1()
+    assert t41["min_angle_deg"]["laplacian"] == 58.65
+    assert smoother_ranking(t41["min_angle_deg"], True) == [
+        "laplacian", "weighted_angle_based", "simple_angle_based"]
+    assert smoother_ranking(t41["variance_angle"], False)[0] == "laplacian"
+    # both columns of Table 6.1 reach the cone at node 16, as the report's text says
+    assert table_6_1_first_slip_node("report") == 16
+    assert table_6_1_first_slip_node("simo_laursen") == 16
+    nodes = np.arange(2, 8)
+    assert start_of_last_run(nodes, [0, 0, 1, 0, 1, 1]) == 6
+    assert start_of_last_run(nodes, [1, 1, 1, 1, 1, 1]) == 2
+    assert start_of_last_run(nodes, [1, 1, 1, 1, 1, 0]) is None
+    assert first_slip_node(nodes, np.full(6, 10.0), np.array([0, 1, 2, 3, 5, -5.0]), 0.5) == 6
+
+
+def test_report_values_over_a_shortened_run():
+    t68 = table("blocks_fast_sliding_table_6_8")
+    short = report_values("blocks_fast_sliding", 0.2, "consistent", until=0.075)
+    row = int(np.flatnonzero(np.isclose(t68["time"], 0.075))[0])
+    assert short["energy_dissipated_fraction"] == pytest.approx(
+        (1.56 - t68["mu0.2_consistent"][row]) / 1.56)
+    between = report_values("blocks_fast_sliding", 0.2, "consistent", until=0.078)
+    e = np.interp(0.078, t68["time"], t68["mu0.2_consistent"])
+    assert between["energy_dissipated_fraction"] == pytest.approx((1.56 - e) / 1.56)
+    assert report_values("blocks_fast_sliding", 0.2, "consistent", until=1.0) == \
+        report_values("blocks_fast_sliding", 0.2, "consistent")
+
+
+def test_a_run_stopped_during_contact_has_no_contact_end(tmp_path):
+    (tmp_path / "summary.json").write_text(json.dumps({
+        "scenario": "examples/ring_impact.toml", "overrides": [], "contact_start_time": 0.065,
+        "contact_end_time": 0.2, "max_penetration": 0.004, "max_active_pairs": 5}))
+    with HistoryWriter(tmp_path) as w:
+        for step, t in enumerate([0.0, 0.1, 0.2]):
+            w.write({"step": step, "time": t, "kinetic_energy": 1.6, "strain_energy": 0.0,
+                     "total_energy": 1.6, "linear_momentum_x": 0.0, "linear_momentum_y": -3.2,
+                     "angular_momentum": 0.0, "newton_iterations": 1})
+    ours = our_values(tmp_path)
+    assert "contact_end_time" not in ours and "contact_duration" not in ours
+    assert "max_active_pairs" not in ours and ours["contact_start_time"] == 0.065
+    _, rows = compare(tmp_path)
+    assert {r.quantity for r in rows} >= {"contact_start_time", "energy_initial"}
+    assert "contact_end_time" not in {r.quantity for r in rows}
+    path = tmp_path / "c.csv"
+    write_comparison_csv(path, [Comparison("state", "stick", "slip", 0.0, "equal")])
+    assert path.read_text().splitlines()[1] == "state,stick,slip,nan,nan,equal,FAIL"

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import csv
 import json
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from importlib import resources
 from pathlib import Path
 
@@ -39,19 +39,171 @@ def table(name: str) -> dict[str, np.ndarray]:
         return read_csv_table(path)
 
 
+# ----------------------------------------------------------------------------------------------
+# The quasi-static examples (report 4.2, 6.1, 6.2): reference values and their measures
+# ----------------------------------------------------------------------------------------------
+#: Report 6.2: load per unit thickness (q = 300 over the diameter 800), radius, the cylinder's
+#: Young's modulus and Poisson's ratio.
+HERTZ_LOAD, HERTZ_RADIUS, HERTZ_YOUNG, HERTZ_POISSON = 240000.0, 400.0, 5.0e4, 0.3
+
+
+def hertz_plane_strain(load: float, radius: float = HERTZ_RADIUS, young: float = HERTZ_YOUNG,
+                       poisson: float = HERTZ_POISSON) -> tuple[float, float]:
+    """Half-width a and peak pressure p0 of a cylinder pressed onto a rigid flat, plane strain:
+    a = sqrt(4 P R (1 - nu^2) / (pi E)), p0 = 2 P / (pi a)."""
+    a = float(np.sqrt(4.0 * load * radius * (1.0 - poisson**2) / (np.pi * young)))
+    return a, 2.0 * load / (np.pi * a)
+
+
+def fit_hertz_ellipse(X: np.ndarray, p: np.ndarray, a0: float, p0: float) -> tuple[float, float]:
+    """Least-squares (a, p0) of the Hertz profile p0 sqrt(1 - X^2/a^2) through (X, p)."""
+    from scipy.optimize import least_squares
+
+    X, p = np.asarray(X, float), np.asarray(p, float)
+
+    def misfit(z: np.ndarray) -> np.ndarray:
+        return z[1] * np.sqrt(np.clip(1.0 - (X / z[0]) ** 2, 0.0, None)) - p
+
+    a, peak = least_squares(misfit, [a0, p0]).x
+    return float(a), float(peak)
+
+
+#: Table 4.1's smoothers (its last three stages).
+SMOOTHERS = ("laplacian", "simple_angle_based", "weighted_angle_based")
+#: Table 4.1's stages in the order of its columns.
+TABLE_4_1_STAGES = ("original", "before_smoothing", *SMOOTHERS)
+
+
+def table_4_1() -> dict[str, dict[str, float]]:
+    """Table 4.1 as {measure: {stage: value}}."""
+    t = table("mesh_smoothing_table_4_1")
+    return {str(m): {stage: float(t[stage][i]) for stage in TABLE_4_1_STAGES}
+            for i, m in enumerate(t["measure"])}
+
+
+def smoother_ranking(values: dict[str, float], larger_is_better: bool) -> list[str]:
+    """The smoothers from best to worst by one measure."""
+    return sorted(SMOOTHERS, key=lambda s: -values[s] if larger_is_better else values[s])
+
+
+def start_of_last_run(nodes: np.ndarray, mask: np.ndarray) -> int | None:
+    """The first node of the final run of ``mask`` (e.g. the start of a slip zone at the end of
+    an interface); None if the last node is not in it."""
+    mask = np.asarray(mask, bool)
+    if not mask[-1]:
+        return None
+    outside = np.flatnonzero(~mask)
+    return int(nodes[0] if outside.size == 0 else nodes[outside[-1] + 1])
+
+
+def first_slip_node(nodes: np.ndarray, t_n: np.ndarray, t_t: np.ndarray, mu: float,
+                    rtol: float | np.ndarray = 0.0) -> int | None:
+    """The first node (in the given order) on the Coulomb cone, |t_T| >= (1 - rtol) mu t_N,
+    after which every node is on it (the start of the slip zone); None if the last one sticks.
+    """
+    on_cone = np.abs(t_t) >= (1.0 - np.asarray(rtol)) * mu * np.asarray(t_n)
+    return start_of_last_run(nodes, on_cone)
+
+
+def table_6_1_first_slip_node(source: str, mu: float = 0.5) -> int | None:
+    """Where Table 6.1's column (``report`` or ``simo_laursen``) reaches the Coulomb cone: its
+    stresses are rounded to integers, so a node is on the cone within the rounding,
+    0.5 / |t_T| + 0.5 / t_N (both columns: node 16, as the report's text says)."""
+    t = table("block_sliding_table_6_1")
+    t_n, t_t = t[f"normal_{source}"].astype(float), t[f"tangent_{source}"].astype(float)
+    rtol = 0.5 / np.maximum(np.abs(t_t), 0.5) + 0.5 / t_n
+    return first_slip_node(t["node"], t_n, t_t, mu, rtol)
+
+
+#: How a row is checked: see :meth:`Comparison.passed`.
+MODES = ("relative", "absolute", "at_most", "at_least", "same_sign", "equal")
+
+
 @dataclass(frozen=True)
 class Comparison:
+    """One quantity, ours beside the report's, and how it is checked.
+
+    ``tolerance`` None: shown for information only. Otherwise, by ``mode``:
+
+    - ``relative``: |ours - report| <= tolerance |report| (or <= ``atol``);
+    - ``absolute``: |ours - report| <= tolerance;
+    - ``at_most`` / ``at_least``: ours <= report + tolerance |report| + atol (a bound the report
+      states, e.g. its energy drift) / ours >= report - tolerance |report| - atol;
+    - ``same_sign``: ours and report are both positive or both negative (a trend: a gain,
+      a shift in a given direction);
+    - ``equal``: ours == report (text values, counts, rankings).
+
+    ``note`` says where the report's value comes from or why the tolerance.
+    """
+
     quantity: str
-    ours: float
-    report: float
+    ours: float | str
+    report: float | str
+    tolerance: float | None = None
+    mode: str = "relative"
+    atol: float = 0.0
+    note: str = ""
+
+    def __post_init__(self) -> None:
+        if self.mode not in MODES:
+            raise ValueError(f"unknown comparison mode {self.mode!r}; expected one of {MODES}")
+
+    @property
+    def numeric(self) -> bool:
+        return not isinstance(self.ours, str) and not isinstance(self.report, str)
 
     @property
     def difference(self) -> float:
-        return self.ours - self.report
+        return float(self.ours) - float(self.report) if self.numeric else float("nan")
 
     @property
     def relative(self) -> float:
-        return self.difference / abs(self.report) if self.report else float("nan")
+        if not self.numeric or not self.report:
+            return float("nan")
+        return self.difference / abs(float(self.report))
+
+    @property
+    def checked(self) -> bool:
+        return self.tolerance is not None
+
+    def passed(self) -> bool | None:
+        """True/False against the tolerance; None for an information row."""
+        if self.tolerance is None:
+            return None
+        if self.mode == "equal":
+            return self.ours == self.report
+        if not self.numeric or not np.isfinite(float(self.ours)):
+            return False
+        ours, report, tol = float(self.ours), float(self.report), self.tolerance
+        if self.mode == "same_sign":
+            return ours * report > 0.0
+        if self.mode == "relative":
+            return abs(ours - report) <= max(tol * abs(report), self.atol)
+        if self.mode == "absolute":
+            return abs(ours - report) <= tol
+        slack = tol * abs(report) + self.atol
+        return ours <= report + slack if self.mode == "at_most" else ours >= report - slack
+
+    def tolerance_text(self) -> str:
+        if self.tolerance is None:
+            return "info"
+        tol = self.tolerance
+        extra = f" or ±{self.atol:.3g}" if self.atol else ""
+        return {
+            "relative": f"±{tol:.3g} rel.{extra}",
+            "absolute": f"±{tol:.3g}",
+            "at_most": f"≤ report{f' +{tol:.3g} rel.' if tol else ''}"
+                       f"{f' +{self.atol:.3g}' if self.atol else ''}",
+            "at_least": f"≥ report{f' -{tol:.3g} rel.' if tol else ''}"
+                        f"{f' -{self.atol:.3g}' if self.atol else ''}",
+            "same_sign": "same sign",
+            "equal": "equal",
+        }[self.mode]
+
+    def with_check(self, tolerance: float | None, mode: str = "relative", atol: float = 0.0,
+                   note: str = "") -> Comparison:
+        return replace(self, tolerance=tolerance, mode=mode, atol=atol,
+                       note=note or self.note)
 
 
 def _case(summary: dict) -> tuple[str, float, str]:
@@ -67,30 +219,49 @@ def _case(summary: dict) -> tuple[str, float, str]:
     return example, friction, mass
 
 
-def report_values(example: str, friction: float = 0.0, mass: str = "consistent") -> dict:
-    """The report's numbers for one case of one example (text values and table-derived)."""
+def _until(time: np.ndarray, values: np.ndarray, until: float | None) -> np.ndarray:
+    """The tabulated values up to ``until`` (the last one interpolated at ``until``)."""
+    if until is None or until >= time[-1]:
+        return values
+    keep = time < until
+    return np.concatenate([values[keep], [np.interp(until, time, values)]])
+
+
+def report_values(example: str, friction: float = 0.0, mass: str = "consistent",
+                  until: float | None = None) -> dict:
+    """The report's numbers for one case of one example (text values and table-derived).
+
+    ``until``: the end time of a shortened run; the quantities derived from the report's time
+    tables (6.8, 6.10) are then taken over the same time span.
+    """
     values = dict(TEXT_VALUES.get(example, {}))
     column = f"mu{friction:g}_{mass}"
     if example == "blocks_fast_sliding":
         t68 = table("blocks_fast_sliding_table_6_8")
         if column in t68:
-            e = t68[column]
+            e = _until(t68["time"], t68[column], until)
             values["energy_max_relative_variation"] = float(np.abs(e - e[0]).max() / e[0])
             values["energy_dissipated_fraction"] = float((e[0] - e[-1]) / e[0])
     if example == "tilted_blocks":
         t610 = table("tilted_blocks_table_6_10")
         key = f"mu{friction:g}"
         if f"{key}_total_energy" in t610:
-            e, my = t610[f"{key}_total_energy"], t610[f"{key}_My"]
+            e = _until(t610["time"], t610[f"{key}_total_energy"], until)
+            my = _until(t610["time"], t610[f"{key}_My"], until)
+            ma = _until(t610["time"], t610[f"{key}_Ma"], until)
             values["energy_max_relative_variation"] = float(np.abs(e - e[0]).max() / e[0])
             values["linear_momentum_max_relative_variation"] = float(
                 np.abs(my - my[0]).max() / abs(my[0]))
-            values["angular_momentum_max"] = float(np.abs(t610[f"{key}_Ma"]).max())
+            values["angular_momentum_max"] = float(np.abs(ma).max())
     return values
 
 
 def our_values(directory: Path) -> dict[str, float]:
-    """The same quantities measured from a results folder."""
+    """The same quantities measured from a results folder.
+
+    A run that ends while its bodies are still in contact (a shortened run) has no contact end
+    time, duration or final count of active pairs.
+    """
     summary = json.loads((directory / "summary.json").read_text())
     h = read_csv_table(directory / "history.csv")
     e = h["total_energy"]
@@ -107,6 +278,11 @@ def our_values(directory: Path) -> dict[str, float]:
     for key in ("contact_start_time", "contact_end_time", "max_penetration", "max_active_pairs"):
         if summary.get(key) is not None:
             out[key] = float(summary[key])
+    t_last = float(h["time"][-1])
+    if "contact_end_time" in out and abs(out["contact_end_time"] - t_last) <= 1e-9 * max(
+            1.0, abs(t_last)):
+        for key in ("contact_end_time", "max_active_pairs"):
+            out.pop(key, None)
     if "contact_start_time" in out and "contact_end_time" in out:
         out["contact_duration"] = out["contact_end_time"] - out["contact_start_time"]
     return out
@@ -117,17 +293,32 @@ def compare(directory: str | Path) -> tuple[str, list[Comparison]]:
     directory = Path(directory)
     summary = json.loads((directory / "summary.json").read_text())
     example, friction, mass = _case(summary)
-    report = report_values(example, friction, mass)
+    until = float(read_csv_table(directory / "history.csv")["time"][-1])
+    report = report_values(example, friction, mass, until)
     ours = our_values(directory)
     rows = [Comparison(k, ours[k], v) for k, v in report.items() if k in ours]
     label = f"{example} (mu = {friction:g}, {mass} mass)"
     return label, rows
 
 
+def format_value(value: float | str) -> str:
+    """A table cell: text as is, numbers to 5 significant digits."""
+    if isinstance(value, str):
+        return value
+    return "n/a" if np.isnan(value) else f"{value:.5g}"
+
+
+def verdict(row: Comparison) -> str:
+    return {None: "info", True: "pass", False: "FAIL"}[row.passed()]
+
+
 def format_comparison(label: str, rows: list[Comparison]) -> str:
-    lines = [label, f"{'quantity':42s} {'ours':>12s} {'report':>12s} {'rel. diff':>10s}"]
+    lines = [label, f"{'quantity':42s} {'ours':>12s} {'report':>12s} {'rel. diff':>10s}"
+                    f"  {'check':s}"]
     for r in rows:
-        lines.append(f"{r.quantity:42s} {r.ours:12.5g} {r.report:12.5g} {r.relative:10.2%}")
+        check = "" if r.tolerance is None else f"  {verdict(r)} ({r.tolerance_text()})"
+        lines.append(f"{r.quantity:42s} {format_value(r.ours):>12s} "
+                     f"{format_value(r.report):>12s} {r.relative:10.2%}{check}")
     if not rows:
         lines.append("(no reference values for this example)")
     return "\n".join(lines)
@@ -136,7 +327,9 @@ def format_comparison(label: str, rows: list[Comparison]) -> str:
 def write_comparison_csv(path: Path, rows: list[Comparison]) -> None:
     with path.open("w", newline="") as fh:
         writer = csv.writer(fh)
-        writer.writerow(["quantity", "ours", "report", "difference", "relative_difference"])
+        writer.writerow(["quantity", "ours", "report", "difference", "relative_difference",
+                         "tolerance", "result"])
         for r in rows:
-            writer.writerow([r.quantity, repr(r.ours), repr(r.report), repr(r.difference),
-                             repr(r.relative)])
+            writer.writerow([r.quantity, *(v if isinstance(v, str) else repr(v)
+                                           for v in (r.ours, r.report)), repr(r.difference),
+                             repr(r.relative), r.tolerance_text(), verdict(r)])
