@@ -84,3 +84,21 @@ def test_ring_impact_against_the_report():
     rows = [r.extra["contact_rows"] for r in rec.records if r.extra]
     assert max(len(r["node_1"]) for r in rows) == 7  # report: at most 7 active pairs
     assert max(r["gap"].max() for r in rows if len(r["gap"])) == pytest.approx(0.005, rel=1e-6)
+
+
+def test_fast_sliding_with_lumped_mass_stays_within_table_6_8():
+    _, energy, momentum, _, _ = run("blocks_fast_sliding.toml", ['analysis.mass="lumped"'])
+    # Table 6.8, mu = 0 lumped: the report's energy varies by up to 1.2 % (min 1.5413)
+    assert np.abs(energy - energy[0]).max() / energy[0] < 0.012
+    assert np.abs(momentum - momentum[0]).max() < 1e-9
+
+
+def test_tilted_blocks_with_large_friction_nearly_stick():
+    rec, energy, momentum, angular, _ = run("tilted_blocks.toml", ["contact.0.friction=10"])
+    # Table 6.10, mu = 10: the energy stays within 1.7 % (0.118-0.121); the pairs stick
+    assert np.abs(energy - energy[0]).max() / energy[0] < 0.017
+    assert np.abs(momentum - momentum[0]).max() < 1e-9
+    assert np.abs(angular).max() < 5.2e-4  # the report's largest |Ma| for mu = 10
+    statuses = np.concatenate([r.extra["contact_rows"]["status"] for r in rec.records
+                               if r.extra and len(r.extra["contact_rows"]["status"])])
+    assert np.mean(statuses == "stick") > 0.5
