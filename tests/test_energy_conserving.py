@@ -67,7 +67,8 @@ def test_energy_variant_conserves_the_ring_impact_energy_where_the_gap_law_does_
     results = {}
     for flag in ("false", "true"):
         rec = Recorder()
-        model = model_from_example("ring_impact.toml", base + [f"analysis.energy_conserving={flag}"])
+        model = model_from_example("ring_impact.toml",
+                                   base + [f"analysis.energy_conserving={flag}"])
         Simulation(model, [rec]).run()
         energy = np.array([r.balance.total_energy for r in rec.records])
         momentum = np.array([r.balance.linear_momentum for r in rec.records])
