@@ -8,6 +8,10 @@ from typing import Literal
 import numpy as np
 from numpy.typing import NDArray
 
+from .ale.motion import AleBody
+from .contact.augmentation import AugmentationTolerances
+from .contact.laws import ContactLaw
+from .contact.surfaces import Interface
 from .fem.assembly import Assembler, MaterialGroup
 from .fem.loads import LoadCase, Prescribed
 from .materials.models import Material
@@ -72,8 +76,8 @@ class Model:
     X0: NDArray  # stacked reference coordinates (n, 2)
     cells: NDArray  # stacked connectivity in global node numbers (ne, 4)
     assembler: Assembler = field(repr=False)
-    interfaces: tuple = ()
-    ale_bodies: tuple = ()  # AleSetup per body with mesh_motion = "ale"
+    interfaces: tuple[ContactInterface, ...] = ()
+    ale_bodies: tuple[AleSetup, ...] = ()  # one per body with mesh_motion = "ale"
 
     @property
     def n_nodes(self) -> int:
@@ -125,12 +129,12 @@ class ContactInterface:
     """One contact interface as the time loop uses it (kernels in :mod:`ntncontact.contact`)."""
 
     name: str
-    interface: object  # contact.surfaces.Interface
-    law: object  # contact.laws.ContactLaw
+    interface: Interface
+    law: ContactLaw
     persistency: bool
     candidates: NDArray  # surface-1 global nodes that may enter the active set
     release_steps: int
-    tolerances: object  # contact.augmentation.AugmentationTolerances
+    tolerances: AugmentationTolerances
     max_augmentations: int
     ordered_pairing: bool = False  # distinct partners in surface order (ALE partner surface)
     predicted_detection: bool = False  # penetration tested at x + dt v (see interfaces)
@@ -143,4 +147,4 @@ class AleSetup:
     body_index: int
     node_offset: int
     n_nodes: int
-    motion: object  # ale.motion.AleBody (local numbering)
+    motion: AleBody  # local numbering
