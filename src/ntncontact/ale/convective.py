@@ -1,0 +1,127 @@
+"""The ALE convective term C v of report (5.7)/(5.9): f_a = sum_e int rho0 N_a (c . grad_x v) dV0.
+
+C_ab = int rho N_a c . grad_x N_b dV (report 2.4.2, (5.9)), integrated over each element's
+reference (X) image with 2 x 2 Gauss since rho dV = rho0 dV0; the spatial gradient is
+grad_x N = grad_X N F^-1 with F = dx/dX of the evaluation configuration x. The convective
+velocity c is nodal and interpolated with N. The report holds c constant during an iteration
+(the remark after (5.13)); the derivative with respect to c is returned as well so that the
+fully coupled form c = v - v_hat can be linearized by the caller.
+
+Element derivatives (s_b = c . grad_x N_b, G_ik = (grad_x v)_ik, W = rho0 w_g det J):
+    df_ai/dv_bj = C_ab delta_ij,
+    df_ai/dc_dk = sum_g W N_a N_d G_ik,
+    df_ai/dx_dl = -sum_g W N_a s_d G_il      (from d grad_x N_b / dx_dl = -grad_x N_l grad_x N_d).
+The element quantities are vectorized over elements; assembly uses the Q4 dof order 2 a + i.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.sparse as sp
+from numpy.typing import NDArray
+
+from ..fem.assembly import element_dofs
+from ..fem.q4 import N_GP, kinematics
+
+__all__ = ["ConvectiveForce", "convective_force", "convective_matrix", "element_convective"]
+
+Triplets = tuple[NDArray, NDArray, NDArray]
+
+
+@dataclass(frozen=True)
+class ElementConvective:
+    """Per element: C_e (ne, 4, 4), f_e (ne, 8) and the three (ne, 8, 8) derivatives of f_e."""
+
+    C: NDArray
+    f: NDArray
+    df_dx: NDArray
+    df_dv: NDArray
+    df_dc: NDArray
+
+
+@dataclass(frozen=True)
+class ConvectiveForce:
+    """The assembled convective force (ndof,) and COO triplets of its derivatives."""
+
+    force: NDArray
+    d_x: Triplets
+    d_v: Triplets
+    d_c: Triplets
+
+
+def _spatial(X_e: NDArray, x_e: NDArray) -> tuple[NDArray, NDArray]:
+    """grad_x N (ne, g, 4, 2) and reference weights det(dX/dxi) w_g (ne, g)."""
+    kin = kinematics(X_e, x_e)
+    F = kin.F
+    det = F[..., 0, 0] * F[..., 1, 1] - F[..., 0, 1] * F[..., 1, 0]
+    Finv = np.empty_like(F)
+    Finv[..., 0, 0] = F[..., 1, 1] / det
+    Finv[..., 1, 1] = F[..., 0, 0] / det
+    Finv[..., 0, 1] = -F[..., 0, 1] / det
+    Finv[..., 1, 0] = -F[..., 1, 0] / det
+    # dN/dx_k = dN/dX_J (F^-1)_Jk: the chain rule through X(x)
+    return np.einsum("egbJ,egJk->egbk", kin.grad, Finv), kin.weight
+
+
+def _weighted_parts(
+    X_e: NDArray, x_e: NDArray, c_e: NDArray, rho: NDArray
+) -> tuple[NDArray, NDArray, NDArray]:
+    """grad_x N, rho0 w N_a (ne, g, 4) and s_b = c . grad_x N_b (ne, g, 4) at the Gauss points."""
+    gx, w = _spatial(X_e, x_e)
+    WN = (w * rho[:, None])[..., None] * N_GP  # rho0 dV0 = rho dV at each Gauss point
+    c_g = np.einsum("ga,eak->egk", N_GP, c_e)
+    return gx, WN, np.einsum("egk,egbk->egb", c_g, gx)
+
+
+def element_convective(
+    X_e: NDArray, x_e: NDArray, v_e: NDArray, c_e: NDArray, rho: NDArray
+) -> ElementConvective:
+    """Element convective matrices, forces and derivatives; arrays (ne, 4, 2), rho (ne,)."""
+    gx, WN, s = _weighted_parts(X_e, x_e, c_e, rho)
+    G = np.einsum("ebi,egbk->egik", v_e, gx)  # grad_x v
+    C = np.einsum("ega,egb->eab", WN, s)
+    f = np.einsum("eab,ebi->eai", C, v_e).reshape(-1, 8)
+    eye = np.eye(2)
+    df_dv = np.einsum("eab,ij->eaibj", C, eye).reshape(-1, 8, 8)
+    df_dc = np.einsum("ega,gd,egik->eaidk", WN, N_GP, G).reshape(-1, 8, 8)
+    df_dx = -np.einsum("ega,egd,egil->eaidl", WN, s, G).reshape(-1, 8, 8)
+    return ElementConvective(C, f, df_dx, df_dv, df_dc)
+
+
+def _triplets(edofs: NDArray, Ke: NDArray) -> Triplets:
+    k = edofs.shape[1]
+    rows = np.repeat(edofs, k, axis=1).ravel()
+    cols = np.tile(edofs, (1, k)).ravel()
+    return rows, cols, Ke.ravel()
+
+
+def convective_force(
+    X: NDArray, x: NDArray, v: NDArray, c: NDArray, cells: NDArray, rho: NDArray
+) -> ConvectiveForce:
+    """f = C(c) v over the listed ``cells`` (global node numbers, (ne, 4)), rho0 per cell.
+
+    X, x, v, c are nodal (n, 2) arrays of all nodes; the force has 2 n entries and the
+    derivative triplets use global dofs 2 node + i.
+    """
+    cells = np.asarray(cells, dtype=np.int64).reshape(-1, 4)
+    el = element_convective(X[cells], x[cells], v[cells], c[cells], np.asarray(rho, float))
+    edofs = element_dofs(cells)
+    force = np.bincount(edofs.ravel(), weights=el.f.ravel(), minlength=2 * len(X))
+    return ConvectiveForce(force, _triplets(edofs, el.df_dx), _triplets(edofs, el.df_dv),
+                           _triplets(edofs, el.df_dc))
+
+
+def convective_matrix(
+    X: NDArray, x: NDArray, c: NDArray, cells: NDArray, rho: NDArray
+) -> sp.csr_matrix:
+    """The scalar (per node) convective matrix C_ab = int rho N_a c . grad_x N_b dV, (n, n).
+
+    On dofs it acts on each velocity component alike: kron(C, I2) (report (5.9)).
+    """
+    cells = np.asarray(cells, dtype=np.int64).reshape(-1, 4)
+    _, WN, s = _weighted_parts(X[cells], x[cells], c[cells], np.asarray(rho, float))
+    rows, cols, vals = _triplets(cells, np.einsum("ega,egb->eab", WN, s))
+    n = len(X)
+    return sp.csr_matrix((vals, (rows, cols)), shape=(n, n))
