@@ -23,6 +23,7 @@ from .io.scenario import (
     MeshConfig,
     ScenarioConfig,
     ScenarioError,
+    TieConfig,
     TimeFunctionConfig,
 )
 from .materials.models import Material, MaterialError
@@ -31,6 +32,7 @@ from .mesh.boundary import surface_chain
 from .mesh.quadmesh import MeshError, QuadMesh
 from .mesh.quality import check_elements
 from .model import AleSetup, AnalysisSettings, Body, ContactInterface, Model, stack_bodies
+from .ties import Tie, TieError, make_tie, pair_tie
 
 
 def build_mesh(cfg: MeshConfig, name: str, base_dir: Path) -> QuadMesh:
@@ -134,8 +136,54 @@ def build_model(config: ScenarioConfig, base_dir: str | Path = ".") -> Model:
     analysis = AnalysisSettings(a.kind, a.dt, a.t_end, a.mass, a.output_interval,
                                 a.max_cutbacks, a.newton.rtol, a.newton.max_iterations,
                                 a.energy_conserving)
+    fixed = np.unique(np.concatenate([p.dofs for p in prescribed] or [np.zeros(0, int)]))
+    ties = tuple(_tie(t, i, bodies, fixed) for i, t in enumerate(config.tie))
+    _check_ale_ties(ties, ale_bodies, bodies)
     return Model(bodies, analysis, LoadCase(tuple(patterns), tuple(functions)),
-                 tuple(prescribed), X0, cells, assembler, interfaces, ale_bodies)
+                 tuple(prescribed), X0, cells, assembler, interfaces, ale_bodies, ties)
+
+
+def _tie(cfg: TieConfig, index: int, bodies: tuple[Body, ...], fixed_dofs: np.ndarray) -> Tie:
+    """Pair the coincident nodes of one ``[[tie]]`` entry; errors name the entry."""
+    where = f"tie.{index} ('{cfg.name}')"
+    by_name = {b.name: b for b in bodies}
+    b1, b2 = by_name[cfg.body_1], by_name[cfg.body_2]
+    try:
+        local_1, local_2 = b1.mesh.node_set(cfg.surface_1), b2.mesh.node_set(cfg.surface_2)
+    except MeshError as err:
+        raise ScenarioError(f"{where}: {err}") from None
+    extent = np.ptp(np.vstack([b1.mesh.nodes, b2.mesh.nodes]), axis=0).max()
+    tolerance = cfg.tolerance if cfg.tolerance is not None else 1e-8 * extent
+    try:
+        nodes_1, nodes_2 = pair_tie(cfg.name, b1.name, b1.mesh.nodes[local_1],
+                                    local_1 + b1.node_offset, b2.name, b2.mesh.nodes[local_2],
+                                    local_2 + b2.node_offset, tolerance)
+    except TieError as err:
+        raise ScenarioError(f"{where}: {err}") from None
+    return make_tie(cfg.name, b1.name, b2.name, nodes_1, nodes_2, fixed_dofs)
+
+
+def _check_ale_ties(ties: tuple[Tie, ...], ale_bodies: tuple[AleSetup, ...],
+                    bodies: tuple[Body, ...]) -> None:
+    """A tied node of an ALE body must be one the mesh motion never moves (a boundary node
+    off its contact surface, or an end or corner of it): the tie holds material points."""
+    for setup in ale_bodies:
+        motion = setup.motion
+        sliding = np.zeros(motion.n_nodes, bool)
+        sliding[motion.surface] = ~motion.corner
+        if not motion.closed:
+            sliding[motion.surface[[0, -1]]] = False
+        movable = sliding | ~motion.boundary
+        for tie in ties:
+            for nodes in (tie.nodes_1, tie.nodes_2):
+                local = nodes - setup.node_offset
+                local = local[(local >= 0) & (local < setup.n_nodes)]
+                if movable[local].any():
+                    name = bodies[setup.body_index].name
+                    raise ScenarioError(
+                        f"tie '{tie.name}': nodes {local[movable[local]].tolist()} of the ALE "
+                        f"body '{name}' may be moved by its mesh motion (interior or on its "
+                        "contact surface); tie only its fixed boundary nodes")
 
 
 def _ale_setup(index: int, body: Body, cfg: BodyConfig, config: ScenarioConfig) -> AleSetup:

@@ -16,6 +16,7 @@ from .fem.assembly import Assembler, MaterialGroup
 from .fem.loads import LoadCase, Prescribed
 from .materials.models import Material
 from .mesh.quadmesh import QuadMesh
+from .ties import Tie
 
 MeshMotion = Literal["lagrangian", "ale"]
 
@@ -78,6 +79,7 @@ class Model:
     assembler: Assembler = field(repr=False)
     interfaces: tuple[ContactInterface, ...] = ()
     ale_bodies: tuple[AleSetup, ...] = ()  # one per body with mesh_motion = "ale"
+    ties: tuple[Tie, ...] = ()  # [[tie]] constraints between bodies (ntncontact.ties)
 
     @property
     def n_nodes(self) -> int:

@@ -31,6 +31,7 @@ from .model import Model
 from .problem import StepProblem, StepState
 from .solvers.linear import LinearSolverError
 from .solvers.newton import NewtonError, NewtonSettings, newton
+from .ties import tie_terms
 
 
 class SimulationError(RuntimeError):
@@ -181,7 +182,9 @@ class Simulation:
             mass = self._dof_mass(state) if self.dynamic else None
             problem = StepProblem(self.model, state, dt, mass,
                                   contact_terms(interfaces, contact, dt),
-                                  lagrange_terms(interfaces, contact, dt))
+                                  # ties after the contact multipliers (see TieTerm.order)
+                                  [*lagrange_terms(interfaces, contact, dt),
+                                   *tie_terms(self.model.ties)])
             y0 = problem.initial_guess()
             if guess is not None:  # warm start: the last solution, shifted by the remap
                 d_guess = guess[0] + (state.d - guess[1]).ravel()

@@ -241,11 +241,23 @@ class ContactConfig(Strict):
         return self
 
 
+class TieConfig(Strict):
+    """Nodes of surface 1 held at their coincident partners on surface 2 (x_a = x_b)."""
+
+    name: str
+    body_1: str
+    surface_1: str
+    body_2: str
+    surface_2: str
+    tolerance: Positive | None = None  # default 1e-8 times the two bodies' extent
+
+
 class ScenarioConfig(Strict):
     title: str = ""
     analysis: AnalysisConfig
     bodies: list[BodyConfig] = Field(min_length=1)
     contact: list[ContactConfig] = []
+    tie: list[TieConfig] = []
 
     @model_validator(mode="after")
     def _unique_names(self) -> ScenarioConfig:
@@ -256,6 +268,14 @@ class ScenarioConfig(Strict):
             for key in ("body_1", "body_2"):
                 if getattr(c, key) not in names:
                     raise ValueError(f"contact.{i}.{key}: no body named '{getattr(c, key)}'")
+        for i, t in enumerate(self.tie):
+            for key in ("body_1", "body_2"):
+                if getattr(t, key) not in names:
+                    raise ValueError(f"tie.{i} ('{t.name}').{key}: no body named "
+                                     f"'{getattr(t, key)}'")
+        ties = [t.name for t in self.tie]
+        if len(set(ties)) != len(ties):
+            raise ValueError(f"tie names must be unique, got {ties}")
         return self
 
 

@@ -1,0 +1,146 @@
+"""Tie constraints between bodies: coincident node pairs held together exactly, x_a = x_b.
+
+A tie pairs each node of one surface (node set) with the coincident node of another, at build
+time, and enters the step as Lagrange multipliers of the bordered Newton system
+(:class:`ntncontact.problem.ConstraintTerm`): per tied component k the constraint
+h_k = x[a_k] - x[b_k] = 0 and the force lam_k on node a, -lam_k on node b (B = G^T). The
+multiplier is therefore minus the force the tie exerts on the body-1 node. The constraint is
+linear, so its tangent is zero and it adds no stiffness; its forces are equal and opposite, so
+a tie conserves linear momentum and, holding x_a = x_b at all times, does no work.
+
+Components whose two dofs are both prescribed are left to the supports (the bordered system
+would otherwise get a zero row on the free dofs).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy.spatial import cKDTree
+
+
+class TieError(ValueError):
+    """A tie that cannot be built; the message names the tie, the bodies and the node."""
+
+
+@dataclass(frozen=True)
+class Tie:
+    """Paired global nodes of two surfaces and the dof pairs the constraint holds together."""
+
+    name: str
+    body_1: str
+    body_2: str
+    nodes_1: NDArray  # global nodes of surface 1
+    nodes_2: NDArray  # the coincident partner of each, global
+    dofs_1: NDArray  # tied dofs of body 1 (components prescribed on both sides dropped)
+    dofs_2: NDArray
+
+    @property
+    def size(self) -> int:
+        return int(self.dofs_1.size)
+
+
+def coincident_partners(X1: NDArray, X2: NDArray, tolerance: float) -> NDArray:
+    """Index into X2 of the point within ``tolerance`` of each point of X1; -1 where none is,
+    -2 where more than one is (ambiguous)."""
+    if len(X2) == 0:
+        return np.full(len(X1), -1)
+    tree = cKDTree(X2)
+    dist, idx = tree.query(X1, k=min(2, len(X2)))
+    dist, idx = dist.reshape(len(X1), -1), idx.reshape(len(X1), -1)
+    out = np.where(dist[:, 0] <= tolerance, idx[:, 0], -1)
+    if dist.shape[1] > 1:
+        out[(dist[:, 1] <= tolerance)] = -2
+    return out
+
+
+def pair_tie(name: str, body_1: str, X1: NDArray, nodes_1: NDArray, body_2: str, X2: NDArray,
+             nodes_2: NDArray, tolerance: float) -> tuple[NDArray, NDArray]:
+    """Pair each global node of ``nodes_1`` (reference positions X1, one row per node) with the
+    coincident node of ``nodes_2``; every node needs exactly one distinct partner."""
+    partner = coincident_partners(X1, X2, tolerance)
+    for code, what in ((-1, "has no coincident node"), (-2, "has several coincident nodes")):
+        bad = np.flatnonzero(partner == code)
+        if bad.size:
+            where = ", ".join(f"({X1[i, 0]:.6g}, {X1[i, 1]:.6g})" for i in bad[:5])
+            raise TieError(f"tie '{name}': {bad.size} node(s) of body '{body_1}' {what} on "
+                           f"body '{body_2}' within tolerance {tolerance:.3g}, at {where}")
+    paired = np.asarray(nodes_2)[partner]
+    values, counts = np.unique(paired, return_counts=True)
+    if np.any(counts > 1):
+        raise TieError(f"tie '{name}': nodes {values[counts > 1].tolist()} of body '{body_2}' "
+                       "are the partner of more than one node")
+    if np.any(paired == np.asarray(nodes_1)):
+        raise TieError(f"tie '{name}': a node cannot be tied to itself (the two surfaces "
+                       "share nodes)")
+    return np.asarray(nodes_1, dtype=np.int64), paired.astype(np.int64)
+
+
+def make_tie(name: str, body_1: str, body_2: str, nodes_1: NDArray, nodes_2: NDArray,
+             fixed_dofs: NDArray) -> Tie:
+    """The tie of paired nodes, leaving out the components prescribed on both sides."""
+    d1 = (2 * nodes_1[:, None] + np.arange(2)).ravel()
+    d2 = (2 * nodes_2[:, None] + np.arange(2)).ravel()
+    keep = ~(np.isin(d1, fixed_dofs) & np.isin(d2, fixed_dofs))
+    return Tie(name, body_1, body_2, nodes_1, nodes_2, d1[keep], d2[keep])
+
+
+@dataclass(frozen=True)
+class TieTerm:
+    """One tie as a bordered-system constraint term (see :mod:`ntncontact.problem`)."""
+
+    tie: Tie
+    # Sorted after every Lagrange contact interface (simulation._lagrange_multipliers sorts the
+    # constraint terms by ``order`` and hands the leading ones to the contact interfaces).
+    order: float = math.inf
+
+    @property
+    def size(self) -> int:
+        return self.tie.size
+
+    @property
+    def initial(self) -> NDArray:
+        return np.zeros(self.size)
+
+    def __call__(self, x_eval: NDArray, v_eval: NDArray | None, rate: float | None,
+                 x_start: NDArray, lam: NDArray) -> tuple:
+        xf = x_eval.ravel()
+        d1, d2 = self.tie.dofs_1, self.tie.dofs_2
+        force = np.zeros(xf.size)
+        np.add.at(force, d1, lam)
+        np.add.at(force, d2, -lam)
+        k = np.arange(self.size)
+        rows, cols = np.concatenate([k, k]), np.concatenate([d1, d2])
+        vals = np.concatenate([np.ones(self.size), -np.ones(self.size)])
+        empty = (np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros(0))
+        return force, empty, xf[d1] - xf[d2], (rows, cols, vals), (cols, rows, vals)
+
+
+def tie_terms(ties: Sequence[Tie]) -> list[TieTerm]:
+    """Constraint terms of the ties that hold at least one component."""
+    return [TieTerm(t) for t in ties if t.size]
+
+
+def tie_forces(constraints: Sequence, multipliers: Sequence[NDArray]) -> dict[str, NDArray]:
+    """Force each tie exerts on its body-1 nodes, (n_pairs, 2) per tie name, from the constraint
+    terms of a step problem and their multipliers (``StepProblem.multipliers``). Components
+    left to the supports are zero."""
+    out = {}
+    for term, lam in zip(constraints, multipliers, strict=True):
+        if isinstance(term, TieTerm):
+            tie = term.tie
+            f = np.zeros(2 * int(tie.nodes_1.max()) + 2)
+            np.add.at(f, tie.dofs_1, -lam)
+            out[tie.name] = f.reshape(-1, 2)[tie.nodes_1]
+    return out
+
+
+def tie_violation(ties: Sequence[Tie], x: NDArray) -> float:
+    """Largest distance between tied nodes at positions x (n, 2)."""
+    gaps = [np.linalg.norm(x[t.nodes_1] - x[t.nodes_2], axis=1).max() for t in ties
+            if t.nodes_1.size]
+    return float(max(gaps, default=0.0))
