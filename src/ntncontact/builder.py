@@ -200,6 +200,7 @@ def _ale_setup(index: int, body: Body, cfg: BodyConfig, config: ScenarioConfig) 
                                remap=opts.remap, conserve_momentum=opts.conserve_momentum,
                                respace=opts.respace, interior=opts.interior,
                                slide_tolerance=opts.slide_tolerance,
+                               convection=opts.convection,
                                density=body.material.density, name=body.name)
     return AleSetup(index, body.node_offset, body.mesh.n_nodes, motion)
 

@@ -11,6 +11,7 @@ import scipy.sparse as sp
 from numpy.typing import NDArray
 
 from .contact import PairState
+from .convection import convective_terms
 from .diagnostics import Balance, balance
 from .dynamics.energy import EndEnergy, EnergyConsistentContact
 from .dynamics.midpoint import end_of_step, midpoint_velocity, velocity_factor
@@ -181,7 +182,8 @@ class Simulation:
                 state = motion.state
             mass = self._dof_mass(state) if self.dynamic else None
             problem = StepProblem(self.model, state, dt, mass,
-                                  contact_terms(interfaces, contact, dt),
+                                  [*contact_terms(interfaces, contact, dt),
+                                   *convective_terms(self.model, motion, dt)],
                                   # ties after the contact multipliers (see TieTerm.order)
                                   [*lagrange_terms(interfaces, contact, dt),
                                    *tie_terms(self.model.ties)])

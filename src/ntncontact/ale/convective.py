@@ -38,7 +38,7 @@ class ElementConvective:
     f: NDArray
     df_dx: NDArray
     df_dv: NDArray
-    df_dc: NDArray
+    df_dc: NDArray | None  # None when not asked for
 
 
 @dataclass(frozen=True)
@@ -48,7 +48,7 @@ class ConvectiveForce:
     force: NDArray
     d_x: Triplets
     d_v: Triplets
-    d_c: Triplets
+    d_c: Triplets | None  # None when not asked for
 
 
 def _spatial(X_e: NDArray, x_e: NDArray) -> tuple[NDArray, NDArray]:
@@ -76,17 +76,21 @@ def _weighted_parts(
 
 
 def element_convective(
-    X_e: NDArray, x_e: NDArray, v_e: NDArray, c_e: NDArray, rho: NDArray
+    X_e: NDArray, x_e: NDArray, v_e: NDArray, c_e: NDArray, rho: NDArray,
+    need_dc: bool = True,
 ) -> ElementConvective:
     """Element convective matrices, forces and derivatives; arrays (ne, 4, 2), rho (ne,)."""
     gx, WN, s = _weighted_parts(X_e, x_e, c_e, rho)
     G = np.einsum("ebi,egbk->egik", v_e, gx)  # grad_x v
-    C = np.einsum("ega,egb->eab", WN, s)
+    WNs = np.einsum("ega,egd->egad", WN, s)
+    C = WNs.sum(axis=1)
     f = np.einsum("eab,ebi->eai", C, v_e).reshape(-1, 8)
-    eye = np.eye(2)
-    df_dv = np.einsum("eab,ij->eaibj", C, eye).reshape(-1, 8, 8)
-    df_dc = np.einsum("ega,gd,egik->eaidk", WN, N_GP, G).reshape(-1, 8, 8)
-    df_dx = -np.einsum("ega,egd,egil->eaidl", WN, s, G).reshape(-1, 8, 8)
+    df_dv = np.einsum("eab,ij->eaibj", C, np.eye(2)).reshape(-1, 8, 8)
+    df_dx = -np.einsum("egad,egil->eaidl", WNs, G).reshape(-1, 8, 8)
+    df_dc = None
+    if need_dc:
+        WNN = np.einsum("ega,gd->egad", WN, N_GP)
+        df_dc = np.einsum("egad,egik->eaidk", WNN, G).reshape(-1, 8, 8)
     return ElementConvective(C, f, df_dx, df_dv, df_dc)
 
 
@@ -98,19 +102,22 @@ def _triplets(edofs: NDArray, Ke: NDArray) -> Triplets:
 
 
 def convective_force(
-    X: NDArray, x: NDArray, v: NDArray, c: NDArray, cells: NDArray, rho: NDArray
+    X: NDArray, x: NDArray, v: NDArray, c: NDArray, cells: NDArray, rho: NDArray,
+    need_dc: bool = True,
 ) -> ConvectiveForce:
     """f = C(c) v over the listed ``cells`` (global node numbers, (ne, 4)), rho0 per cell.
 
     X, x, v, c are nodal (n, 2) arrays of all nodes; the force has 2 n entries and the
-    derivative triplets use global dofs 2 node + i.
+    derivative triplets use global dofs 2 node + i (d_c only with ``need_dc``: a c held
+    constant in the iteration needs none).
     """
     cells = np.asarray(cells, dtype=np.int64).reshape(-1, 4)
-    el = element_convective(X[cells], x[cells], v[cells], c[cells], np.asarray(rho, float))
+    el = element_convective(X[cells], x[cells], v[cells], c[cells], np.asarray(rho, float),
+                            need_dc)
     edofs = element_dofs(cells)
     force = np.bincount(edofs.ravel(), weights=el.f.ravel(), minlength=2 * len(X))
-    return ConvectiveForce(force, _triplets(edofs, el.df_dx), _triplets(edofs, el.df_dv),
-                           _triplets(edofs, el.df_dc))
+    d_c = _triplets(edofs, el.df_dc) if el.df_dc is not None else None
+    return ConvectiveForce(force, _triplets(edofs, el.df_dx), _triplets(edofs, el.df_dv), d_c)
 
 
 def convective_matrix(

@@ -70,6 +70,12 @@ this split the node then moves with the material during the Lagrangian step, so 
 velocity over the step is v + (x~_n - x_n)/dt and the report's c = v - v_hat equals
 -(x~_n - x_n)/dt: ``AleUpdate.mesh_velocity`` (and ``convective``) are diagnostics only.
 
+6. ``convection = "convective_term"`` (opt-in) splits differently: the move remaps only the
+   geometry (X, hence d: which particle sits at the node) and leaves v and a at their old nodal
+   values (no momentum correction either); the step then adds the report's C(c) v_{n+1/2} with
+   c = ``AleUpdate.convective`` held constant (``ale.convective``, wired by
+   ``ntncontact.convection``). Remapping v as well would count the convection twice.
+
 Calling it from the time loop (augmentation k): pass the ORIGINAL t_n state of the body every
 time (no repeated remapping, hence no accumulated diffusion), ``x_pred`` = the active nodes'
 end-of-step positions from the last iterate (x_n + dt v_n for k = 1) and ``x_start`` = the
@@ -119,10 +125,12 @@ __all__ = ["AleBody", "AleUpdate", "lumped_masses", "move_ale_body"]
 
 RespaceMethod = Literal["local", "reference"]
 InteriorMethod = Literal["minimal", "displacement", "position"]
+Convection = Literal["remap", "convective_term"]
 _SMOOTHING = ("laplacian", "angle", "weighted_angle")
 _REMAP = ("linear", "quadratic")
 _RESPACE = ("local", "reference")
 _INTERIOR = ("minimal", "displacement", "position")
+_CONVECTION = ("remap", "convective_term")
 # a move below this fraction of the smallest surface spacing is round-off (of the curve
 # evaluation, whose arc-length inversion is iterative, or of the sparse solve): such nodes keep
 # their old position exactly
@@ -171,6 +179,7 @@ class AleBody:
     spacing_tolerance: float = 0.5
     min_quality: float = 0.5
     reference_quality: NDArray[np.float64] | None = None
+    convection: Convection = "remap"
 
     def __post_init__(self) -> None:
         cells = _frozen(self.cells, np.int64).reshape(-1, 4)
@@ -191,6 +200,9 @@ class AleBody:
         if self.respace not in _RESPACE or self.interior not in _INTERIOR:
             raise ValueError(f"{self.name}: respace must be one of {_RESPACE} and interior one "
                              f"of {_INTERIOR}, got {self.respace!r}, {self.interior!r}")
+        if self.convection not in _CONVECTION:
+            raise ValueError(f"{self.name}: convection must be one of {_CONVECTION}, got "
+                             f"{self.convection!r}")
         quality = np.ones(len(cells)) if self.reference_quality is None else _frozen(
             self.reference_quality, np.float64).reshape(-1)
         if quality.shape != (len(cells),):
@@ -701,10 +713,12 @@ def move_ale_body(
                                hint=_hints(body, tn, chain, curve, slides, moved))
     X_new, v_new, a_new = X.copy(), v.copy(), a.copy()
     X_new[moved], v_new[moved], a_new[moved] = values[:, :2], values[:, 2:4], values[:, 4:]
+    if body.convection == "convective_term":  # the step's C v term convects v (item 6)
+        v_new[moved], a_new[moved] = v[moved], a[moved]
     _check_cells(body, X_new, touched, f"{body.name} (reference image)")
     mass_new = tn.masses_after(X_new, touched)
     v_fixed, change = _conserve_momentum(tn, mass_new, x_new, v_new, moved)
-    if body.conserve_momentum:
+    if body.conserve_momentum and body.convection == "remap":
         v_new = v_fixed
     return AleUpdate(
         X=X_new, d=np.where(moved[:, None], x_new - X_new, d), v=v_new, a=a_new, x_mesh=x_new,

@@ -173,6 +173,8 @@ class AleConfig(Strict):
     respace: Literal["local", "reference"] = "local"
     interior: Literal["minimal", "displacement", "position"] = "minimal"
     slide_tolerance: Positive = 1e-8
+    # "convective_term": remap only X and d, and add the report's C v to the step (5.7)
+    convection: Literal["remap", "convective_term"] = "remap"
 
 
 class BodyConfig(Strict):
