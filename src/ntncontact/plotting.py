@@ -317,8 +317,8 @@ def animate(
     fps: int = 10,
 ) -> Path:
     """A GIF of the deformed meshes over (up to ``max_frames`` evenly spaced) output steps."""
-    from matplotlib.animation import PillowWriter
     from matplotlib.cm import ScalarMappable
+    from PIL import Image
 
     frames = load_frames(directory, None, max_frames)
     norm, xlim, ylim = _common_view(frames, field)
@@ -327,11 +327,25 @@ def animate(
     # The colour bar gets its own mappable: the mesh collection is replaced every frame.
     fig.colorbar(ScalarMappable(norm, "viridis"), ax=ax, label=field.replace("_", " "))
     collection = _draw_mesh(ax, frames[0], field, norm, (xlim, ylim))
-    writer = PillowWriter(fps=fps)
+    # Axes, ticks and colour bar never change: draw them once (blitting) and only draw the
+    # mesh and the title on top per frame; redrawing the whole figure per frame was ~10x slower.
+    collection.set_visible(False)
+    ax.set_title(" ", fontsize="small")
+    fig.canvas.draw()
+    fig.set_layout_engine("none")
+    background = fig.canvas.copy_from_bbox(fig.bbox)
+    collection.set_visible(True)
+    images = []
+    for frame in frames:
+        fig.canvas.restore_region(background)
+        collection.set_verts(frame.deformed_points[frame.cells])
+        collection.set_array(cell_values(frame, field))
+        ax.title.set_text(f"t = {frame.time:.4g}")
+        ax.draw_artist(collection)
+        ax.draw_artist(ax.title)
+        rgba = np.asarray(fig.canvas.buffer_rgba())
+        images.append(Image.fromarray(rgba[..., :3].copy()).convert("P", palette=Image.ADAPTIVE))
     output = Path(path_gif)
-    with writer.saving(fig, output, dpi=DPI):
-        for frame in frames:
-            collection.remove()
-            collection = _draw_mesh(ax, frame, field, norm, (xlim, ylim))
-            writer.grab_frame()
+    images[0].save(output, save_all=True, append_images=images[1:], duration=int(1000 / fps),
+                   loop=0)
     return output

@@ -71,6 +71,8 @@ class StepProblem:
     extra: Sequence[ExtraTerm] = ()
     constraints: Sequence[ConstraintTerm] = ()
     _cache: dict = field(default_factory=dict, repr=False)
+    _floor: float | None = field(default=None, repr=False)
+    _same_pattern: bool | None = field(default=None, repr=False)
 
     def __post_init__(self) -> None:
         ndof = self.model.ndof
@@ -118,10 +120,12 @@ class StepProblem:
             start += c.size
         return out
 
-    def _evaluate(self, y: NDArray) -> tuple[NDArray, sp.csr_matrix, float]:
+    def _evaluate(self, y: NDArray, need_tangent: bool) -> tuple[NDArray, sp.csr_matrix | None]:
+        """R on all dofs and, if asked, its tangent K; sets ``self._scale``."""
         d = self.full(y)
         x = self.state.X.ravel() + d
-        f_int, K, _ = self.model.assembler.internal(self.state.X, x.reshape(-1, 2))
+        f_int, K, _ = self.model.assembler.internal(self.state.X, x.reshape(-1, 2),
+                                                    need_tangent)
         R = f_int - self.f_ext
         scale = max(np.linalg.norm(f_int), np.linalg.norm(self.f_ext))
         v_eval, rate = None, None
@@ -129,23 +133,42 @@ class StepProblem:
             d_n, v_n = self.state.d.ravel(), self.state.v.ravel()
             inertia = self.mass @ midpoint_acceleration(d, d_n, v_n, self.dt)
             R = R + inertia
-            K = K + inertia_factor(self.dt) * self.mass
+            if K is not None:
+                K = self._add_mass(K, inertia_factor(self.dt))
             scale = max(scale, np.linalg.norm(inertia))
             v_eval, rate = midpoint_velocity(d, d_n, self.dt).reshape(-1, 2), 2.0 / self.dt
+        triplets = []
         for term in self.extra:
-            f, (rows, cols, vals) = term(x.reshape(-1, 2), v_eval, rate, self.state.x)
+            f, coo = term(x.reshape(-1, 2), v_eval, rate, self.state.x)
             R = R + f
             scale = max(scale, np.linalg.norm(f))
-            if len(vals):
-                K = K + sp.csr_matrix((vals, (rows, cols)), shape=K.shape)
-        h, G, B = self._constraints(x.reshape(-1, 2), v_eval, rate, y, K.shape[0])
+            triplets.append(coo)
+        if K is not None:
+            K = _add_triplets(K, triplets)
+        h, G, B = self._constraints(x.reshape(-1, 2), v_eval, rate, y, R.size)
         if h.size:
             R = R + self._constraint_force
-            K = K + self._constraint_tangent
-        # Forces computed from positions of size L carry round-off ~ eps |K| L: never ask for less.
-        floor = 1e-4 * np.abs(K.diagonal()).max() * self.length_scale
+            if K is not None:
+                K = K + self._constraint_tangent
+        if K is not None:
+            # Forces computed from positions of size L carry round-off ~ eps |K| L: never ask
+            # for less. Kept from the first tangent, so residual-only calls use it too.
+            self._floor = 1e-4 * np.abs(K.diagonal()).max() * self.length_scale
         self._blocks = (h, G, B)
-        return R, K.tocsr(), float(max(scale, floor))
+        self._scale = float(max(scale, self._floor))
+        return R, K
+
+    def _add_mass(self, K: sp.csr_matrix, factor: float) -> sp.csr_matrix:
+        """K + factor M, adding data arrays when M was assembled in K's pattern."""
+        M = self.mass
+        if self._same_pattern is None:
+            self._same_pattern = (M.shape == K.shape and M.nnz == K.nnz
+                                  and np.array_equal(M.indptr, K.indptr)
+                                  and np.array_equal(M.indices, K.indices))
+        if not self._same_pattern:
+            return K + factor * M
+        K.data += factor * M.data
+        return K
 
     def _constraints(self, x, v_eval, rate, y, ndof):
         """h, G (m x ndof), B (ndof x m) of all constraint terms, their force and its tangent."""
@@ -171,19 +194,41 @@ class StepProblem:
         return np.concatenate(hs), sp.vstack(gs).tocsr(), sp.hstack(bs).tocsr()
 
     def residual(self, y: NDArray) -> tuple[NDArray, float]:
-        R, K, scale = self._evaluate(y)
+        # the first call also builds the tangent (for the scale floor and the first Newton step)
+        R, K = self._evaluate(y, need_tangent=self._floor is None)
         self._cache = {"y": y.copy(), "K": K, "blocks": self._blocks,
                        "C": getattr(self, "_multiplier_block", None)}
         h = self._blocks[0]
-        return np.concatenate([R[self.free_dofs], h]), scale
+        return np.concatenate([R[self.free_dofs], h]), self._scale
 
     def jacobian(self, y: NDArray) -> sp.csr_matrix:
-        if "y" not in self._cache or not np.array_equal(self._cache["y"], y):
-            self.residual(y)
+        if ("y" not in self._cache or not np.array_equal(self._cache["y"], y)
+                or self._cache["K"] is None):
+            R, K = self._evaluate(y, need_tangent=True)
+            self._cache = {"y": y.copy(), "K": K, "blocks": self._blocks,
+                           "C": getattr(self, "_multiplier_block", None)}
         K = self._cache["K"]
-        Kff = K[self.free_dofs][:, self.free_dofs]
+        Kff = self._free_block(K)
         h, G, B = self._cache["blocks"]
         if not h.size:
             return Kff
         C = self._cache["C"]
         return sp.bmat([[Kff, B[self.free_dofs]], [G[:, self.free_dofs], C]], format="csr")
+
+    def _free_block(self, K: sp.csr_matrix) -> sp.csr_matrix:
+        """K restricted to the free dofs (all of K when nothing is prescribed)."""
+        if self.fixed_dofs.size == 0:
+            return K
+        return K[self.free_dofs][:, self.free_dofs]
+
+
+def _add_triplets(K: sp.csr_matrix, triplets: list) -> sp.csr_matrix:
+    """K plus the COO triplets (rows, cols, values) of the extra terms, in one conversion."""
+    rows = [np.asarray(r) for r, _, v in triplets if len(v)]
+    if not rows:
+        return K
+    cols = [np.asarray(c) for _, c, v in triplets if len(v)]
+    vals = [np.asarray(v) for _, _, v in triplets if len(v)]
+    extra = sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))),
+                          shape=K.shape)
+    return (K + extra).tocsr()

@@ -31,7 +31,7 @@ from .mesh_motion import move_meshes
 from .model import Model
 from .problem import StepProblem, StepState
 from .solvers.linear import LinearSolverError
-from .solvers.newton import NewtonError, NewtonSettings, newton
+from .solvers.newton import FactorCache, NewtonError, NewtonSettings, newton
 from .ties import tie_terms
 
 
@@ -114,7 +114,11 @@ class Simulation:
         self.lumped = model.analysis.mass == "lumped"
         self.state = initial_state(model)
         self._nodal_mass = model.assembler.nodal_mass(model.X0, self.lumped)
-        self._mass = sp.kron(self._nodal_mass, sp.eye(2), format="csr")
+        # element masses, of which only the ALE bodies' change (their particles move)
+        self._element_mass = model.assembler.element_masses(model.X0)
+        self._ale_cells = np.concatenate(
+            [model.bodies[a.body_index].cells for a in model.ale_bodies] or [np.zeros(0, int)])
+        self._mass = model.assembler.dof_mass(self._element_mass, self.lumped)
         self.length_scale = float(np.ptp(model.X0, axis=0).max())
         self.max_augmentations = max([ci.max_augmentations for ci in model.interfaces] or [1])
         self.initial_contact = tuple(PairState.empty() for _ in model.interfaces)
@@ -176,6 +180,7 @@ class Simulation:
         base, motion = state, None
         x_pred = state.x + dt * state.v  # first prediction of the end-of-step positions
         previous, iterations, guess = None, 0, None
+        factors = self._factor_cache()  # one factor serves the augmentations (modified Newton)
         for augmentation in range(1, self.max_augmentations + 1):  # noqa: B007 (used after)
             if self.model.ale_bodies and any(len(c) for c in contact):
                 motion = move_meshes(self.model, base, contact, x_pred, dt, motion)
@@ -192,7 +197,7 @@ class Simulation:
                 d_guess = guess[0] + (state.d - guess[1]).ravel()
                 y0[: problem.free_dofs.size] = d_guess[problem.free_dofs]
             result = newton(problem.residual, problem.jacobian, self.solve, y0, self.settings,
-                            self.length_scale)
+                            self.length_scale, factors)
             iterations += result.iterations
             split = None
             if self.model.analysis.energy_conserving and any(len(c) for c in contact):
@@ -269,11 +274,18 @@ class Simulation:
         order = sorted(list(others) + list(combined.terms), key=lambda t: t.order)
         return [by_term[id(t)] for t in order]
 
+    def _factor_cache(self) -> FactorCache | None:
+        """A factor cache for this step if the linear solver can keep factors."""
+        factorize = getattr(getattr(self.solve, "__self__", None), "factorize", None)
+        return FactorCache(factorize) if factorize is not None else None
+
     def _dof_mass(self, state: StepState) -> sp.csr_matrix:
         """The mass on dofs; ALE bodies carry new particles at their nodes, so it is rebuilt."""
         if not self.model.ale_bodies:
             return self._mass
-        return sp.kron(self._nodal(state), sp.eye(2), format="csr")
+        me = self._element_mass.copy()
+        me[self._ale_cells] = self.model.assembler.element_masses(state.X, self._ale_cells)
+        return self.model.assembler.dof_mass(me, self.lumped)
 
     def _nodal(self, state: StepState) -> sp.csr_matrix:
         if not self.model.ale_bodies:

@@ -162,3 +162,20 @@ class Assembler:
     def mass(self, X: NDArray, lumped: bool) -> sp.csr_matrix:
         """Mass matrix on dofs: the scalar mass repeated for x and y."""
         return sp.kron(self.nodal_mass(X, lumped), sp.eye(2), format="csr")
+
+    def element_masses(self, X: NDArray, elements: NDArray | None = None) -> NDArray:
+        """Consistent scalar element masses (ne, 4, 4) of all elements or of ``elements``."""
+        idx = slice(None) if elements is None else elements
+        return element_mass(X[self.cells[idx]], self.rho[idx])
+
+    def dof_mass(self, element_masses: NDArray, lumped: bool) -> sp.csr_matrix:
+        """Mass on dofs from all element masses, in the stiffness pattern (so that the Newton
+        matrix 4/dt^2 M + K is a sum of data arrays); lumped: row sums on the diagonal."""
+        me = element_masses
+        if lumped:
+            me = np.einsum("eab,ab->eab", np.broadcast_to(me.sum(axis=2)[:, :, None], me.shape),
+                           np.eye(4))
+        blocks = np.zeros((len(me), 4, 2, 4, 2))
+        blocks[:, :, 0, :, 0] = me
+        blocks[:, :, 1, :, 1] = me
+        return self.pattern.matrix(blocks.reshape(len(me), 8, 8))

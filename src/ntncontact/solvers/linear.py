@@ -116,6 +116,32 @@ def _transpose_map(indptr: NDArray, indices: NDArray, n: int) -> NDArray | None:
 PARDISO_MIN_UNKNOWNS = 10_000
 
 
+class Factorization:
+    """A factored matrix: call it with b (n,) or (n, k) for the solution of A x = b."""
+
+    def __init__(self, owner: LinearSolver, n: int, solve, generation: int | None = None) -> None:
+        self.owner, self.n, self._solve, self.generation = owner, n, solve, generation
+
+    @property
+    def valid(self) -> bool:
+        """False once a PARDISO factor was replaced by a later factorization of its solver."""
+        return self.generation is None or self.generation == self.owner._generation
+
+    def __call__(self, b: NDArray) -> NDArray:
+        b = np.asarray(b, dtype=float)
+        if b.shape[0] != self.n:
+            raise LinearSolverError(f"right-hand side has {b.shape[0]} rows, matrix has {self.n}")
+        if not self.valid:
+            raise LinearSolverError("this factorization was replaced by a later one")
+        if self.n == 0:
+            return np.zeros_like(b)
+        x = self._solve(b)
+        self.owner.stats.solves += 1
+        if not np.all(np.isfinite(x)):
+            raise LinearSolverError("the solution is not finite: the matrix is singular")
+        return x
+
+
 class LinearSolver:
     """Solves A x = b for a sequence of sparse matrices, reusing the analysis of their pattern.
 
@@ -139,18 +165,22 @@ class LinearSolver:
         self.backend: str = backend
         self.symmetric = symmetric
         self.stats = SolverStats()
+        self._generation = 0  # counts factorizations: a PARDISO factor is valid until the next
 
     def solve(self, A: sp.spmatrix, b: NDArray) -> NDArray:
         """Solution of A x = b (b of shape (n,) or (n, k)); raises :class:`LinearSolverError`."""
+        return self.factorize(A)(b)
+
+    def factorize(self, A: sp.spmatrix) -> Factorization:
+        """Factor A once to solve for many right-hand sides, later ones included (modified
+        Newton): the result stays valid until this solver factors another matrix with PARDISO
+        (whose factor lives in the shared handle); SuperLU factors are kept by the result."""
         A = _canonical_csr(A)
-        b = np.asarray(b, dtype=float)
-        if b.shape[0] != A.shape[0]:
-            raise LinearSolverError(f"right-hand side has {b.shape[0]} rows, matrix {A.shape}")
-        if A.shape[0] == 0:
-            return np.zeros_like(b)
         if self._pattern is None or not self._pattern.matches(A):
             self._release()
             self._pattern = _Pattern(A)
+        if A.shape[0] == 0:
+            return Factorization(self, 0, lambda b: np.zeros_like(b))
         symmetric = self._pattern.is_symmetric(A.data) if self.symmetric is None else self.symmetric
         backend = self.backend
         if self._auto and A.shape[0] < PARDISO_MIN_UNKNOWNS:
@@ -161,11 +191,9 @@ class LinearSolver:
             impl_class = _PardisoBackend if backend == "pardiso" else _SuperLUBackend
             impl = self._impls[key] = impl_class(self._pattern, symmetric, self.stats)
         impl.factor(A.data)
-        x = impl.solve(b)
-        self.stats.solves += 1
-        if not np.all(np.isfinite(x)):
-            raise LinearSolverError("the solution is not finite: the matrix is singular")
-        return x
+        self._generation += 1
+        return Factorization(self, A.shape[0], impl.solver(),
+                             self._generation if backend == "pardiso" else None)
 
     def _release(self) -> None:
         for impl in self._impls.values():
@@ -245,12 +273,17 @@ class _SuperLUBackend:
                 f"matrix is numerically singular: {small.size} pivot(s) below "
                 f"{PIVOT_RTOL:g} x the largest (unsupported body or mechanism?)")
 
-    def solve(self, b: NDArray) -> NDArray:
+    def solver(self):
+        """The solve of the current factor, which keeps working after later factorizations."""
+        lu, perm = self.lu, self.perm
         if not self.lu_is_permuted:
-            return self.lu.solve(b)
-        x = np.empty_like(b)
-        x[self.perm] = self.lu.solve(np.ascontiguousarray(b[self.perm]))
-        return x
+            return lu.solve
+
+        def solve(b: NDArray) -> NDArray:
+            x = np.empty_like(b)
+            x[perm] = lu.solve(np.ascontiguousarray(b[perm]))
+            return x
+        return solve
 
     def release(self) -> None:
         self.lu = None
@@ -292,6 +325,9 @@ class _PardisoBackend:
             raise LinearSolverError(
                 f"matrix is numerically singular: PARDISO perturbed {self.iparm[13]} pivot(s) "
                 "(unsupported body or mechanism?)")
+
+    def solver(self):
+        return self.solve
 
     def solve(self, b: NDArray) -> NDArray:
         rhs = np.asfortranarray(b)

@@ -34,6 +34,9 @@ class NewtonSettings:
     max_iterations: int = 25
     line_search_steps: int = 5
     divergence_factor: float = 1e8
+    #: modified Newton (see :class:`FactorCache`): a step with a kept factor is accepted if it
+    #: shrinks |R| at least by this factor, else the Jacobian is factored afresh
+    reuse_contraction: float = 0.1
 
 
 @dataclass
@@ -46,6 +49,34 @@ class NewtonResult:
 Residual = Callable[[NDArray], tuple[NDArray, float]]
 Jacobian = Callable[[NDArray], sp.spmatrix]
 LinearSolve = Callable[[sp.spmatrix, NDArray], NDArray]
+Factorize = Callable[[sp.spmatrix], Callable[[NDArray], NDArray]]
+
+
+@dataclass
+class FactorCache:
+    """A factored Jacobian kept across Newton iterations and across Newton solves of nearby
+    problems (the augmentations of one step, whose Jacobians differ only by the multiplier
+    and mesh updates): modified Newton. Its steps are only accepted while they contract the
+    residual (``NewtonSettings.reuse_contraction``), so the converged answer is unchanged;
+    what is saved is the factorization, the dominant cost of small contact problems."""
+
+    factorize: Factorize
+    factor: Callable[[NDArray], NDArray] | None = None
+    size: int = -1
+    factorizations: int = 0
+    reused_steps: int = 0
+
+    def usable(self, size: int) -> bool:
+        return (self.factor is not None and self.size == size
+                and getattr(self.factor, "valid", True))
+
+    def refresh(self, matrix: sp.spmatrix) -> Callable[[NDArray], NDArray]:
+        self.factor, self.size = self.factorize(matrix), matrix.shape[0]
+        self.factorizations += 1
+        return self.factor
+
+    def drop(self) -> None:
+        self.factor = None
 
 
 def newton(
@@ -55,8 +86,12 @@ def newton(
     y0: NDArray,
     settings: NewtonSettings = NewtonSettings(),
     length_scale: float = 1.0,
+    factors: FactorCache | None = None,
 ) -> NewtonResult:
-    """Solve R(y) = 0 from ``y0``; raise :class:`NewtonError` with the last residual if it fails."""
+    """Solve R(y) = 0 from ``y0``; raise :class:`NewtonError` with the last residual if it fails.
+
+    With ``factors``, a kept factorization is tried first (modified Newton) and replaced by a
+    fresh one as soon as its step does not contract the residual enough."""
     y = np.array(y0, dtype=float)
     R, scale = residual(y)
     norms = [float(np.linalg.norm(R))]
@@ -64,10 +99,15 @@ def newton(
     if y.size == 0 or norms[0] <= settings.atol or norms[0] == 0.0:
         return NewtonResult(y, 0, norms)
     for it in range(1, settings.max_iterations + 1):
-        dy = -solve(jacobian(y), R)
-        if not np.all(np.isfinite(dy)):
-            raise NewtonError("linear solve returned non-finite values", norms[-1], it)
-        y, R, scale = _line_search(residual, y, dy, norms[-1], settings.line_search_steps)
+        step = _modified_step(residual, y, R, norms[-1], factors, settings)
+        if step is not None:
+            dy, y, R, scale = step
+        else:
+            dy = -(factors.refresh(jacobian(y))(R) if factors is not None
+                   else solve(jacobian(y), R))
+            if not np.all(np.isfinite(dy)):
+                raise NewtonError("linear solve returned non-finite values", norms[-1], it)
+            y, R, scale = _line_search(residual, y, dy, norms[-1], settings.line_search_steps)
         norms.append(float(np.linalg.norm(R)))
         limit = settings.divergence_factor * max(first, 1e-300)
         if not np.isfinite(norms[-1]) or norms[-1] > limit:
@@ -82,6 +122,25 @@ def newton(
         norms[-1],
         settings.max_iterations,
     )
+
+
+def _modified_step(residual: Residual, y: NDArray, R: NDArray, norm0: float,
+                   factors: FactorCache | None, settings: NewtonSettings):
+    """(dy, y + dy, R, scale) with the kept factor if that step contracts |R| enough; else
+    None, and the kept factor is dropped so that the caller factors the current Jacobian."""
+    if factors is None or not factors.usable(y.size):
+        return None
+    dy = -factors.factor(R)
+    try:
+        R_new, scale = residual(y + dy)
+    except (ValueError, FloatingPointError):  # the stale step inverted an element
+        R_new, scale = None, 0.0
+    if (R_new is None or not np.all(np.isfinite(dy))
+            or not np.linalg.norm(R_new) <= settings.reuse_contraction * norm0):
+        factors.drop()
+        return None
+    factors.reused_steps += 1
+    return dy, y + dy, R_new, scale
 
 
 def _line_search(
