@@ -199,3 +199,27 @@ def test_auto_uses_superlu_for_small_systems():
     np.testing.assert_allclose(A @ x, np.ones(n), rtol=1e-12)
     assert n < linear.PARDISO_MIN_UNKNOWNS
     assert all(isinstance(i, linear._SuperLUBackend) for i in solver._impls.values())
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_a_kept_factor_solves_later_right_hand_sides(backend):
+    """factorize(): the factor of A keeps solving A x = b while it is valid; a PARDISO factor
+    (held in the solver's handle) is invalidated by the next factorization, a SuperLU one is not."""
+    solver = LinearSolver(backend)
+    K0, nodes = block(stretch=0.0)
+    K1, _ = block(stretch=0.1)
+    A0, A1 = supported(K0, nodes), supported(K1, nodes)
+    b = np.linspace(1.0, 2.0, A0.shape[0])
+    factor0 = solver.factorize(A0)
+    assert_accurate(A0, b, factor0(b))
+    factor1 = solver.factorize(A1)
+    assert_accurate(A1, b, factor1(b))
+    if backend == "superlu":
+        assert factor0.valid
+        assert_accurate(A0, b, factor0(b))
+    else:
+        assert not factor0.valid
+        with pytest.raises(LinearSolverError, match="replaced"):
+            factor0(b)
+    with pytest.raises(LinearSolverError, match="rows"):
+        factor1(b[:-1])

@@ -37,6 +37,9 @@ class NewtonSettings:
     #: modified Newton (see :class:`FactorCache`): a step with a kept factor is accepted if it
     #: shrinks |R| at least by this factor, else the Jacobian is factored afresh
     reuse_contraction: float = 0.1
+    #: at most this many kept-factor steps in a row before a fresh factorization (bounds the
+    #: linear convergence of modified Newton when the contraction setting is lax)
+    max_reused_steps: int = 4
 
 
 @dataclass
@@ -98,8 +101,12 @@ def newton(
     first = norms[0]
     if y.size == 0 or norms[0] <= settings.atol or norms[0] == 0.0:
         return NewtonResult(y, 0, norms)
+    reused = 0
     for it in range(1, settings.max_iterations + 1):
-        step = _modified_step(residual, y, R, norms[-1], factors, settings)
+        step = None
+        if reused < settings.max_reused_steps:
+            step = _modified_step(residual, y, R, norms[-1], factors, settings)
+        reused = reused + 1 if step is not None else 0
         if step is not None:
             dy, y, R, scale = step
         else:

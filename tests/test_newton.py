@@ -1,0 +1,72 @@
+"""Newton-Raphson: full and modified (kept factor) iterations reach the same root."""
+
+import numpy as np
+import pytest
+import scipy.sparse as sp
+
+from ntncontact.solvers.linear import LinearSolver
+from ntncontact.solvers.newton import FactorCache, NewtonSettings, newton
+
+N = 40
+
+
+def cubic_system(shift: float):
+    """R(y) = A y + y^3 - b (A: 1D Laplacian + shift I), a nonlinear SPD-tangent system."""
+    main = np.full(N, 2.0 + shift)
+    A = sp.diags([main, -np.ones(N - 1), -np.ones(N - 1)], [0, -1, 1], format="csr")
+    b = np.linspace(0.5, 1.5, N)
+
+    def residual(y):
+        return A @ y + y**3 - b, float(np.linalg.norm(b))
+
+    def jacobian(y):
+        return sp.csr_matrix(A + sp.diags(3.0 * y**2))
+
+    return residual, jacobian
+
+
+def solve_full(shift):
+    residual, jacobian = cubic_system(shift)
+    solver = LinearSolver("superlu")
+    return newton(residual, jacobian, solver.solve, np.zeros(N), NewtonSettings(rtol=1e-12))
+
+
+def test_kept_factor_reaches_the_same_root_with_fewer_factorizations():
+    """Two nearby problems (as two augmentations of a step) share one factor cache."""
+    solver = LinearSolver("superlu")
+    cache = FactorCache(solver.factorize)
+    settings = NewtonSettings(rtol=1e-12)
+    for shift in (0.5, 0.51):
+        residual, jacobian = cubic_system(shift)
+        start = solve_full(0.5).y  # the previous augmentation's answer as warm start
+        result = newton(residual, jacobian, solver.solve, start, settings, factors=cache)
+        reference = solve_full(shift).y
+        assert np.abs(result.y - reference).max() <= 1e-10 * np.abs(reference).max()
+        assert np.linalg.norm(residual(result.y)[0]) <= 1e-12 * residual(result.y)[1]
+    assert cache.reused_steps >= 2
+    assert cache.factorizations < 3  # the full method factors at every iteration
+
+
+def test_a_stale_factor_that_does_not_contract_is_replaced():
+    """A factor of a very different matrix: its step fails the contraction test, so Newton
+    factors the true Jacobian instead of crawling (or diverging) with the stale one."""
+    solver = LinearSolver("superlu")
+    cache = FactorCache(solver.factorize)
+    wrong = sp.identity(N, format="csr") * 1e-3  # steps 1000x too long
+    cache.refresh(wrong)
+    residual, jacobian = cubic_system(0.5)
+    result = newton(residual, jacobian, solver.solve, np.zeros(N), NewtonSettings(rtol=1e-12),
+                    factors=cache)
+    assert result.iterations <= 8
+    assert np.abs(result.y - solve_full(0.5).y).max() <= 1e-10
+    assert cache.factorizations >= 2  # the stale one, then at least one fresh
+
+
+@pytest.mark.parametrize("contraction", [0.1, 0.5])
+def test_contraction_setting_controls_reuse(contraction):
+    solver = LinearSolver("superlu")
+    cache = FactorCache(solver.factorize)
+    residual, jacobian = cubic_system(0.5)
+    newton(residual, jacobian, solver.solve, np.zeros(N),
+           NewtonSettings(rtol=1e-12, reuse_contraction=contraction), factors=cache)
+    assert cache.factorizations >= 1
