@@ -1,6 +1,6 @@
 """Write the gmsh meshes of the quasi-static examples (report 6.1 and 6.3).
 
-The scenario generators have no way to name single interior nodes of a surface, which these
+The scenario generators have no way to name single nodes or parts of a surface, which these
 examples need (a contact interface restricted to some nodes, point loads on chosen top nodes),
 so their meshes are written here as gmsh 2.2 files with physical groups::
 
@@ -9,17 +9,14 @@ so their meshes are written here as gmsh 2.2 files with physical groups::
 - ``block_sliding_block.msh``: the report 6.1 block, 20 x 10 unit squares at (5, 10), node for
   node the ``rectangle`` generator's mesh (same numbering, same edge/node sets) plus the node
   set ``bottom_inner`` (interface nodes 2-20 of the report, the corners left out).
-- ``delamination_layers.msh``: the two layers of report 6.3 as ONE body (the engine cannot tie
-  two bodies), 64 wide, 32 x 5 elements of 2 x 2 per layer. The lower layer fills
-  0 <= y <= 10; the upper layer's bottom is the lower layer's top where the layers are tied
-  (shared nodes) and lies on y = 10.2 over the delamination, a slit with 15 candidate pairs at
-  x = 18, 20, ..., 46 whose tips x = 16 and 48 are shared nodes; the upper rows are spread
-  evenly up to y = 20.2. Edge sets bottom/right/top/left (outer boundary), ``slit_upper`` (the
-  slit's upper face, tip to tip), ``slit_lower`` (its lower face between the first and last
-  candidate: an interface's surfaces may not share the tips); node sets ``slit_tips``,
-  ``delaminated`` and ``delaminated_lower`` (the 15 candidate nodes of each face),
-  ``interface_tied`` (the shared interface nodes outside the slit), ``load_18`` ...
-  ``load_46`` (the top node at that x).
+- ``delamination_upper.msh``, ``delamination_lower.msh``: the two layers of report 6.3, 64 wide,
+  32 x 5 elements of 2 x 2 each. The lower layer fills 0 <= y <= 10; the upper layer's bottom
+  lies on y = 10 where the layers are tied and on y = 10.2 over the delamination (15 candidate
+  pairs at x = 18, 20, ..., 46; its tips x = 16 and 48 are tied), its top on y = 20.2. Each
+  has edge sets bottom/right/top/left (counter-clockwise) and ``delaminated_face`` (the
+  interface face over the delamination, tip to tip), node sets ``tied`` (interface nodes
+  x <= 16 and x >= 48), ``tips`` and ``delaminated`` (the 15 candidate nodes); the upper layer
+  also ``load_18`` ... ``load_46`` (the top node at that x).
 - ``hertz_cylinder_{1,2,3}.msh``: the report 6.2 half cylinder R = 400, flat face up on
   y = 400, lowest point at the origin, from ``hertz_cylinder_mesh(level)`` (contact-zone element
   size 6, 4, 3, uniform within 60 of the lowest point; the ``half_disk`` scenario type cannot set
@@ -76,51 +73,59 @@ def block_sliding_block() -> tuple[QuadMesh, dict, dict]:
     return mesh, lines, points
 
 
-def delamination_layers() -> tuple[QuadMesh, dict, dict]:
-    """Both layers as one mesh: the lower layer's grid, then the upper layer's, whose bottom
-    row reuses the lower layer's top nodes where the layers are tied."""
-    nx, ny = LAYER_NX, LAYER_NY
-    xs = np.linspace(0.0, LAYER_WIDTH, nx + 1)
-    lower_y = np.linspace(0.0, LAYER_THICKNESS, ny + 1)
-    lower = np.arange((nx + 1) * (ny + 1)).reshape(ny + 1, nx + 1)
-    nodes = [np.column_stack([np.tile(xs, ny + 1), np.repeat(lower_y, nx + 1)])]
+def _grid_cells(grid: np.ndarray) -> np.ndarray:
+    return np.stack((grid[:-1, :-1], grid[:-1, 1:], grid[1:, 1:], grid[1:, :-1]),
+                    axis=-1).reshape(-1, 4)
+
+
+def _layer(bottom_y: np.ndarray, top_y: float, name: str) -> tuple[QuadMesh, np.ndarray]:
+    """One layer: LAYER_NY rows spread evenly from ``bottom_y`` (per column) up to ``top_y``."""
+    xs = np.linspace(0.0, LAYER_WIDTH, LAYER_NX + 1)
+    t = np.linspace(0.0, 1.0, LAYER_NY + 1)[:, None]
+    ys = bottom_y[None, :] + t * (top_y - bottom_y[None, :])
+    grid = np.arange((LAYER_NX + 1) * (LAYER_NY + 1)).reshape(LAYER_NY + 1, LAYER_NX + 1)
+    nodes = np.column_stack([np.tile(xs, LAYER_NY + 1), ys.ravel()])
+    return QuadMesh(nodes, _grid_cells(grid), name=name), grid
+
+
+def _layer_sets(grid: np.ndarray, face_row: int) -> tuple[dict, dict]:
+    """Outer boundary edge sets and the interface sets of the layer face in row ``face_row``
+    (0: the upper layer's bottom, -1: the lower layer's top)."""
+    xs = np.linspace(0.0, LAYER_WIDTH, LAYER_NX + 1)
+    slit = np.isin(np.round(xs, 9), DELAMINATION_X)
+    tips = np.isin(np.round(xs, 9), DELAMINATION_X[[0, -1]] + [-2.0, 2.0])
+    face = grid[face_row]
+    span = face[np.flatnonzero(tips)[0]:np.flatnonzero(tips)[1] + 1]
+    if face_row == -1:  # counter-clockwise: the lower layer's top runs right to left
+        span = span[::-1]
+    lines = {
+        "bottom": np.column_stack([grid[0, :-1], grid[0, 1:]]),
+        "right": np.column_stack([grid[:-1, -1], grid[1:, -1]]),
+        "top": np.column_stack([grid[-1, 1:], grid[-1, :-1]]),
+        "left": np.column_stack([grid[1:, 0], grid[:-1, 0]]),
+        "delaminated_face": np.column_stack([span[:-1], span[1:]]),
+    }
+    points = {"tips": face[tips], "delaminated": face[slit], "tied": face[~slit]}
+    return lines, points
+
+
+def delamination_lower() -> tuple[QuadMesh, dict, dict]:
+    """The lower layer of report 6.3 (body 2, E2 = 5e4), 0 <= y <= 10."""
+    mesh, grid = _layer(np.zeros(LAYER_NX + 1), LAYER_THICKNESS, "lower")
+    lines, points = _layer_sets(grid, -1)
+    return mesh, lines, points
+
+
+def delamination_upper() -> tuple[QuadMesh, dict, dict]:
+    """The upper layer (body 1, E1 = 2e4): its bottom is on y = 10 where it is tied to the
+    lower layer and on y = 10.2 over the delamination; top on y = 20.2."""
+    xs = np.linspace(0.0, LAYER_WIDTH, LAYER_NX + 1)
     slit = np.isin(np.round(xs, 9), DELAMINATION_X)
     bottom_y = LAYER_THICKNESS + np.where(slit, DELAMINATION_GAP, 0.0)
-    top_y = 2.0 * LAYER_THICKNESS + DELAMINATION_GAP
-    upper = np.empty((ny + 1, nx + 1), dtype=np.int64)
-    upper[0] = lower[-1]
-    n = lower.size
-    upper[0, slit] = n + np.arange(slit.sum())  # the slit's upper face: new nodes
-    nodes.append(np.column_stack([xs[slit], bottom_y[slit]]))
-    n += slit.sum()
-    for j in range(1, ny + 1):
-        upper[j] = n + np.arange(nx + 1)
-        nodes.append(np.column_stack([xs, bottom_y + j / ny * (top_y - bottom_y)]))
-        n += nx + 1
-    xy = np.vstack(nodes)
-
-    def cells(grid: np.ndarray) -> np.ndarray:
-        return np.stack((grid[:-1, :-1], grid[:-1, 1:], grid[1:, 1:], grid[1:, :-1]),
-                        axis=-1).reshape(-1, 4)
-
-    mesh = QuadMesh(xy, np.vstack([cells(lower), cells(upper)]), name="layers")
-    tips = np.flatnonzero(np.isin(np.round(xs, 9), DELAMINATION_X[[0, -1]] + [-2.0, 2.0]))
-    span = slice(tips[0], tips[1] + 1)
-    lines = {
-        "bottom": np.column_stack([lower[0, :-1], lower[0, 1:]]),
-        "right": np.column_stack([np.r_[lower[:-1, -1], upper[:-1, -1]],
-                                  np.r_[lower[1:, -1], upper[1:, -1]]]),
-        "top": np.column_stack([upper[-1, 1:], upper[-1, :-1]]),
-        "left": np.column_stack([np.r_[lower[1:, 0], upper[1:, 0]],
-                                 np.r_[lower[:-1, 0], upper[:-1, 0]]]),
-        "slit_upper": np.column_stack([upper[0, span][:-1], upper[0, span][1:]]),
-        "slit_lower": np.column_stack([lower[-1, slit][1:], lower[-1, slit][:-1]]),
-    }
-    points = {"slit_tips": lower[-1, tips], "delaminated": upper[0, slit],
-              "delaminated_lower": lower[-1, slit],
-              "interface_tied": lower[-1, ~slit & ~np.isin(np.arange(nx + 1), tips)]}
+    mesh, grid = _layer(bottom_y, 2.0 * LAYER_THICKNESS + DELAMINATION_GAP, "upper")
+    lines, points = _layer_sets(grid, 0)
     for x_load in LOAD_X:
-        points[f"load_{x_load:.0f}"] = upper[-1, np.isclose(xs, x_load)]
+        points[f"load_{x_load:.0f}"] = grid[-1, np.isclose(xs, x_load)]
     return mesh, lines, points
 
 
@@ -137,7 +142,8 @@ def hertz_cylinder(level: int) -> tuple[QuadMesh, dict, dict]:
 
 MESHES = {
     "block_sliding_block.msh": block_sliding_block,
-    "delamination_layers.msh": delamination_layers,
+    "delamination_lower.msh": delamination_lower,
+    "delamination_upper.msh": delamination_upper,
     **{f"hertz_cylinder_{k}.msh": (lambda k=k: hertz_cylinder(k)) for k in (1, 2, 3)},
 }
 
