@@ -72,17 +72,22 @@ def _ordered_candidates(x: NDArray, ci: ContactInterface, state: PairState,
 
 
 def contact_terms(interfaces: Sequence[ContactInterface], states: Sequence[PairState],
-                  dt: float):
-    """Newton terms (force, COO tangent) of every interface with its multipliers held fixed."""
+                  dt: float, last: dict | None = None):
+    """Newton terms (force, COO tangent) of every interface with its multipliers held fixed.
+
+    ``last``, if given, receives per interface index the arguments and result of the latest
+    evaluation, so that :func:`evaluate_all` at the converged point need not repeat it."""
     terms = []
-    for ci, state in zip(interfaces, states, strict=True):
+    for index, (ci, state) in enumerate(zip(interfaces, states, strict=True)):
         if len(state) == 0 or ci.law.method == "lagrange":
             continue
 
-        def term(x_eval, v_eval, rate, x_start, ci=ci, state=state):
+        def term(x_eval, v_eval, rate, x_start, ci=ci, state=state, index=index):
             rate_eval = rate if ci.persistency else None
             r = evaluate_contact(x_eval, v_eval if ci.persistency else None, rate_eval,
                                  ci.interface, state, ci.law, x_start=x_start, dt=dt)
+            if last is not None:
+                last[index] = (x_eval, v_eval, rate, x_start, r)
             return r.force, (r.rows, r.cols, r.vals)
 
         terms.append(term)
@@ -142,17 +147,33 @@ def with_solved_multipliers(
 def evaluate_all(
     interfaces: Sequence[ContactInterface], states: Sequence[PairState], x_eval: NDArray,
     v_eval: NDArray | None, rate: float | None, x_start: NDArray, dt: float,
+    last: dict | None = None,
 ) -> tuple[ContactResult | None, ...]:
-    """Per-pair results at a converged Newton solution (None for an empty active set)."""
+    """Per-pair results at a converged Newton solution (None for an empty active set); taken
+    from ``last`` (see :func:`contact_terms`) where it was evaluated at exactly these values."""
     out = []
-    for ci, state in zip(interfaces, states, strict=True):
+    for index, (ci, state) in enumerate(zip(interfaces, states, strict=True)):
         if len(state) == 0:
             out.append(None)
+            continue
+        if last is not None and _same_arguments(last.get(index), x_eval, v_eval, rate, x_start):
+            out.append(last[index][-1])
             continue
         out.append(evaluate_contact(x_eval, v_eval if ci.persistency else None,
                                     rate if ci.persistency else None, ci.interface, state,
                                     ci.law, x_start=x_start, dt=dt))
     return tuple(out)
+
+
+def _same_arguments(cached, x_eval, v_eval, rate, x_start) -> bool:
+    if cached is None:
+        return False
+    x0, v0, rate0, start0, _ = cached
+
+    def same(a, b):
+        return (a is None and b is None) or (a is not None and b is not None
+                                             and np.array_equal(a, b))
+    return same(x0, x_eval) and same(v0, v_eval) and rate0 == rate and same(start0, x_start)
 
 
 def augment_all(

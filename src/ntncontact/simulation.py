@@ -186,8 +186,9 @@ class Simulation:
                 motion = move_meshes(self.model, base, contact, x_pred, dt, motion)
                 state = motion.state
             mass = self._dof_mass(state) if self.dynamic else None
+            last_contact: dict = {}  # the contact terms' latest evaluation (reused below)
             problem = StepProblem(self.model, state, dt, mass,
-                                  [*contact_terms(interfaces, contact, dt),
+                                  [*contact_terms(interfaces, contact, dt, last_contact),
                                    *convective_terms(self.model, motion, dt)],
                                   # ties after the contact multipliers (see TieTerm.order)
                                   [*lagrange_terms(interfaces, contact, dt),
@@ -207,7 +208,7 @@ class Simulation:
             guess = (d.ravel(), state.d)
             contact = with_solved_multipliers(interfaces, contact,
                                               self._lagrange_multipliers(problem, result, split))
-            results = self._contact_results(interfaces, contact, state, d, dt)
+            results = self._contact_results(interfaces, contact, state, d, dt, last_contact)
             used = contact
             contact, done = augment_all(interfaces, contact, previous, results)
             x_pred = state.X + (2.0 * d - state.d if self.dynamic else d)
@@ -292,13 +293,14 @@ class Simulation:
             return self._nodal_mass
         return self.model.assembler.nodal_mass(state.X, self.lumped)
 
-    def _contact_results(self, interfaces, contact, state: StepState, d: NDArray, dt: float):
+    def _contact_results(self, interfaces, contact, state: StepState, d: NDArray, dt: float,
+                         last: dict | None = None):
         if not interfaces:
             return ()
         x_eval = state.X + d
         v_eval = midpoint_velocity(d, state.d, dt) if self.dynamic else None
         rate = velocity_factor(dt) if self.dynamic else None
-        return evaluate_all(interfaces, contact, x_eval, v_eval, rate, state.x, dt)
+        return evaluate_all(interfaces, contact, x_eval, v_eval, rate, state.x, dt, last)
 
     def step_with_cutback(self, dt: float) -> tuple[StepState, int, float]:
         """Advance by dt, halving (up to max_cutbacks times) sub-steps that fail."""
