@@ -19,9 +19,20 @@ from ntncontact.contact import (
     PairState,
     augment,
     check_augmentation,
+    evaluate,
     evaluate_contact,
     lagrange_blocks,
 )
+
+
+@pytest.fixture(autouse=True, params=["numpy", "numba"])
+def contact_kernel(request, monkeypatch):
+    """Every test here runs with the NumPy reference and the compiled contact kernel."""
+    if request.param == "numba":
+        pytest.importorskip("numba")
+    monkeypatch.setattr(evaluate, "KERNEL", request.param)
+    return request.param
+
 
 THETA = 0.3
 D = np.array([np.cos(THETA), np.sin(THETA)])  # wall direction

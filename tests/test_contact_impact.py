@@ -9,6 +9,7 @@ velocity flip exactly in one step, v_{n+1} = 2 v_{n+1/2} - v_n, so kinetic energ
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from ntncontact.contact import (
     AugmentationTolerances,
@@ -21,8 +22,19 @@ from ntncontact.contact import (
     closest_pairs,
     commit_step,
     detect,
+    evaluate,
     evaluate_contact,
 )
+
+
+@pytest.fixture(autouse=True, params=["numpy", "numba"])
+def contact_kernel(request, monkeypatch):
+    """Every test here runs with the NumPy reference and the compiled contact kernel."""
+    if request.param == "numba":
+        pytest.importorskip("numba")
+    monkeypatch.setattr(evaluate, "KERNEL", request.param)
+    return request.param
+
 
 DT = 0.1
 MASS = 1.0

@@ -26,6 +26,16 @@ from .laws import ContactLaw, normal_traction
 from .state import PairState
 from .surfaces import Interface
 
+try:
+    from . import kernels_numba
+except ImportError:  # pragma: no cover - Numba missing: the NumPy reference still works
+    kernels_numba = None  # type: ignore[assignment]
+
+#: Implementation of :func:`evaluate_contact`: "numba" (one compiled loop over the pairs,
+#: equal to the reference to round-off, the default when Numba imports) or "numpy" (the
+#: vectorized reference built from :func:`pair_response`). Read at every call.
+KERNEL: str = "numba" if kernels_numba is not None else "numpy"
+
 __all__ = [
     "ContactResult",
     "ContactTerm",
@@ -176,6 +186,11 @@ def evaluate_contact(
     ndof = 2 * x_eval.shape[0]
     if law.frictional and rate_factor is None and x_start is None:
         raise ValueError("friction under the gap law needs x_start (tangential increment)")
+    if KERNEL == "numba":
+        res = _evaluate_compiled(x_eval, v_eval, rate_factor, interface, state, law, x_start,
+                                 dt)
+        if res is not None:
+            return res  # else: an error the reference reports with its own message
     resp = pair_response(x_eval, v_eval, rate_factor, interface, state, law, x_start)
     force_pp, jac = _force_jacobian(resp)
     rows, cols, vals = assemble_pair_jacobian(state.pairs, resp.kin.slots, jac)
@@ -190,6 +205,40 @@ def evaluate_contact(
         dissipation=frictional_dissipation(rm.traction, k.slip_measure, k.length, rm.status,
                                            step),
         rate_law=k.rate_law,
+    )
+
+
+_NO_ARRAY = np.zeros((0, 2))
+
+
+def _evaluate_compiled(
+    x_eval: NDArray, v_eval: NDArray | None, rate_factor: float | None, interface: Interface,
+    state: PairState, law: ContactLaw, x_start: NDArray | None, dt: float | None,
+) -> ContactResult | None:
+    """:func:`evaluate_contact` by :func:`kernels_numba.evaluate_pairs`; None on bad input."""
+    rate_law = rate_factor is not None
+    if rate_law and v_eval is None:
+        return None
+    step = 1.0 if rate_factor is None else (dt if dt is not None else 2.0 / rate_factor)
+    params = np.array([law.eps_N, law.eps_T, law.mu, rate_factor or 0.0, step])
+    flags = np.array([kernels_numba.METHOD_CODES[law.method], rate_law, v_eval is not None,
+                      x_start is not None, law.frictional], dtype=np.int64)
+    pairs = state.pairs
+    code, force, rows, cols, vals, scalars, normal, tangent, status, dissipation = \
+        kernels_numba.evaluate_pairs(
+            x_eval, _NO_ARRAY if v_eval is None else v_eval,
+            _NO_ARRAY if x_start is None else x_start, interface.surface1.kernel_table,
+            interface.surface2.kernel_table, pairs, state.lambda_N, state.dlambda_T,
+            state.t_T, params, flags)
+    if code != kernels_numba.OK:
+        return None
+    k = kernels_numba
+    return ContactResult(
+        force=force, rows=rows, cols=cols, vals=vals, pairs=pairs, gap=scalars[k.GAP],
+        gap_rate=scalars[k.GAP_RATE], slip_measure=scalars[k.SLIP_MEASURE],
+        t_N=scalars[k.T_N], t_T=scalars[k.T_T], trial_T=scalars[k.TRIAL_T], status=status,
+        length=scalars[k.LENGTH], normal=normal, tangent=tangent,
+        dissipation=float(dissipation), rate_law=rate_law,
     )
 
 

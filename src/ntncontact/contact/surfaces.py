@@ -86,6 +86,15 @@ class ContactSurface:
         order = np.argsort(self.nodes)
         return self.nodes[order], order
 
+    @cached_property
+    def kernel_table(self) -> NDArray[np.int64]:
+        """(5, size) lookup table of the compiled contact kernel: sorted global nodes, their
+        chain positions, then prev, next and the corner flag per chain position."""
+        keys, order = self._sorted
+        table = np.vstack((keys, order, self.prev, self.next, self.corner)).astype(np.int64)
+        table.setflags(write=False)
+        return table
+
     def index_of(self, global_nodes: ArrayLike) -> NDArray[np.int64]:
         """Position in the chain of each global node; ValueError if one is not on the surface."""
         query = np.asarray(global_nodes, dtype=np.int64)
