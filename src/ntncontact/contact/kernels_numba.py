@@ -36,12 +36,53 @@ def _chain_index(table, node):
 
 
 @njit(cache=True, inline="always")
-def _sign(a):
-    if a > 0.0:
-        return 1.0
-    if a < 0.0:
-        return -1.0
-    return a  # 0 and NaN as np.sign
+def _fill_slots(table1, table2, i, j, slots):
+    """Global node of every slot (kinematics._slots); False if i or j is not on its surface."""
+    k1, k2 = _chain_index(table1, i), _chain_index(table2, j)
+    if k1 < 0 or k2 < 0:
+        return False
+    slots[0], slots[1] = i, j
+    if table1[4, k1]:  # corner: the partner's normal negated (report 6.6)
+        slots[2], slots[3] = table2[3, k2], table2[2, k2]
+    else:
+        slots[2], slots[3] = table1[2, k1], table1[3, k1]
+    slots[4], slots[5] = table1[2, k1], table1[3, k1]
+    return True
+
+
+@njit(cache=True, inline="always")
+def _normal_frame(x, slots, dn, de):
+    """(chord length l, e0, e1) with e = (x_b - x_a)/l; fills the slot-2/3 Jacobians of e and
+    n = rot(-90) e = (e1, -e0), d e/d x_b = (I - e e^T)/l (kinematics._normal_frame)."""
+    c0, c1 = x[slots[3], 0] - x[slots[2], 0], x[slots[3], 1] - x[slots[2], 1]
+    chord = np.sqrt(c0 * c0 + c1 * c1)
+    if chord == 0.0:
+        return chord, 0.0, 0.0
+    e0, e1 = c0 / chord, c1 / chord
+    for r in range(2):
+        er = e0 if r == 0 else e1
+        for c in range(2):
+            deb = ((1.0 if r == c else 0.0) - er * (e0 if c == 0 else e1)) / chord
+            de[2, r, c], de[3, r, c] = -deb, deb
+    for k in range(2, 4):
+        for c in range(2):
+            dn[k, 0, c], dn[k, 1, c] = de[k, 1, c], -de[k, 0, c]
+    return chord, e0, e1
+
+
+@njit(cache=True, inline="always")
+def _tributary_length(x, slots, d_length):
+    """L_c (5.5), filling its slot gradient; a missing neighbour (open end) adds nothing."""
+    i, prev, nxt = slots[0], slots[4], slots[5]
+    b0, b1 = x[i, 0] - x[prev, 0], x[i, 1] - x[prev, 1]
+    a0, a1 = x[nxt, 0] - x[i, 0], x[nxt, 1] - x[i, 1]
+    l_back, l_ahead = np.sqrt(b0 * b0 + b1 * b1), np.sqrt(a0 * a0 + a1 * a1)
+    ub0, ub1 = (b0 / l_back, b1 / l_back) if l_back > 0.0 else (0.0, 0.0)
+    ua0, ua1 = (a0 / l_ahead, a1 / l_ahead) if l_ahead > 0.0 else (0.0, 0.0)
+    d_length[0, 0], d_length[0, 1] = 0.5 * (ub0 - ua0), 0.5 * (ub1 - ua1)
+    d_length[4, 0], d_length[4, 1] = -0.5 * ub0, -0.5 * ub1
+    d_length[5, 0], d_length[5, 1] = 0.5 * ua0, 0.5 * ua1
+    return 0.5 * (l_back + l_ahead)
 
 
 @njit(cache=True, inline="always")
@@ -57,6 +98,70 @@ def _project(w0, w1, scale, a0, a1, d_axis, grad):
     return w0 * a0 + w1 * a1
 
 
+@njit(cache=True, inline="always")
+def _sign(a):
+    if a > 0.0:
+        return 1.0
+    if a < 0.0:
+        return -1.0
+    return a  # 0 and NaN as np.sign
+
+
+@njit(cache=True, inline="always")
+def _normal_traction(method, lambda_n, eps_N, measure):
+    """(t_N, dt_N/d measure) of laws.normal_traction; "lagrange": the multiplier itself."""
+    if method == 2:
+        return lambda_n, 0.0
+    trial = (0.0 if method == 0 else lambda_n) + eps_N * measure
+    return (trial, eps_N) if trial >= 0.0 else (0.0, 0.0)
+
+
+@njit(cache=True, inline="always")
+def _return_mapping(t_prev, dlam, slip, t_n, mu, eps_T):
+    """(t_T, trial, status, d t_T/d slip, d t_T/d t_N) of friction.return_mapping, friction on."""
+    trial = t_prev + dlam + eps_T * slip
+    limit = mu * t_n
+    beyond = (abs(trial) > limit) or (limit <= 0.0 and trial != 0.0)
+    if not beyond:
+        return trial, trial, _STICK, eps_T, 0.0
+    sign = _sign(trial)
+    # beyond the cone against the motion: the sliding direction reversed, it sticks (3.3.2)
+    status = _STICK if slip * trial < 0.0 else _SLIP
+    return limit * sign, trial, status, 0.0, mu * sign
+
+
+@njit(cache=True, inline="always")
+def _force_jacobian(t_n, t_t, e0, e1, length, d_tn, d_tt, dn, de, d_length, jac):
+    """F = L_c (t_N n + t_T e), returned, and dF/dx_slot into jac (evaluate._force_jacobian)."""
+    n0, n1 = e1, -e0
+    dir0, dir1 = t_n * n0 + t_t * e0, t_n * n1 + t_t * e1
+    for k in range(6):
+        for r in range(2):
+            nr, er, dirr = (n0, e0, dir0) if r == 0 else (n1, e1, dir1)
+            for c in range(2):
+                d_dir = (nr * d_tn[k, c] + t_n * dn[k, r, c] + er * d_tt[k, c]
+                         + t_t * de[k, r, c])
+                jac[k, r, c] = dirr * d_length[k, c] + length * d_dir
+    return length * dir0, length * dir1
+
+
+@njit(cache=True, inline="always")
+def _scatter(p, i, j, slots, f0, f1, jac, force, rows, cols, vals):
+    """+F on node i, -F on node j, and the pair's 48 COO entries in the reference's order."""
+    force[2 * i] += f0
+    force[2 * i + 1] += f1
+    force[2 * j] -= f0
+    force[2 * j + 1] -= f1
+    q = ENTRIES_PER_PAIR * p
+    for node in range(2):
+        row, sgn = (2 * i, 1.0) if node == 0 else (2 * j, -1.0)
+        for k in range(6):
+            for r in range(2):
+                for c in range(2):
+                    rows[q], cols[q], vals[q] = row + r, 2 * slots[k] + c, sgn * jac[k, r, c]
+                    q += 1
+
+
 @njit(cache=True)
 def evaluate_pairs(x, v, x_start, table1, table2, pairs, lambda_N, dlambda_T, t_prev, params,
                    flags):
@@ -68,67 +173,31 @@ def evaluate_pairs(x, v, x_start, table1, table2, pairs, lambda_N, dlambda_T, t_
     GAP...LENGTH, normal (P, 2), tangent (P, 2), status (P,), dissipation).
     """
     eps_N, eps_T, mu, rate_factor, step = params[0], params[1], params[2], params[3], params[4]
-    method, rate_law, has_v, has_start, frictional = flags[0], flags[1], flags[2], flags[3], \
-        flags[4]
+    method, rate_law, has_v, has_start, frictional = (flags[0], flags[1], flags[2], flags[3],
+                                                      flags[4])
     npairs = pairs.shape[0]
     force = np.zeros(2 * x.shape[0])
     rows = np.empty(ENTRIES_PER_PAIR * npairs, np.int64)
     cols = np.empty(ENTRIES_PER_PAIR * npairs, np.int64)
     vals = np.empty(ENTRIES_PER_PAIR * npairs)
     scalars = np.empty((7, npairs))
-    normal = np.empty((npairs, 2))
-    tangent = np.empty((npairs, 2))
+    normal, tangent = np.empty((npairs, 2)), np.empty((npairs, 2))
     status = np.empty(npairs, np.int8)
     slots = np.empty(6, np.int64)
-    dn = np.zeros((6, 2, 2))  # only slots 2 and 3 are ever non-zero
-    de = np.zeros((6, 2, 2))
+    dn, de = np.zeros((6, 2, 2)), np.zeros((6, 2, 2))  # only slots 2, 3 ever non-zero
     d_length = np.zeros((6, 2))
-    d_gap = np.empty((6, 2))
-    d_rate = np.empty((6, 2))
-    d_slip = np.empty((6, 2))
-    d_tn = np.empty((6, 2))
-    d_tt = np.empty((6, 2))
-    jac = np.empty((6, 2, 2))
+    d_gap, d_rate, d_slip = np.empty((6, 2)), np.empty((6, 2)), np.empty((6, 2))
+    d_tn, d_tt, jac = np.empty((6, 2)), np.empty((6, 2)), np.empty((6, 2, 2))
     dissipation = 0.0
     for p in range(npairs):
         i, j = pairs[p, 0], pairs[p, 1]
-        k1, k2 = _chain_index(table1, i), _chain_index(table2, j)
-        if k1 < 0 or k2 < 0:
+        if not _fill_slots(table1, table2, i, j, slots):
             return NOT_ON_SURFACE, force, rows, cols, vals, scalars, normal, tangent, status, 0.0
-        slots[0], slots[1] = i, j
-        if table1[4, k1]:  # corner: the partner's normal negated (report 6.6)
-            slots[2], slots[3] = table2[3, k2], table2[2, k2]
-        else:
-            slots[2], slots[3] = table1[2, k1], table1[3, k1]
-        slots[4], slots[5] = table1[2, k1], table1[3, k1]
-
-        # normal frame: e = (x_b - x_a)/l, n = rot(-90) e, d e/d x_b = (I - e e^T)/l
-        c0, c1 = x[slots[3], 0] - x[slots[2], 0], x[slots[3], 1] - x[slots[2], 1]
-        chord = np.sqrt(c0 * c0 + c1 * c1)
+        chord, e0, e1 = _normal_frame(x, slots, dn, de)
         if chord == 0.0:
             return ZERO_CHORD, force, rows, cols, vals, scalars, normal, tangent, status, 0.0
-        e0, e1 = c0 / chord, c1 / chord
         n0, n1 = e1, -e0
-        for r in range(2):
-            for c in range(2):
-                deb = ((1.0 if r == c else 0.0) - (e0 if r == 0 else e1) * (e0 if c == 0
-                                                                               else e1)) / chord
-                de[2, r, c], de[3, r, c] = -deb, deb
-        for k in range(2, 4):
-            for c in range(2):
-                dn[k, 0, c], dn[k, 1, c] = de[k, 1, c], -de[k, 0, c]
-
-        # tributary length L_c (5.5); a missing neighbour (open end) contributes nothing
-        b0, b1 = x[i, 0] - x[slots[4], 0], x[i, 1] - x[slots[4], 1]
-        a0, a1 = x[slots[5], 0] - x[i, 0], x[slots[5], 1] - x[i, 1]
-        l_back, l_ahead = np.sqrt(b0 * b0 + b1 * b1), np.sqrt(a0 * a0 + a1 * a1)
-        ub0, ub1 = (b0 / l_back, b1 / l_back) if l_back > 0.0 else (0.0, 0.0)
-        ua0, ua1 = (a0 / l_ahead, a1 / l_ahead) if l_ahead > 0.0 else (0.0, 0.0)
-        length = 0.5 * (l_back + l_ahead)
-        d_length[0, 0], d_length[0, 1] = 0.5 * (ub0 - ua0), 0.5 * (ub1 - ua1)
-        d_length[4, 0], d_length[4, 1] = -0.5 * ub0, -0.5 * ub1
-        d_length[5, 0], d_length[5, 1] = 0.5 * ua0, 0.5 * ua1
-
+        length = _tributary_length(x, slots, d_length)
         # gap (2.4), gap rate (2.9), tangential measure (2.10 or the increment since x_start)
         w0, w1 = x[i, 0] - x[j, 0], x[i, 1] - x[j, 1]
         gap = _project(w0, w1, 1.0, n0, n1, dn, d_gap)
@@ -139,65 +208,23 @@ def evaluate_pairs(x, v, x_start, table1, table2, pairs, lambda_N, dlambda_T, t_
         if rate_law:
             slip = _project(vw0, vw1, rate_factor, e0, e1, de, d_slip)
         elif has_start:
-            s0 = w0 - (x_start[i, 0] - x_start[j, 0])
-            s1 = w1 - (x_start[i, 1] - x_start[j, 1])
+            s0, s1 = w0 - (x_start[i, 0] - x_start[j, 0]), w1 - (x_start[i, 1] - x_start[j, 1])
             slip = _project(s0, s1, 1.0, e0, e1, de, d_slip)
         else:
             slip = _project(0.0, 0.0, 0.0, e0, e1, de, d_slip)
         measure, d_measure = (gap_rate, d_rate) if rate_law else (gap, d_gap)
-
-        # normal traction (2.33/2.34); "lagrange": the multiplier itself
-        if method == 2:
-            t_n, dt_dm = lambda_N[p], 0.0
-        else:
-            trial_n = (0.0 if method == 0 else lambda_N[p]) + eps_N * measure
-            t_n, dt_dm = (trial_n, eps_N) if trial_n >= 0.0 else (0.0, 0.0)
+        t_n, dt_dm = _normal_traction(method, lambda_N[p], eps_N, measure)
+        t_t, trial, stat, ds_coef, dn_coef = 0.0, 0.0, _SLIP, 0.0, 0.0
+        if frictional:
+            dlam = dlambda_T[p] if method != 0 else 0.0
+            t_t, trial, stat, ds_coef, dn_coef = _return_mapping(t_prev[p], dlam, slip, t_n, mu,
+                                                                 eps_T)
         for k in range(6):
             for c in range(2):
                 d_tn[k, c] = dt_dm * d_measure[k, c]
-
-        # Coulomb return mapping with the reversal rule (friction.return_mapping)
-        stat, trial, t_t, ds_coef, dn_coef = _SLIP, 0.0, 0.0, 0.0, 0.0
-        if frictional:
-            dlam = dlambda_T[p] if method != 0 else 0.0
-            trial = t_prev[p] + dlam + eps_T * slip
-            limit = mu * t_n
-            beyond = (abs(trial) > limit) or (limit <= 0.0 and trial != 0.0)
-            sign = _sign(trial)
-            if beyond:
-                t_t, dn_coef = limit * sign, mu * sign
-                stat = _STICK if slip * trial < 0.0 else _SLIP
-            else:
-                t_t, ds_coef, stat = trial, eps_T, _STICK
-        for k in range(6):
-            for c in range(2):
                 d_tt[k, c] = ds_coef * d_slip[k, c] + dn_coef * d_tn[k, c]
-
-        # F = L_c (t_N n + t_T e) and its slot Jacobian (evaluate._force_jacobian)
-        dir0, dir1 = t_n * n0 + t_t * e0, t_n * n1 + t_t * e1
-        for k in range(6):
-            for r in range(2):
-                nr, er, dirr = (n0, e0, dir0) if r == 0 else (n1, e1, dir1)
-                for c in range(2):
-                    d_dir = (nr * d_tn[k, c] + t_n * dn[k, r, c] + er * d_tt[k, c]
-                             + t_t * de[k, r, c])
-                    jac[k, r, c] = dirr * d_length[k, c] + length * d_dir
-        f0, f1 = length * dir0, length * dir1
-        force[2 * i] += f0
-        force[2 * i + 1] += f1
-        force[2 * j] -= f0
-        force[2 * j + 1] -= f1
-        q = ENTRIES_PER_PAIR * p
-        for node in range(2):
-            sgn = 1.0 if node == 0 else -1.0
-            for k in range(6):
-                for r in range(2):
-                    for c in range(2):
-                        rows[q] = 2 * pairs[p, node] + r
-                        cols[q] = 2 * slots[k] + c
-                        vals[q] = sgn * jac[k, r, c]
-                        q += 1
-
+        f0, f1 = _force_jacobian(t_n, t_t, e0, e1, length, d_tn, d_tt, dn, de, d_length, jac)
+        _scatter(p, i, j, slots, f0, f1, jac, force, rows, cols, vals)
         scalars[GAP, p], scalars[GAP_RATE, p], scalars[SLIP_MEASURE, p] = gap, gap_rate, slip
         scalars[T_N, p], scalars[T_T, p], scalars[TRIAL_T, p] = t_n, t_t, trial
         scalars[LENGTH, p] = length
