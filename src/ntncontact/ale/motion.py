@@ -102,10 +102,12 @@ import scipy.sparse as sp
 from numpy.typing import ArrayLike, NDArray
 
 from ntncontact.ale.remap import (
+    LazyGradients,
     RemapMethod,
     Remapper,
     conservative_velocity_correction,
     momenta,
+    two_ring_patches,
 )
 from ntncontact.ale.smoothing import (
     Smoother,
@@ -306,6 +308,11 @@ class AleBody:
         return owner[np.minimum(at, keys.size - 1)]
 
     @cached_property
+    def _patches(self) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
+        """Two-ring node patches of the quadratic remap's gradient recovery (topology)."""
+        return two_ring_patches(self.cells, self.n_nodes)
+
+    @cached_property
     def cell_density(self) -> NDArray[np.float64]:
         return np.broadcast_to(np.asarray(self.density, dtype=float), (len(self.cells),))
 
@@ -354,11 +361,12 @@ class _TnState:
 
     @cached_property
     def remapper(self) -> Remapper:
-        return Remapper(self.x, self.body.cells)
+        return Remapper(self.x, self.body.cells, patches=self.body._patches)
 
     @cached_property
-    def gradients(self) -> NDArray[np.float64]:
-        return self.remapper.nodal_gradients(self.fields)
+    def gradients(self) -> LazyGradients:
+        """Recovered where first needed (a move remaps a few points)."""
+        return LazyGradients(self.remapper, self.fields)
 
     @cached_property
     def element_masses(self) -> NDArray[np.float64]:

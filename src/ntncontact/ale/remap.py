@@ -41,9 +41,11 @@ import scipy.sparse as sp
 from numpy.typing import ArrayLike, NDArray
 from scipy.spatial import cKDTree
 
+from ntncontact.ale import kernels_numba as _kernels
 from ntncontact.mesh.quadmesh import MeshError
 
 __all__ = [
+    "LazyGradients",
     "PointLocation",
     "Remapper",
     "conservative_velocity_correction",
@@ -51,6 +53,7 @@ __all__ = [
     "momenta",
     "q4_shape",
     "remap_fields",
+    "two_ring_patches",
 ]
 
 RemapMethod = Literal["linear", "quadratic"]
@@ -74,26 +77,13 @@ def inverse_bilinear(
     written x = a0 + a1 xi + a2 eta + a3 xi eta; iterates are kept in [-4, 4] so that far-away
     candidate cells cannot overflow.
     """
-    x0, x1, x2, x3 = (cell_xy[..., a, :] for a in range(4))
-    a0 = 0.25 * (x0 + x1 + x2 + x3) - points
-    a1, a2 = 0.25 * (-x0 + x1 + x2 - x3), 0.25 * (-x0 - x1 + x2 + x3)
-    a3 = 0.25 * (x0 - x1 + x2 - x3)
-    xi, eta = np.zeros(points.shape[:-1]), np.zeros(points.shape[:-1])
-    for _ in range(iterations):
-        r = a0 + a1 * xi[..., None] + a2 * eta[..., None] + a3 * (xi * eta)[..., None]
-        g1, g2 = a1 + a3 * eta[..., None], a2 + a3 * xi[..., None]  # columns of dx/dxi
-        det = g1[..., 0] * g2[..., 1] - g1[..., 1] * g2[..., 0]
-        det = np.where(np.abs(det) > 0, det, 1.0)
-        new_xi = np.clip(xi - (g2[..., 1] * r[..., 0] - g2[..., 0] * r[..., 1]) / det, -4.0, 4.0)
-        new_eta = np.clip(eta - (g1[..., 0] * r[..., 1] - g1[..., 1] * r[..., 0]) / det, -4.0,
-                          4.0)
-        change = max(np.max(np.abs(new_xi - xi), initial=0.0),
-                     np.max(np.abs(new_eta - eta), initial=0.0))
-        xi, eta = new_xi, new_eta
-        if change <= 1e-15:  # converged to round-off of O(1) reference coordinates
-            break
-    r = a0 + a1 * xi[..., None] + a2 * eta[..., None] + a3 * (xi * eta)[..., None]
-    return np.stack([xi, eta], axis=-1), np.linalg.norm(r, axis=-1)
+    cell_xy, points = np.asarray(cell_xy, dtype=float), np.asarray(points, dtype=float)
+    lead = np.broadcast_shapes(cell_xy.shape[:-2], points.shape[:-1])
+    cells = np.ascontiguousarray(np.broadcast_to(cell_xy, (*lead, 4, 2))).reshape(-1, 4, 2)
+    pts = np.ascontiguousarray(np.broadcast_to(points, (*lead, 2))).reshape(-1, 2)
+    # compiled Newton loop (``kernels_numba``), run until every point has converged
+    xi, res = _kernels.inverse_bilinear(cells, pts, iterations)
+    return xi.reshape(*lead, 2), res.reshape(lead)
 
 
 def _nearest_on_boundary(
@@ -121,7 +111,8 @@ class PointLocation(NamedTuple):
 class Remapper:
     """Locator and interpolator on one old mesh; build once per old mesh."""
 
-    def __init__(self, nodes: ArrayLike, cells: ArrayLike, candidates: int = 8) -> None:
+    def __init__(self, nodes: ArrayLike, cells: ArrayLike, candidates: int = 8,
+                 patches: tuple[NDArray[np.int64], NDArray] | None = None) -> None:
         self.nodes = np.asarray(nodes, dtype=float)
         self.cells = np.asarray(cells, dtype=np.int64).reshape(-1, 4)
         xc = self.nodes[self.cells]
@@ -138,6 +129,7 @@ class Remapper:
         self.cell_size = np.sqrt(np.abs(area))  # sqrt(area): the length scale of a cell
         self._k = min(candidates, len(self.cells))
         self._gradient_ops: tuple[NDArray, NDArray] | None = None
+        self._patches = patches
 
     def _search(self, points: NDArray, k: int) -> tuple[NDArray, NDArray]:
         """Containing cell (or -1) and its xi for each point among its k nearest centroids.
@@ -247,13 +239,14 @@ class Remapper:
         points: ArrayLike,
         method: RemapMethod = "linear",
         outside_tol: float = 0.1,
-        gradients: ArrayLike | None = None,
+        gradients: ArrayLike | LazyGradients | None = None,
         hint: ArrayLike | None = None,
     ) -> NDArray[np.float64]:
         """Old nodal fields (n,) or (n, k) evaluated at new points, (p,) or (p, k).
 
         ``gradients`` (n, k, 2), only for "quadratic": nodal gradients of the fields if already
-        known (e.g. ``nodal_gradients`` of the same fields kept between calls). ``hint``: likely
+        known (e.g. ``nodal_gradients`` of the same fields kept between calls), or a
+        ``LazyGradients`` of these fields on this remapper. ``hint``: likely
         cells of the points (see ``locate``).
         """
         if method not in ("linear", "quadratic"):
@@ -266,8 +259,13 @@ class Remapper:
         shape = q4_shape(loc.xi)
         out = np.einsum("pa,pak->pk", shape, f2[nodes])
         if method == "quadratic":
-            g = self.nodal_gradients(f2) if gradients is None else np.asarray(gradients, float)
-            g = g.reshape(len(self.nodes), f2.shape[1], 2)[nodes]  # (p, 4, k, 2)
+            if gradients is None:
+                g = self.nodal_gradients(f2, nodes.ravel()).reshape(*nodes.shape, -1, 2)
+            elif isinstance(gradients, LazyGradients):
+                g = gradients.at(nodes)
+            else:
+                g = np.asarray(gradients, float).reshape(len(self.nodes), f2.shape[1], 2)[nodes]
+            # g: (p, 4, k, 2)
             rel = pts[:, None, :] - self.nodes[nodes]  # p - x_a
             out += 0.5 * np.einsum("pa,paki,pai->pk", shape, g, rel)
             # a clamped point lies off its cell by p - x(xi): continue linearly to it
@@ -279,49 +277,91 @@ class Remapper:
         out[same] = f2[node[same]]
         return out.reshape((len(pts), *f.shape[1:]))
 
-    def _gradient_operators(self) -> tuple[NDArray[np.int64], NDArray[np.float64]]:
-        """Per node its two-ring patch (padded with -1) and the rows G (n, 2, maxp) with
-        g_a = G_a (f_patch - f_a): least squares of f_j - f_a = g.d + d.H d / 2 over the patch
-        (d = x_j - x_a), or of g.d alone where the patch does not determine a quadratic."""
-        if self._gradient_ops is None:
-            m, n = len(self.cells), len(self.nodes)
-            rows = np.repeat(np.arange(m), 4)
-            inc = sp.csr_matrix((np.ones(4 * m), (rows, self.cells.ravel())), shape=(m, n))
-            ring = (inc.T @ inc).tocsr()
-            ring = (ring @ ring).tocsr()  # nodes within two cells of each node
-            ring.setdiag(0)
-            ring.eliminate_zeros()
-            ring.sort_indices()
-            lengths = np.diff(ring.indptr)
-            width = max(int(lengths.max(initial=0)), 1)
-            patch = np.full((n, width), -1, dtype=np.int64)
-            cols = np.arange(ring.nnz) - np.repeat(ring.indptr[:-1], lengths)
-            patch[np.repeat(np.arange(n), lengths), cols] = ring.indices
-            valid = patch >= 0
-            d = (self.nodes[np.where(valid, patch, 0)] - self.nodes[:, None, :]) * valid[..., None]
-            scale = np.sqrt(np.sum(d**2, axis=(1, 2)) / np.maximum(lengths, 1))
-            scale = np.where(scale > 0, scale, 1.0)
-            ds = d / scale[:, None, None]
-            dx, dy = ds[..., 0], ds[..., 1]
-            quad = np.stack([dx, dy, 0.5 * dx * dx, dx * dy, 0.5 * dy * dy], axis=-1)
-            ops = np.zeros((n, 2, width))
-            for basis, terms in ((ds, 2), (quad, 5)):  # the quadratic fit overrides where ok
-                u, sv, vt = np.linalg.svd(basis, full_matrices=False)
-                ok = (lengths >= terms) & (sv[:, -1] > 1e-8 * sv[:, 0])
-                inv = np.where(sv > 1e-8 * sv[:, :1], 1.0 / np.where(sv > 0, sv, 1.0), 0.0)
-                pinv = np.einsum("nji,nj,nqj->niq", vt, inv, u)  # (n, terms, width)
-                ops[ok] = pinv[ok, :2, :] / scale[ok, None, None]
+    def _gradient_operators(
+        self, nodes: NDArray[np.int64] | None = None
+    ) -> tuple[NDArray[np.int64], NDArray[np.float64]]:
+        """Per node (all, or the given ones) its two-ring patch (padded with -1) and the rows
+        G (p, 2, maxp) with g_a = G_a (f_patch - f_a): least squares of
+        f_j - f_a = g.d + d.H d / 2 over the patch (d = x_j - x_a), or of g.d alone where the
+        patch does not determine a quadratic. Each node's rows depend on its own patch only."""
+        if nodes is None and self._gradient_ops is not None:
+            return self._gradient_ops
+        if self._patches is None:
+            self._patches = two_ring_patches(self.cells, len(self.nodes))
+        patch, lengths = self._patches
+        if nodes is not None:
+            patch, lengths = patch[nodes], lengths[nodes]
+        centre = self.nodes if nodes is None else self.nodes[nodes]
+        valid = patch >= 0
+        d = (self.nodes[np.where(valid, patch, 0)] - centre[:, None, :]) * valid[..., None]
+        scale = np.sqrt(np.sum(d**2, axis=(1, 2)) / np.maximum(lengths, 1))
+        scale = np.where(scale > 0, scale, 1.0)
+        ds = d / scale[:, None, None]
+        dx, dy = ds[..., 0], ds[..., 1]
+        quad = np.stack([dx, dy, 0.5 * dx * dx, dx * dy, 0.5 * dy * dy], axis=-1)
+        ops = np.zeros((len(patch), 2, patch.shape[1]))
+        for basis, terms in ((ds, 2), (quad, 5)):  # the quadratic fit overrides where ok
+            u, sv, vt = np.linalg.svd(basis, full_matrices=False)
+            ok = (lengths >= terms) & (sv[:, -1] > 1e-8 * sv[:, 0])
+            inv = np.where(sv > 1e-8 * sv[:, :1], 1.0 / np.where(sv > 0, sv, 1.0), 0.0)
+            pinv = np.einsum("nji,nj,nqj->niq", vt, inv, u)  # (n, terms, width)
+            ops[ok] = pinv[ok, :2, :] / scale[ok, None, None]
+        if nodes is None:
             self._gradient_ops = (patch, ops)
-        return self._gradient_ops
+        return patch, ops
 
-    def nodal_gradients(self, fields: ArrayLike) -> NDArray[np.float64]:
+    def nodal_gradients(
+        self, fields: ArrayLike, nodes: ArrayLike | None = None
+    ) -> NDArray[np.float64]:
         """Recovered nodal gradients (n, k, 2) of nodal fields (n,) or (n, k): exact for
         quadratic fields wherever the two-ring patch carries a quadratic (every node of a mesh
-        at least two cells across), exact for linear fields everywhere else."""
+        at least two cells across), exact for linear fields everywhere else. With ``nodes``
+        only those nodes' gradients, (p, k, 2)."""
         f2 = np.asarray(fields, dtype=float).reshape(len(self.nodes), -1)
-        patch, ops = self._gradient_operators()
-        diff = (f2[np.where(patch >= 0, patch, 0)] - f2[:, None, :]) * (patch >= 0)[..., None]
+        idx = None if nodes is None else np.asarray(nodes, dtype=np.int64).reshape(-1)
+        patch, ops = self._gradient_operators(idx)
+        own = f2 if idx is None else f2[idx]
+        diff = (f2[np.where(patch >= 0, patch, 0)] - own[:, None, :]) * (patch >= 0)[..., None]
         return np.einsum("niq,nqk->nki", ops, diff)
+
+
+class LazyGradients:
+    """Nodal gradients of fixed fields on one Remapper, recovered only at the nodes asked for
+    and kept: a move remaps a few points, which need the gradients of a few cells' nodes."""
+
+    def __init__(self, remapper: Remapper, fields: ArrayLike) -> None:
+        self.remapper = remapper
+        self.fields = np.asarray(fields, dtype=float).reshape(len(remapper.nodes), -1)
+        self._values = np.zeros((len(remapper.nodes), self.fields.shape[1], 2))
+        self._known = np.zeros(len(remapper.nodes), bool)
+
+    def at(self, nodes: NDArray[np.int64]) -> NDArray[np.float64]:
+        """Gradients of the nodes ``nodes`` (any shape s), (*s, k, 2)."""
+        missing = np.unique(nodes[~self._known[nodes]])
+        if missing.size:
+            self._values[missing] = self.remapper.nodal_gradients(self.fields, missing)
+            self._known[missing] = True
+        return self._values[nodes]
+
+
+def two_ring_patches(cells: ArrayLike, n_nodes: int) -> tuple[NDArray[np.int64], NDArray]:
+    """Per node the sorted nodes within two cells of it, padded with -1 to a common width,
+    and their counts: ((n, width), (n,)). Topology only."""
+    cell_arr = np.asarray(cells, dtype=np.int64).reshape(-1, 4)
+    m, n = len(cell_arr), n_nodes
+    rows = np.repeat(np.arange(m), 4)
+    inc = sp.csr_matrix((np.ones(4 * m), (rows, cell_arr.ravel())), shape=(m, n))
+    ring = (inc.T @ inc).tocsr()
+    ring = (ring @ ring).tocsr()  # nodes within two cells of each node
+    ring.setdiag(0)
+    ring.eliminate_zeros()
+    ring.sort_indices()
+    lengths = np.diff(ring.indptr)
+    width = max(int(lengths.max(initial=0)), 1)
+    patch = np.full((n, width), -1, dtype=np.int64)
+    cols = np.arange(ring.nnz) - np.repeat(ring.indptr[:-1], lengths)
+    patch[np.repeat(np.arange(n), lengths), cols] = ring.indices
+    return patch, lengths
 
 
 def remap_fields(

@@ -26,9 +26,12 @@ moves nothing else (see its docstring).
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
+
+from ntncontact.ale import kernels_numba as _kernels
 
 __all__ = [
     "SurfaceCurve",
@@ -80,7 +83,7 @@ class SurfaceCurve:
     @classmethod
     def from_chain(cls, chain_xy: ArrayLike, corner_mask: ArrayLike | None = None) -> SurfaceCurve:
         """Build the curve; ``corner_mask`` flags body corners (segment breaks)."""
-        points = np.asarray(chain_xy, dtype=float)
+        points = np.ascontiguousarray(chain_xy, dtype=float)
         if points.ndim != 2 or points.shape[1] != 2 or len(points) < 2:
             raise ValueError(f"a surface chain needs shape (n >= 2, 2), got {points.shape}")
         breaks = _break_mask(len(points), corner_mask)
@@ -107,26 +110,18 @@ class SurfaceCurve:
         return u * (np.linalg.norm(dx, axis=-1) @ _GAUSS_W)
 
     def _segment_of(self, s: NDArray) -> tuple[NDArray, NDArray]:
-        """Segment index and local parameter u of arc-length positions s (clamped to the chain)."""
-        s = np.clip(s, 0.0, self.length)
-        seg = np.clip(np.searchsorted(self.node_s, s, side="right") - 1, 0, len(self.bulge) - 1)
-        ds = s - self.node_s[seg]
-        seg_len = np.diff(self.node_s)[seg]
-        u = np.divide(ds, seg_len, out=np.zeros_like(ds), where=seg_len > 0)
-        for _ in range(6):  # Newton on arc(u) = ds; |x'| varies slowly so this converges fast
-            _, dx = self._eval(seg, u)
-            speed = np.linalg.norm(dx, axis=-1)
-            step = np.divide(self._arc(seg, u) - ds, speed, out=np.zeros_like(u), where=speed > 0)
-            u = np.clip(u - step, 0.0, 1.0)
-            if not np.any(np.abs(step) > _CONVERGED):
-                break
-        return seg, u
+        """Segment index and local parameter u of arc-length positions s (clamped to the chain):
+        Newton on arc(u) = ds from the chord estimate (compiled: ``kernels_numba``)."""
+        s_flat = np.ascontiguousarray(s, dtype=float).reshape(-1)
+        seg, u = _kernels.segment_of(self.points, self.bulge, self.node_s, s_flat, _GAUSS_U,
+                                     _GAUSS_W)
+        return seg.reshape(np.shape(s)), u.reshape(np.shape(s))
 
     def point_at(self, s: ArrayLike) -> NDArray[np.float64]:
         """Positions (p, 2) at arc-length parameters s (values outside [0, L] are clamped)."""
-        s_arr = np.atleast_1d(np.asarray(s, dtype=float))
-        seg, u = self._segment_of(s_arr)
-        return self._eval(seg, u)[0]
+        s_arr = np.ascontiguousarray(np.atleast_1d(np.asarray(s, dtype=float)).reshape(-1))
+        return _kernels.point_at(self.points, self.bulge, self.node_s, s_arr, _GAUSS_U,
+                                 _GAUSS_W)
 
     def tangent_at(self, s: ArrayLike) -> NDArray[np.float64]:
         """Unit tangents (p, 2) in the chain direction at arc-length parameters s."""
@@ -180,16 +175,12 @@ class SurfaceCurve:
         best_seg, best_u = seg[rows, best], u[rows, best]
         return self.node_s[best_seg] + self._arc(best_seg, best_u), foot[rows, best]
 
-    def _nearest_segments(self, pts: NDArray, keep: int = 3) -> NDArray[np.int64]:
-        """Per point the ``keep`` segments with the closest of 9 samples each, (p, keep)."""
-        n_seg = len(self.bulge)
-        samples = np.linspace(0.0, 1.0, 9)
-        all_seg = np.broadcast_to(np.arange(n_seg), (len(pts), n_seg))
-        xs, _ = self._eval(all_seg[..., None], np.broadcast_to(samples, (*all_seg.shape, 9)))
-        nearest = np.linalg.norm(xs - pts[:, None, None, :], axis=-1).min(axis=-1)
-        return np.argsort(nearest, axis=1, kind="stable")[:, :min(keep, n_seg)]
-
     def _end_tangents(self) -> tuple[NDArray, NDArray]:
+        """``_tangents`` (kept per curve: they depend on the curve only)."""
+        return self._tangents
+
+    @cached_property
+    def _tangents(self) -> tuple[NDArray, NDArray]:
         """Unit tangents at the start and end of every segment from the continuous nodal
         tangent field: at a smooth node the normalized mean of the two segments' one-sided
         tangents (so both segments share it), at a break the segment's own."""
@@ -201,6 +192,8 @@ class SurfaceCurve:
         mean = end[:-1] + start[1:]
         mean /= np.linalg.norm(mean, axis=1, keepdims=True)
         end[:-1][inner], start[1:][inner] = mean[inner], mean[inner]
+        start.setflags(write=False)
+        end.setflags(write=False)
         return start, end
 
     def normal_foot(self, points: ArrayLike) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
@@ -215,45 +208,12 @@ class SurfaceCurve:
         chain both coincide with the orthogonal projection. A point beyond a break (no normal
         through it on the adjacent segment) gets the break.
         """
-        pts = np.atleast_2d(np.asarray(points, dtype=float))
-        seg = self._nearest_segments(pts)
-        t_start, t_end = self._end_tangents()
-        t0, t1 = t_start[seg], t_end[seg]
-        p = pts[:, None, :]
-
-        def residual(u: NDArray) -> tuple[NDArray, NDArray]:
-            """f(u) = (p - x(u)) . t(u), decreasing through the foot, and df/du."""
-            x, dx = self._eval(seg, u)
-            t = t0 + u[..., None] * (t1 - t0)
-            r = p - x
-            return (np.einsum("psi,psi->ps", r, t),
-                    np.einsum("psi,psi->ps", r, t1 - t0) - np.einsum("psi,psi->ps", dx, t))
-
-        f0, _ = residual(np.zeros(seg.shape))
-        f1, _ = residual(np.ones(seg.shape))
-        root = (f0 >= 0.0) & (f1 <= 0.0)
-        lo, hi = np.zeros(seg.shape), np.ones(seg.shape)
-        u = np.where(root, f0 / np.where(root & (f0 > f1), f0 - f1, 1.0), np.where(f0 < 0, 0, 1))
-        for _ in range(30):  # Newton on the bracketed cubic, bisection when it leaves the bracket
-            f, df = residual(u)
-            lo, hi = np.where(f > 0.0, u, lo), np.where(f > 0.0, hi, u)
-            step = np.divide(f, df, out=np.full_like(f, np.inf), where=df < 0.0)
-            new = u - step
-            new = np.where((new >= lo) & (new <= hi), new, 0.5 * (lo + hi))
-            new = np.where(root & (f != 0.0), new, u)
-            done = not np.any(np.abs(new - u) > _CONVERGED)
-            u = new
-            if done:
-                break
-        foot = self._eval(seg, u)[0]
-        dist = np.linalg.norm(foot - p, axis=-1) + np.where(root, 0.0, np.inf)
-        best = np.argmin(dist, axis=1)
-        rows = np.arange(len(pts))
-        none = ~root.any(axis=1)  # beyond a break: the nearest candidate's nearer end
-        ends = np.linalg.norm(self._eval(seg, np.where(f0 < 0, 0.0, 1.0))[0] - p, axis=-1)
-        best = np.where(none, np.argmin(ends, axis=1), best)
-        best_seg, best_u = seg[rows, best], u[rows, best]
-        return self.node_s[best_seg] + self._arc(best_seg, best_u), foot[rows, best]
+        pts = np.ascontiguousarray(np.atleast_2d(np.asarray(points, dtype=float)))
+        t_start, t_end = self._tangents
+        # per point: the 3 segments with the closest samples, Newton on the bracketed
+        # f(u) = (p - x(u)) . t(u) (bisection when it leaves the bracket), nearest root wins
+        return _kernels.normal_foot(self.points, self.bulge, self.node_s, t_start, t_end, pts,
+                                    _GAUSS_U, _GAUSS_W)
 
 
 def point_at(

@@ -1,0 +1,235 @@
+"""Numba kernels of the ALE update's small inner loops (surface curve, bilinear inversion).
+
+Each is the loop form of the NumPy code it replaces in ``ale.surface`` and ``ale.remap``, with
+the same operations in the same order and the same iteration rule: the Newton loops run over the
+whole batch until every member has converged (as the vectorized code did), so the results agree
+with it to round-off of the reordered sums (arc-length quadrature). The arrays are tiny (a few
+points on a chain of tens of segments), so the NumPy versions were dominated by per-call overhead.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+# 8-point Gauss-Legendre on [0, 1] (as ale.surface)
+_GX, _GW = np.polynomial.legendre.leggauss(8)
+GAUSS_U = 0.5 * (_GX + 1.0)
+GAUSS_W = 0.5 * _GW
+CONVERGED = 1e-14  # Newton updates of a local parameter u in [0, 1] below this: round-off
+
+
+@njit(cache=True, inline="always")
+def _eval(points, bulge, seg, u):
+    """Position and dx/du of segment ``seg`` at u: (x0, x1, dx0, dx1)."""
+    p0, p1 = points[seg, 0], points[seg, 1]
+    d0, d1 = points[seg + 1, 0] - p0, points[seg + 1, 1] - p1
+    q0, q1 = bulge[seg, 0], bulge[seg, 1]
+    w = u * (u - 1.0)
+    c = 2.0 * u - 1.0
+    return p0 + u * d0 + w * q0, p1 + u * d1 + w * q1, d0 + c * q0, d1 + c * q1
+
+
+@njit(cache=True)
+def _arc(points, bulge, seg, u, gauss_u, gauss_w):
+    """Arc length from the start of segment ``seg`` to u (8-point Gauss)."""
+    total = 0.0
+    for g in range(gauss_u.size):
+        _, _, dx0, dx1 = _eval(points, bulge, seg, u * gauss_u[g])
+        total += np.sqrt(dx0 * dx0 + dx1 * dx1) * gauss_w[g]
+    return u * total
+
+
+@njit(cache=True)
+def segment_of(points, bulge, node_s, s, gauss_u, gauss_w):
+    """Segment and local u of arc-length positions s (``SurfaceCurve._segment_of``)."""
+    n_seg = bulge.shape[0]
+    length = node_s[-1]
+    p = s.size
+    seg = np.empty(p, np.int64)
+    u = np.empty(p)
+    ds = np.empty(p)
+    for i in range(p):
+        si = min(max(s[i], 0.0), length)
+        k = np.searchsorted(node_s, si, side="right") - 1
+        k = min(max(k, 0), n_seg - 1)
+        seg[i] = k
+        ds[i] = si - node_s[k]
+        seg_len = node_s[k + 1] - node_s[k]
+        u[i] = ds[i] / seg_len if seg_len > 0 else 0.0
+    for _ in range(6):  # Newton on arc(u) = ds, stopped when every step is round-off
+        moving = False
+        for i in range(p):
+            _, _, dx0, dx1 = _eval(points, bulge, seg[i], u[i])
+            speed = np.sqrt(dx0 * dx0 + dx1 * dx1)
+            step = 0.0
+            if speed > 0:
+                step = (_arc(points, bulge, seg[i], u[i], gauss_u, gauss_w) - ds[i]) / speed
+            u[i] = min(max(u[i] - step, 0.0), 1.0)
+            if np.abs(step) > CONVERGED:
+                moving = True
+        if not moving:
+            break
+    return seg, u
+
+
+@njit(cache=True)
+def point_at(points, bulge, node_s, s, gauss_u, gauss_w):
+    """Positions (p, 2) at arc-length parameters s (``SurfaceCurve.point_at``)."""
+    seg, u = segment_of(points, bulge, node_s, s, gauss_u, gauss_w)
+    out = np.empty((s.size, 2))
+    for i in range(s.size):
+        x0, x1, _, _ = _eval(points, bulge, seg[i], u[i])
+        out[i, 0], out[i, 1] = x0, x1
+    return out
+
+
+@njit(cache=True)
+def _nearest_segments(points, bulge, pts, keep):
+    """Per point the ``keep`` segments with the closest of 9 samples each (stable order)."""
+    n_seg = bulge.shape[0]
+    p = pts.shape[0]
+    out = np.empty((p, keep), np.int64)
+    nearest = np.empty(n_seg)
+    for i in range(p):
+        for k in range(n_seg):
+            best = np.inf
+            for j in range(9):
+                x0, x1, _, _ = _eval(points, bulge, k, j / 8.0)
+                r0, r1 = x0 - pts[i, 0], x1 - pts[i, 1]
+                best = min(best, np.sqrt(r0 * r0 + r1 * r1))
+            nearest[k] = best
+        taken = np.zeros(n_seg, np.bool_)
+        for c in range(keep):  # repeated minimum, ties to the lower index: a stable argsort
+            pick = -1
+            for k in range(n_seg):
+                if not taken[k] and (pick < 0 or nearest[k] < nearest[pick]):
+                    pick = k
+            taken[pick] = True
+            out[i, c] = pick
+    return out
+
+
+@njit(cache=True, inline="always")
+def _foot_residual(points, bulge, seg, u, t00, t01, t10, t11, p0, p1):
+    """f(u) = (p - x(u)) . t(u) and df/du of ``SurfaceCurve.normal_foot``."""
+    x0, x1, dx0, dx1 = _eval(points, bulge, seg, u)
+    e0, e1 = t10 - t00, t11 - t01
+    t0, t1 = t00 + u * e0, t01 + u * e1
+    r0, r1 = p0 - x0, p1 - x1
+    return r0 * t0 + r1 * t1, (r0 * e0 + r1 * e1) - (dx0 * t0 + dx1 * t1)
+
+
+@njit(cache=True)
+def normal_foot(points, bulge, node_s, t_start, t_end, pts, gauss_u, gauss_w):
+    """Arc-length parameters and positions of the normal feet (``SurfaceCurve.normal_foot``)."""
+    p = pts.shape[0]
+    keep = min(3, bulge.shape[0])
+    seg = _nearest_segments(points, bulge, pts, keep)
+    f0 = np.empty((p, keep))
+    root = np.empty((p, keep), np.bool_)
+    u = np.empty((p, keep))
+    lo = np.zeros((p, keep))
+    hi = np.ones((p, keep))
+    for i in range(p):
+        for c in range(keep):
+            k = seg[i, c]
+            a, _ = _foot_residual(points, bulge, k, 0.0, t_start[k, 0], t_start[k, 1],
+                                  t_end[k, 0], t_end[k, 1], pts[i, 0], pts[i, 1])
+            b, _ = _foot_residual(points, bulge, k, 1.0, t_start[k, 0], t_start[k, 1],
+                                  t_end[k, 0], t_end[k, 1], pts[i, 0], pts[i, 1])
+            f0[i, c] = a
+            root[i, c] = (a >= 0.0) and (b <= 0.0)
+            if root[i, c]:
+                u[i, c] = a / ((a - b) if a > b else 1.0)
+            else:
+                u[i, c] = 0.0 if a < 0 else 1.0
+    for _ in range(30):  # Newton on the bracketed cubic, bisection when it leaves the bracket
+        moving = False
+        for i in range(p):
+            for c in range(keep):
+                k = seg[i, c]
+                uc = u[i, c]
+                f, df = _foot_residual(points, bulge, k, uc, t_start[k, 0], t_start[k, 1],
+                                       t_end[k, 0], t_end[k, 1], pts[i, 0], pts[i, 1])
+                if f > 0.0:
+                    lo[i, c] = uc
+                else:
+                    hi[i, c] = uc
+                step = f / df if df < 0.0 else np.inf
+                new = uc - step
+                if not (new >= lo[i, c] and new <= hi[i, c]):
+                    new = 0.5 * (lo[i, c] + hi[i, c])
+                if not (root[i, c] and f != 0.0):
+                    new = uc
+                if np.abs(new - uc) > CONVERGED:
+                    moving = True
+                u[i, c] = new
+        if not moving:
+            break
+    s = np.empty(p)
+    foot = np.empty((p, 2))
+    for i in range(p):
+        best, best_d, none = 0, np.inf, True
+        for c in range(keep):
+            if root[i, c]:
+                none = False
+                x0, x1, _, _ = _eval(points, bulge, seg[i, c], u[i, c])
+                r0, r1 = x0 - pts[i, 0], x1 - pts[i, 1]
+                dist = np.sqrt(r0 * r0 + r1 * r1)
+                if dist < best_d:
+                    best, best_d = c, dist
+        if none:  # beyond a break: the nearest candidate's nearer end
+            best_d = np.inf
+            for c in range(keep):
+                x0, x1, _, _ = _eval(points, bulge, seg[i, c], 0.0 if f0[i, c] < 0 else 1.0)
+                r0, r1 = x0 - pts[i, 0], x1 - pts[i, 1]
+                dist = np.sqrt(r0 * r0 + r1 * r1)
+                if dist < best_d:
+                    best, best_d = c, dist
+        k, uc = seg[i, best], u[i, best]
+        s[i] = node_s[k] + _arc(points, bulge, k, uc, gauss_u, gauss_w)
+        foot[i, 0], foot[i, 1], _, _ = _eval(points, bulge, k, uc)
+    return s, foot
+
+
+@njit(cache=True)
+def inverse_bilinear(cell_xy, points, iterations):
+    """Reference coordinates (m, 2) and residual distances (m,) of points in Q4 cells
+    (``ale.remap.inverse_bilinear`` for (m, 4, 2) cells and (m, 2) points)."""
+    m = points.shape[0]
+    a = np.empty((m, 4, 2))  # a0 (minus the point), a1, a2, a3 of x = a0 + a1 xi + ...
+    for e in range(m):
+        for i in range(2):
+            x0, x1, x2, x3 = cell_xy[e, 0, i], cell_xy[e, 1, i], cell_xy[e, 2, i], cell_xy[e, 3, i]
+            a[e, 0, i] = 0.25 * (x0 + x1 + x2 + x3) - points[e, i]
+            a[e, 1, i] = 0.25 * (-x0 + x1 + x2 - x3)
+            a[e, 2, i] = 0.25 * (-x0 - x1 + x2 + x3)
+            a[e, 3, i] = 0.25 * (x0 - x1 + x2 - x3)
+    xi = np.zeros((m, 2))
+    for _ in range(iterations):
+        change = 0.0
+        for e in range(m):
+            x, y = xi[e, 0], xi[e, 1]
+            xy = x * y
+            r0 = a[e, 0, 0] + a[e, 1, 0] * x + a[e, 2, 0] * y + a[e, 3, 0] * xy
+            r1 = a[e, 0, 1] + a[e, 1, 1] * x + a[e, 2, 1] * y + a[e, 3, 1] * xy
+            g10, g11 = a[e, 1, 0] + a[e, 3, 0] * y, a[e, 1, 1] + a[e, 3, 1] * y
+            g20, g21 = a[e, 2, 0] + a[e, 3, 0] * x, a[e, 2, 1] + a[e, 3, 1] * x
+            det = g10 * g21 - g11 * g20
+            if not np.abs(det) > 0:
+                det = 1.0
+            nx = min(max(x - (g21 * r0 - g20 * r1) / det, -4.0), 4.0)
+            ny = min(max(y - (g10 * r1 - g11 * r0) / det, -4.0), 4.0)
+            change = max(change, np.abs(nx - x), np.abs(ny - y))
+            xi[e, 0], xi[e, 1] = nx, ny
+        if change <= 1e-15:  # converged to round-off of O(1) reference coordinates
+            break
+    res = np.empty(m)
+    for e in range(m):
+        x, y = xi[e, 0], xi[e, 1]
+        xy = x * y
+        r0 = a[e, 0, 0] + a[e, 1, 0] * x + a[e, 2, 0] * y + a[e, 3, 0] * xy
+        r1 = a[e, 0, 1] + a[e, 1, 1] * x + a[e, 2, 1] * y + a[e, 3, 1] * xy
+        res[e] = np.sqrt(r0 * r0 + r1 * r1)
+    return xi, res
