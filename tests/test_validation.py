@@ -11,6 +11,7 @@ from ntncontact.reference import (
     HERTZ_LOAD,
     TABLE_4_1_STAGES,
     Comparison,
+    hertz_nodal_forces,
     hertz_plane_strain,
     table,
     table_4_1,
@@ -20,6 +21,7 @@ from ntncontact.validation import (
     DELAMINATION_POSITIONS,
     EXAMPLES,
     HERTZ_BETA,
+    HERTZ_CONVERGENCE_FRACTION,
     KINDS,
     Case,
     CaseResult,
@@ -27,6 +29,7 @@ from ntncontact.validation import (
     HertzSnapshot,
     block_sliding_rows,
     delamination_rows,
+    hertz_convergence_rows,
     hertz_friction_rows,
     hertz_rows,
     impact_rows,
@@ -148,7 +151,9 @@ def hertz_snapshot(h: float, fraction: float = 1.0, scale: float = 1.0) -> Hertz
     p = scale * p0 * np.sqrt(np.clip(1.0 - (X / a) ** 2, 0.0, None))
     vertical = p / p.sum() * HERTZ_LOAD * fraction
     zero = np.zeros_like(X)
-    return HertzSnapshot(fraction, X, p, p, zero, zero.astype(bool), vertical, zero, 0.0, -0.1)
+    forces = scale * hertz_nodal_forces(X, a, p0)  # the exact work-equivalent nodal forces
+    return HertzSnapshot(fraction, X, p, p, zero, zero.astype(bool), vertical, zero, 0.0, -0.1,
+                         X, forces)
 
 
 def test_hertz_rows_against_the_plane_strain_formulas():
@@ -161,7 +166,12 @@ def test_hertz_rows_against_the_plane_strain_formulas():
     snap = replace(hertz_snapshot(4.0, scale=1.02), pair_offset=4e-3)
     assert failed(hertz_rows(snap, 4.0)) == {
         "peak pressure p0, largest nodal value, 100.0 %", "peak pressure p0, ellipse fit, 100.0 %",
-        "max pair offset / h, 100.0 %"}
+        "peak pressure p0, work-equivalent fit, 100.0 %", "max pair offset / h, 100.0 %"}
+    # the work-equivalent fit reads the exact profile back exactly on any mesh
+    assert by["peak pressure p0, work-equivalent fit, 100.0 %"].ours == pytest.approx(
+        by["peak pressure p0, work-equivalent fit, 100.0 %"].report, rel=1e-9)
+    assert by["half-width a, work-equivalent fit, 100.0 %"].ours == pytest.approx(
+        by["half-width a, work-equivalent fit, 100.0 %"].report, rel=1e-9)
     # a coarse mesh (h = 6) allows (6/47)^2 = 1.6 %
     assert failed(hertz_rows(hertz_snapshot(6.0, scale=1.015), 6.0)) == set()
 
@@ -197,6 +207,22 @@ def test_hertz_friction_rows_and_the_links_between_cases():
     assert [r.passed() for r in m1f.rows] == [True, True]
     assert failed(m2f.rows) == {"peak pressure vs frictionless, 100.0 %"}  # 10 % > 8.6 %
     assert m1f.images == []  # the figure failed (no folder): the comparison stands
+
+
+def test_hertz_convergence_rows_check_second_order_at_the_lowest_load():
+    """Mesh 2 (h = 4) against mesh 1 (h = 6) at 26.7 %: the error of the work-equivalent fit
+    must fall at least like 1.25 (h/h1)^2 = 0.56; at full load the ratio is shown only."""
+    low = HERTZ_CONVERGENCE_FRACTION
+    coarse = hertz_snapshot(6.0, low, scale=1.01)
+    for scale, fails in ((1.0044, False), (1.006, True)):  # p0 error 0.44 / 0.6 of mesh 1's
+        rows = {r.quantity: r for r in hertz_convergence_rows(
+            hertz_snapshot(4.0, low, scale=scale), coarse, 4.0, 6.0)}
+        row = rows["work-equivalent fit: |error of p0| / mesh 1's, 26.7 %"]
+        assert row.ours == pytest.approx((scale - 1.0) / 0.01, rel=1e-6)
+        assert row.passed() is (not fails)
+    full = hertz_convergence_rows(hertz_snapshot(4.0, scale=1.006),
+                                  hertz_snapshot(6.0, scale=1.01), 4.0, 6.0)
+    assert [r.passed() for r in full] == [None, None]
 
 
 def delamination_positions(shift: float = 0.0, offset: float = 0.0):

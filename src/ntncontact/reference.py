@@ -68,6 +68,42 @@ def fit_hertz_ellipse(X: np.ndarray, p: np.ndarray, a0: float, p0: float) -> tup
     return float(a), float(peak)
 
 
+def hertz_nodal_forces(X: np.ndarray, a: float, p0: float) -> np.ndarray:
+    """Work-equivalent nodal forces, int p N_i dx, of the Hertz profile p0 sqrt(1 - x^2/a^2)
+    on the piecewise linear hat functions N_i of the sorted node positions ``X`` (exact
+    integrals). A node-to-node contact solution balances these, not point values of p: the
+    outermost pressed node's force comes from the part of its hat inside the contact only."""
+    X = np.asarray(X, float)
+    u = np.clip(X, -a, a)
+    root = np.sqrt(np.clip(a * a - u * u, 0.0, None))
+    i0 = 0.5 * (u * root + a * a * np.arcsin(u / a))  # int sqrt(a^2 - x^2) dx
+    i1 = -root**3 / 3.0  # int x sqrt(a^2 - x^2) dx
+    length = np.diff(X)
+    d0, d1 = np.diff(i0), np.diff(i1)
+    scale = p0 / a
+    F = np.zeros_like(X)
+    F[:-1] += scale * (X[1:] * d0 - d1) / length  # N = (x_b - x) / L on each segment
+    F[1:] += scale * (d1 - X[:-1] * d0) / length  # N = (x - x_a) / L
+    return F
+
+
+def fit_hertz_nodal_forces(X: np.ndarray, F: np.ndarray, a0: float, p0: float
+                           ) -> tuple[float, float]:
+    """Least-squares (a, p0) of the Hertz profile whose work-equivalent nodal forces
+    (:func:`hertz_nodal_forces`) match the nodal normal forces ``F`` at the sorted reference
+    positions ``X`` (all surface nodes, pressed or not). Unlike :func:`fit_hertz_ellipse`,
+    which reads force / tributary length as a point value, it is exact for an exact Hertz
+    profile on any mesh, so its error is the solution's, not the read-out's."""
+    from scipy.optimize import least_squares
+
+    X, F = np.asarray(X, float), np.asarray(F, float)
+    order = np.argsort(X)
+    X, F = X[order], F[order]
+    a, peak = least_squares(lambda z: hertz_nodal_forces(X, z[0], z[1]) - F, [a0, p0],
+                            x_scale=[a0, p0]).x
+    return float(a), float(peak)
+
+
 #: Table 4.1's smoothers (its last three stages).
 SMOOTHERS = ("laplacian", "simple_angle_based", "weighted_angle_based")
 #: Table 4.1's stages in the order of its columns.
