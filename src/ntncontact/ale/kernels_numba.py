@@ -233,3 +233,47 @@ def inverse_bilinear(cell_xy, points, iterations):
         r1 = a[e, 0, 1] + a[e, 1, 1] * x + a[e, 2, 1] * y + a[e, 3, 1] * xy
         res[e] = np.sqrt(r0 * r0 + r1 * r1)
     return xi, res
+
+
+@njit(cache=True)
+def cell_min_sines(nodes, cells, which):
+    """Smallest corner sine of the cells ``which`` (``ale.smoothing.cell_min_sines``)."""
+    out = np.empty(which.size)
+    for k in range(which.size):
+        e = which[k]
+        low = np.inf
+        for c in range(4):
+            i, j, h = cells[e, c], cells[e, (c + 1) % 4], cells[e, (c + 3) % 4]
+            a0, a1 = nodes[j, 0] - nodes[i, 0], nodes[j, 1] - nodes[i, 1]
+            b0, b1 = nodes[h, 0] - nodes[i, 0], nodes[h, 1] - nodes[i, 1]
+            cross = a0 * b1 - a1 * b0
+            scale = np.sqrt((a0 * a0 + a1 * a1) * (b0 * b0 + b1 * b1))
+            low = min(low, cross / scale if scale > 0 else -1.0)
+        out[k] = low
+    return out
+
+
+@njit(cache=True)
+def element_masses(X, cells, which, density, dn, shape):
+    """Per cell of ``which`` its 4 lumped nodal masses (``ale.motion._element_masses``);
+    ``dn`` (g, a, k) natural gradients and ``shape`` (g, a) shape values at the Gauss points,
+    ``density`` per cell of ``which``."""
+    out = np.zeros((which.size, 4))
+    det = np.empty(4)
+    for k in range(which.size):
+        e = which[k]
+        for g in range(4):
+            j00 = j01 = j10 = j11 = 0.0  # J_ik = dx_i / dxi_k
+            for a in range(4):
+                n = cells[e, a]
+                j00 += dn[g, a, 0] * X[n, 0]
+                j01 += dn[g, a, 1] * X[n, 0]
+                j10 += dn[g, a, 0] * X[n, 1]
+                j11 += dn[g, a, 1] * X[n, 1]
+            det[g] = (j00 * j11 - j01 * j10) * density[k]
+        for a in range(4):
+            total = 0.0
+            for g in range(4):
+                total += det[g] * shape[g, a]
+            out[k, a] = total
+    return out

@@ -101,13 +101,15 @@ import numpy as np
 import scipy.sparse as sp
 from numpy.typing import ArrayLike, NDArray
 
+from ntncontact.ale import kernels_numba as _kernels
 from ntncontact.ale.remap import (
     LazyGradients,
     RemapMethod,
     Remapper,
+    RemapTopology,
     conservative_velocity_correction,
     momenta,
-    two_ring_patches,
+    remap_topology,
 )
 from ntncontact.ale.smoothing import (
     Smoother,
@@ -140,6 +142,11 @@ _SNAP = 1e-10
 # 2 x 2 Gauss points (weights 1) and the Q4 corner signs
 _XI = np.array([[-1.0, -1.0], [1.0, -1.0], [1.0, 1.0], [-1.0, 1.0]])
 _GP = _XI / np.sqrt(3.0)
+# natural gradients (g, a, k) and values (g, a) of the Q4 shape functions at the Gauss points
+_DN = np.ascontiguousarray(0.25 * np.stack([_XI[:, 0] * (1.0 + _XI[:, 1] * _GP[:, 1:2]),
+                                            _XI[:, 1] * (1.0 + _XI[:, 0] * _GP[:, 0:1])],
+                                           axis=-1))
+_SHAPE = 0.25 * (1.0 + _GP[:, None, 0] * _XI[:, 0]) * (1.0 + _GP[:, None, 1] * _XI[:, 1])
 
 
 def _frozen(values: ArrayLike, dtype: type) -> NDArray:
@@ -275,7 +282,7 @@ class AleBody:
 
     def cells_touching(self, nodes: NDArray[np.bool_]) -> NDArray[np.bool_]:
         """Mask of the cells with a node in the mask ``nodes``."""
-        return (self._incidence @ nodes.astype(float)) > 0
+        return nodes[self.cells].any(axis=1)
 
     def within_layers(self, seeds: NDArray[np.bool_], layers: int) -> NDArray[np.bool_]:
         """Nodes reachable from the mask ``seeds`` through at most ``layers`` shared cells."""
@@ -308,9 +315,9 @@ class AleBody:
         return owner[np.minimum(at, keys.size - 1)]
 
     @cached_property
-    def _patches(self) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
-        """Two-ring node patches of the quadratic remap's gradient recovery (topology)."""
-        return two_ring_patches(self.cells, self.n_nodes)
+    def _remap_topology(self) -> RemapTopology:
+        """The remap's cell-only data (boundary edges, gradient-recovery patches)."""
+        return remap_topology(self.cells, self.n_nodes)
 
     @cached_property
     def cell_density(self) -> NDArray[np.float64]:
@@ -361,7 +368,7 @@ class _TnState:
 
     @cached_property
     def remapper(self) -> Remapper:
-        return Remapper(self.x, self.body.cells, patches=self.body._patches)
+        return Remapper(self.x, self.body.cells, topology=self.body._remap_topology)
 
     @cached_property
     def gradients(self) -> LazyGradients:
@@ -370,7 +377,9 @@ class _TnState:
 
     @cached_property
     def element_masses(self) -> NDArray[np.float64]:
-        return _element_masses(self.X, self.body.cells, self.body.cell_density)
+        body = self.body
+        return _kernels.element_masses(self.X, body.cells, np.arange(len(body.cells)),
+                                       body.cell_density, _DN, _SHAPE)
 
     @cached_property
     def masses(self) -> NDArray[np.float64]:
@@ -379,9 +388,11 @@ class _TnState:
     def masses_after(self, X_new: NDArray, cells: NDArray[np.bool_]) -> NDArray[np.float64]:
         """Lumped masses with the masked cells' reference images replaced by those of X_new."""
         body = self.body
-        change = _element_masses(X_new, body.cells[cells], body.cell_density[cells])
-        change -= self.element_masses[cells]
-        return self.masses + np.bincount(body.cells[cells].ravel(), change.ravel(), len(X_new))
+        idx = np.flatnonzero(cells)
+        change = _kernels.element_masses(X_new, body.cells, idx, body.cell_density[idx], _DN,
+                                         _SHAPE)
+        change -= self.element_masses[idx]
+        return self.masses + np.bincount(body.cells[idx].ravel(), change.ravel(), len(X_new))
 
     @cached_property
     def momenta(self) -> tuple[NDArray[np.float64], float]:
@@ -389,7 +400,7 @@ class _TnState:
 
     @cached_property
     def quality(self) -> NDArray[np.float64]:
-        return cell_min_sines(self.x, self.body.cells)
+        return _min_sines(self.body, self.x, np.ones(len(self.body.cells), bool))
 
     @cached_property
     def h_min(self) -> float:
@@ -591,7 +602,7 @@ def _acceptable(body: AleBody, tn: _TnState, x_new: NDArray) -> bool:
     """Every cell changed by the move keeps min_quality of its original quality, or does not
     get worse than at t_n."""
     cells = body.cells_touching(np.any(x_new != tn.x, axis=1))
-    q = cell_min_sines(x_new, body.cells[cells])
+    q = _min_sines(body, x_new, cells)
     floor = np.minimum(body.min_quality * body.reference_quality[cells], tn.quality[cells])
     return bool(np.all(q >= floor))
 
@@ -636,8 +647,14 @@ def _hints(body: AleBody, tn: _TnState, chain: _Chain, curve: SurfaceCurve, slid
 
 def _check_cells(body: AleBody, x: NDArray, cells: NDArray, label: str) -> None:
     """MeshError (naming the element) if one of the masked cells is inverted or degenerate."""
-    if np.any(cell_min_sines(x, body.cells[cells]) <= 1e-10):
+    if np.any(_min_sines(body, x, cells) <= 1e-10):
         check_elements(x, body.cells, label)
+
+
+def _min_sines(body: AleBody, x: NDArray, cells: NDArray[np.bool_]) -> NDArray[np.float64]:
+    """``cell_min_sines`` of the masked cells (compiled: no gathered copies)."""
+    return _kernels.cell_min_sines(np.ascontiguousarray(x, dtype=float), body.cells,
+                                   np.flatnonzero(cells))
 
 
 def _conserve_momentum(

@@ -34,6 +34,7 @@ rigid-body velocity that restores the linear and angular momentum (METHOD_NOTES,
 
 from __future__ import annotations
 
+from functools import cached_property
 from typing import Literal, NamedTuple
 
 import numpy as np
@@ -53,6 +54,7 @@ __all__ = [
     "momenta",
     "q4_shape",
     "remap_fields",
+    "remap_topology",
     "two_ring_patches",
 ]
 
@@ -102,6 +104,27 @@ def _nearest_on_boundary(
     return np.min(dist, axis=-1), start + te[..., None] * (end - start), edge
 
 
+class RemapTopology:
+    """What a Remapper needs from the cells alone: the outer (boundary) cell edges and the
+    two-ring node patches of the gradient recovery (built on first use)."""
+
+    def __init__(self, cells: NDArray[np.int64], n_nodes: int) -> None:
+        self.cells, self.n_nodes = cells, n_nodes
+        keys = np.sort(np.stack([cells, np.roll(cells, -1, axis=1)], -1), -1)
+        _, inverse, counts = np.unique(keys.reshape(-1, 2), axis=0, return_inverse=True,
+                                       return_counts=True)
+        self.outer_edge = (counts[inverse.reshape(-1)] == 1).reshape(-1, 4)
+
+    @cached_property
+    def patches(self) -> tuple[NDArray[np.int64], NDArray]:
+        return two_ring_patches(self.cells, self.n_nodes)
+
+
+def remap_topology(cells: ArrayLike, n_nodes: int) -> RemapTopology:
+    """The cell-only data of a Remapper, to share between meshes with the same cells."""
+    return RemapTopology(np.asarray(cells, dtype=np.int64).reshape(-1, 4), n_nodes)
+
+
 class PointLocation(NamedTuple):
     cell: NDArray[np.int64]  # containing (or nearest) old cell of each point
     xi: NDArray[np.float64]  # reference coordinates in that cell, (p, 2)
@@ -112,16 +135,16 @@ class Remapper:
     """Locator and interpolator on one old mesh; build once per old mesh."""
 
     def __init__(self, nodes: ArrayLike, cells: ArrayLike, candidates: int = 8,
-                 patches: tuple[NDArray[np.int64], NDArray] | None = None) -> None:
+                 topology: RemapTopology | None = None) -> None:
+        """``topology``: ``remap_topology(cells, len(nodes))`` if kept from another mesh with
+        the same cells (it depends on the cells only)."""
         self.nodes = np.asarray(nodes, dtype=float)
         self.cells = np.asarray(cells, dtype=np.int64).reshape(-1, 4)
         xc = self.nodes[self.cells]
         self._cell_xy = xc
         self._box_lo, self._box_hi = xc.min(axis=1), xc.max(axis=1)
-        keys = np.sort(np.stack([self.cells, np.roll(self.cells, -1, axis=1)], -1), -1)
-        _, inverse, counts = np.unique(keys.reshape(-1, 2), axis=0, return_inverse=True,
-                                       return_counts=True)
-        self._outer_edge = (counts[inverse.reshape(-1)] == 1).reshape(-1, 4)
+        self._topology = topology or remap_topology(self.cells, len(self.nodes))
+        self._outer_edge = self._topology.outer_edge
         self._tree = cKDTree(xc.mean(axis=1))
         self._node_tree = cKDTree(self.nodes)
         d1, d2 = xc[:, 2] - xc[:, 0], xc[:, 3] - xc[:, 1]
@@ -129,7 +152,6 @@ class Remapper:
         self.cell_size = np.sqrt(np.abs(area))  # sqrt(area): the length scale of a cell
         self._k = min(candidates, len(self.cells))
         self._gradient_ops: tuple[NDArray, NDArray] | None = None
-        self._patches = patches
 
     def _search(self, points: NDArray, k: int) -> tuple[NDArray, NDArray]:
         """Containing cell (or -1) and its xi for each point among its k nearest centroids.
@@ -286,9 +308,7 @@ class Remapper:
         patch does not determine a quadratic. Each node's rows depend on its own patch only."""
         if nodes is None and self._gradient_ops is not None:
             return self._gradient_ops
-        if self._patches is None:
-            self._patches = two_ring_patches(self.cells, len(self.nodes))
-        patch, lengths = self._patches
+        patch, lengths = self._topology.patches
         if nodes is not None:
             patch, lengths = patch[nodes], lengths[nodes]
         centre = self.nodes if nodes is None else self.nodes[nodes]
