@@ -224,12 +224,15 @@ def _evaluate_compiled(
     flags = np.array([kernels_numba.METHOD_CODES[law.method], rate_law, v_eval is not None,
                       x_start is not None, law.frictional], dtype=np.int64)
     pairs = state.pairs
+
+    def c(a: NDArray | None) -> NDArray:  # one compiled signature: C-contiguous float64
+        return _NO_ARRAY if a is None else np.ascontiguousarray(a, dtype=np.float64)
+
     code, force, rows, cols, vals, scalars, normal, tangent, status, dissipation = \
         kernels_numba.evaluate_pairs(
-            x_eval, _NO_ARRAY if v_eval is None else v_eval,
-            _NO_ARRAY if x_start is None else x_start, interface.surface1.kernel_table,
-            interface.surface2.kernel_table, pairs, state.lambda_N, state.dlambda_T,
-            state.t_T, params, flags)
+            c(x_eval), c(v_eval), c(x_start), interface.surface1.kernel_table,
+            interface.surface2.kernel_table, np.ascontiguousarray(pairs, dtype=np.int64),
+            c(state.lambda_N), c(state.dlambda_T), c(state.t_T), params, flags)
     if code != kernels_numba.OK:
         return None
     k = kernels_numba
