@@ -87,7 +87,10 @@ works (x_start defaults correctly), but remaps twice and the mesh velocities mus
 Cost: everything that depends only on the t_n state (the old surface curve, the point locator,
 the recovered nodal gradients of the quadratic remap, the old masses and cell qualities) is
 built once per t_n state and reused by the following augmentations of the step (the body keeps
-the last state's data, recognised by its bytes); topology-only structures are built once.
+the last state's data, recognised by its bytes); the gradients are recovered only at the nodes
+a move needs; topology-only structures are built once. The small inner loops (normal foot,
+arc-length inversion, bilinear inversion, cell qualities, element masses) are compiled
+(``ale.kernels_numba``).
 """
 
 from __future__ import annotations
