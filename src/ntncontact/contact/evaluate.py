@@ -225,14 +225,15 @@ def _evaluate_compiled(
                       x_start is not None, law.frictional], dtype=np.int64)
     pairs = state.pairs
 
-    def c(a: NDArray | None) -> NDArray:  # one compiled signature: C-contiguous float64
+    def c_float(a: NDArray | None) -> NDArray:  # one compiled signature: C-contiguous float64
         return _NO_ARRAY if a is None else np.ascontiguousarray(a, dtype=np.float64)
 
     code, force, rows, cols, vals, scalars, normal, tangent, status, dissipation = \
         kernels_numba.evaluate_pairs(
-            c(x_eval), c(v_eval), c(x_start), interface.surface1.kernel_table,
+            c_float(x_eval), c_float(v_eval), c_float(x_start), interface.surface1.kernel_table,
             interface.surface2.kernel_table, np.ascontiguousarray(pairs, dtype=np.int64),
-            c(state.lambda_N), c(state.dlambda_T), c(state.t_T), params, flags)
+            c_float(state.lambda_N), c_float(state.dlambda_T), c_float(state.t_T), params,
+            flags)
     if code != kernels_numba.OK:
         return None
     k = kernels_numba
