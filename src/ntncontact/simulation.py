@@ -119,6 +119,7 @@ class Simulation:
         self._ale_cells = np.concatenate(
             [model.bodies[a.body_index].cells for a in model.ale_bodies] or [np.zeros(0, int)])
         self._mass = model.assembler.dof_mass(self._element_mass, self.lumped)
+        self._ale_nodes = np.unique(model.assembler.cells[self._ale_cells])
         self.length_scale = float(np.ptp(model.X0, axis=0).max())
         self.max_augmentations = max([ci.max_augmentations for ci in model.interfaces] or [1])
         self.initial_contact = tuple(PairState.empty() for _ in model.interfaces)
@@ -128,6 +129,7 @@ class Simulation:
         self._step_work = dict.fromkeys(LEDGER, 0.0)
         self._last_mismatch = 0.0
         self._energy_multiplier = 0.0
+        self._mass_key: tuple | None = None  # (ALE bodies' X, mass) of the last mass built
 
     def balance(self, state: StepState) -> Balance:
         _, _, energy = self.model.assembler.internal(state.X, state.x, need_tangent=False)
@@ -284,9 +286,14 @@ class Simulation:
         """The mass on dofs; ALE bodies carry new particles at their nodes, so it is rebuilt."""
         if not self.model.ale_bodies:
             return self._mass
+        X_ale = state.X[self._ale_nodes]
+        if self._mass_key is not None and np.array_equal(self._mass_key[0], X_ale):
+            return self._mass_key[1]  # the mesh was not moved since (e.g. a skipped move)
         me = self._element_mass.copy()
         me[self._ale_cells] = self.model.assembler.element_masses(state.X, self._ale_cells)
-        return self.model.assembler.dof_mass(me, self.lumped)
+        mass = self.model.assembler.dof_mass(me, self.lumped)
+        self._mass_key = (X_ale, mass)
+        return mass
 
     def _nodal(self, state: StepState) -> sp.csr_matrix:
         if not self.model.ale_bodies:

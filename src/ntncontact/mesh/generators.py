@@ -11,7 +11,6 @@ from collections.abc import Sequence
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from scipy.optimize import brentq
 
 from ntncontact.mesh.quadmesh import MeshError, QuadMesh
 
@@ -83,6 +82,8 @@ def _sizes_with_first(length: float, first: float, n: int, n_uniform: int = 1) -
     upper = 2.0
     while excess(upper) < 0:
         upper *= 2.0
+    from scipy.optimize import brentq  # here: scipy.optimize takes 0.1 s to import
+
     ratio = brentq(excess, 0.0, upper, xtol=1e-15, rtol=1e-14)
     sizes = first * ratio**exponents
     return sizes * (length / sizes.sum())
