@@ -40,14 +40,29 @@ def _plot(args: argparse.Namespace) -> int:
     from .plotting import animate, plot_all, plot_deformed
 
     directory = Path(args.directory)
-    paths = plot_all(directory)
+    jobs = [(plot_all, (directory,), {})]
     if args.times:
-        paths.append(plot_deformed(directory, args.times, path=directory / "snapshots.png"))
+        jobs.append((plot_deformed, (directory, args.times),
+                     {"path": directory / "snapshots.png"}))
     if args.gif:
-        paths.append(animate(directory, directory / "animation.gif"))
-    for p in paths:
-        print(p)
+        jobs.append((animate, (directory, directory / "animation.gif"), {}))
+    for result in _run_jobs(jobs):
+        for p in result if isinstance(result, list) else [result]:
+            print(p)
     return 0
+
+
+def _run_jobs(jobs: list) -> list:
+    """Results of independent figure jobs, side by side on two processes where the platform
+    forks (matplotlib rendering is single-threaded); errors are re-raised in order."""
+    import multiprocessing as mp
+    from concurrent.futures import ProcessPoolExecutor
+
+    if len(jobs) < 2 or "fork" not in mp.get_all_start_methods():
+        return [fn(*a, **k) for fn, a, k in jobs]
+    with ProcessPoolExecutor(max_workers=2, mp_context=mp.get_context("fork")) as pool:
+        futures = [pool.submit(fn, *a, **k) for fn, a, k in jobs]
+        return [f.result() for f in futures]
 
 
 def _mesh_quality(args: argparse.Namespace) -> int:
