@@ -277,3 +277,269 @@ def element_masses(X, cells, which, density, dn, shape):
                 total += det[g] * shape[g, a]
             out[k, a] = total
     return out
+
+
+# --- surface slides (ale.motion._surface_slides, ale.surface.local_slides) -------------------
+
+
+@njit(cache=True)
+def _block_sum(a, lo, n):
+    """NumPy's pairwise sum of a block of at most 128 values (eight accumulators)."""
+    if n < 8:
+        res = 0.0
+        for i in range(n):
+            res += a[lo + i]
+        return res
+    r = np.empty(8)
+    for j in range(8):
+        r[j] = a[lo + j]
+    i = 8
+    while i < n - (n % 8):
+        for j in range(8):
+            r[j] += a[lo + i + j]
+        i += 8
+    res = ((r[0] + r[1]) + (r[2] + r[3])) + ((r[4] + r[5]) + (r[6] + r[7]))
+    while i < n:
+        res += a[lo + i]
+        i += 1
+    return res
+
+
+@njit(cache=True)
+def _pairwise_sum(a, lo, n):
+    """Sum of a[lo:lo + n] in NumPy's order (``np.sum`` of a contiguous float64 array: blocks
+    of at most 128 summed by ``_block_sum``, halves (multiples of 8) added above that), so the
+    results agree bit for bit. The halving is unrolled with an explicit stack: a recursive
+    function loaded from Numba's cache crashed."""
+    if n <= 128:
+        return _block_sum(a, lo, n)
+    frame_lo = np.empty(64, np.int64)
+    frame_n = np.empty(64, np.int64)
+    frame_state = np.empty(64, np.int64)
+    values = np.empty(64)
+    depth, count = 1, 0
+    frame_lo[0], frame_n[0], frame_state[0] = lo, n, 0
+    while depth > 0:
+        top = depth - 1
+        start, size = frame_lo[top], frame_n[top]
+        if size <= 128:
+            values[count] = _block_sum(a, start, size)
+            count += 1
+            depth -= 1
+            continue
+        half = size // 2
+        half -= half % 8
+        if frame_state[top] < 2:  # push the left half, then the right one
+            right = frame_state[top] == 1
+            frame_state[top] += 1
+            frame_lo[depth] = start + half if right else start
+            frame_n[depth] = size - half if right else half
+            frame_state[depth] = 0
+            depth += 1
+        else:
+            values[count - 2] = values[count - 2] + values[count - 1]
+            count -= 1
+            depth -= 1
+    return values[0]
+
+
+@njit(cache=True)
+def wanted_arc(points, bulge, node_s, t_start, t_end, breaks, pts, pos, snap, gauss_u,
+               gauss_w):
+    """``ale.motion._wanted_arc`` with the active nodes' tangents (``node_tangents(pos)``)."""
+    s, foot = normal_foot(points, bulge, node_s, t_start, t_end, pts, gauss_u, gauss_w)
+    n = node_s.size
+    h_min = np.inf
+    for i in range(n - 1):
+        h_min = min(h_min, node_s[i + 1] - node_s[i])
+    out = np.empty(s.size)
+    for i in range(s.size):
+        gap = np.inf
+        for j in range(n):
+            if breaks[j]:
+                gap = min(gap, np.abs(s[i] - node_s[j]))
+        k = pos[i]
+        if k == n - 1:
+            t0, t1 = t_end[max(k - 1, 0), 0], t_end[max(k - 1, 0), 1]
+        else:
+            t0, t1 = t_start[min(k, n - 2), 0], t_start[min(k, n - 2), 1]
+        over = (pts[i, 0] - foot[i, 0]) * t0 + (pts[i, 1] - foot[i, 1]) * t1
+        out[i] = s[i] + (over if gap <= snap * h_min else 0.0)
+    return out
+
+
+@njit(cache=True)
+def anchor_targets(node_s, breaks, pos, wanted, slide_tolerance, ratio, snap):
+    """Targets of the active nodes (``ale.motion._clamp_slides`` of the wanted arc lengths,
+    slides below the tolerance dropped) and the anchors; (targets, clamped, mismatch, anchor
+    indices, anchor slides, first pair of anchors out of order or -1)."""
+    n, k = node_s.size, pos.size
+    n_brk = 0
+    for i in range(n):
+        n_brk += breaks[i]
+    brk = np.empty(n_brk, np.int64)
+    c = 0
+    for i in range(n):
+        if breaks[i]:
+            brk[c] = i
+            c += 1
+    run_min = np.empty(max(n_brk - 1, 1))
+    for r in range(n_brk - 1):
+        low = node_s[brk[r] + 1] - node_s[brk[r]]
+        for i in range(brk[r] + 1, brk[r + 1]):
+            low = min(low, node_s[i + 1] - node_s[i])
+        run_min[r] = low
+    targets = np.empty(k)
+    clamped = np.zeros(k, np.bool_)
+    mismatch = 0.0
+    for i in range(k):
+        p = pos[i]
+        near = min(node_s[max(p - 1, 0) + 1] - node_s[max(p - 1, 0)],
+                   node_s[min(p, n - 2) + 1] - node_s[min(p, n - 2)])
+        w = wanted[i]
+        if np.abs(w - node_s[p]) <= slide_tolerance * near:
+            w = node_s[p]
+        j = np.searchsorted(brk, p)
+        run = min(max(j - 1, 0), n_brk - 2)
+        b0, b1 = brk[run], brk[run + 1]
+        h = ratio * run_min[run]
+        if brk[min(j, n_brk - 1)] == p:
+            t = node_s[p]
+        else:
+            lo = min(node_s[b0] + (p - b0) * h, node_s[p])
+            hi = max(node_s[b1] - (b1 - p) * h, node_s[p])
+            t = min(max(w, lo), hi)
+        targets[i] = t
+        clamped[i] = np.abs(t - w) > snap * run_min[run]
+        miss = np.abs(wanted[i] - t)
+        if not (miss <= mismatch) and not np.isnan(mismatch):
+            mismatch = miss
+    anchor = breaks.copy()
+    s = node_s.copy()
+    slide = np.zeros(n)
+    for i in range(k):
+        anchor[pos[i]] = True
+        s[pos[i]] = targets[i]
+        slide[pos[i]] = targets[i] - node_s[pos[i]]
+    n_anchor = 0
+    for i in range(n):
+        n_anchor += anchor[i]
+    idx = np.empty(n_anchor, np.int64)
+    c = 0
+    for i in range(n):
+        if anchor[i]:
+            idx[c] = i
+            c += 1
+    bad = -1
+    for i in range(n_anchor - 1):
+        if s[idx[i + 1]] - s[idx[i]] <= 0.0:
+            bad = i
+            break
+    return targets, clamped, mismatch, idx, slide[idx], bad
+
+
+@njit(cache=True)
+def _buffer(cur, target, slide, lo, hi, reverse, out):
+    """``ale.surface._buffer`` on cur (reversed if ``reverse``): fills out[:m] with the length
+    changes of the m leading segments and returns m, or -1 if the whole run cannot absorb it."""
+    n = cur.size
+    change = -slide
+    total = 0.0
+    m = -1
+    for i in range(n):
+        j = n - 1 - i if reverse else i
+        room = cur[j] - lo * target[j] if change < 0.0 else hi * target[j] - cur[j]
+        out[i] = max(room, 0.0)
+        total += out[i]
+        if total >= np.abs(change):
+            m = i + 1
+            break
+    if m < 0:
+        return -1
+    for i in range(m):
+        out[i] = change * out[i] / total
+    return m
+
+
+@njit(cache=True)
+def local_slides(s, ref, idx, slide, lo, hi):
+    """``ale.surface.local_slides`` (validated inputs, band [lo, hi]); (slides, resets)."""
+    out = np.zeros(s.size)
+    for k in range(idx.size):
+        out[idx[k]] = slide[k]
+    resets = 0
+    for k in range(idx.size - 1):
+        a, b, sa, sb = idx[k], idx[k + 1], slide[k], slide[k + 1]
+        if b - a < 2 or (sa == 0.0 and sb == 0.0):
+            continue
+        cur = np.empty(b - a)
+        for i in range(b - a):
+            cur[i] = s[a + i + 1] - s[a + i]
+        rseg = ref[a:b]
+        scale = _pairwise_sum(cur, 0, cur.size) / _pairwise_sum(rseg, 0, rseg.size)
+        target = rseg * scale
+        head, tail = np.empty(b - a), np.empty(b - a)
+        m_head = _buffer(cur, target, sa, lo, hi, False, head) if sa != 0.0 else 0
+        m_tail = _buffer(cur, target, -sb, lo, hi, True, tail) if sb != 0.0 else 0
+        if m_head >= 0 and m_tail >= 0 and m_head + m_tail <= b - a:
+            acc = 0.0
+            for i in range(m_head - 1):
+                acc += head[i]
+                out[a + 1 + i] = sa + acc
+            acc = 0.0
+            for i in range(m_tail - 1):
+                acc += tail[i]
+                out[b - 1 - i] = sb - acc
+            continue
+        change = sb - sa  # of the run's length
+        slack = np.empty(b - a)
+        for i in range(b - a):
+            room = cur[i] - lo * target[i] if change < 0.0 else hi * target[i] - cur[i]
+            slack[i] = max(room, 0.0)
+        total = _pairwise_sum(slack, 0, slack.size)
+        if change == 0.0:
+            out[a + 1:b] = sa
+        elif total >= np.abs(change):
+            acc = 0.0
+            for i in range(b - a - 1):
+                acc += slack[i]
+                out[a + 1 + i] = sa + change * acc / total
+        else:
+            resets += 1
+            cum = np.empty(b - a + 1)
+            cum[0] = 0.0
+            for i in range(b - a):
+                cum[i + 1] = cum[i] + rseg[i]
+            span = (s[b] - s[a]) + change
+            for i in range(1, b - a):
+                out[a + i] = sa + cum[i] / cum[b - a] * span - (s[a + i] - s[a])
+    return out, resets
+
+
+@njit(cache=True)
+def slid_positions(x, chain_nodes, breaks, points, bulge, node_s, slides, snap_length,
+                   gauss_u, gauss_w):
+    """Node positions with the chain nodes slid along the curve (``ale.motion._move_surface``):
+    a move below ``snap_length`` keeps the old position exactly."""
+    n = slides.size
+    count = 0
+    for i in range(n):
+        count += slides[i] != 0.0 and not breaks[i]
+    which = np.empty(count, np.int64)
+    s = np.empty(count)
+    c = 0
+    for i in range(n):
+        if slides[i] != 0.0 and not breaks[i]:
+            which[c] = i
+            s[c] = node_s[i] + slides[i]
+            c += 1
+    out = x.copy()
+    if count == 0:
+        return out
+    new = point_at(points, bulge, node_s, s, gauss_u, gauss_w)
+    for c in range(count):
+        i = which[c]
+        r0, r1 = new[c, 0] - points[i, 0], new[c, 1] - points[i, 1]
+        if np.sqrt(r0 * r0 + r1 * r1) > snap_length:
+            out[chain_nodes[i], 0], out[chain_nodes[i], 1] = new[c, 0], new[c, 1]
+    return out

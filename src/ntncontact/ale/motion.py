@@ -123,7 +123,7 @@ from ntncontact.ale.smoothing import (
     harmonic_extension,
     node_adjacency,
 )
-from ntncontact.ale.surface import SurfaceCurve, local_slides
+from ntncontact.ale.surface import SurfaceCurve
 from ntncontact.mesh.boundary import chain_edge_lengths, surface_chain
 from ntncontact.mesh.quadmesh import MeshError, QuadMesh
 from ntncontact.mesh.quality import check_elements
@@ -506,99 +506,50 @@ def _open_chain(body: AleBody, active: NDArray) -> _Chain:
     return _Chain(nodes, breaks, np.roll(body.reference_spacing, -start), (pos - start) % n)
 
 
-def _clamp_slides(
-    node_s: NDArray, breaks: NDArray, pos: NDArray, wanted: NDArray, ratio: float
-) -> tuple[NDArray, NDArray]:
-    """Arc-length targets kept between the neighbouring breaks; (targets, clamped mask).
-
-    Between a node and a break b the free nodes keep at least ``ratio`` times the smallest
-    segment of the stretch between the two breaks around the node; breaks do not move.
-    """
-    brk = np.flatnonzero(breaks)
-    run_min = np.minimum.reduceat(np.diff(node_s), brk[:-1])
-    j = np.searchsorted(brk, pos)
-    on_break = brk[np.minimum(j, brk.size - 1)] == pos
-    run = np.clip(j - 1, 0, brk.size - 2)
-    b0, b1 = brk[run], brk[run + 1]
-    h = ratio * run_min[run]
-    lo = np.minimum(node_s[b0] + (pos - b0) * h, node_s[pos])
-    hi = np.maximum(node_s[b1] - (b1 - pos) * h, node_s[pos])
-    target = np.where(on_break, node_s[pos], np.clip(wanted, lo, hi))
-    clamped = np.abs(target - wanted) > _SNAP * run_min[run]
-    return target, clamped
-
-
-def _check_anchor_order(chain: _Chain, node_s: NDArray, targets: NDArray, name: str) -> None:
-    """MeshError if anchor targets (active nodes, breaks) are not strictly increasing."""
-    anchor = chain.breaks.copy()
-    anchor[chain.position] = True
-    s = node_s.copy()
-    s[chain.position] = targets
-    idx = np.flatnonzero(anchor)
-    bad = np.flatnonzero(np.diff(s[idx]) <= 0.0)
-    if bad.size:
-        a, b = chain.nodes[idx[bad[0]]], chain.nodes[idx[bad[0] + 1]]
-        raise MeshError(f"body '{name}': surface nodes {a} and {b} would swap order (their "
-                        "contact targets cross); cannot move the ALE mesh")
-
-
-def _wanted_arc(curve: SurfaceCurve, points: NDArray, tangents: NDArray) -> NDArray:
-    """Arc-length parameter where each point wants its node: the foot of its normal on the
-    curve (``SurfaceCurve.normal_foot``, the closest point up to O(h^2) kinks), continued past a
-    break (corner or chain end) along ``tangents`` by the overshoot, so that a
-    target beyond a break is seen (and clamped) instead of silently stopping at the break."""
-    s, foot = curve.normal_foot(points)
-    h_min = np.diff(curve.node_s).min()
-    gap = np.abs(s[:, None] - curve.node_s[curve.breaks][None, :]).min(axis=1)
-    residual = points - foot
-    over = np.einsum("ij,ij->i", residual, tangents)
-    return s + np.where(gap <= _SNAP * h_min, over, 0.0)
-
-
 def _surface_slides(
     body: AleBody, curve: SurfaceCurve, chain: _Chain, wanted_xy: NDArray
 ) -> tuple[NDArray, NDArray, float, int]:
     """Arc-length slide of every chain node; (slides, clamped mask per active, mismatch, resets).
 
-    Slides below the tolerance are not made, so such nodes get exactly 0.
+    The wanted arc length of an active node is the foot of the normal through its wanted point
+    (``SurfaceCurve.normal_foot``, the closest point up to O(h^2) kinks), continued past a break
+    (corner or chain end) along the node's tangent by the overshoot, so that a target beyond a
+    break is seen (and clamped) instead of silently stopping at the break. Slides below the
+    tolerance are not made (such nodes get exactly 0); targets are clamped so that the free
+    nodes between a node and the breaks around it keep ``min_spacing_ratio`` times the
+    smallest segment of that stretch (breaks do not move). Compiled
+    (``kernels_numba.wanted_arc``, ``anchor_targets``, ``local_slides``).
     """
     node_s, pos = curve.node_s, chain.position
-    wanted = _wanted_arc(curve, wanted_xy, curve.node_tangents(pos))
-    seg = np.diff(node_s)
-    near = np.minimum(seg[np.maximum(pos - 1, 0)], seg[np.minimum(pos, seg.size - 1)])
-    still = np.abs(wanted - node_s[pos]) <= body.slide_tolerance * near
-    targets, clamped = _clamp_slides(node_s, chain.breaks, pos, np.where(still, node_s[pos],
-                                     wanted), body.min_spacing_ratio)
-    _check_anchor_order(chain, node_s, targets, body.name)
-    mismatch = float(np.max(np.abs(wanted - targets), initial=0.0))
-    anchor = chain.breaks.copy()
-    anchor[pos] = True
-    idx = np.flatnonzero(anchor)
-    anchor_slide = np.zeros(node_s.size)
-    anchor_slide[pos] = targets - node_s[pos]
+    t_start, t_end = curve._tangents
+    wanted = _kernels.wanted_arc(curve.points, curve.bulge, node_s, t_start, t_end,
+                                 curve.breaks, wanted_xy, pos, _SNAP, _kernels.GAUSS_U,
+                                 _kernels.GAUSS_W)
+    targets, clamped, mismatch, idx, anchor_slide, bad = _kernels.anchor_targets(
+        node_s, chain.breaks, pos, wanted, body.slide_tolerance, body.min_spacing_ratio, _SNAP)
+    if bad >= 0:
+        a, b = chain.nodes[idx[bad]], chain.nodes[idx[bad + 1]]
+        raise MeshError(f"body '{body.name}': surface nodes {a} and {b} would swap order (their "
+                        "contact targets cross); cannot move the ALE mesh")
     if body.respace == "local":
-        slides, resets = local_slides(node_s, chain.spacing, idx, anchor_slide[idx],
-                                      body.spacing_tolerance)
-        return slides, clamped, mismatch, resets
+        tol = body.spacing_tolerance
+        slides, resets = _kernels.local_slides(node_s, chain.spacing, idx, anchor_slide,
+                                               1.0 - tol, 1.0 / (1.0 - tol))
+        return slides, clamped, float(mismatch), int(resets)
     ref = np.concatenate([[0.0], np.cumsum(chain.spacing)])
-    s_new = np.interp(ref, ref[idx], node_s[idx] + anchor_slide[idx])
+    s_new = np.interp(ref, ref[idx], node_s[idx] + anchor_slide)
     slides = s_new - node_s
-    slides[idx] = anchor_slide[idx]
-    return slides, clamped, mismatch, 0
+    slides[idx] = anchor_slide
+    return slides, clamped, float(mismatch), 0
 
 
 def _move_surface(
     tn: _TnState, curve: SurfaceCurve, chain: _Chain, slides: NDArray
 ) -> NDArray[np.float64]:
     """Node positions with the chain nodes slid along the t_n curve (others unchanged)."""
-    x_new = tn.x.copy()
-    move = (slides != 0.0) & ~chain.breaks
-    if move.any():
-        new_xy = curve.point_at(curve.node_s[move] + slides[move])
-        old_xy = curve.points[move]
-        real = np.linalg.norm(new_xy - old_xy, axis=1) > _SNAP * tn.h_min
-        x_new[chain.nodes[move][real]] = new_xy[real]
-    return x_new
+    return _kernels.slid_positions(tn.x, chain.nodes, chain.breaks, curve.points, curve.bulge,
+                                   curve.node_s, slides, _SNAP * tn.h_min, _kernels.GAUSS_U,
+                                   _kernels.GAUSS_W)
 
 
 def _acceptable(body: AleBody, tn: _TnState, x_new: NDArray) -> bool:

@@ -289,25 +289,6 @@ def relocate_surface_nodes(
     return new_xy, s_active
 
 
-def _slack(cur: NDArray, target: NDArray, change: float, lo: float, hi: float) -> NDArray:
-    """How much each segment can shrink (change < 0) or grow (change > 0) within the band."""
-    room = cur - lo * target if change < 0.0 else hi * target - cur
-    return np.maximum(room, 0.0)
-
-
-def _buffer(cur: NDArray, target: NDArray, slide: float, lo: float, hi: float) -> NDArray | None:
-    """Length changes of the fewest leading segments that absorb a slide of their first node
-    within the band, each in proportion to its slack; None if the whole run cannot."""
-    change = -slide  # the leading segments shrink when the first node slides into the run
-    slack = _slack(cur, target, change, lo, hi)
-    total = np.cumsum(slack)
-    enough = np.flatnonzero(total >= abs(change))
-    if enough.size == 0:
-        return None
-    m = int(enough[0]) + 1
-    return change * slack[:m] / total[m - 1]
-
-
 def local_slides(
     node_s: ArrayLike,
     reference_spacing: ArrayLike,
@@ -347,29 +328,8 @@ def local_slides(
         raise ValueError("anchors must be increasing chain indices with one slide each and "
                          "reference_spacing must have one length per segment")
     lo, hi = 1.0 - tolerance, 1.0 / (1.0 - tolerance)
-    out = np.zeros(s.size)
-    out[idx] = slide
-    seg = np.diff(s)
-    resets = 0
-    for k in np.flatnonzero((np.diff(idx) >= 2) & ((slide[:-1] != 0.0) | (slide[1:] != 0.0))):
-        a, b, sa, sb = idx[k], idx[k + 1], slide[k], slide[k + 1]
-        cur, rseg = seg[a:b], ref[a:b]
-        target = rseg * (cur.sum() / rseg.sum())
-        head = _buffer(cur, target, sa, lo, hi) if sa != 0.0 else np.zeros(0)
-        tail = _buffer(cur[::-1], target[::-1], -sb, lo, hi) if sb != 0.0 else np.zeros(0)
-        if head is not None and tail is not None and head.size + tail.size <= b - a:
-            out[a + 1:a + head.size] = sa + np.cumsum(head)[:-1]
-            out[b - tail.size + 1:b] = (sb - np.cumsum(tail)[:-1])[::-1]
-            continue
-        change = sb - sa  # of the run's length
-        slack = _slack(cur, target, change, lo, hi)
-        if change == 0.0:
-            out[a + 1:b] = sa
-        elif slack.sum() >= abs(change):
-            out[a + 1:b] = sa + change * np.cumsum(slack)[:-1] / slack.sum()
-        else:
-            resets += 1
-            cum = np.concatenate([[0.0], np.cumsum(rseg)])
-            local = s[a:b + 1] - s[a]
-            out[a + 1:b] = sa + cum[1:-1] / cum[-1] * (local[-1] + change) - local[1:-1]
-    return out, resets
+    # compiled loop over the runs (``kernels_numba.local_slides``)
+    out, resets = _kernels.local_slides(np.ascontiguousarray(s), np.ascontiguousarray(ref),
+                                        np.ascontiguousarray(idx), np.ascontiguousarray(slide),
+                                        lo, hi)
+    return out, int(resets)

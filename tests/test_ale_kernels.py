@@ -1,0 +1,143 @@
+"""The compiled ALE kernels (``ale.kernels_numba``) against the NumPy code they replaced, bit for
+bit: the kernels repeat its operations in its order (NumPy's pairwise summation included), so
+the ALE update's results did not change when they were introduced."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from ntncontact.ale import kernels_numba as kernels
+from ntncontact.ale.surface import local_slides
+
+SNAP = 1e-10
+
+
+def reference_local_slides(s, ref, idx, slide, tolerance):
+    """``ale.surface.local_slides`` as it was in NumPy (a Python loop over the runs)."""
+    lo, hi = 1.0 - tolerance, 1.0 / (1.0 - tolerance)
+
+    def slack_of(cur, target, change):
+        room = cur - lo * target if change < 0.0 else hi * target - cur
+        return np.maximum(room, 0.0)
+
+    def buffer(cur, target, slide_):
+        change = -slide_
+        slack = slack_of(cur, target, change)
+        total = np.cumsum(slack)
+        enough = np.flatnonzero(total >= abs(change))
+        if enough.size == 0:
+            return None
+        m = int(enough[0]) + 1
+        return change * slack[:m] / total[m - 1]
+
+    out = np.zeros(s.size)
+    out[idx] = slide
+    seg = np.diff(s)
+    resets = 0
+    for k in np.flatnonzero((np.diff(idx) >= 2) & ((slide[:-1] != 0.0) | (slide[1:] != 0.0))):
+        a, b, sa, sb = idx[k], idx[k + 1], slide[k], slide[k + 1]
+        cur, rseg = seg[a:b], ref[a:b]
+        target = rseg * (cur.sum() / rseg.sum())
+        head = buffer(cur, target, sa) if sa != 0.0 else np.zeros(0)
+        tail = buffer(cur[::-1], target[::-1], -sb) if sb != 0.0 else np.zeros(0)
+        if head is not None and tail is not None and head.size + tail.size <= b - a:
+            out[a + 1:a + head.size] = sa + np.cumsum(head)[:-1]
+            out[b - tail.size + 1:b] = (sb - np.cumsum(tail)[:-1])[::-1]
+            continue
+        change = sb - sa
+        slack = slack_of(cur, target, change)
+        if change == 0.0:
+            out[a + 1:b] = sa
+        elif slack.sum() >= abs(change):
+            out[a + 1:b] = sa + change * np.cumsum(slack)[:-1] / slack.sum()
+        else:
+            resets += 1
+            cum = np.concatenate([[0.0], np.cumsum(rseg)])
+            local = s[a:b + 1] - s[a]
+            out[a + 1:b] = sa + cum[1:-1] / cum[-1] * (local[-1] + change) - local[1:-1]
+    return out, resets
+
+
+def reference_anchor_targets(node_s, breaks, pos, wanted, slide_tolerance, ratio):
+    """``ale.motion``'s NumPy clamping of the wanted arc lengths (``_clamp_slides``), the
+    mismatch, the anchors and the first pair of anchors out of order (-1: none)."""
+    seg = np.diff(node_s)
+    near = np.minimum(seg[np.maximum(pos - 1, 0)], seg[np.minimum(pos, seg.size - 1)])
+    still = np.abs(wanted - node_s[pos]) <= slide_tolerance * near
+    kept = np.where(still, node_s[pos], wanted)
+    brk = np.flatnonzero(breaks)
+    run_min = np.minimum.reduceat(seg, brk[:-1])
+    j = np.searchsorted(brk, pos)
+    on_break = brk[np.minimum(j, brk.size - 1)] == pos
+    run = np.clip(j - 1, 0, brk.size - 2)
+    b0, b1 = brk[run], brk[run + 1]
+    h = ratio * run_min[run]
+    lo = np.minimum(node_s[b0] + (pos - b0) * h, node_s[pos])
+    hi = np.maximum(node_s[b1] - (b1 - pos) * h, node_s[pos])
+    targets = np.where(on_break, node_s[pos], np.clip(kept, lo, hi))
+    clamped = np.abs(targets - kept) > SNAP * run_min[run]
+    mismatch = float(np.max(np.abs(wanted - targets), initial=0.0))
+    anchor = breaks.copy()
+    anchor[pos] = True
+    idx = np.flatnonzero(anchor)
+    s = node_s.copy()
+    s[pos] = targets
+    bad = np.flatnonzero(np.diff(s[idx]) <= 0.0)
+    slide = np.zeros(node_s.size)
+    slide[pos] = targets - node_s[pos]
+    return targets, clamped, mismatch, idx, slide[idx], int(bad[0]) if bad.size else -1
+
+
+def random_chain(rng, n):
+    ref = rng.uniform(0.5, 2.0, n - 1)
+    s = np.concatenate([[0.0], np.cumsum(ref * rng.uniform(0.6, 1.6, n - 1))])
+    return s, ref
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_local_slides_equal_the_numpy_loop_bit_for_bit(seed):
+    rng = np.random.default_rng(seed)
+    for n in (3, 8, 12, 41, 300):  # runs above 8 and 128 segments: NumPy's pairwise sums
+        s, ref = random_chain(rng, n)
+        for _ in range(20):
+            inner = np.sort(rng.choice(np.arange(1, n - 1), rng.integers(0, min(4, n - 2) + 1),
+                                       replace=False))
+            idx = np.concatenate([[0], inner, [n - 1]])
+            scale = rng.choice([0.05, 0.5, 3.0, 30.0])
+            slide = np.where(rng.uniform(size=idx.size) < 0.3, 0.0,
+                             scale * rng.standard_normal(idx.size))
+            slide[[0, -1]] = 0.0
+            if rng.uniform() < 0.2 and idx.size > 3:
+                slide[2] = slide[1]  # equal slides (rigid shift of a run)
+            tolerance = rng.choice([0.2, 0.5, 0.9])
+            got, resets = local_slides(s, ref, idx, slide, tolerance)
+            want, want_resets = reference_local_slides(s, ref, idx, slide, tolerance)
+            np.testing.assert_array_equal(got, want)
+            assert resets == want_resets
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_anchor_targets_equal_the_numpy_clamping_bit_for_bit(seed):
+    rng = np.random.default_rng(100 + seed)
+    for n in (4, 12, 41):
+        s, _ = random_chain(rng, n)
+        for _ in range(30):
+            breaks = rng.uniform(size=n) < 0.15
+            breaks[[0, -1]] = True
+            pos = rng.choice(n, rng.integers(1, min(5, n) + 1), replace=False)
+            wanted = s[pos] + rng.choice([1e-12, 0.1, 1.0, 5.0]) * rng.standard_normal(pos.size)
+            ratio = rng.choice([0.1, 0.25, 0.6])
+            got = kernels.anchor_targets(s, breaks, pos, wanted, 1e-8, ratio, SNAP)
+            want = reference_anchor_targets(s, breaks, pos, wanted, 1e-8, ratio)
+            for g, w in zip(got, want, strict=True):
+                np.testing.assert_array_equal(g, w)
+
+
+@pytest.mark.parametrize("n", [0, 1, 7, 8, 9, 100, 128, 129, 300, 1000, 4099])
+def test_pairwise_sum_is_numpys_sum(n):
+    rng = np.random.default_rng(n)
+    a = rng.standard_normal(n) * 10.0 ** rng.uniform(-6, 6, n)
+    assert kernels._pairwise_sum(a, 0, n) == a.sum()
+    if n > 5:
+        assert kernels._pairwise_sum(a, 2, n - 5) == a[2:n - 3].sum()
