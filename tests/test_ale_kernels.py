@@ -8,7 +8,9 @@ import numpy as np
 import pytest
 
 from ntncontact.ale import kernels_numba as kernels
+from ntncontact.ale.remap import Remapper, _nearest_on_boundary, inverse_bilinear, q4_shape
 from ntncontact.ale.surface import local_slides
+from ntncontact.mesh.generators import rectangle
 
 SNAP = 1e-10
 
@@ -141,3 +143,72 @@ def test_pairwise_sum_is_numpys_sum(n):
     assert kernels._pairwise_sum(a, 0, n) == a.sum()
     if n > 5:
         assert kernels._pairwise_sum(a, 2, n - 5) == a[2:n - 3].sum()
+
+
+def reference_try_hints(remapper, pts, hint, outside_tol):
+    """``Remapper._try_hints`` as it was in NumPy: (cell or -1, xi, clamped)."""
+    n = len(pts)
+    cell, xi, clamped = np.full(n, -1), np.zeros((n, 2)), np.zeros(n, bool)
+    idx = np.flatnonzero(hint >= 0)
+    h = hint[idx]
+    cell_xy, size = remapper._cell_xy, remapper.cell_size
+    found, res = inverse_bilinear(cell_xy[h], pts[idx])
+    inside = (np.max(np.abs(found), axis=-1) <= 1.0 + 1e-9) & (res <= 1e-9 * size[h])
+    cell[idx[inside]], xi[idx[inside]] = h[inside], found[inside]
+    rest, h = idx[~inside], h[~inside]
+    if rest.size:
+        dist, bxi, edge = _nearest_on_boundary(cell_xy[h], pts[rest])
+        a, b = cell_xy[h, edge], cell_xy[h, (edge + 1) % 4]
+        rel = pts[rest] - a
+        outward = (b - a)[:, 0] * rel[:, 1] - (b - a)[:, 1] * rel[:, 0] < 0.0
+        out = remapper._outer_edge[h, edge] & outward & (dist <= outside_tol * size[h])
+        cell[rest[out]], xi[rest[out]], clamped[rest[out]] = h[out], bxi[out], True
+    return cell, xi, clamped
+
+
+def reference_interpolation(remapper, f2, loc, pts, g):
+    """``Remapper.remap``'s NumPy einsums (before the ``same node`` snapping)."""
+    nodes = remapper.cells[loc.cell]
+    shape = q4_shape(loc.xi)
+    out = np.einsum("pa,pak->pk", shape, f2[nodes])
+    if g is not None:
+        rel = pts[:, None, :] - remapper.nodes[nodes]
+        out += 0.5 * np.einsum("pa,paki,pai->pk", shape, g, rel)
+        off = pts - np.einsum("pa,pai->pi", shape, remapper.nodes[nodes])
+        out += 0.5 * np.einsum("pa,paki,pi->pk", shape, g, off)
+    return out
+
+
+def distorted_block(rng, nx=8, ny=5):
+    mesh = rectangle(2.0, 1.0, nx, ny)
+    nodes = mesh.nodes + 0.2 * rng.uniform(-1, 1, mesh.nodes.shape) / max(nx, ny)
+    return nodes, mesh.cells
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_hinted_location_and_interpolation_equal_the_numpy_code_bit_for_bit(seed):
+    rng = np.random.default_rng(200 + seed)
+    nodes, cells = distorted_block(rng)
+    remapper = Remapper(nodes, cells)
+    fields = rng.standard_normal((len(nodes), 6))
+    node_cell = np.full(len(nodes), -1)
+    node_cell[cells.ravel()] = np.repeat(np.arange(len(cells)), 4)
+    for p in (1, 3, 7, 20):
+        base = rng.choice(len(nodes), p, replace=False)
+        # moved nodes: inside their hint cell, in a neighbour, or pushed off the boundary
+        pts = nodes[base] + rng.choice([1e-3, 0.05, 0.2]) * rng.standard_normal((p, 2))
+        hint = np.where(rng.uniform(size=p) < 0.2, -1, node_cell[base])
+        got = kernels.locate_in_hints(remapper._cell_xy, remapper.cell_size,
+                                      remapper._outer_edge, pts, hint, 0.1, 1e-9, 12)
+        for g, w in zip(got, reference_try_hints(remapper, pts, hint, 0.1), strict=True):
+            np.testing.assert_array_equal(g, w)
+        loc = remapper.locate(pts, 10.0, hint)
+        # C-contiguous, as the ALE update's (``LazyGradients``): NumPy's einsum sums in an
+        # order that depends on the operands' memory layout
+        grads = np.ascontiguousarray(remapper.nodal_gradients(fields)[remapper.cells[loc.cell]])
+        for g in (None, grads):
+            got = kernels.interpolate(remapper.nodes, remapper.cells, fields, loc.cell, loc.xi,
+                                      pts, np.zeros((p, 4, 6, 2)) if g is None else g,
+                                      g is not None)
+            np.testing.assert_array_equal(got, reference_interpolation(remapper, fields, loc,
+                                                                       pts, g))

@@ -543,3 +543,111 @@ def slid_positions(x, chain_nodes, breaks, points, bulge, node_s, slides, snap_l
         if np.sqrt(r0 * r0 + r1 * r1) > snap_length:
             out[chain_nodes[i], 0], out[chain_nodes[i], 1] = new[c, 0], new[c, 1]
     return out
+
+
+# --- remap (ale.remap.Remapper: hinted point location, interpolation) ------------------------
+
+_CORNER_XI = np.array([[-1.0, -1.0], [1.0, -1.0], [1.0, 1.0], [-1.0, 1.0]])
+
+
+@njit(cache=True)
+def _nearest_on_cell_boundary(cell_xy, e, p0, p1):
+    """Closest point of cell e's straight edges to (p0, p1) (``ale.remap._nearest_on_boundary``
+    for one cell and point); (distance, xi0, xi1, local edge)."""
+    best_dist, best_t, edge = np.inf, 0.0, 0
+    for k in range(4):
+        a0, a1 = cell_xy[e, k, 0], cell_xy[e, k, 1]
+        d0, d1 = cell_xy[e, (k + 1) % 4, 0] - a0, cell_xy[e, (k + 1) % 4, 1] - a1
+        t = (p0 - a0) * d0 + (p1 - a1) * d1
+        t = min(max(t / max(d0 * d0 + d1 * d1, 1e-300), 0.0), 1.0)
+        r0, r1 = a0 + t * d0 - p0, a1 + t * d1 - p1
+        dist = np.sqrt(r0 * r0 + r1 * r1)
+        if k == 0 or dist < best_dist:  # argmin: the first minimum
+            best_dist, best_t, edge = dist, t, k
+    s0, s1 = _CORNER_XI[edge, 0], _CORNER_XI[edge, 1]
+    e0, e1 = _CORNER_XI[(edge + 1) % 4, 0], _CORNER_XI[(edge + 1) % 4, 1]
+    return best_dist, s0 + best_t * (e0 - s0), s1 + best_t * (e1 - s1), edge
+
+
+@njit(cache=True)
+def locate_in_hints(cell_xy, cell_size, outer_edge, pts, hint, outside_tol, inside_tol,
+                    iterations):
+    """``Remapper._try_hints``: (cell or -1, xi, clamped) of points found in their hint cell or
+    just outside one of its mesh-boundary edges (clamped onto it). The hinted points are
+    inverted as one batch, as in the NumPy code (the Newton loop stops for the whole batch)."""
+    n = pts.shape[0]
+    cell = np.full(n, -1, np.int64)
+    xi = np.zeros((n, 2))
+    clamped = np.zeros(n, np.bool_)
+    count = 0
+    for i in range(n):
+        count += hint[i] >= 0
+    which = np.empty(count, np.int64)
+    c = 0
+    for i in range(n):
+        if hint[i] >= 0:
+            which[c] = i
+            c += 1
+    batch_xy = np.empty((count, 4, 2))
+    batch_pts = np.empty((count, 2))
+    for c in range(count):
+        batch_xy[c] = cell_xy[hint[which[c]]]
+        batch_pts[c] = pts[which[c]]
+    found, res = inverse_bilinear(batch_xy, batch_pts, iterations)
+    for c in range(count):
+        i, h = which[c], hint[which[c]]
+        if (max(np.abs(found[c, 0]), np.abs(found[c, 1])) <= 1.0 + inside_tol
+                and res[c] <= 1e-9 * cell_size[h]):
+            cell[i], xi[i, 0], xi[i, 1] = h, found[c, 0], found[c, 1]
+            continue
+        p0, p1 = pts[i, 0], pts[i, 1]
+        dist, x0, x1, edge = _nearest_on_cell_boundary(cell_xy, h, p0, p1)
+        a0, a1 = cell_xy[h, edge, 0], cell_xy[h, edge, 1]
+        b0, b1 = cell_xy[h, (edge + 1) % 4, 0], cell_xy[h, (edge + 1) % 4, 1]
+        outward = (b0 - a0) * (p1 - a1) - (b1 - a1) * (p0 - a0) < 0.0  # right of a -> b
+        if outer_edge[h, edge] and outward and dist <= outside_tol * cell_size[h]:
+            cell[i], xi[i, 0], xi[i, 1], clamped[i] = h, x0, x1, True
+    return cell, xi, clamped
+
+
+@njit(cache=True)
+def interpolate(nodes, cells, fields, cell, xi, pts, gradients, quadratic):
+    """``Remapper.remap``'s interpolant at located points: Q4 values (4.18) and, if
+    ``quadratic``, the gradient-enhanced terms with ``gradients`` (p, 4, k, 2) of the cells'
+    nodes. Summed in the order of the NumPy einsums it replaces (per point over the corners;
+    the two gradient terms over the corners of per-corner sums over the two coordinates)."""
+    p, k = pts.shape[0], fields.shape[1]
+    out = np.zeros((p, k))
+    shape = np.empty(4)
+    for q in range(p):
+        e = cell[q]
+        for a in range(4):
+            shape[a] = 0.25 * (1.0 + xi[q, 0] * _CORNER_XI[a, 0]) * (
+                1.0 + xi[q, 1] * _CORNER_XI[a, 1])
+        for j in range(k):
+            total = 0.0
+            for a in range(4):
+                total += shape[a] * fields[cells[e, a], j]
+            out[q, j] = total
+        if not quadratic:
+            continue
+        off0, off1 = 0.0, 0.0  # p - x(xi): a clamped point lies off its cell
+        for a in range(4):
+            off0 += shape[a] * nodes[cells[e, a], 0]
+            off1 += shape[a] * nodes[cells[e, a], 1]
+        off0, off1 = pts[q, 0] - off0, pts[q, 1] - off1
+        for j in range(k):
+            near = 0.0
+            for a in range(4):
+                n = cells[e, a]
+                g0, g1 = gradients[q, a, j, 0], gradients[q, a, j, 1]
+                near += shape[a] * g0 * (pts[q, 0] - nodes[n, 0]) + shape[a] * g1 * (
+                    pts[q, 1] - nodes[n, 1])
+            out[q, j] = out[q, j] + 0.5 * near
+        for j in range(k):
+            far = 0.0
+            for a in range(4):
+                g0, g1 = gradients[q, a, j, 0], gradients[q, a, j, 1]
+                far += shape[a] * g0 * off0 + shape[a] * g1 * off1
+            out[q, j] = out[q, j] + 0.5 * far
+    return out

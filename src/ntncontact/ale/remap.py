@@ -142,16 +142,30 @@ class Remapper:
         self.cells = np.asarray(cells, dtype=np.int64).reshape(-1, 4)
         xc = self.nodes[self.cells]
         self._cell_xy = xc
-        self._box_lo, self._box_hi = xc.min(axis=1), xc.max(axis=1)
         self._topology = topology or remap_topology(self.cells, len(self.nodes))
         self._outer_edge = self._topology.outer_edge
-        self._tree = cKDTree(xc.mean(axis=1))
-        self._node_tree = cKDTree(self.nodes)
         d1, d2 = xc[:, 2] - xc[:, 0], xc[:, 3] - xc[:, 1]
         area = 0.5 * (d1[:, 0] * d2[:, 1] - d1[:, 1] * d2[:, 0])
         self.cell_size = np.sqrt(np.abs(area))  # sqrt(area): the length scale of a cell
         self._k = min(candidates, len(self.cells))
         self._gradient_ops: tuple[NDArray, NDArray] | None = None
+
+    # the search structures are built on first use: a hinted ALE move rarely needs them
+    @cached_property
+    def _tree(self) -> cKDTree:
+        return cKDTree(self._cell_xy.mean(axis=1))
+
+    @cached_property
+    def _box_lo(self) -> NDArray[np.float64]:
+        return self._cell_xy.min(axis=1)
+
+    @cached_property
+    def _box_hi(self) -> NDArray[np.float64]:
+        return self._cell_xy.max(axis=1)
+
+    @cached_property
+    def _node_tree(self) -> cKDTree:
+        return cKDTree(self.nodes)
 
     def _search(self, points: NDArray, k: int) -> tuple[NDArray, NDArray]:
         """Containing cell (or -1) and its xi for each point among its k nearest centroids.
@@ -215,26 +229,13 @@ class Remapper:
 
     def _try_hints(self, pts: NDArray, hint: NDArray, outside_tol: float, cell: NDArray,
                    xi: NDArray, clamped: NDArray) -> None:
-        """Fill the points found in (or just outside a boundary edge of) their hint cell."""
-        idx = np.flatnonzero(hint >= 0)
-        if idx.size == 0:
-            return
-        h = hint[idx]
-        found, res = inverse_bilinear(self._cell_xy[h], pts[idx])
-        inside = (np.max(np.abs(found), axis=-1) <= 1.0 + _INSIDE_TOL) & (
-            res <= 1e-9 * self.cell_size[h]
-        )
-        cell[idx[inside]], xi[idx[inside]] = h[inside], found[inside]
-        rest, h = idx[~inside], h[~inside]
-        if rest.size == 0:
-            return
-        dist, bxi, edge = _nearest_on_boundary(self._cell_xy[h], pts[rest])
-        a = self._cell_xy[h, edge]
-        b = self._cell_xy[h, (edge + 1) % 4]
-        rel = pts[rest] - a
-        outward = (b - a)[:, 0] * rel[:, 1] - (b - a)[:, 1] * rel[:, 0] < 0.0  # right of a -> b
-        out = self._outer_edge[h, edge] & outward & (dist <= outside_tol * self.cell_size[h])
-        cell[rest[out]], xi[rest[out]], clamped[rest[out]] = h[out], bxi[out], True
+        """Fill the points found in (or just outside a boundary edge of) their hint cell
+        (compiled: ``kernels_numba.locate_in_hints``)."""
+        found, found_xi, out = _kernels.locate_in_hints(
+            self._cell_xy, self.cell_size, self._outer_edge, np.ascontiguousarray(pts), hint,
+            outside_tol, _INSIDE_TOL, 12)
+        hit = found >= 0
+        cell[hit], xi[hit], clamped[hit] = found[hit], found_xi[hit], out[hit]
 
     def _clamp(
         self, pts: NDArray, todo: NDArray, cell: NDArray, xi: NDArray, outside_tol: float
@@ -278,8 +279,7 @@ class Remapper:
         pts = np.atleast_2d(np.asarray(points, dtype=float))
         loc = self.locate(pts, outside_tol, hint)
         nodes = self.cells[loc.cell]  # (p, 4)
-        shape = q4_shape(loc.xi)
-        out = np.einsum("pa,pak->pk", shape, f2[nodes])
+        g = np.zeros((len(pts), 4, f2.shape[1], 2))
         if method == "quadratic":
             if gradients is None:
                 g = self.nodal_gradients(f2, nodes.ravel()).reshape(*nodes.shape, -1, 2)
@@ -287,12 +287,11 @@ class Remapper:
                 g = gradients.at(nodes)
             else:
                 g = np.asarray(gradients, float).reshape(len(self.nodes), f2.shape[1], 2)[nodes]
-            # g: (p, 4, k, 2)
-            rel = pts[:, None, :] - self.nodes[nodes]  # p - x_a
-            out += 0.5 * np.einsum("pa,paki,pai->pk", shape, g, rel)
-            # a clamped point lies off its cell by p - x(xi): continue linearly to it
-            off = pts - np.einsum("pa,pai->pi", shape, self.nodes[nodes])
-            out += 0.5 * np.einsum("pa,paki,pi->pk", shape, g, off)
+        # sum_a N_a f_a, and for "quadratic" + 1/2 sum_a N_a g_a . (p - x_a) + 1/2 sum_a N_a
+        # g_a . (p - x(xi)) (a clamped point lies off its cell: continue linearly to it)
+        out = _kernels.interpolate(self.nodes, self.cells, np.ascontiguousarray(f2), loc.cell,
+                                   np.ascontiguousarray(loc.xi), np.ascontiguousarray(pts),
+                                   np.ascontiguousarray(g, dtype=float), method == "quadratic")
         # an unmoved node keeps its own value exactly (no round-off of the interpolation)
         dist, node = self._node_tree.query(pts)
         same = dist <= 1e-12 * self.cell_size[loc.cell]
