@@ -264,3 +264,18 @@ def test_read_vtu_raises_on_corrupt_file(tmp_path):
     bad.write_text("<VTKFile")
     with pytest.raises(meshio.ReadError):
         read_vtu(bad)
+
+
+def test_summary_rewrites_are_throttled_while_running_but_never_lost(tmp_path):
+    """While "running", rewrites wait min_interval (each is synced to disk); the data are kept
+    in memory, and a status change or finish() writes everything at once."""
+    summary = SummaryWriter(tmp_path, min_interval=3600.0, scenario="ball")
+    summary.update(max_gap=0.5)
+    on_disk = json.loads((tmp_path / "summary.json").read_text())
+    assert "max_gap" not in on_disk and summary.data["max_gap"] == 0.5
+    summary.finish("failed", "diverged")
+    on_disk = json.loads((tmp_path / "summary.json").read_text())
+    assert on_disk["max_gap"] == 0.5 and on_disk["status"] == "failed"
+    eager = SummaryWriter(tmp_path / "eager", min_interval=0.0)
+    eager.update(max_gap=0.25)
+    assert json.loads((tmp_path / "eager" / "summary.json").read_text())["max_gap"] == 0.25

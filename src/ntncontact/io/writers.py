@@ -189,9 +189,16 @@ def to_jsonable(value: Any) -> Any:
 
 def write_json_atomic(path: str | os.PathLike, data: Mapping[str, Any]) -> None:
     """Write ``data`` as JSON to a temporary file, then rename it over ``path``."""
+    _write_text_atomic(path, _json_text(data))
+
+
+def _json_text(data: Mapping[str, Any]) -> str:
+    return json.dumps(to_jsonable(data), indent=2, allow_nan=False)
+
+
+def _write_text_atomic(path: str | os.PathLike, text: str) -> None:
     final = Path(path)
     tmp = final.with_name(final.name + ".tmp")
-    text = json.dumps(to_jsonable(data), indent=2, allow_nan=False)
     with open(tmp, "w", encoding="utf-8") as handle:
         handle.write(text + "\n")
         handle.flush()
@@ -204,13 +211,19 @@ class SummaryWriter:
 
     ``wall_time_s`` is measured from construction unless given. The energy statistics come from
     :meth:`record_energy`: ``energy_max_relative_variation`` is max |E - E0| / |E0| (null when
-    E0 is zero). Every :meth:`update` rewrites the file atomically.
+    E0 is zero). :meth:`update` checks every value at once and rewrites the file atomically,
+    at most every ``min_interval`` seconds while the run is "running" (each rewrite is synced to
+    disk, which cost more than the step itself on small runs); a change of status, and
+    :meth:`finish`, always write.
     """
 
-    def __init__(self, directory: str | os.PathLike, **extra: Any) -> None:
+    def __init__(self, directory: str | os.PathLike, min_interval: float = 1.0,
+                 **extra: Any) -> None:
         self.path = Path(directory) / SUMMARY_FILE
         self.path.parent.mkdir(parents=True, exist_ok=True)
         self._start = _time.perf_counter()
+        self.min_interval = float(min_interval)
+        self._written_at: float | None = None
         self._max_variation = 0.0
         self._data: dict[str, Any] = {
             "steps": 0,
@@ -248,8 +261,14 @@ class SummaryWriter:
         if "wall_time_s" not in fields:
             fields["wall_time_s"] = _time.perf_counter() - self._start
         merged = self._data | fields
-        # Write before keeping: a value JSON cannot hold leaves the file and the state unchanged.
-        write_json_atomic(self.path, merged)
+        # Check before keeping: a value JSON cannot hold leaves the file and the state unchanged.
+        text = _json_text(merged)
+        now = _time.perf_counter()
+        due = (self._written_at is None or status != self._data["status"] or status != "running"
+               or now - self._written_at >= self.min_interval)
+        if due:
+            _write_text_atomic(self.path, text)
+            self._written_at = now
         self._data = merged
 
     def finish(self, status: str = "completed", error: str | None = None, **fields: Any) -> None:
