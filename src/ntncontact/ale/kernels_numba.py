@@ -651,3 +651,65 @@ def interpolate(nodes, cells, fields, cell, xi, pts, gradients, quadratic):
                 far += shape[a] * g0 * off0 + shape[a] * g1 * off1
             out[q, j] = out[q, j] + 0.5 * far
     return out
+
+
+# --- moved nodes and cells (ale.motion) ------------------------------------------------------
+
+
+@njit(cache=True)
+def changed_cells(x_new, x_old, cells):
+    """Nodes whose position changed (mask) and the cells with such a node (indices)."""
+    n, m = x_new.shape[0], cells.shape[0]
+    moved = np.zeros(n, np.bool_)
+    for i in range(n):
+        moved[i] = x_new[i, 0] != x_old[i, 0] or x_new[i, 1] != x_old[i, 1]
+    touched = np.zeros(m, np.bool_)
+    count = 0
+    for e in range(m):
+        touched[e] = moved[cells[e, 0]] or moved[cells[e, 1]] or moved[cells[e, 2]] or moved[
+            cells[e, 3]]
+        count += touched[e]
+    which = np.empty(count, np.int64)
+    c = 0
+    for e in range(m):
+        if touched[e]:
+            which[c] = e
+            c += 1
+    return moved, which
+
+
+@njit(cache=True)
+def acceptable(x_new, x_old, cells, min_quality, reference_quality, tn_quality):
+    """``ale.motion._acceptable``: every cell with a moved node keeps ``min_quality`` of its
+    original smallest corner sine or does not get worse than at t_n."""
+    _, which = changed_cells(x_new, x_old, cells)
+    q = cell_min_sines(x_new, cells, which)
+    for k in range(which.size):
+        e = which[k]
+        a, b = min_quality * reference_quality[e], tn_quality[e]
+        if np.isnan(a) or np.isnan(b):  # np.minimum propagates NaN: q >= NaN fails
+            return False
+        if not q[k] >= min(a, b):
+            return False
+    return True
+
+
+@njit(cache=True)
+def hint_cells(node_cell, chain_nodes, owner, node_s, slides, moved):
+    """``ale.motion._hints``: per moved node (in node order) a likely old cell: for a slid
+    chain node the cell owning the segment it landed on, otherwise one around its position."""
+    hint = node_cell.copy()
+    for i in range(slides.size):
+        if slides[i] != 0.0:
+            seg = np.searchsorted(node_s, node_s[i] + slides[i], side="right") - 1
+            hint[chain_nodes[i]] = owner[min(max(seg, 0), owner.size - 1)]
+    count = 0
+    for i in range(moved.size):
+        count += moved[i]
+    out = np.empty(count, np.int64)
+    c = 0
+    for i in range(moved.size):
+        if moved[i]:
+            out[c] = hint[i]
+            c += 1
+    return out

@@ -295,6 +295,20 @@ class AleBody:
         return mask
 
     @cached_property
+    def _surface_index(self) -> NDArray[np.int64]:
+        """Chain index of every node (-1 off the contact surface)."""
+        where = np.full(self.n_nodes, -1)
+        where[self.surface] = np.arange(self.surface.size)
+        return where
+
+    @cached_property
+    def _open_breaks(self) -> NDArray[np.bool_]:
+        """Breaks of the open chain: the corners and both ends (not to be modified)."""
+        breaks = self.corner.copy()
+        breaks[[0, -1]] = True
+        return breaks
+
+    @cached_property
     def _node_cell(self) -> NDArray[np.int64]:
         """One cell around each node (the remap's first guess for a node moved a little)."""
         out = np.full(self.n_nodes, -1)
@@ -388,10 +402,10 @@ class _TnState:
     def masses(self) -> NDArray[np.float64]:
         return np.bincount(self.body.cells.ravel(), self.element_masses.ravel(), len(self.X))
 
-    def masses_after(self, X_new: NDArray, cells: NDArray[np.bool_]) -> NDArray[np.float64]:
-        """Lumped masses with the masked cells' reference images replaced by those of X_new."""
+    def masses_after(self, X_new: NDArray, idx: NDArray[np.int64]) -> NDArray[np.float64]:
+        """Lumped masses with the reference images of the cells ``idx`` replaced by those of
+        X_new."""
         body = self.body
-        idx = np.flatnonzero(cells)
         change = _kernels.element_masses(X_new, body.cells, idx, body.cell_density[idx], _DN,
                                          _SHAPE)
         change -= self.element_masses[idx]
@@ -484,16 +498,12 @@ def _open_chain(body: AleBody, active: NDArray) -> _Chain:
     """Open the chain; a closed chain starts at its first corner, else at the node farthest
     (in chain steps) from every active node, which then stays fixed for this update."""
     n = body.surface.size
-    where = np.full(body.n_nodes, -1)
-    where[body.surface] = np.arange(n)
-    pos = where[active]
+    pos = body._surface_index[active]
     if np.any(pos < 0):
         raise ValueError(f"{body.name}: active nodes {active[pos < 0].tolist()} are not on the "
                          "ALE contact surface")
     if not body.closed:
-        breaks = body.corner.copy()
-        breaks[[0, -1]] = True
-        return _Chain(body.surface, breaks, body.reference_spacing, pos)
+        return _Chain(body.surface, body._open_breaks, body.reference_spacing, pos)
     if body.corner.any():
         start = int(np.argmax(body.corner))
     else:
@@ -555,10 +565,8 @@ def _move_surface(
 def _acceptable(body: AleBody, tn: _TnState, x_new: NDArray) -> bool:
     """Every cell changed by the move keeps min_quality of its original quality, or does not
     get worse than at t_n."""
-    cells = body.cells_touching(np.any(x_new != tn.x, axis=1))
-    q = _min_sines(body, x_new, cells)
-    floor = np.minimum(body.min_quality * body.reference_quality[cells], tn.quality[cells])
-    return bool(np.all(q >= floor))
+    return bool(_kernels.acceptable(x_new, tn.x, body.cells, body.min_quality,
+                                    body.reference_quality, tn.quality))
 
 
 def _move_interior(
@@ -591,17 +599,13 @@ def _hints(body: AleBody, tn: _TnState, chain: _Chain, curve: SurfaceCurve, slid
            moved: NDArray) -> NDArray[np.int64]:
     """Likely old cell of every moved node: for a slid surface node the cell of the segment it
     landed on, otherwise a cell around its old position."""
-    hint = body._node_cell.copy()
-    slid = slides != 0.0
-    seg = np.searchsorted(curve.node_s, curve.node_s[slid] + slides[slid], side="right") - 1
-    owner = tn.segment_cells(chain)
-    hint[chain.nodes[slid]] = owner[np.clip(seg, 0, owner.size - 1)]
-    return hint[moved]
+    return _kernels.hint_cells(body._node_cell, chain.nodes, tn.segment_cells(chain),
+                               curve.node_s, slides, moved)
 
 
-def _check_cells(body: AleBody, x: NDArray, cells: NDArray, label: str) -> None:
-    """MeshError (naming the element) if one of the masked cells is inverted or degenerate."""
-    if np.any(_min_sines(body, x, cells) <= 1e-10):
+def _check_cells(body: AleBody, x: NDArray, cells: NDArray[np.int64], label: str) -> None:
+    """MeshError (naming the element) if one of the cells ``cells`` is inverted or degenerate."""
+    if np.any(_kernels.cell_min_sines(x, body.cells, cells) <= 1e-10):
         check_elements(x, body.cells, label)
 
 
@@ -613,6 +617,7 @@ def _min_sines(body: AleBody, x: NDArray, cells: NDArray[np.bool_]) -> NDArray[n
 
 def _conserve_momentum(
     tn: _TnState, mass_new: NDArray, x_new: NDArray, v_new: NDArray, moved: NDArray,
+    touched: NDArray[np.int64],
 ) -> tuple[NDArray, tuple[NDArray, float]]:
     """Momentum change of the plain remap and the velocity corrected on the remapped nodes.
 
@@ -626,7 +631,7 @@ def _conserve_momentum(
     sub = moved
     if np.count_nonzero(moved) < 2:
         sub = np.zeros_like(moved)
-        sub[tn.body.cells[tn.body.cells_touching(moved)].ravel()] = True
+        sub[tn.body.cells[touched].ravel()] = True
     p_rest, l_rest = momenta(mass_new[~sub], x_new[~sub], v_new[~sub])
     out = v_new.copy()
     out[sub] = conservative_velocity_correction(mass_new[sub], x_new[sub], v_new[sub],
@@ -682,10 +687,9 @@ def move_ale_body(
     slides, clamped, mismatch, resets = _surface_slides(body, curve, chain, wanted_xy)
     x_surf = _move_surface(tn, curve, chain, slides)
     x_new, smoothing, stage = _move_interior(body, tn, x_surf)
-    moved = np.any(x_new != x_old, axis=1)
+    moved, touched = _kernels.changed_cells(x_new, x_old, body.cells)  # touched: cell indices
     if not moved.any():
         return _unchanged(X, d, v, a, mismatch, active[clamped])
-    touched = body.cells_touching(moved)
     _check_cells(body, x_new, touched, body.name)
     gradients = tn.gradients if body.remap == "quadratic" else None
     values = tn.remapper.remap(tn.fields, x_new[moved], body.remap, gradients=gradients,
@@ -696,7 +700,7 @@ def move_ale_body(
         v_new[moved], a_new[moved] = v[moved], a[moved]
     _check_cells(body, X_new, touched, f"{body.name} (reference image)")
     mass_new = tn.masses_after(X_new, touched)
-    v_fixed, change = _conserve_momentum(tn, mass_new, x_new, v_new, moved)
+    v_fixed, change = _conserve_momentum(tn, mass_new, x_new, v_new, moved, touched)
     if body.conserve_momentum and body.convection == "remap":
         v_new = v_fixed
     return AleUpdate(
