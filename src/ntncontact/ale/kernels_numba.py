@@ -1,10 +1,16 @@
-"""Numba kernels of the ALE update's small inner loops (surface curve, bilinear inversion).
+"""Numba kernels of the ALE update's loops: surface curve, bilinear inversion, surface slides
+(``ale.motion``, ``ale.surface.local_slides``), moved nodes and cell checks, the remap's hinted
+point location and interpolation.
 
-Each is the loop form of the NumPy code it replaces in ``ale.surface`` and ``ale.remap``, with
-the same operations in the same order and the same iteration rule: the Newton loops run over the
-whole batch until every member has converged (as the vectorized code did), so the results agree
-with it to round-off of the reordered sums (arc-length quadrature). The arrays are tiny (a few
-points on a chain of tens of segments), so the NumPy versions were dominated by per-call overhead.
+Each is the loop form of the NumPy code it replaces in ``ale.surface``, ``ale.motion`` and
+``ale.remap``, with the same operations in the same order and the same iteration rule: the Newton
+loops run over the whole batch until every member has converged (as the vectorized code did),
+sums of arrays follow NumPy's pairwise order (``_pairwise_sum``) and the einsums' order. The
+kernels that replaced the surface slides, the cell checks and the remap's location and
+interpolation give the NumPy code's results bit for bit (``tests/test_ale_kernels.py``); the
+curve kernels agree with it to round-off of the reordered arc-length quadrature. The arrays are
+tiny (a few points on a chain of tens of segments), so the NumPy versions were dominated by
+per-call overhead.
 """
 
 from __future__ import annotations

@@ -88,9 +88,14 @@ Cost: everything that depends only on the t_n state (the old surface curve, the 
 the recovered nodal gradients of the quadratic remap, the old masses and cell qualities) is
 built once per t_n state and reused by the following augmentations of the step (the body keeps
 the last state's data, recognised by its bytes); the gradients are recovered only at the nodes
-a move needs; topology-only structures are built once. The small inner loops (normal foot,
-arc-length inversion, bilinear inversion, cell qualities, element masses) are compiled
-(``ale.kernels_numba``).
+a move needs; topology-only structures (and the open chain's breaks) are built once. The
+loops are compiled (``ale.kernels_numba``): the surface slides (normal foot, clamping, the
+runs between anchors, the slide along the curve), the moved nodes and touched cells with
+their qualities, the remap's hinted point location and interpolation, and the element masses;
+they repeat the NumPy code's operations in its order, so results are the same bit for bit.
+What is left in NumPy per move is mostly the momentum correction (BLAS dot products, whose
+summation order a loop cannot reproduce) and, per t_n state, the surface curve's arc lengths
+and the gradient recovery's least-squares fits (LAPACK).
 """
 
 from __future__ import annotations

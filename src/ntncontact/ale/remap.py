@@ -1,7 +1,8 @@
 """Remapping nodal fields from the old mesh onto moved nodes (report 4.3, eqs. 4.18-4.19).
 
-Point location uses a k-d tree over old cell centroids; the candidate cells of every point are
-tested at once with a vectorized Newton inversion of the bilinear map. Points slightly outside the
+Point location tries a hinted cell per point first (the ALE update knows where a moved node
+came from) and otherwise uses a k-d tree over old cell centroids; the candidate cells of every
+point are tested at once with a vectorized Newton inversion of the bilinear map. Points slightly outside the
 old mesh (a surface node moved along the curved surface of ``ale.surface`` bulges out of the old
 polygonal boundary by O(h^2 curvature)) are clamped to the nearest point of the nearest cell.
 
@@ -279,7 +280,7 @@ class Remapper:
         pts = np.atleast_2d(np.asarray(points, dtype=float))
         loc = self.locate(pts, outside_tol, hint)
         nodes = self.cells[loc.cell]  # (p, 4)
-        g = np.zeros((len(pts), 4, f2.shape[1], 2))
+        g = np.zeros((0, 4, f2.shape[1], 2))  # "linear": not read
         if method == "quadratic":
             if gradients is None:
                 g = self.nodal_gradients(f2, nodes.ravel()).reshape(*nodes.shape, -1, 2)
