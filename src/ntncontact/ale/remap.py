@@ -2,9 +2,10 @@
 
 Point location tries a hinted cell per point first (the ALE update knows where a moved node
 came from) and otherwise uses a k-d tree over old cell centroids; the candidate cells of every
-point are tested at once with a vectorized Newton inversion of the bilinear map. Points slightly outside the
-old mesh (a surface node moved along the curved surface of ``ale.surface`` bulges out of the old
-polygonal boundary by O(h^2 curvature)) are clamped to the nearest point of the nearest cell.
+point are tested at once with a vectorized Newton inversion of the bilinear map. Points
+slightly outside the old mesh (a surface node moved along the curved surface of
+``ale.surface`` bulges out of the old polygonal boundary by O(h^2 curvature)) are clamped to
+the nearest point of the nearest cell.
 
 Two interpolants:
 
