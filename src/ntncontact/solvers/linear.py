@@ -225,6 +225,12 @@ def _canonical_csr(A: sp.spmatrix) -> sp.csr_matrix:
     return A
 
 
+#: Below this many unknowns SuperLU gets no supernode relaxation and panels of one column:
+#: 1.7x faster factorizations of the ring impact's 890-dof tangent (0.9 ms against 1.5 ms),
+#: while from a few thousand unknowns on the supernodes pay (3280 dofs: 133 ms against 144).
+SMALL_SYSTEM = 2000
+
+
 class _SuperLUBackend:
     """SuperLU with the MMD(A^T+A) ordering computed at the first factorization of a pattern."""
 
@@ -238,6 +244,8 @@ class _SuperLUBackend:
         p = self.pattern
         # SymmetricMode: FE patterns are symmetric, so prefer diagonal pivots (keeps the ordering)
         kwargs = {"diag_pivot_thresh": 0.1, "options": {"SymmetricMode": True}}
+        if p.n < SMALL_SYSTEM:
+            kwargs |= {"relax": 1, "panel_size": 1}
         try:
             if self.perm is None:
                 A = sp.csc_matrix(sp.csr_matrix((data, p.indices, p.indptr), shape=(p.n, p.n)))
