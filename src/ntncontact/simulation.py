@@ -119,6 +119,9 @@ class Simulation:
         self._ale_cells = np.concatenate(
             [model.bodies[a.body_index].cells for a in model.ale_bodies] or [np.zeros(0, int)])
         self._mass = model.assembler.dof_mass(self._element_mass, self.lumped)
+        rigid_cells = np.setdiff1d(np.arange(len(model.cells)), self._ale_cells)
+        self._fixed_mass_data = model.assembler.dof_mass_data(  # the part that never changes
+            self._element_mass[rigid_cells], self.lumped, rigid_cells)
         self._ale_nodes = np.unique(model.assembler.cells[self._ale_cells])
         self.length_scale = float(np.ptp(model.X0, axis=0).max())
         self.max_augmentations = max([ci.max_augmentations for ci in model.interfaces] or [1])
@@ -289,9 +292,10 @@ class Simulation:
         X_ale = state.X[self._ale_nodes]
         if self._mass_key is not None and np.array_equal(self._mass_key[0], X_ale):
             return self._mass_key[1]  # the mesh was not moved since (e.g. a skipped move)
-        me = self._element_mass.copy()
-        me[self._ale_cells] = self.model.assembler.element_masses(state.X, self._ale_cells)
-        mass = self.model.assembler.dof_mass(me, self.lumped)
+        asm = self.model.assembler
+        me = asm.element_masses(state.X, self._ale_cells)
+        mass = asm.pattern_matrix(self._fixed_mass_data
+                                  + asm.dof_mass_data(me, self.lumped, self._ale_cells))
         self._mass_key = (X_ale, mass)
         return mass
 

@@ -171,6 +171,12 @@ class Assembler:
     def dof_mass(self, element_masses: NDArray, lumped: bool) -> sp.csr_matrix:
         """Mass on dofs from all element masses, in the stiffness pattern (so that the Newton
         matrix 4/dt^2 M + K is a sum of data arrays); lumped: row sums on the diagonal."""
+        return self.pattern_matrix(self.dof_mass_data(element_masses, lumped))
+
+    def dof_mass_data(self, element_masses: NDArray, lumped: bool,
+                      elements: NDArray | None = None) -> NDArray:
+        """The CSR data (stiffness pattern) of the dof mass of ``elements`` (all by default)
+        from their scalar element masses: ALE runs rebuild only their moving bodies' part."""
         me = element_masses
         if lumped:
             me = np.einsum("eab,ab->eab", np.broadcast_to(me.sum(axis=2)[:, :, None], me.shape),
@@ -178,4 +184,12 @@ class Assembler:
         blocks = np.zeros((len(me), 4, 2, 4, 2))
         blocks[:, :, 0, :, 0] = me
         blocks[:, :, 1, :, 1] = me
-        return self.pattern.matrix(blocks.reshape(len(me), 8, 8))
+        entries = self.pattern.entry_map
+        if elements is not None:
+            entries = entries.reshape(len(self.cells), -1)[elements].ravel()
+        return np.bincount(entries, weights=blocks.ravel(), minlength=self.pattern.nnz)
+
+    def pattern_matrix(self, data: NDArray) -> sp.csr_matrix:
+        """A CSR matrix with the stiffness pattern and these data."""
+        p = self.pattern
+        return sp.csr_matrix((data, p.indices, p.indptr), shape=p.shape)
