@@ -14,6 +14,7 @@ from .contact import PairState
 from .convection import convective_terms
 from .diagnostics import Balance, balance
 from .dynamics.energy import EndEnergy, EnergyConsistentContact
+from .dynamics.mass import MovingMass
 from .dynamics.midpoint import end_of_step, midpoint_velocity, velocity_factor
 from .fem.q4 import InvertedElementError
 from .interfaces import (
@@ -114,15 +115,11 @@ class Simulation:
         self.lumped = model.analysis.mass == "lumped"
         self.state = initial_state(model)
         self._nodal_mass = model.assembler.nodal_mass(model.X0, self.lumped)
-        # element masses, of which only the ALE bodies' change (their particles move)
-        self._element_mass = model.assembler.element_masses(model.X0)
-        self._ale_cells = np.concatenate(
+        ale_cells = np.concatenate(
             [model.bodies[a.body_index].cells for a in model.ale_bodies] or [np.zeros(0, int)])
-        self._mass = model.assembler.dof_mass(self._element_mass, self.lumped)
-        rigid_cells = np.setdiff1d(np.arange(len(model.cells)), self._ale_cells)
-        self._fixed_mass_data = model.assembler.dof_mass_data(  # the part that never changes
-            self._element_mass[rigid_cells], self.lumped, rigid_cells)
-        self._ale_nodes = np.unique(model.assembler.cells[self._ale_cells])
+        # only the ALE bodies' element masses change (their nodes carry new particles)
+        self._moving_mass = MovingMass(model.assembler, model.X0, self.lumped, ale_cells)
+        self._mass = self._moving_mass.matrix(model.X0)
         self.length_scale = float(np.ptp(model.X0, axis=0).max())
         self.max_augmentations = max([ci.max_augmentations for ci in model.interfaces] or [1])
         self.initial_contact = tuple(PairState.empty() for _ in model.interfaces)
@@ -132,7 +129,6 @@ class Simulation:
         self._step_work = dict.fromkeys(LEDGER, 0.0)
         self._last_mismatch = 0.0
         self._energy_multiplier = 0.0
-        self._mass_key: tuple | None = None  # (ALE bodies' X, mass) of the last mass built
 
     def balance(self, state: StepState) -> Balance:
         _, _, energy = self.model.assembler.internal(state.X, state.x, need_tangent=False)
@@ -289,15 +285,7 @@ class Simulation:
         """The mass on dofs; ALE bodies carry new particles at their nodes, so it is rebuilt."""
         if not self.model.ale_bodies:
             return self._mass
-        X_ale = state.X[self._ale_nodes]
-        if self._mass_key is not None and np.array_equal(self._mass_key[0], X_ale):
-            return self._mass_key[1]  # the mesh was not moved since (e.g. a skipped move)
-        asm = self.model.assembler
-        me = asm.element_masses(state.X, self._ale_cells)
-        mass = asm.pattern_matrix(self._fixed_mass_data
-                                  + asm.dof_mass_data(me, self.lumped, self._ale_cells))
-        self._mass_key = (X_ale, mass)
-        return mass
+        return self._moving_mass.matrix(state.X)
 
     def _nodal(self, state: StepState) -> sp.csr_matrix:
         if not self.model.ale_bodies:
