@@ -19,19 +19,12 @@ from ntncontact.contact import (
     PairState,
     augment,
     check_augmentation,
-    evaluate,
     evaluate_contact,
     lagrange_blocks,
 )
 
-
-@pytest.fixture(autouse=True, params=["numpy", "numba"])
-def contact_kernel(request, monkeypatch):
-    """Every test here runs with the NumPy reference and the compiled contact kernel."""
-    if request.param == "numba":
-        pytest.importorskip("numba")
-    monkeypatch.setattr(evaluate, "KERNEL", request.param)
-    return request.param
+# every test here runs with the NumPy reference and the compiled contact kernel (conftest)
+pytestmark = pytest.mark.usefixtures("both_contact_kernels")
 
 
 THETA = 0.3

@@ -15,20 +15,13 @@ from ntncontact.contact import (
     Interface,
     PairState,
     commit_step,
-    evaluate,
     evaluate_contact,
     frictional_dissipation,
     return_mapping,
 )
 
-
-@pytest.fixture(autouse=True, params=["numpy", "numba"])
-def contact_kernel(request, monkeypatch):
-    """Every test here runs with the NumPy reference and the compiled contact kernel."""
-    if request.param == "numba":
-        pytest.importorskip("numba")
-    monkeypatch.setattr(evaluate, "KERNEL", request.param)
-    return request.param
+# every test here runs with the NumPy reference and the compiled contact kernel (conftest)
+pytestmark = pytest.mark.usefixtures("both_contact_kernels")
 
 
 def random_inputs(seed: int, n: int = 2000):

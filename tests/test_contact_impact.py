@@ -22,18 +22,11 @@ from ntncontact.contact import (
     closest_pairs,
     commit_step,
     detect,
-    evaluate,
     evaluate_contact,
 )
 
-
-@pytest.fixture(autouse=True, params=["numpy", "numba"])
-def contact_kernel(request, monkeypatch):
-    """Every test here runs with the NumPy reference and the compiled contact kernel."""
-    if request.param == "numba":
-        pytest.importorskip("numba")
-    monkeypatch.setattr(evaluate, "KERNEL", request.param)
-    return request.param
+# every test here runs with the NumPy reference and the compiled contact kernel (conftest)
+pytestmark = pytest.mark.usefixtures("both_contact_kernels")
 
 
 DT = 0.1

@@ -21,20 +21,13 @@ from ntncontact.contact import (
     Interface,
     PairState,
     contact_term,
-    evaluate,
     evaluate_contact,
     lagrange_blocks,
     pair_kinematics,
 )
 
-
-@pytest.fixture(autouse=True, params=["numpy", "numba"])
-def contact_kernel(request, monkeypatch):
-    """Every test here runs with the NumPy reference and the compiled contact kernel."""
-    if request.param == "numba":
-        pytest.importorskip("numba")
-    monkeypatch.setattr(evaluate, "KERNEL", request.param)
-    return request.param
+# every test here runs with the NumPy reference and the compiled contact kernel (conftest)
+pytestmark = pytest.mark.usefixtures("both_contact_kernels")
 
 
 H = 1e-6
