@@ -375,20 +375,28 @@ def wanted_arc(points, bulge, node_s, t_start, t_end, breaks, pts, pos, snap, ga
 
 
 @njit(cache=True)
+def _true_indices(mask):
+    """Indices of the True entries of a boolean array (np.flatnonzero)."""
+    count = 0
+    for i in range(mask.size):
+        count += mask[i]
+    out = np.empty(count, np.int64)
+    c = 0
+    for i in range(mask.size):
+        if mask[i]:
+            out[c] = i
+            c += 1
+    return out
+
+
+@njit(cache=True)
 def anchor_targets(node_s, breaks, pos, wanted, slide_tolerance, ratio, snap):
     """Targets of the active nodes (``ale.motion._clamp_slides`` of the wanted arc lengths,
     slides below the tolerance dropped) and the anchors; (targets, clamped, mismatch, anchor
     indices, anchor slides, first pair of anchors out of order or -1)."""
     n, k = node_s.size, pos.size
-    n_brk = 0
-    for i in range(n):
-        n_brk += breaks[i]
-    brk = np.empty(n_brk, np.int64)
-    c = 0
-    for i in range(n):
-        if breaks[i]:
-            brk[c] = i
-            c += 1
+    brk = _true_indices(breaks)
+    n_brk = brk.size
     run_min = np.empty(max(n_brk - 1, 1))
     for r in range(n_brk - 1):
         low = node_s[brk[r] + 1] - node_s[brk[r]]
@@ -427,15 +435,8 @@ def anchor_targets(node_s, breaks, pos, wanted, slide_tolerance, ratio, snap):
         anchor[pos[i]] = True
         s[pos[i]] = targets[i]
         slide[pos[i]] = targets[i] - node_s[pos[i]]
-    n_anchor = 0
-    for i in range(n):
-        n_anchor += anchor[i]
-    idx = np.empty(n_anchor, np.int64)
-    c = 0
-    for i in range(n):
-        if anchor[i]:
-            idx[c] = i
-            c += 1
+    idx = _true_indices(anchor)
+    n_anchor = idx.size
     bad = -1
     for i in range(n_anchor - 1):
         if s[idx[i + 1]] - s[idx[i]] <= 0.0:
