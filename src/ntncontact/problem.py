@@ -20,6 +20,7 @@ from numpy.typing import NDArray
 
 from .dynamics.midpoint import inertia_factor, midpoint_acceleration, midpoint_velocity
 from .fem.loads import dirichlet_values
+from .fem.sparse import TripletUnion
 from .model import Model
 
 ExtraTerm = Callable[
@@ -70,6 +71,9 @@ class StepProblem:
     mass: sp.csr_matrix | None = None  # on dofs; None for quasi-static
     extra: Sequence[ExtraTerm] = ()
     constraints: Sequence[ConstraintTerm] = ()
+    #: the stiffness + extra terms' pattern; pass one instance to every step's problem so that
+    #: the linear solver sees the same pattern (and reuses its analysis) across steps
+    union: TripletUnion = field(default_factory=TripletUnion, repr=False)
     _cache: dict = field(default_factory=dict, repr=False)
     _floor: float | None = field(default=None, repr=False)
     _same_pattern: bool | None = field(default=None, repr=False)
@@ -143,14 +147,12 @@ class StepProblem:
             R = R + f
             scale = max(scale, np.linalg.norm(f))
             triplets.append(coo)
-        if K is not None:
-            K = _add_triplets(K, triplets)
-        h, G, B = self._constraints(x.reshape(-1, 2), v_eval, rate, y, R.size)
+        h, G, B, f_c, k_c = self._constraints(x.reshape(-1, 2), v_eval, rate, y, R.size)
         if h.size:
-            R = R + self._constraint_force
-            if K is not None:
-                K = K + self._constraint_tangent
+            R = R + f_c
+            triplets += k_c
         if K is not None:
+            K = _add_triplets(K, triplets, self.union)
             # Forces computed from positions of size L carry round-off ~ eps |K| L: never ask
             # for less. Kept from the first tangent, so residual-only calls use it too.
             self._floor = 1e-4 * np.abs(K.diagonal()).max() * self.length_scale
@@ -171,27 +173,26 @@ class StepProblem:
         return K
 
     def _constraints(self, x, v_eval, rate, y, ndof):
-        """h, G (m x ndof), B (ndof x m) of all constraint terms, their force and its tangent."""
-        self._constraint_tangent = sp.csr_matrix((ndof, ndof))
-        self._constraint_force = np.zeros(ndof)
+        """h, G (m x ndof), B (ndof x m) of all constraint terms, their force and the COO
+        triplets of its tangent."""
         if not self.constraints:
-            return np.zeros(0), None, None
-        hs, gs, bs, cs = [], [], [], []
+            return np.zeros(0), None, None, None, []
+        force = np.zeros(ndof)
+        hs, gs, bs, cs, tangents = [], [], [], [], []
         for c, lam in zip(self.constraints, self.multipliers(y), strict=True):
-            f, (kr, kc, kv), h, (gr, gc, gv), (br, bc, bv), *rest = c(
-                x, v_eval, rate, self.state.x, lam)
+            f, k, h, (gr, gc, gv), (br, bc, bv), *rest = c(x, v_eval, rate, self.state.x, lam)
             # optional dh/dlam block of a term whose constraints depend on its own multipliers
             cs.append(sp.csr_matrix((rest[0][2], (rest[0][0], rest[0][1])),
                                     shape=(c.size, c.size)) if rest else
                       sp.csr_matrix((c.size, c.size)))
-            self._constraint_force += f
-            self._constraint_tangent = self._constraint_tangent + sp.csr_matrix(
-                (kv, (kr, kc)), shape=(ndof, ndof))
+            force += f
+            tangents.append(k)
             hs.append(h)
             gs.append(sp.csr_matrix((gv, (gr, gc)), shape=(c.size, ndof)))
             bs.append(sp.csr_matrix((bv, (br, bc)), shape=(ndof, c.size)))
         self._multiplier_block = sp.block_diag(cs, format="csr")
-        return np.concatenate(hs), sp.vstack(gs).tocsr(), sp.hstack(bs).tocsr()
+        return (np.concatenate(hs), sp.vstack(gs).tocsr(), sp.hstack(bs).tocsr(), force,
+                tangents)
 
     def residual(self, y: NDArray) -> tuple[NDArray, float]:
         # the first call also builds the tangent (for the scale floor and the first Newton step)
@@ -222,13 +223,11 @@ class StepProblem:
         return K[self.free_dofs][:, self.free_dofs]
 
 
-def _add_triplets(K: sp.csr_matrix, triplets: list) -> sp.csr_matrix:
-    """K plus the COO triplets (rows, cols, values) of the extra terms, in one conversion."""
-    rows = [np.asarray(r) for r, _, v in triplets if len(v)]
-    if not rows:
+def _add_triplets(K: sp.csr_matrix, triplets: list, union: TripletUnion) -> sp.csr_matrix:
+    """K plus the COO triplets (rows, cols, values) of the extra terms, in the union pattern
+    (explicit zeros kept, see :mod:`ntncontact.fem.sparse`)."""
+    kept = [(r, c, v) for r, c, v in triplets if len(v)]
+    if not kept:
         return K
-    cols = [np.asarray(c) for _, c, v in triplets if len(v)]
-    vals = [np.asarray(v) for _, _, v in triplets if len(v)]
-    extra = sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))),
-                          shape=K.shape)
-    return (K + extra).tocsr()
+    rows, cols, vals = (np.concatenate([np.asarray(t[i]) for t in kept]) for i in range(3))
+    return union.add(K, rows, cols, vals)

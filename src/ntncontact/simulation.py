@@ -17,6 +17,7 @@ from .dynamics.energy import EndEnergy, EnergyConsistentContact
 from .dynamics.mass import MovingMass
 from .dynamics.midpoint import end_of_step, midpoint_velocity, velocity_factor
 from .fem.q4 import InvertedElementError
+from .fem.sparse import TripletUnion
 from .interfaces import (
     LagrangeTerm,
     augment_all,
@@ -129,6 +130,7 @@ class Simulation:
         self._step_work = dict.fromkeys(LEDGER, 0.0)
         self._last_mismatch = 0.0
         self._energy_multiplier = 0.0
+        self._union = TripletUnion()  # one stiffness pattern for all steps (fem.sparse)
 
     def balance(self, state: StepState) -> Balance:
         _, _, energy = self.model.assembler.internal(state.X, state.x, need_tangent=False)
@@ -193,7 +195,7 @@ class Simulation:
                                    *convective_terms(self.model, motion, dt)],
                                   # ties after the contact multipliers (see TieTerm.order)
                                   [*lagrange_terms(interfaces, contact, dt),
-                                   *tie_terms(self.model.ties)])
+                                   *tie_terms(self.model.ties)], union=self._union)
             y0 = problem.initial_guess()
             if guess is not None:  # warm start: the last solution, shifted by the remap
                 d_guess = guess[0] + (state.d - guess[1]).ravel()
@@ -258,7 +260,7 @@ class Simulation:
 
     def _solve_bordered(self, problem: StepProblem, others: list, combined, y0: NDArray):
         bordered = StepProblem(self.model, problem.state, problem.dt, problem.mass,
-                               problem.extra, others + [combined])
+                               problem.extra, others + [combined], union=self._union)
         new = newton(bordered.residual, bordered.jacobian, self.solve, y0, self.settings,
                      self.length_scale)
         return bordered, new

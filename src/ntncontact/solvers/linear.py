@@ -158,14 +158,20 @@ class LinearSolver:
         if backend not in ("auto", "pardiso", "superlu"):
             raise ValueError(f"unknown linear solver backend '{backend}'")
         self._auto = backend == "auto"
-        if backend == "auto":
-            backend = "pardiso" if pardiso_available() else "superlu"
         if backend == "pardiso" and not pardiso_available():
             raise LinearSolverError("PARDISO requested but pypardiso/MKL is not installed")
-        self.backend: str = backend
+        self._backend = None if self._auto else backend
         self.symmetric = symmetric
         self.stats = SolverStats()
         self._generation = 0  # counts factorizations: a PARDISO factor is valid until the next
+
+    @property
+    def backend(self) -> str:
+        """"pardiso" or "superlu"; "auto" looks for MKL only when first asked (loading it
+        takes ~0.6 s, which small problems, always solved by SuperLU, need not pay)."""
+        if self._backend is None:
+            self._backend = "pardiso" if pardiso_available() else "superlu"
+        return self._backend
 
     def solve(self, A: sp.spmatrix, b: NDArray) -> NDArray:
         """Solution of A x = b (b of shape (n,) or (n, k)); raises :class:`LinearSolverError`."""
@@ -182,9 +188,8 @@ class LinearSolver:
         if A.shape[0] == 0:
             return Factorization(self, 0, lambda b: np.zeros_like(b))
         symmetric = self._pattern.is_symmetric(A.data) if self.symmetric is None else self.symmetric
-        backend = self.backend
-        if self._auto and A.shape[0] < PARDISO_MIN_UNKNOWNS:
-            backend = "superlu"
+        small = self._auto and A.shape[0] < PARDISO_MIN_UNKNOWNS
+        backend = "superlu" if small else self.backend
         key = symmetric if backend == "pardiso" else None  # SuperLU's LU serves both
         impl = self._impls.get(key)
         if impl is None:
