@@ -22,6 +22,7 @@ from .dynamics.midpoint import inertia_factor, midpoint_acceleration, midpoint_v
 from .fem.loads import dirichlet_values
 from .fem.sparse import TripletUnion
 from .model import Model
+from .solvers.newton import norm2
 
 ExtraTerm = Callable[
     [NDArray, NDArray | None, float | None, NDArray],
@@ -131,7 +132,7 @@ class StepProblem:
         f_int, K, _ = self.model.assembler.internal(self.state.X, x.reshape(-1, 2),
                                                     need_tangent)
         R = f_int - self.f_ext
-        scale = max(np.linalg.norm(f_int), np.linalg.norm(self.f_ext))
+        scale = max(norm2(f_int), norm2(self.f_ext))
         v_eval, rate = None, None
         if self.dynamic:
             d_n, v_n = self.state.d.ravel(), self.state.v.ravel()
@@ -139,13 +140,13 @@ class StepProblem:
             R = R + inertia
             if K is not None:
                 K = self._add_mass(K, inertia_factor(self.dt))
-            scale = max(scale, np.linalg.norm(inertia))
+            scale = max(scale, norm2(inertia))
             v_eval, rate = midpoint_velocity(d, d_n, self.dt).reshape(-1, 2), 2.0 / self.dt
         triplets = []
         for term in self.extra:
             f, coo = term(x.reshape(-1, 2), v_eval, rate, self.state.x)
             R = R + f
-            scale = max(scale, np.linalg.norm(f))
+            scale = max(scale, norm2(f))
             triplets.append(coo)
         h, G, B, f_c, k_c = self._constraints(x.reshape(-1, 2), v_eval, rate, y, R.size)
         if h.size:

@@ -7,12 +7,19 @@ the magnitude of the forces in play (so the tolerance is relative to them), and
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
 import scipy.sparse as sp
 from numpy.typing import NDArray
+
+
+def norm2(v: NDArray) -> float:
+    """Euclidean norm of a 1-D array: what ``np.linalg.norm`` computes (sqrt of the dot
+    product), without its dispatch cost (~5 us, paid ~35 000 times in an impact run)."""
+    return math.sqrt(float(np.dot(v, v)))
 
 
 class NewtonError(RuntimeError):
@@ -97,7 +104,7 @@ def newton(
     fresh one as soon as its step does not contract the residual enough."""
     y = np.array(y0, dtype=float)
     R, scale = residual(y)
-    norms = [float(np.linalg.norm(R))]
+    norms = [norm2(R)]
     first = norms[0]
     if y.size == 0 or norms[0] <= settings.atol or norms[0] == 0.0:
         return NewtonResult(y, 0, norms)
@@ -115,12 +122,12 @@ def newton(
             if not np.all(np.isfinite(dy)):
                 raise NewtonError("linear solve returned non-finite values", norms[-1], it)
             y, R, scale = _line_search(residual, y, dy, norms[-1], settings.line_search_steps)
-        norms.append(float(np.linalg.norm(R)))
+        norms.append(norm2(R))
         limit = settings.divergence_factor * max(first, 1e-300)
         if not np.isfinite(norms[-1]) or norms[-1] > limit:
             raise NewtonError(f"diverged (|R| = {norms[-1]:.3e})", norms[-1], it)
         small_r = norms[-1] <= settings.rtol * scale + settings.atol
-        small_d = np.linalg.norm(dy) <= settings.dtol * (np.linalg.norm(y) + length_scale)
+        small_d = norm2(dy) <= settings.dtol * (norm2(y) + length_scale)
         if small_r and (small_d or norms[-1] <= 1e-3 * settings.rtol * scale):
             return NewtonResult(y, it, norms)
     raise NewtonError(
@@ -143,7 +150,7 @@ def _modified_step(residual: Residual, y: NDArray, R: NDArray, norm0: float,
     except (ValueError, FloatingPointError):  # the stale step inverted an element
         R_new, scale = None, 0.0
     if (R_new is None or not np.all(np.isfinite(dy))
-            or not np.linalg.norm(R_new) <= settings.reuse_contraction * norm0):
+            or not norm2(R_new) <= settings.reuse_contraction * norm0):
         factors.drop()
         return None
     factors.reused_steps += 1
@@ -162,7 +169,7 @@ def _line_search(
         except (ValueError, FloatingPointError):  # e.g. an element inverted by a too-long step
             alpha *= 0.5
             continue
-        norm = float(np.linalg.norm(R))
+        norm = norm2(R)
         if best is None or norm < best[0]:
             best = (norm, alpha, R, scale)
         if norm < norm0:
