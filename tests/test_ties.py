@@ -222,3 +222,21 @@ def _run_records(data: dict) -> list:
     Simulation(model_from_dict(data, EXAMPLES), [rec]).run()
     assert rec.status == ("completed", None)
     return rec.records
+
+
+def test_run_folder_records_the_tie_reaction_and_violation(tmp_path):
+    """history.csv carries each tie's resultant on body 1 (p W upwards on the upper layer here)
+    and the tied nodes' largest distance; summary.json the worst distance of the run."""
+    import json
+
+    from ntncontact.io.results import ResultWriter
+    from ntncontact.io.writers import read_csv_table
+
+    model = model_from_dict(two_layers(5.0e4, 2.0e4, P, sides_fixed=True))
+    Simulation(model, [ResultWriter(tmp_path, model)]).run()
+    history = read_csv_table(tmp_path / "history.csv")
+    assert history["tie_glue_force_y"][-1] == pytest.approx(P * WIDTH, rel=1e-9)
+    assert abs(history["tie_glue_force_x"][-1]) <= 1e-9 * P * WIDTH
+    assert history["tie_violation"].max() < 1e-12
+    summary = json.loads((tmp_path / "summary.json").read_text())
+    assert summary["max_tie_violation"] == pytest.approx(history["tie_violation"].max())

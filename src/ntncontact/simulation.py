@@ -34,7 +34,7 @@ from .model import Model
 from .problem import StepProblem, StepState
 from .solvers.linear import LinearSolverError
 from .solvers.newton import FactorCache, NewtonError, NewtonSettings, newton
-from .ties import tie_terms
+from .ties import tie_forces, tie_terms, tie_violation
 
 
 class SimulationError(RuntimeError):
@@ -70,6 +70,7 @@ class SolvedStep:
     augmentations: int
     iterations: int
     mismatch: float
+    tie_forces: dict = field(default_factory=dict)  # per tie: force on its body-1 nodes
 
 
 class Observer(Protocol):
@@ -129,6 +130,7 @@ class Simulation:
         self.ledger = dict.fromkeys(LEDGER, 0.0)  # cumulative energy ledger
         self._step_work = dict.fromkeys(LEDGER, 0.0)
         self._last_mismatch = 0.0
+        self._last_tie_forces: dict = {}
         self._energy_multiplier = 0.0
         self._union = TripletUnion()  # one stiffness pattern for all steps (fem.sparse)
 
@@ -162,6 +164,7 @@ class Simulation:
         committed = commit_all(interfaces, solved.used, results) if interfaces else ()
         self._last_contact = (results if interfaces else (), solved.augmentations)
         self._last_mismatch = solved.mismatch
+        self._last_tie_forces = solved.tie_forces
         self._accumulate_work(s, d1, results, dt)
         new = StepState(s.step + 1, s.time + dt, s.X, d1, v1, a1, committed)
         return new, iterations
@@ -219,7 +222,9 @@ class Simulation:
                 break
             previous = results
         mismatch = motion.mismatch if motion is not None else 0.0
-        return SolvedStep(state, d, used, results, augmentation, iterations, mismatch)
+        ties = tie_forces(problem.constraints, problem.multipliers(result.y)) \
+            if self.model.ties else {}
+        return SolvedStep(state, d, used, results, augmentation, iterations, mismatch, ties)
 
     def _conserve_energy(self, problem: StepProblem, result, mass):
         """Report 5.5 (see ``dynamics.energy``): if the Lagrange step changed the total energy,
@@ -340,7 +345,7 @@ class Simulation:
                 dt = t_next - self.state.time
                 self.state, its, _ = self.step_with_cutback(dt)
                 self.state = replace(self.state, time=t_next)
-                extra = self._ledger_extra() | self._contact_extra()
+                extra = self._ledger_extra() | self._contact_extra() | self._tie_extra()
                 self._notify(StepRecord(self.state, self.balance(self.state), its, dt, extra))
                 if progress is not None:
                     progress(self.state.time)
@@ -383,6 +388,19 @@ class Simulation:
             "energy_multiplier": self._energy_multiplier,
             "contact_rows": contact_rows(self.model.interfaces, results, self.state.x),
         }
+
+    def _tie_extra(self) -> dict:
+        """History columns of the ties: the resultant force each transmits to body 1 over the
+        step (the reaction of the bond) and the largest distance between tied nodes."""
+        if not self.model.ties:
+            return {}
+        out = {"tie_violation": tie_violation(self.model.ties, self.state.x)}
+        for tie in self.model.ties:
+            total = self._last_tie_forces.get(tie.name, np.zeros((0, 2))).sum(axis=0)
+            total = total if total.size else np.zeros(2)
+            out |= {f"tie_{tie.name}_force_x": float(total[0]),
+                    f"tie_{tie.name}_force_y": float(total[1])}
+        return out
 
     def _notify(self, record: StepRecord) -> None:
         for obs in self.observers:

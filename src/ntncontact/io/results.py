@@ -15,6 +15,14 @@ CONTACT_HISTORY = ("active_pairs", "frictional_dissipation", "contact_work", "au
                    "ale_mismatch", "energy_multiplier")
 
 
+def tie_history(model: Model) -> tuple[str, ...]:
+    """history.csv columns of the model's ties (see ``Simulation._tie_extra``)."""
+    columns = ["tie_violation"]
+    for tie in model.ties:
+        columns += [f"tie_{tie.name}_force_x", f"tie_{tie.name}_force_y"]
+    return tuple(columns)
+
+
 class ResultWriter:
     """Writes history.csv, summary.json and fields.pvd/VTU as the simulation advances."""
 
@@ -23,6 +31,9 @@ class ResultWriter:
         extra_history = ("external_work",) + extra_history
         if model.interfaces:
             extra_history = extra_history + CONTACT_HISTORY
+        if model.ties:
+            extra_history = extra_history + tie_history(model)
+            summary_extra = {"max_tie_violation": 0.0} | summary_extra
             summary_extra = {"contact_start_time": None, "contact_end_time": None,
                              "max_penetration": 0.0, "max_active_pairs": 0} | summary_extra
         self.results = ResultsDirectory(directory, history_columns=extra_history,
@@ -46,6 +57,10 @@ class ResultWriter:
         }
         row |= {k: record.extra.get(k, 0.0) for k in self.extra_history}
         self.results.write_history(row)
+        if "tie_violation" in record.extra:
+            summary = self.results.summary
+            worst = max(record.extra["tie_violation"], summary.data.get("max_tie_violation", 0.0))
+            summary.update(max_tie_violation=worst)
         self._last = record
         rows = record.extra.get("contact_rows")
         if rows is not None:
