@@ -31,11 +31,11 @@ class ResultWriter:
         extra_history = ("external_work",) + extra_history
         if model.interfaces:
             extra_history = extra_history + CONTACT_HISTORY
+            summary_extra = {"contact_start_time": None, "contact_end_time": None,
+                             "max_penetration": 0.0, "max_active_pairs": 0} | summary_extra
         if model.ties:
             extra_history = extra_history + tie_history(model)
             summary_extra = {"max_tie_violation": 0.0} | summary_extra
-            summary_extra = {"contact_start_time": None, "contact_end_time": None,
-                             "max_penetration": 0.0, "max_active_pairs": 0} | summary_extra
         self.results = ResultsDirectory(directory, history_columns=extra_history,
                                         **summary_extra)
         self.model = model
