@@ -37,18 +37,21 @@ def _run(args: argparse.Namespace) -> int:
 
 
 def _plot(args: argparse.Namespace) -> int:
-    from .plotting import animate, plot_all, plot_deformed
+    from .plotting import FIGURE_MAKERS, animate, check_made, plot_deformed, plot_figure
 
     directory = Path(args.directory)
-    jobs = [(plot_all, (directory,), {})]
+    jobs = []  # one per figure, the slowest first, so that two workers share them evenly
+    if args.gif:
+        jobs.append((animate, (directory, directory / "animation.gif"), {}))
     if args.times:
         jobs.append((plot_deformed, (directory, args.times),
                      {"path": directory / "snapshots.png"}))
-    if args.gif:
-        jobs.append((animate, (directory, directory / "animation.gif"), {}))
-    for result in _run_jobs(jobs):
-        for p in result if isinstance(result, list) else [result]:
-            print(p)
+    figures = len(jobs)
+    jobs += [(plot_figure, (name, directory), {}) for name in FIGURE_MAKERS]
+    results = _run_jobs(jobs)
+    made = check_made([p for p in results[figures:] if p is not None], directory)
+    for p in made + results[:figures]:
+        print(p)
     return 0
 
 

@@ -291,20 +291,30 @@ def plot_pair_history(
     return _save(fig, Path(path) if path else folder / "pair_history.png")
 
 
+#: The figures of :func:`plot_all`, slowest first (so that two workers share them evenly).
+FIGURE_MAKERS = ("plot_deformed", "plot_pair_history", "plot_contact_tractions",
+                 "plot_energies", "plot_momenta")
+
+
+def plot_figure(name: str, directory: str | os.PathLike) -> Path | None:
+    """One of :data:`FIGURE_MAKERS` for the folder, or None if it has no data for it."""
+    try:
+        return globals()[name](Path(directory))
+    except ResultsNotFoundError:
+        return None
+
+
 def plot_all(directory: str | os.PathLike) -> list[Path]:
     """Every figure the folder has data for; the list of PNGs written."""
-    folder = Path(directory)
-    makers = (plot_energies, plot_momenta, plot_deformed, plot_contact_tractions,
-              plot_pair_history)
-    made = []
-    for make in makers:
-        try:
-            made.append(make(folder))
-        except ResultsNotFoundError:
-            continue
+    made = [p for p in (plot_figure(name, directory) for name in FIGURE_MAKERS) if p is not None]
+    return check_made(made, directory)
+
+
+def check_made(made: list[Path], directory: str | os.PathLike) -> list[Path]:
+    """``made``, or an error naming the files looked for when it is empty."""
     if not made:
         raise ResultsNotFoundError(
-            f"no results to plot in {folder} (looked for {HISTORY_FILE}, {CONTACT_FILE}, "
+            f"no results to plot in {directory} (looked for {HISTORY_FILE}, {CONTACT_FILE}, "
             f"{PVD_FILE})"
         )
     return made
