@@ -326,13 +326,18 @@ def spacing_near(x, body, node):
     return min(np.linalg.norm(x[chain[i + 1]] - x[node]), np.linalg.norm(x[chain[i - 1]] - x[node]))
 
 
-def test_slides_below_the_tolerance_move_nothing_and_keep_the_fields_bit_for_bit():
+def sliding_setup():
+    """The bent block and its fields, surface node 4, the spacing there and the tangent."""
     mesh, body, X, d, v, a = bent_block()
     x = X + d
     node = body.surface[[4]]
+    chord = x[body.surface[5]] - x[body.surface[3]]
     h = spacing_near(x, body, node[0])
-    tangent = (x[body.surface[5]] - x[body.surface[3]]) / np.linalg.norm(
-        x[body.surface[5]] - x[body.surface[3]])
+    return mesh, body, X, d, v, a, x, node, h, chord / np.linalg.norm(chord)
+
+
+def test_slides_below_the_tolerance_move_nothing_and_keep_the_fields_bit_for_bit():
+    mesh, body, X, d, v, a, x, node, h, tangent = sliding_setup()
     for shift, moves in ((0.5e-8 * h, False), (2e-8 * h, True)):  # slide_tolerance = 1e-8
         out = move_ale_body(body, X, d, v, a, node, x[node] + shift * tangent, x[node], DT)
         assert out.moved.any() == moves
@@ -362,12 +367,7 @@ def test_exact_targets_on_a_deformed_mesh_move_nothing_unlike_full_respacing_and
 
 
 def test_small_slide_moves_only_surface_nodes_next_to_the_sliding_node():
-    mesh, body, X, d, v, a = bent_block()
-    x = X + d
-    node = body.surface[[4]]
-    h = spacing_near(x, body, node[0])
-    tangent = (x[body.surface[5]] - x[body.surface[3]]) / np.linalg.norm(
-        x[body.surface[5]] - x[body.surface[3]])
+    mesh, body, X, d, v, a, x, node, h, tangent = sliding_setup()
     out = move_ale_body(body, X, d, v, a, node, x[node] + 0.2 * h * tangent, x[node], DT)
     assert out.interior == "surface" and out.mismatch < ROUND
     moved = np.flatnonzero(out.moved)

@@ -586,15 +586,8 @@ def locate_in_hints(cell_xy, cell_size, outer_edge, pts, hint, outside_tol, insi
     cell = np.full(n, -1, np.int64)
     xi = np.zeros((n, 2))
     clamped = np.zeros(n, np.bool_)
-    count = 0
-    for i in range(n):
-        count += hint[i] >= 0
-    which = np.empty(count, np.int64)
-    c = 0
-    for i in range(n):
-        if hint[i] >= 0:
-            which[c] = i
-            c += 1
+    which = _true_indices(hint >= 0)
+    count = which.size
     batch_xy = np.empty((count, 4, 2))
     batch_pts = np.empty((count, 2))
     for c in range(count):
@@ -710,13 +703,4 @@ def hint_cells(node_cell, chain_nodes, owner, node_s, slides, moved):
         if slides[i] != 0.0:
             seg = np.searchsorted(node_s, node_s[i] + slides[i], side="right") - 1
             hint[chain_nodes[i]] = owner[min(max(seg, 0), owner.size - 1)]
-    count = 0
-    for i in range(moved.size):
-        count += moved[i]
-    out = np.empty(count, np.int64)
-    c = 0
-    for i in range(moved.size):
-        if moved[i]:
-            out[c] = hint[i]
-            c += 1
-    return out
+    return hint[_true_indices(moved)]
