@@ -47,7 +47,7 @@ def _plot(args: argparse.Namespace) -> int:
         jobs.append((plot_deformed, (directory, args.times),
                      {"path": directory / "snapshots.png"}))
     figures = len(jobs)
-    jobs += [(plot_figure, (name, directory), {}) for name in FIGURE_MAKERS]
+    jobs += [(plot_figure, (make, directory), {}) for make in FIGURE_MAKERS]
     results = _run_jobs(jobs)
     made = check_made([p for p in results[figures:] if p is not None], directory)
     for p in made + results[:figures]:

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import os
 import warnings
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -292,21 +292,22 @@ def plot_pair_history(
 
 
 #: The figures of :func:`plot_all`, slowest first (so that two workers share them evenly).
-FIGURE_MAKERS = ("plot_deformed", "plot_pair_history", "plot_contact_tractions",
-                 "plot_energies", "plot_momenta")
+FIGURE_MAKERS = (plot_deformed, plot_pair_history, plot_contact_tractions, plot_energies,
+                 plot_momenta)
 
 
-def plot_figure(name: str, directory: str | os.PathLike) -> Path | None:
-    """One of :data:`FIGURE_MAKERS` for the folder, or None if it has no data for it."""
+def plot_figure(make: Callable[[Path], Path], directory: str | os.PathLike) -> Path | None:
+    """The figure ``make`` (one of :data:`FIGURE_MAKERS`) draws for the folder, or None if
+    the folder has no data for it."""
     try:
-        return globals()[name](Path(directory))
+        return make(Path(directory))
     except ResultsNotFoundError:
         return None
 
 
 def plot_all(directory: str | os.PathLike) -> list[Path]:
     """Every figure the folder has data for; the list of PNGs written."""
-    made = [p for p in (plot_figure(name, directory) for name in FIGURE_MAKERS) if p is not None]
+    made = [p for p in (plot_figure(make, directory) for make in FIGURE_MAKERS) if p is not None]
     return check_made(made, directory)
 
 

@@ -397,7 +397,6 @@ class Simulation:
         out = {"tie_violation": tie_violation(self.model.ties, self.state.x)}
         for tie in self.model.ties:
             total = self._last_tie_forces.get(tie.name, np.zeros((0, 2))).sum(axis=0)
-            total = total if total.size else np.zeros(2)
             out |= {f"tie_{tie.name}_force_x": float(total[0]),
                     f"tie_{tie.name}_force_y": float(total[1])}
         return out

@@ -36,9 +36,8 @@ class TripletUnion:
         if self._key is None:
             return False
         indptr, indices, r, c = self._key
-        return (K.indptr is indptr or np.array_equal(K.indptr, indptr)) and \
-            (K.indices is indices or np.array_equal(K.indices, indices)) and \
-            np.array_equal(rows, r) and np.array_equal(cols, c)
+        return (np.array_equal(K.indptr, indptr) and np.array_equal(K.indices, indices)
+                and np.array_equal(rows, r) and np.array_equal(cols, c))
 
     def _build(self, K: sp.csr_matrix, rows: NDArray, cols: NDArray) -> None:
         """Union pattern (sorted, unique) and each K entry's and triplet's place in it."""
