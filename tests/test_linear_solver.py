@@ -173,6 +173,28 @@ def test_singular_after_reuse_is_detected(backend):
     assert_accurate(A, b, solver.solve(A, b))  # still usable after the failure
 
 
+def test_superlu_pivots_are_read_only_for_growing_solutions():
+    """Reading U's pivots is the costly part of a small SuperLU solve: a well-conditioned
+    matrix never needs it, a singular one is caught at its first solve, and an ill-conditioned
+    but regular one passes the check and is solved."""
+    solver = LinearSolver("superlu")
+    A = spd_matrix()
+    b = np.ones(A.shape[0])
+    for _ in range(3):
+        assert_accurate(A, b, solver.solve(A, b))
+    assert solver.stats.pivot_checks == 0
+    K, _ = block(kind="neo_hookean", stretch=0.1)
+    with pytest.raises(LinearSolverError, match="numerically singular"):
+        LinearSolver("superlu").solve(K, np.ones(K.shape[0]))
+    scaling = np.ones(A.shape[0])
+    scaling[0] = 1e-5  # D A D: dof 0 in other units; x_0 grows by 1e5, its pivot falls by 1e10
+    weak = sp.csr_matrix(sp.diags(scaling) @ A @ sp.diags(scaling))
+    factor = solver.factorize(weak)
+    x = factor(b)
+    assert solver.stats.pivot_checks == 1
+    assert np.allclose(weak @ x, b, rtol=0, atol=1e-6 * np.abs(x).max())
+
+
 def test_bad_input_is_reported():
     solver = LinearSolver("superlu")
     with pytest.raises(LinearSolverError, match="square"):

@@ -75,8 +75,10 @@ class StepProblem:
     #: the stiffness + extra terms' pattern; pass one instance to every step's problem so that
     #: the linear solver sees the same pattern (and reuses its analysis) across steps
     union: TripletUnion = field(default_factory=TripletUnion, repr=False)
+    #: round-off floor of the residual scale (see ``_evaluate``); None: set by the first tangent.
+    #: The augmentations of a step pass it on, so their first residuals need no tangent.
+    scale_floor: float | None = None
     _cache: dict = field(default_factory=dict, repr=False)
-    _floor: float | None = field(default=None, repr=False)
     _same_pattern: bool | None = field(default=None, repr=False)
 
     def __post_init__(self) -> None:
@@ -156,9 +158,9 @@ class StepProblem:
             K = _add_triplets(K, triplets, self.union)
             # Forces computed from positions of size L carry round-off ~ eps |K| L: never ask
             # for less. Kept from the first tangent, so residual-only calls use it too.
-            self._floor = 1e-4 * np.abs(K.diagonal()).max() * self.length_scale
+            self.scale_floor = 1e-4 * np.abs(K.diagonal()).max() * self.length_scale
         self._blocks = (h, G, B)
-        self._scale = float(max(scale, self._floor))
+        self._scale = float(max(scale, self.scale_floor))
         return R, K
 
     def _add_mass(self, K: sp.csr_matrix, factor: float) -> sp.csr_matrix:
@@ -196,8 +198,9 @@ class StepProblem:
                 tangents)
 
     def residual(self, y: NDArray) -> tuple[NDArray, float]:
-        # the first call also builds the tangent (for the scale floor and the first Newton step)
-        R, K = self._evaluate(y, need_tangent=self._floor is None)
+        # without a floor, the first call also builds the tangent (for the floor and the first
+        # Newton step)
+        R, K = self._evaluate(y, need_tangent=self.scale_floor is None)
         self._cache = {"y": y.copy(), "K": K, "blocks": self._blocks,
                        "C": getattr(self, "_multiplier_block", None)}
         h = self._blocks[0]

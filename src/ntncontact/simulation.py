@@ -185,7 +185,7 @@ class Simulation:
         interfaces = self.model.interfaces
         base, motion = state, None
         x_pred = state.x + dt * state.v  # first prediction of the end-of-step positions
-        previous, iterations, guess = None, 0, None
+        previous, iterations, guess, floor = None, 0, None, None
         factors = self._factor_cache()  # one factor serves the augmentations (modified Newton)
         for augmentation in range(1, self.max_augmentations + 1):  # noqa: B007 (used after)
             if self.model.ale_bodies and any(len(c) for c in contact):
@@ -198,7 +198,8 @@ class Simulation:
                                    *convective_terms(self.model, motion, dt)],
                                   # ties after the contact multipliers (see TieTerm.order)
                                   [*lagrange_terms(interfaces, contact, dt),
-                                   *tie_terms(self.model.ties)], union=self._union)
+                                   *tie_terms(self.model.ties)], union=self._union,
+                                  scale_floor=floor)
             y0 = problem.initial_guess()
             if guess is not None:  # warm start: the last solution, shifted by the remap
                 d_guess = guess[0] + (state.d - guess[1]).ravel()
@@ -206,6 +207,7 @@ class Simulation:
             result = newton(problem.residual, problem.jacobian, self.solve, y0, self.settings,
                             self.length_scale, factors)
             iterations += result.iterations
+            floor = problem.scale_floor
             split = None
             if self.model.analysis.energy_conserving and any(len(c) for c in contact):
                 problem, result, its, split = self._conserve_energy(problem, result, mass)

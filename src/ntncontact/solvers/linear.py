@@ -35,6 +35,9 @@ SYMMETRY_RTOL = 1e-12
 #: A pivot below PIVOT_RTOL times the largest one marks SuperLU's factor as singular: rigid
 #: modes give ~1e-15, while penalty/stiffness contrasts of 1e8 stay far above it.
 PIVOT_RTOL = 1e-12
+#: SuperLU's pivots are only checked when a solution grows like the inverse of a tiny pivot,
+#: |x| max|A| > PIVOT_CHECK_GROWTH |b| (see ``_SuperLUBackend.solver``).
+PIVOT_CHECK_GROWTH = 1e6
 
 
 class LinearSolverError(RuntimeError):
@@ -68,6 +71,7 @@ class SolverStats:
     analyses: int = 0
     factorizations: int = 0
     solves: int = 0
+    pivot_checks: int = 0  # SuperLU factors whose pivots were inspected (see PIVOT_CHECK_GROWTH)
 
 
 class _Pattern:
@@ -187,10 +191,13 @@ class LinearSolver:
             self._pattern = _Pattern(A)
         if A.shape[0] == 0:
             return Factorization(self, 0, lambda b: np.zeros_like(b))
-        symmetric = self._pattern.is_symmetric(A.data) if self.symmetric is None else self.symmetric
         small = self._auto and A.shape[0] < PARDISO_MIN_UNKNOWNS
         backend = "superlu" if small else self.backend
-        key = symmetric if backend == "pardiso" else None  # SuperLU's LU serves both
+        symmetric = None  # SuperLU's LU serves both
+        if backend == "pardiso":
+            symmetric = (self._pattern.is_symmetric(A.data) if self.symmetric is None
+                         else self.symmetric)
+        key = symmetric
         impl = self._impls.get(key)
         if impl is None:
             impl_class = _PardisoBackend if backend == "pardiso" else _SuperLUBackend
@@ -244,6 +251,7 @@ class _SuperLUBackend:
         self.perm: NDArray | None = None  # symmetric permutation p: later factors are of A[p][:, p]
         self.lu: spla.SuperLU | None = None
         self.lu_is_permuted = False
+        self.scale = 0.0  # max |A| of the current factor
 
     def factor(self, data: NDArray) -> None:
         p = self.pattern
@@ -267,7 +275,7 @@ class _SuperLUBackend:
         except RuntimeError as err:  # "Factor is exactly singular"
             raise LinearSolverError(f"SuperLU: {err}: the matrix is singular") from None
         self.stats.factorizations += 1
-        self._check_pivots()
+        self.scale = float(np.abs(data).max(initial=0.0))
 
     def _permutation_map(self) -> tuple[NDArray, NDArray, NDArray]:
         """CSC structure of A[p][:, p] and, per entry, its position in the CSR data of A."""
@@ -278,28 +286,40 @@ class _SuperLUBackend:
         Ap.sort_indices()
         return Ap.indptr, Ap.indices, Ap.data.astype(np.int64) - 1
 
-    def _check_pivots(self) -> None:
-        d = np.abs(self.lu.U.diagonal())
-        small = np.flatnonzero(d <= PIVOT_RTOL * d.max(initial=0.0))
-        if small.size:
-            raise LinearSolverError(
-                f"matrix is numerically singular: {small.size} pivot(s) below "
-                f"{PIVOT_RTOL:g} x the largest (unsupported body or mechanism?)")
-
     def solver(self):
-        """The solve of the current factor, which keeps working after later factorizations."""
-        lu, perm = self.lu, self.perm
-        if not self.lu_is_permuted:
-            return lu.solve
+        """The solve of the current factor, which keeps working after later factorizations.
+
+        Its pivots are checked (at most once) when a solution grows like the inverse of a tiny
+        pivot: reading them costs ~0.4 ms (SciPy copies U into a matrix), a third of a small
+        factorization, and a well-conditioned solve cannot hide one."""
+        lu, perm, scale, stats = self.lu, self.perm, self.scale, self.stats
+        permuted, checked = self.lu_is_permuted, []
 
         def solve(b: NDArray) -> NDArray:
-            x = np.empty_like(b)
-            x[perm] = lu.solve(np.ascontiguousarray(b[perm]))
+            if permuted:
+                x = np.empty_like(b)
+                x[perm] = lu.solve(np.ascontiguousarray(b[perm]))
+            else:
+                x = lu.solve(b)
+            if not checked and (np.abs(x).max(initial=0.0) * scale
+                                > PIVOT_CHECK_GROWTH * np.abs(b).max(initial=0.0)):
+                stats.pivot_checks += 1
+                _check_pivots(lu)  # raises for a singular factor, at every use
+                checked.append(True)
             return x
         return solve
 
     def release(self) -> None:
         self.lu = None
+
+
+def _check_pivots(lu: spla.SuperLU) -> None:
+    d = np.abs(lu.U.diagonal())
+    small = np.flatnonzero(d <= PIVOT_RTOL * d.max(initial=0.0))
+    if small.size:
+        raise LinearSolverError(
+            f"matrix is numerically singular: {small.size} pivot(s) below "
+            f"{PIVOT_RTOL:g} x the largest (unsupported body or mechanism?)")
 
 
 class _PardisoBackend:
