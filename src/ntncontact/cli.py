@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import contextlib
 import sys
 from pathlib import Path
 
@@ -23,49 +24,36 @@ def _run(args: argparse.Namespace) -> int:
     out = Path(args.out)
     writer = ResultWriter(out, model, scenario=str(scenario), title=config.title,
                           overrides=list(args.set or []))
-    sim = Simulation(model, [writer])
-    t_end = model.analysis.t_end
-    with tqdm(total=t_end, unit="t", disable=args.quiet or None, desc=scenario.stem,
-              bar_format="{l_bar}{bar}| t={n:.4g}/{total:.4g} [{elapsed}<{remaining}]") as bar:
+    plotting = args.plot or args.gif or bool(args.times)
+    with _figure_jobs(out, args) if plotting else contextlib.nullcontext() as figures:
+        sim = Simulation(model, [writer] + ([figures.start()] if figures else []))
+        t_end = model.analysis.t_end
+        with tqdm(total=t_end, unit="t", disable=args.quiet or None, desc=scenario.stem,
+                  bar_format="{l_bar}{bar}| t={n:.4g}/{total:.4g} [{elapsed}<{remaining}]") \
+                as bar:
 
-        def progress(t: float) -> None:
-            bar.update(t - bar.n)
+            def progress(t: float) -> None:
+                bar.update(t - bar.n)
 
-        sim.run(progress)
-    print(f"results written to {out} (history.csv, summary.json, fields.pvd)")
+            sim.run(progress)
+        print(f"results written to {out} (history.csv, summary.json, fields.pvd)")
+        if figures:
+            print("figures:", *figures.paths(), sep="\n  ")
     return 0
+
+
+def _figure_jobs(directory: Path, args: argparse.Namespace):
+    from .figure_jobs import FigureJobs
+
+    return FigureJobs(directory, gif=args.gif, times=args.times)
 
 
 def _plot(args: argparse.Namespace) -> int:
-    from .plotting import FIGURE_MAKERS, animate, check_made, plot_deformed, plot_figure
-
-    directory = Path(args.directory)
-    jobs = []  # one per figure, the slowest first, so that two workers share them evenly
-    if args.gif:
-        jobs.append((animate, (directory, directory / "animation.gif"), {}))
-    if args.times:
-        jobs.append((plot_deformed, (directory, args.times),
-                     {"path": directory / "snapshots.png"}))
-    figures = len(jobs)
-    jobs += [(plot_figure, (make, directory), {}) for make in FIGURE_MAKERS]
-    results = _run_jobs(jobs)
-    made = check_made([p for p in results[figures:] if p is not None], directory)
-    for p in made + results[:figures]:
-        print(p)
+    with _figure_jobs(Path(args.directory), args) as figures:
+        figures.start().submit_all()
+        for path in figures.paths():
+            print(path)
     return 0
-
-
-def _run_jobs(jobs: list) -> list:
-    """Results of independent figure jobs, side by side on two processes where the platform
-    forks (matplotlib rendering is single-threaded); errors are re-raised in order."""
-    import multiprocessing as mp
-    from concurrent.futures import ProcessPoolExecutor
-
-    if len(jobs) < 2 or "fork" not in mp.get_all_start_methods():
-        return [fn(*a, **k) for fn, a, k in jobs]
-    with ProcessPoolExecutor(max_workers=2, mp_context=mp.get_context("fork")) as pool:
-        futures = [pool.submit(fn, *a, **k) for fn, a, k in jobs]
-        return [f.result() for f in futures]
 
 
 def _mesh_quality(args: argparse.Namespace) -> int:
@@ -135,12 +123,14 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--set", action="append", metavar="KEY=VALUE",
                      help="override a scenario key, e.g. analysis.mass=\"lumped\" (repeatable)")
     run.add_argument("--quiet", action="store_true", help="no progress bar")
+    run.add_argument("--plot", action="store_true",
+                     help="also write the figures of `ntncontact plot`, drawn on two worker "
+                          "processes while the run goes on")
+    _figure_options(run, "(implies --plot)")
     run.set_defaults(func=_run)
     plot = sub.add_parser("plot", help="write PNG figures of a results folder")
     plot.add_argument("directory")
-    plot.add_argument("--times", type=float, nargs="+", metavar="T",
-                      help="also draw the deformed meshes nearest to these times (snapshots.png)")
-    plot.add_argument("--gif", action="store_true", help="also write animation.gif")
+    _figure_options(plot)
     plot.set_defaults(func=_plot)
     val = sub.add_parser("validate", help="run the report's examples and write a report")
     val.add_argument("--out", required=True)
@@ -156,6 +146,14 @@ def build_parser() -> argparse.ArgumentParser:
     quality.add_argument("--set", action="append", metavar="KEY=VALUE")
     quality.set_defaults(func=_mesh_quality)
     return parser
+
+
+def _figure_options(parser: argparse.ArgumentParser, note: str = "") -> None:
+    parser.add_argument("--times", type=float, nargs="+", metavar="T",
+                        help="also draw the deformed meshes nearest to these times "
+                             f"(snapshots.png) {note}".strip())
+    parser.add_argument("--gif", action="store_true",
+                        help=f"also write animation.gif {note}".strip())
 
 
 def main(argv: list[str] | None = None) -> int:
