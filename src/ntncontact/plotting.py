@@ -37,14 +37,143 @@ def _new_figure(nrows: int = 1, ncols: int = 1, size: tuple[float, float] = (7.0
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
 
-    fig = Figure(figsize=size, dpi=DPI, layout="constrained")
+    # No layout engine: constrained layout measured every tick label of every axes twice per
+    # save (~60 % of a figure's time); _fit_layout places the axes from a cheap measure instead.
+    fig = Figure(figsize=size, dpi=DPI)
     FigureCanvasAgg(fig)
     axes = fig.subplots(nrows, ncols, squeeze=False)
     return fig, axes
 
 
-def _save(fig: Figure, path: Path) -> Path:
-    fig.savefig(path)
+_PAD = 4.0 / 72.0  # inches between decorations and the figure edge or the next axes
+_CBAR_ASPECT = 20.0  # colour bar length / width, as matplotlib's default
+
+
+def _tick_labels(axis: Any) -> tuple[list[str], str, float]:
+    """The major tick labels ``axis`` will draw in its current view, its offset text, and the
+    gap from the last tick to the view's upper end (fraction of the view)."""
+    low, high = sorted(axis.get_view_interval())
+    span = max(high - low, 1e-300)
+    locs = [v for v in axis.get_majorticklocs() if low - 1e-9 * span <= v <= high + 1e-9 * span]
+    formatter = axis.get_major_formatter()
+    gap = (high - max(locs)) / span if locs else 1.0
+    return formatter.format_ticks(locs), formatter.get_offset(), gap
+
+
+class _TextSizes:
+    """Text sizes (inches) from the figure's renderer; each string is measured once, as the
+    panels of a grid (and the second layout pass) repeat the same tick labels."""
+
+    def __init__(self, fig: Figure) -> None:
+        self.renderer = fig.canvas.get_renderer()
+        self._known: dict[tuple[str, Any], tuple[float, float]] = {}
+
+    def _size(self, text: str, size: Any) -> tuple[float, float]:
+        key = (text, size)
+        if key not in self._known:
+            from matplotlib.font_manager import FontProperties
+
+            w, h, _ = self.renderer.get_text_width_height_descent(
+                text, FontProperties(size=size), ismath="$" in text)
+            self._known[key] = (w / DPI, h / DPI)
+        return self._known[key]
+
+    def width(self, texts: Sequence[str], size: Any) -> float:
+        return max((self._size(t, size)[0] for t in texts if t), default=0.0)
+
+    def line_height(self, size: Any) -> float:
+        return self._size("lp", size)[1]
+
+    def artist(self, text: Any) -> tuple[float, float]:
+        """Width and height of a Text artist, zero if it is empty or hidden."""
+        if not text.get_visible() or not text.get_text():
+            return 0.0, 0.0
+        box = text.get_window_extent(self.renderer)
+        return box.width / DPI, box.height / DPI
+
+
+def _outer_sizes(ax: Any, sizes: _TextSizes) -> tuple[float, float, float, float]:
+    """Inches the tick labels, axis labels, offset texts and title of ``ax`` reach beyond its
+    box: (left, bottom, right, top)."""
+    from matplotlib import rcParams
+
+    ax.apply_aspect()  # an equal-aspect box is shrunk: its tick spacing follows that size
+    box = ax.get_position().transformed(ax.get_figure(root=True).dpi_scale_trans)
+    xlabels, xoffset, xgap = _tick_labels(ax.xaxis)
+    ylabels, yoffset, ygap = _tick_labels(ax.yaxis)
+    xw = sizes.width(xlabels[-1:], rcParams["xtick.labelsize"])
+    xh = sizes.line_height(rcParams["xtick.labelsize"])
+    yw = sizes.width(ylabels, rcParams["ytick.labelsize"])
+    yh = sizes.line_height(rcParams["ytick.labelsize"])
+    xtick = (rcParams["xtick.major.size"] + rcParams["xtick.major.pad"]) / 72.0
+    ytick = (rcParams["ytick.major.size"] + rcParams["ytick.major.pad"]) / 72.0
+    labelpad = rcParams["axes.labelpad"] / 72.0
+    ylabel_w = sizes.artist(ax.yaxis.label)[0]
+    xlabel_h = sizes.artist(ax.xaxis.label)[1]
+    title_h = sizes.artist(ax.title)[1]
+    left = ytick + yw + (labelpad + ylabel_w if ylabel_w else 0.0)
+    offset = xh + 3.0 / 72.0 if xoffset else 0.0  # under the tick labels, 3 pt apart
+    bottom = xtick + xh + (labelpad + xlabel_h if xlabel_h else 0.0) + offset
+    # the last tick labels are centred on their ticks: only what is beyond the box counts
+    top = max(yh / 2 - ygap * box.height, yh + _PAD if yoffset else 0.0, 0.0)
+    if title_h:
+        top += rcParams["axes.titlepad"] / 72.0 + title_h
+        # titles are placed with y=1 (see _title): lift one above a y offset text ourselves
+        ax.title.set_y(1.0 + (yh + _PAD) / box.height if yoffset else 1.0)
+    return left, bottom, max(xw / 2 - xgap * box.width, 0.0), top
+
+
+def _fit_layout(fig: Figure, axes: NDArray, cax: Any = None) -> None:
+    """Place the grid ``axes`` (and a colour bar ``cax`` right of them, as tall as the grid)
+    so that their decorations just fit, like constrained layout but measured once per axes."""
+    from matplotlib import rcParams
+
+    sizes = _TextSizes(fig)
+    nrows, ncols = axes.shape
+    width, height = fig.get_size_inches()
+    for _ in range(2):  # the ticks depend on the axes' size, which depends on the margins
+        outer = np.zeros((nrows, ncols, 4))
+        for (row, col), ax in np.ndenumerate(axes):
+            if ax.get_visible():
+                outer[row, col] = _outer_sizes(ax, sizes)
+        left, bottom, right, top = (outer[..., k] for k in range(4))
+        margin_left = left.max() + _PAD
+        column_gap = right.max() + left.max() + 2 * _PAD
+        margin_top = top[0].max() + _PAD
+        margin_bottom = bottom.max(axis=1)[-1] + _PAD
+        row_gap = max((bottom[r].max() + top[r + 1].max() for r in range(nrows - 1)),
+                      default=0.0) + 2 * _PAD
+        margin_right = right.max() + _PAD
+        if cax is not None:
+            bar_height = height - margin_top - margin_bottom
+            bar_width = bar_height / _CBAR_ASPECT
+            labels = _tick_labels(cax.yaxis)[0]
+            tick_w = sizes.width(labels, rcParams["ytick.labelsize"])
+            label_w = sizes.artist(cax.yaxis.label)[0]
+            decorations = ((rcParams["ytick.major.size"] + rcParams["ytick.major.pad"]) / 72.0
+                           + tick_w + rcParams["axes.labelpad"] / 72.0 + label_w)
+            bar_left = width - _PAD - decorations - bar_width
+            margin_right = width - bar_left + right.max() + 4 * _PAD
+            cax.set_position((bar_left / width, margin_bottom / height, bar_width / width,
+                              bar_height / height))
+        cell_w = (width - margin_left - margin_right - (ncols - 1) * column_gap) / ncols
+        cell_h = (height - margin_top - margin_bottom - (nrows - 1) * row_gap) / nrows
+        fig.subplots_adjust(left=margin_left / width, right=1.0 - margin_right / width,
+                            bottom=margin_bottom / height, top=1.0 - margin_top / height,
+                            wspace=column_gap / cell_w, hspace=row_gap / cell_h)
+
+
+def _title(ax: Any, text: str, **kwargs: Any) -> None:
+    # y=1 turns off matplotlib's title placement, which measured all tick labels of the axes
+    # at every draw (~15 % of a mesh figure); _outer_sizes makes room for the title instead.
+    ax.set_title(text, y=1.0, **kwargs)
+
+
+def _save(fig: Figure, path: Path, axes: NDArray | None = None, cax: Any = None) -> Path:
+    if axes is not None:
+        _fit_layout(fig, axes, cax)
+    # zlib level 3 instead of 6: ~35 % faster to write, files ~10 % larger
+    fig.savefig(path, pil_kwargs={"compress_level": 3})
     return path
 
 
@@ -82,7 +211,7 @@ def plot_energies(directory: str | os.PathLike, path: str | os.PathLike | None =
     bottom.set_xlabel("time")
     for ax in (top, bottom):
         ax.grid(True, alpha=0.3)
-    return _save(fig, Path(path) if path else folder / "energies.png")
+    return _save(fig, Path(path) if path else folder / "energies.png", axes)
 
 
 def plot_momenta(directory: str | os.PathLike, path: str | os.PathLike | None = None) -> Path:
@@ -100,7 +229,7 @@ def plot_momenta(directory: str | os.PathLike, path: str | os.PathLike | None = 
     bottom.set_xlabel("time")
     for ax in (top, bottom):
         ax.grid(True, alpha=0.3)
-    return _save(fig, Path(path) if path else folder / "momenta.png")
+    return _save(fig, Path(path) if path else folder / "momenta.png", axes)
 
 
 def _series(directory: Path) -> list[tuple[float, Path]]:
@@ -188,7 +317,7 @@ def _draw_mesh(ax: Any, frame: VtuFrame, field: str, norm: Any, limits: tuple) -
     ax.set_xlim(*limits[0])
     ax.set_ylim(*limits[1])
     ax.set_aspect("equal")
-    ax.set_title(f"t = {frame.time:.4g}", fontsize="small")
+    _title(ax, f"t = {frame.time:.4g}", fontsize="small")
     return collection
 
 
@@ -209,8 +338,9 @@ def plot_deformed(
         collection = _draw_mesh(ax, frame, field, norm, (xlim, ylim))
     for ax in list(axes.flat)[len(frames):]:
         ax.set_visible(False)
-    fig.colorbar(collection, ax=axes.ravel().tolist(), label=field.replace("_", " "))
-    return _save(fig, Path(path) if path else folder / f"deformed_{field}.png")
+    cax = fig.add_axes((0.9, 0.1, 0.02, 0.8))  # placed by _fit_layout
+    fig.colorbar(collection, cax=cax, label=field.replace("_", " "))
+    return _save(fig, Path(path) if path else folder / f"deformed_{field}.png", axes, cax)
 
 
 def _pick_steps(available: NDArray, steps: Sequence[int] | None) -> list[int]:
@@ -252,7 +382,7 @@ def plot_contact_tractions(
     top.legend(loc="best", fontsize="small")
     for ax in (top, bottom):
         ax.grid(True, alpha=0.3)
-    return _save(fig, Path(path) if path else folder / "contact_tractions.png")
+    return _save(fig, Path(path) if path else folder / "contact_tractions.png", axes)
 
 
 def plot_pair_history(
@@ -272,7 +402,7 @@ def plot_pair_history(
     peak = np.abs(tn).max() or 1.0
     axes[0, 0].plot(contact["time"][rows], tn / peak, "o-", ms=3)
     axes[0, 0].set_ylabel(f"normal traction / {peak:.4g}")
-    axes[0, 0].set_title(f"pair ({node_1}, {node_2})")
+    _title(axes[0, 0], f"pair ({node_1}, {node_2})")
     try:
         frames = load_frames(folder, max_frames=10**6)
     except ResultsNotFoundError:
@@ -288,7 +418,7 @@ def plot_pair_history(
     axes[2, 0].set_xlabel("time")
     for ax in axes[:, 0]:
         ax.grid(True, alpha=0.3)
-    return _save(fig, Path(path) if path else folder / "pair_history.png")
+    return _save(fig, Path(path) if path else folder / "pair_history.png", axes)
 
 
 #: The figures of :func:`plot_all`, slowest first (so that two workers share them evenly).
@@ -337,17 +467,19 @@ def animate(
     fig, axes = _new_figure(1, 1, size=(6.0, 4.5))
     ax = axes[0, 0]
     # The colour bar gets its own mappable: the mesh collection is replaced every frame.
-    fig.colorbar(ScalarMappable(norm, FIELD_CMAP), ax=ax, label=field.replace("_", " "))
+    cax = fig.add_axes((0.9, 0.1, 0.02, 0.8))  # placed by _fit_layout
+    fig.colorbar(ScalarMappable(norm, FIELD_CMAP), cax=cax, label=field.replace("_", " "))
     collection = _draw_mesh(ax, frames[0], field, norm, (xlim, ylim))
     # Axes, ticks and colour bar never change: draw them once (blitting) and only draw the
     # mesh and the title on top per frame; redrawing the whole figure per frame was ~10x slower.
     collection.set_visible(False)
     ax.set_title(" ", fontsize="small")
+    _fit_layout(fig, axes, cax)
     fig.canvas.draw()
-    fig.set_layout_engine("none")
     background = fig.canvas.copy_from_bbox(fig.bbox)
     collection.set_visible(True)
     palette = _gif_palette(FIELD_CMAP)
+    size = fig.canvas.get_width_height()
     images = []
     for frame in frames:
         fig.canvas.restore_region(background)
@@ -356,9 +488,9 @@ def animate(
         ax.title.set_text(f"t = {frame.time:.4g}")
         ax.draw_artist(collection)
         ax.draw_artist(ax.title)
-        rgba = np.asarray(fig.canvas.buffer_rgba())
-        images.append(Image.fromarray(rgba[..., :3].copy()).quantize(
-            palette=palette, dither=Image.Dither.NONE))
+        # PIL drops the alpha channel itself (a strided numpy copy cost ~3 ms per frame)
+        rgb = Image.frombuffer("RGBA", size, fig.canvas.buffer_rgba(), "raw", "RGBA", 0, 1)
+        images.append(rgb.convert("RGB").quantize(palette=palette, dither=Image.Dither.NONE))
     output = Path(path_gif)
     images[0].save(output, save_all=True, append_images=images[1:], duration=int(1000 / fps),
                    loop=0)
