@@ -70,3 +70,19 @@ def test_contraction_setting_controls_reuse(contraction):
     newton(residual, jacobian, solver.solve, np.zeros(N),
            NewtonSettings(rtol=1e-12, reuse_contraction=contraction), factors=cache)
     assert cache.factorizations >= 1
+
+
+def test_early_ratio_stops_at_that_fraction_of_the_first_residual():
+    residual, jacobian = cubic_system(0.5)
+    solver = LinearSolver("superlu")
+    start = np.zeros(N)
+    first = np.linalg.norm(residual(start)[0])
+    rough = newton(residual, jacobian, solver.solve, start, NewtonSettings(rtol=1e-12),
+                   early_ratio=1e-3)
+    full = solve_full(0.5)
+    assert rough.early and not full.early
+    assert rough.residual_norms[-1] <= 1e-3 * first < rough.residual_norms[-2]
+    assert rough.iterations < full.iterations
+    # continuing from the rough answer reaches the same root
+    polished = newton(residual, jacobian, solver.solve, rough.y, NewtonSettings(rtol=1e-12))
+    assert np.abs(polished.y - full.y).max() <= 1e-10 * np.abs(full.y).max()

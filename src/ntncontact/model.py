@@ -63,6 +63,8 @@ class AnalysisSettings:
     max_cutbacks: int = 4
     newton_rtol: float = 1e-10
     newton_max_iterations: int = 25
+    #: Newton of an augmentation that may not be the last stops once |R| <= this x its start
+    newton_inexact_augmentations: float = 1e-4
     energy_conserving: bool = False  # report 5.5: energy multiplier bordering the contact step
 
 

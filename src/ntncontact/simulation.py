@@ -132,6 +132,9 @@ class Simulation:
         self._last_mismatch = 0.0
         self._last_tie_forces: dict = {}
         self._energy_multiplier = 0.0
+        # the energy-conserving solve (report 5.5) starts from each augmentation's exact one
+        self._early_ratio = (0.0 if model.analysis.energy_conserving
+                             else model.analysis.newton_inexact_augmentations)
         self._union = TripletUnion()  # one stiffness pattern for all steps (fem.sparse)
 
     def balance(self, state: StepState) -> Balance:
@@ -204,21 +207,34 @@ class Simulation:
             if guess is not None:  # warm start: the last solution, shifted by the remap
                 d_guess = guess[0] + (state.d - guess[1]).ravel()
                 y0[: problem.free_dofs.size] = d_guess[problem.free_dofs]
+            # Inexact augmentations: the multiplier update and mesh move that follow change the
+            # problem by far more than rtol, so the solve stops at early_ratio x its start;
+            # the augmentation that meets report 5.4's test is then solved to rtol and tested
+            # again (ring impact: 2742 -> 1802 Newton iterations, the largest energy variation
+            # 1.525448e-3 -> 1.525451e-3; docs/scenarios.md, newton.inexact_augmentations).
             result = newton(problem.residual, problem.jacobian, self.solve, y0, self.settings,
-                            self.length_scale, factors)
+                            self.length_scale, factors, early_ratio=self._early_ratio)
             iterations += result.iterations
             floor = problem.scale_floor
             split = None
             if self.model.analysis.energy_conserving and any(len(c) for c in contact):
                 problem, result, its, split = self._conserve_energy(problem, result, mass)
                 iterations += its
-            d = problem.full(result.y).reshape(-1, 2)
-            guess = (d.ravel(), state.d)
-            contact = with_solved_multipliers(interfaces, contact,
-                                              self._lagrange_multipliers(problem, result, split))
-            results = self._contact_results(interfaces, contact, state, d, dt, last_contact)
             used = contact
-            contact, done = augment_all(interfaces, contact, previous, results)
+            for _ in range(2):
+                d = problem.full(result.y).reshape(-1, 2)
+                solved = self._lagrange_multipliers(problem, result, split)
+                contact = with_solved_multipliers(interfaces, used, solved)
+                results = self._contact_results(interfaces, contact, state, d, dt, last_contact)
+                used = contact
+                contact, done = augment_all(interfaces, contact, previous, results)
+                if not (done and result.early):
+                    break
+                # converged by a rough solve: solve it to the tolerances and test again
+                result = newton(problem.residual, problem.jacobian, self.solve, result.y,
+                                self.settings, self.length_scale, factors)
+                iterations += result.iterations
+            guess = (d.ravel(), state.d)
             x_pred = state.X + (2.0 * d - state.d if self.dynamic else d)
             if done:
                 break

@@ -54,6 +54,8 @@ class NewtonResult:
     y: NDArray
     iterations: int
     residual_norms: list[float] = field(default_factory=list)
+    #: stopped at the caller's ``stop_at`` before the tolerances were met
+    early: bool = False
 
 
 Residual = Callable[[NDArray], tuple[NDArray, float]]
@@ -97,11 +99,14 @@ def newton(
     settings: NewtonSettings = NewtonSettings(),
     length_scale: float = 1.0,
     factors: FactorCache | None = None,
+    early_ratio: float = 0.0,
 ) -> NewtonResult:
     """Solve R(y) = 0 from ``y0``; raise :class:`NewtonError` with the last residual if it fails.
 
     With ``factors``, a kept factorization is tried first (modified Newton) and replaced by a
-    fresh one as soon as its step does not contract the residual enough."""
+    fresh one as soon as its step does not contract the residual enough. ``early_ratio``: also
+    return (``early=True``) once |R| <= early_ratio |R(y0)|, for callers that only need a rough
+    solution (the augmentations before the last, see ``Simulation._solve_step``)."""
     y = np.array(y0, dtype=float)
     R, scale = residual(y)
     norms = [norm2(R)]
@@ -130,6 +135,8 @@ def newton(
         small_d = norm2(dy) <= settings.dtol * (norm2(y) + length_scale)
         if small_r and (small_d or norms[-1] <= 1e-3 * settings.rtol * scale):
             return NewtonResult(y, it, norms)
+        if norms[-1] <= early_ratio * first:
+            return NewtonResult(y, it, norms, early=True)
     raise NewtonError(
         f"no convergence in {settings.max_iterations} iterations (|R| = {norms[-1]:.3e}, "
         f"tolerance {settings.rtol * scale + settings.atol:.3e})",
