@@ -92,3 +92,13 @@ def test_mesh_quality_command_and_summary(tmp_path, capsys):
     assert 45.0 < quality["min_angle_deg"] < 90.0 < quality["max_angle_deg"] < 135.0
     vtu = sorted((res / "fields").glob("*.vtu"))[-1]
     assert main(["mesh-quality", str(vtu)]) == 0
+
+
+def test_run_with_compare_prints_and_writes_the_comparison(tmp_path, capsys):
+    out = tmp_path / "ring"
+    assert main(["run", str(EXAMPLES / "ring_impact.toml"), "--out", str(out), "--quiet",
+                 "--set", "analysis.t_end=0.1", "--compare"]) == 0
+    printed = capsys.readouterr().out
+    assert "ring_impact" in printed and "energy_initial" in printed
+    assert printed.index("results written") < printed.index("energy_initial")
+    assert (out / "comparison.csv").is_file()

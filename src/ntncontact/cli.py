@@ -39,6 +39,8 @@ def _run(args: argparse.Namespace) -> int:
         print(f"results written to {out} (history.csv, summary.json, fields.pvd)")
         if figures:
             print("figures:", *figures.paths(), sep="\n  ")
+    if args.compare:
+        _print_comparison(out)
     return 0
 
 
@@ -80,10 +82,13 @@ def _mesh_quality(args: argparse.Namespace) -> int:
 
 
 def _compare(args: argparse.Namespace) -> int:
+    return _print_comparison(Path(args.directory))
+
+
+def _print_comparison(directory: Path) -> int:
     """The run's headline numbers beside the report's; also DIR/comparison.csv."""
     from .reference import compare, format_comparison, write_comparison_csv
 
-    directory = Path(args.directory)
     label, rows = compare(directory)
     print(format_comparison(label, rows))
     write_comparison_csv(directory / "comparison.csv", rows)
@@ -127,6 +132,8 @@ def build_parser() -> argparse.ArgumentParser:
                      help="also write the figures of `ntncontact plot`, drawn on two worker "
                           "processes while the run goes on")
     _figure_options(run, "(implies --plot)")
+    run.add_argument("--compare", action="store_true",
+                     help="then print the comparison with the report (as `ntncontact compare`)")
     run.set_defaults(func=_run)
     plot = sub.add_parser("plot", help="write PNG figures of a results folder")
     plot.add_argument("directory")
