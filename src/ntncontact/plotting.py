@@ -98,7 +98,7 @@ def _outer_sizes(ax: Any, sizes: _TextSizes) -> tuple[float, float, float, float
     from matplotlib import rcParams
 
     ax.apply_aspect()  # an equal-aspect box is shrunk: its tick spacing follows that size
-    box = ax.get_position().transformed(ax.get_figure(root=True).dpi_scale_trans)
+    box = ax.get_position().transformed(ax.figure.dpi_scale_trans)
     xlabels, xoffset, xgap = _tick_labels(ax.xaxis)
     ylabels, yoffset, ygap = _tick_labels(ax.yaxis)
     xw = sizes.width(xlabels[-1:], rcParams["xtick.labelsize"])
