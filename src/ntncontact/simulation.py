@@ -220,20 +220,9 @@ class Simulation:
             if self.model.analysis.energy_conserving and any(len(c) for c in contact):
                 problem, result, its, split = self._conserve_energy(problem, result, mass)
                 iterations += its
-            used = contact
-            for _ in range(2):
-                d = problem.full(result.y).reshape(-1, 2)
-                solved = self._lagrange_multipliers(problem, result, split)
-                contact = with_solved_multipliers(interfaces, used, solved)
-                results = self._contact_results(interfaces, contact, state, d, dt, last_contact)
-                used = contact
-                contact, done = augment_all(interfaces, contact, previous, results)
-                if not (done and result.early):
-                    break
-                # converged by a rough solve: solve it to the tolerances and test again
-                result = newton(problem.residual, problem.jacobian, self.solve, result.y,
-                                self.settings, self.length_scale, factors)
-                iterations += result.iterations
+            result, d, used, results, contact, done, its = self._test_augmentation(
+                problem, result, split, contact, previous, last_contact, factors)
+            iterations += its
             guess = (d.ravel(), state.d)
             x_pred = state.X + (2.0 * d - state.d if self.dynamic else d)
             if done:
@@ -243,6 +232,26 @@ class Simulation:
         ties = tie_forces(problem.constraints, problem.multipliers(result.y)) \
             if self.model.ties else {}
         return SolvedStep(state, d, used, results, augmentation, iterations, mismatch, ties)
+
+    def _test_augmentation(self, problem: StepProblem, result, split, contact, previous,
+                           last_contact: dict, factors):
+        """Report 5.4's test on an augmentation's solution: (result, d, the pair states used
+        with their solved multipliers, contact results, the updated pair states, converged,
+        extra Newton iterations). A test passed on an early-stopped solve is repeated after
+        solving on to the tolerances, so that a step always ends with a complete solve."""
+        interfaces, state, dt = self.model.interfaces, problem.state, problem.dt
+        iterations = 0
+        while True:
+            d = problem.full(result.y).reshape(-1, 2)
+            solved = self._lagrange_multipliers(problem, result, split)
+            used = with_solved_multipliers(interfaces, contact, solved)
+            results = self._contact_results(interfaces, used, state, d, dt, last_contact)
+            updated, done = augment_all(interfaces, used, previous, results)
+            if not (done and result.early):
+                return result, d, used, results, updated, done, iterations
+            result = newton(problem.residual, problem.jacobian, self.solve, result.y,
+                            self.settings, self.length_scale, factors)
+            iterations += result.iterations
 
     def _conserve_energy(self, problem: StepProblem, result, mass):
         """Report 5.5 (see ``dynamics.energy``): if the Lagrange step changed the total energy,
