@@ -25,7 +25,6 @@ from .plotting import (
     plot_figure,
 )
 
-Job = tuple[Callable[..., Any], tuple, dict]
 WORKERS = 2  # this code's CI and demo machines have two cores
 
 
@@ -72,7 +71,7 @@ class FigureJobs:
         self._submit_animation()
         self._submit_snapshots()
         if not self._figures:
-            self._figures = [self._submit((plot_figure, (make, self.directory), {}))
+            self._figures = [self._submit(plot_figure, make, self.directory)
                              for make in FIGURE_MAKERS]
 
     def on_step(self, model: object, record: Any) -> None:
@@ -105,16 +104,14 @@ class FigureJobs:
     def _submit_snapshots(self) -> None:
         if self.times and "snapshots" not in self._requested:
             self._requested["snapshots"] = self._submit(
-                (plot_deformed, (self.directory, self.times),
-                 {"path": self.directory / "snapshots.png"}))
+                plot_deformed, self.directory, self.times, path=self.directory / "snapshots.png")
 
     def _submit_animation(self) -> None:
         if self.gif and "animation" not in self._requested:
             self._requested["animation"] = self._submit(
-                (animate, (self.directory, self.directory / "animation.gif"), {}))
+                animate, self.directory, self.directory / "animation.gif")
 
-    def _submit(self, job: Job) -> Future | Any:
-        fn, args, kwargs = job
+    def _submit(self, fn: Callable[..., Any], *args: Any, **kwargs: Any) -> Future | Any:
         if self._pool is None:
             return fn(*args, **kwargs)
         return self._pool.submit(fn, *args, **kwargs)

@@ -193,15 +193,14 @@ class LinearSolver:
             return Factorization(self, 0, lambda b: np.zeros_like(b))
         small = self._auto and A.shape[0] < PARDISO_MIN_UNKNOWNS
         backend = "superlu" if small else self.backend
-        symmetric = None  # SuperLU's LU serves both
+        symmetric = None  # SuperLU's LU serves both (and its key in _impls)
         if backend == "pardiso":
             symmetric = (self._pattern.is_symmetric(A.data) if self.symmetric is None
                          else self.symmetric)
-        key = symmetric
-        impl = self._impls.get(key)
+        impl = self._impls.get(symmetric)
         if impl is None:
             impl_class = _PardisoBackend if backend == "pardiso" else _SuperLUBackend
-            impl = self._impls[key] = impl_class(self._pattern, symmetric, self.stats)
+            impl = self._impls[symmetric] = impl_class(self._pattern, symmetric, self.stats)
         impl.factor(A.data)
         self._generation += 1
         return Factorization(self, A.shape[0], impl.solver(),

@@ -54,7 +54,7 @@ class NewtonResult:
     y: NDArray
     iterations: int
     residual_norms: list[float] = field(default_factory=list)
-    #: stopped at the caller's ``stop_at`` before the tolerances were met
+    #: stopped at the caller's ``early_ratio`` before the tolerances were met
     early: bool = False
 
 
@@ -106,7 +106,7 @@ def newton(
     With ``factors``, a kept factorization is tried first (modified Newton) and replaced by a
     fresh one as soon as its step does not contract the residual enough. ``early_ratio``: also
     return (``early=True``) once |R| <= early_ratio |R(y0)|, for callers that only need a rough
-    solution (the augmentations before the last, see ``Simulation._solve_step``)."""
+    solution (the augmentations before the last, see ``Simulation._test_augmentation``)."""
     y = np.array(y0, dtype=float)
     R, scale = residual(y)
     norms = [norm2(R)]
