@@ -5,7 +5,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from ntncontact.contact import ContactSurface, Interface, closest_pairs
+from ntncontact.contact import ContactSurface, Interface, closest_pairs, pair_kinematics
+from ntncontact.contact import pairing as pairing_module
+from ntncontact.contact.kinematics import pair_gaps
 
 
 def brute_force(q, a, b):
@@ -30,8 +32,17 @@ def wavy_interface(n1: int, n2: int, seed: int):
     return x, Interface(ContactSurface(np.arange(n1)), ContactSurface(n1 + np.arange(n2)))
 
 
+@pytest.fixture(params=["trees", "all_pairs"])
+def search(request, monkeypatch):
+    """Both search paths of closest_pairs: k-d trees, and comparing all combinations (used
+    for small interfaces, see pairing.BRUTE_FORCE_PAIRS)."""
+    limit = 0 if request.param == "trees" else 10**9
+    monkeypatch.setattr(pairing_module, "BRUTE_FORCE_PAIRS", limit)
+    return request.param
+
+
 @pytest.mark.parametrize("seed", [0, 1, 2])
-def test_projection_matches_brute_force(seed):
+def test_projection_matches_brute_force(seed, search):
     x, interface = wavy_interface(17, 23, seed)
     pairing = closest_pairs(x, interface)
     edges = interface.surface2.edges()
@@ -99,3 +110,29 @@ def test_empty_candidates():
     x, interface = wavy_interface(5, 5, 4)
     pairing = closest_pairs(x, interface, candidates=[], exclude=[])
     assert pairing.pairs.shape == (0, 2)
+
+
+@pytest.mark.parametrize("seed", [3, 4])
+def test_both_search_paths_give_the_same_pairing_to_the_bit(seed, monkeypatch):
+    """Comparing all combinations must reproduce the trees' answer exactly (same arithmetic
+    per combination, lowest segment among equal distances), else switching path by size
+    would change results."""
+    x, interface = wavy_interface(40, 60, seed)
+    monkeypatch.setattr(pairing_module, "BRUTE_FORCE_PAIRS", 0)
+    trees = closest_pairs(x, interface, unique=True)
+    monkeypatch.setattr(pairing_module, "BRUTE_FORCE_PAIRS", 10**9)
+    every = closest_pairs(x, interface, unique=True)
+    for name in trees.__dataclass_fields__:
+        np.testing.assert_array_equal(getattr(every, name), getattr(trees, name), err_msg=name)
+
+
+def test_pair_gaps_equal_the_full_kinematics_to_the_bit():
+    x, interface = wavy_interface(17, 23, 5)
+    v = np.random.default_rng(5).standard_normal(x.shape)
+    pairs = closest_pairs(x, interface).pairs
+    normal, gap, rate = pair_gaps(x, interface, pairs, v)
+    kin = pair_kinematics(x, interface, pairs, v)
+    np.testing.assert_array_equal(normal, kin.normal)
+    np.testing.assert_array_equal(gap, kin.gap)
+    np.testing.assert_array_equal(rate, kin.gap_rate)
+    assert pair_gaps(x, interface, pairs)[2] is None

@@ -17,7 +17,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 from numpy.typing import NDArray
 
-from .kinematics import pair_kinematics
+from .kinematics import pair_gaps
 from .state import PairState
 from .surfaces import Interface
 
@@ -70,10 +70,10 @@ def detect(
     fresh = candidates[~np.isin(candidates[:, 0], kept.pairs[:, 0])]
     if persistency and v is None:
         raise ValueError("detection under the persistency law needs velocities v")
-    kin = pair_kinematics(x, interface, fresh, v)
-    enter = kin.gap >= -gap_tol
+    _, gap, gap_rate = pair_gaps(x, interface, fresh, v)
+    enter = gap >= -gap_tol
     if persistency:
-        enter &= kin.gap_rate > 0.0  # type: ignore[operator]
+        enter &= gap_rate > 0.0  # type: ignore[operator]
     new = fresh[enter]
     return Detection(kept.concat(PairState.from_pairs(new)), new[:, 0].copy(),
                      state.pairs[released, 0].copy())

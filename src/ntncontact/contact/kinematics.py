@@ -23,7 +23,7 @@ from numpy.typing import NDArray
 
 from .surfaces import Interface
 
-__all__ = ["PairKinematics", "N_SLOTS", "pair_kinematics", "project"]
+__all__ = ["PairKinematics", "N_SLOTS", "pair_gaps", "pair_kinematics", "project"]
 
 N_SLOTS = 6
 _ROT_M90 = np.array([[0.0, 1.0], [-1.0, 0.0]])  # n = R u rotates the chord by -90 degrees
@@ -74,13 +74,18 @@ def _slots(interface: Interface, pairs: NDArray[np.int64]) -> NDArray[np.int64]:
     return np.column_stack((i, j, a, b, s1.prev[k1], s1.next[k1]))
 
 
-def _normal_frame(x: NDArray, slots: NDArray) -> tuple[NDArray, NDArray, NDArray, NDArray]:
-    """n, e and their slot Jacobians from n = R (x_b - x_a)/l, e = (x_b - x_a)/l."""
+def _unit_chord(x: NDArray, slots: NDArray) -> tuple[NDArray, NDArray]:
+    """e = (x_b - x_a)/l and l of every pair's normal chord (slots 2, 3)."""
     chord = x[slots[:, 3]] - x[slots[:, 2]]
     length = np.linalg.norm(chord, axis=1)
     if np.any(length == 0.0):
         raise ValueError("a contact normal is undefined (coincident chain neighbours)")
-    e = chord / length[:, None]
+    return chord / length[:, None], length
+
+
+def _normal_frame(x: NDArray, slots: NDArray) -> tuple[NDArray, NDArray, NDArray, NDArray]:
+    """n, e and their slot Jacobians from n = R (x_b - x_a)/l, e = (x_b - x_a)/l."""
+    e, length = _unit_chord(x, slots)
     n = e @ _ROT_M90.T
     # d e / d x_b = (I - e e^T)/l; x_a enters with the opposite sign
     de_b = (np.eye(2) - np.einsum("pr,pc->prc", e, e)) / length[:, None, None]
@@ -156,3 +161,22 @@ def pair_kinematics(
         slip, d_slip = project(rel, 1.0 if x_start is not None else 0.0, e, de)
     return PairKinematics(slots, n, e, dn, de, length, d_length, gap, d_gap, gap_rate,
                           d_gap_rate, slip, d_slip, rate_law)
+
+
+def pair_gaps(
+    x: NDArray[np.float64],
+    interface: Interface,
+    pairs: NDArray[np.int64],
+    v: NDArray[np.float64] | None = None,
+) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64] | None]:
+    """Normal n, gap g (2.4) and, with ``v``, gap rate gdot (2.9) of ``pairs``: the values
+    :func:`pair_kinematics` gives (the same operations, so the same bits) without the
+    derivatives, which pairing and detection do not need (they were ~0.5 ms of ~1.5 ms per
+    detection of the ring impact)."""
+    pairs = np.asarray(pairs, dtype=np.int64).reshape(-1, 2)
+    e, _ = _unit_chord(x, _slots(interface, pairs))
+    n = e @ _ROT_M90.T
+    i, j = pairs[:, 0], pairs[:, 1]
+    gap = np.einsum("pr,pr->p", x[i] - x[j], n)
+    rate = None if v is None else np.einsum("pr,pr->p", v[i] - v[j], n)
+    return n, gap, rate

@@ -4,7 +4,9 @@ For every candidate node of surface 1 the closest point of surface 2 (a point on
 segments) and the nearest node of surface 2 are found with k-d trees: the nearest-node distance
 d bounds the closest-point distance, and any segment holding a point within d has its midpoint
 within d + (longest segment)/2, so a ball query on segment midpoints finds every segment that
-can hold the closest point.
+can hold the closest point. Small interfaces (at most :data:`BRUTE_FORCE_PAIRS` candidate-
+segment combinations, e.g. the ring impact's 48 x 40) compare every combination instead: the
+same answer (same distances, same tie-breaking) without building trees, ~5x faster there.
 """
 
 from __future__ import annotations
@@ -15,10 +17,14 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy.spatial import cKDTree
 
-from .kinematics import pair_kinematics
+from .kinematics import pair_gaps
 from .surfaces import Interface
 
 __all__ = ["Pairing", "closest_pairs"]
+
+#: Up to this many (candidate, segment) combinations the closest points are found by comparing
+#: all of them (module doc); beyond it the k-d trees, whose cost grows like C log S, win.
+BRUTE_FORCE_PAIRS = 20_000
 
 
 @dataclass(frozen=True)
@@ -53,6 +59,8 @@ def _closest_on_segments(
     q: NDArray, a: NDArray, b: NDArray, radius: NDArray
 ) -> tuple[NDArray, NDArray, NDArray]:
     """Closest segment index, local coordinate and distance for every query point."""
+    if len(q) * len(a) <= BRUTE_FORCE_PAIRS:
+        return _closest_of_all_segments(q, a, b)
     mid = 0.5 * (a + b)
     hits = cKDTree(mid).query_ball_point(q, radius)
     counts = np.fromiter((len(h) for h in hits), dtype=np.int64, count=len(hits))
@@ -65,6 +73,31 @@ def _closest_on_segments(
     order = np.lexsort((seg, dist, owner))  # per owner: smallest distance, then lowest segment
     first = order[np.r_[0, np.flatnonzero(np.diff(owner[order])) + 1]]
     return seg[first], xi[first], dist[first]
+
+
+def _closest_of_all_segments(q: NDArray, a: NDArray, b: NDArray
+                             ) -> tuple[NDArray, NDArray, NDArray]:
+    """:func:`_closest_on_segments` comparing every segment (a superset of the ball query's,
+    so the same answer): the same arithmetic per combination, and argmin keeps the lowest
+    segment among equal distances as the lexsort does."""
+    ab = b - a  # (S, 2)
+    rel = q[:, None, :] - a[None, :, :]  # (C, S, 2)
+    xi = np.clip(np.einsum("csi,si->cs", rel, ab) / np.einsum("si,si->s", ab, ab), 0.0, 1.0)
+    dist = np.linalg.norm(q[:, None, :] - (a[None] + xi[..., None] * ab[None]), axis=2)
+    seg = np.argmin(dist, axis=1)
+    rows = np.arange(len(q))
+    return seg, xi[rows, seg], dist[rows, seg]
+
+
+def _nearest_nodes(q: NDArray, nodes: NDArray) -> tuple[NDArray, NDArray[np.int64]]:
+    """Distance to and index of the nearest of ``nodes`` for every query point; of equally
+    near nodes the k-d tree may return any, the comparison of all the first."""
+    if len(q) * len(nodes) > BRUTE_FORCE_PAIRS:
+        distance, k = cKDTree(nodes).query(q)
+        return distance, np.asarray(k, dtype=np.int64)
+    d2 = ((q[:, None, :] - nodes[None, :, :]) ** 2).sum(axis=2)
+    k = np.argmin(d2, axis=1)
+    return np.sqrt(d2[np.arange(len(q)), k]), k
 
 
 def _empty_pairing() -> Pairing:
@@ -92,8 +125,8 @@ def closest_pairs(
     if node1.size == 0:
         return _empty_pairing()
     q = x[node1]
-    node_distance, k = cKDTree(x[s2.nodes]).query(q)
-    node2 = s2.nodes[np.asarray(k, dtype=np.int64)]
+    node_distance, k = _nearest_nodes(q, x[s2.nodes])
+    node2 = s2.nodes[k]
     edges = s2.edges()
     a, b = x[edges[:, 0]], x[edges[:, 1]]
     half = 0.5 * np.max(np.linalg.norm(b - a, axis=1))
@@ -106,11 +139,11 @@ def closest_pairs(
         node1, node2, node_distance = node1[keep], node2[keep], node_distance[keep]
         seg, xi, dist = seg[keep], xi[keep], dist[keep]
     point = a[seg] + xi[:, None] * (b[seg] - a[seg])
-    kin = pair_kinematics(x, interface, np.column_stack((node1, node2)))
-    proj_gap = np.einsum("ij,ij->i", x[node1] - point, kin.normal)
+    normal, gap, _ = pair_gaps(x, interface, np.column_stack((node1, node2)))
+    proj_gap = np.einsum("ij,ij->i", x[node1] - point, normal)
     _, inv, cnt = np.unique(node2, return_inverse=True, return_counts=True)
     return Pairing(node1, node2, np.asarray(node_distance, float), seg, xi, point, dist,
-                   kin.gap, proj_gap, cnt[inv.reshape(-1)] > 1)
+                   gap, proj_gap, cnt[inv.reshape(-1)] > 1)
 
 
 def ordered_partners(
