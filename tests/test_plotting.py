@@ -160,3 +160,12 @@ def test_empty_folder_error_names_it(tmp_path):
         plot_energies(empty)
     with pytest.raises(ResultsNotFoundError, match="fields.pvd"):
         animate(empty, tmp_path / "x.gif")
+
+
+def test_warm_up_draws_in_memory_only(tmp_path, monkeypatch):
+    """The figure workers' warm-up (figure_jobs) must leave no file behind, wherever it runs."""
+    from ntncontact.plotting import warm_up
+
+    monkeypatch.chdir(tmp_path)
+    warm_up()
+    assert list(tmp_path.iterdir()) == []

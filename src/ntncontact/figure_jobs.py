@@ -23,15 +23,19 @@ from .plotting import (
     check_made,
     plot_deformed,
     plot_figure,
+    warm_up,
 )
 
 WORKERS = 2  # this code's CI and demo machines have two cores
 
 
 def _import_matplotlib() -> None:
-    """Worker initializer: the ~1 s matplotlib import, paid before the first figure is asked."""
+    """Worker initializer: the ~1 s matplotlib import and the first figure's one-off work
+    (:func:`~ntncontact.plotting.warm_up`), paid before the first figure is asked."""
     from matplotlib.backends import backend_agg  # noqa: F401
     from PIL import Image  # noqa: F401
+
+    warm_up()
 
 
 class FigureJobs:
