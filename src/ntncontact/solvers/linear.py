@@ -1,6 +1,6 @@
 """Sparse direct solver for Newton steps: reuses the symbolic analysis while the pattern holds.
 
-Two backends:
+Three backends:
 
 - ``"pardiso"``: Intel MKL PARDISO through the ``mkl_rt`` library that ``pypardiso`` installs
   (the ``fast`` extra). The ordering (METIS) and symbolic factorization are computed once per
@@ -10,10 +10,18 @@ Two backends:
   general mode with scaling and weighted matching.
 - ``"superlu"``: SciPy's SuperLU, always available. The MMD(A^T + A) column ordering is computed
   once per pattern and reused by factoring the symmetrically permuted matrix in natural order.
+- ``"static"``: for small systems, the same ordering but a compiled LU without row
+  interchanges on the fill pattern computed once per sparsity pattern
+  (:mod:`ntncontact.solvers.static_lu`); SuperLU does the first factorization of a pattern
+  (which gives the ordering) and every factorization whose pivots the static LU rejects
+  (``SolverStats.fallbacks``). Ring impact tangent (890 unknowns): ~0.5 ms per factorization
+  against ~1.3 ms for SuperLU (see ``benchmarks/README.md``).
 
-``"auto"`` picks PARDISO when it loads: on a 2-core machine it was ~20x faster than SuperLU on a
-200 000-dof Q4 tangent (see ``benchmarks/README.md``). A singular matrix (e.g. a body without
-supports in a quasi-static problem) raises :class:`LinearSolverError`.
+``"auto"`` uses ``"static"`` below :data:`SMALL_SYSTEM` unknowns, SuperLU up to
+:data:`PARDISO_MIN_UNKNOWNS`, and above it PARDISO when it loads: on a 2-core machine it was
+~20x faster than SuperLU on a 200 000-dof Q4 tangent (see ``benchmarks/README.md``). A
+singular matrix (e.g. a body without supports in a quasi-static problem) raises
+:class:`LinearSolverError`.
 """
 
 from __future__ import annotations
@@ -28,7 +36,9 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 from numpy.typing import NDArray
 
-Backend = Literal["auto", "pardiso", "superlu"]
+from . import static_lu
+
+Backend = Literal["auto", "pardiso", "superlu", "static"]
 
 #: |A - A^T| <= SYMMETRY_RTOL max|A| counts as symmetric (assembly round-off is ~1e-16).
 SYMMETRY_RTOL = 1e-12
@@ -38,6 +48,13 @@ PIVOT_RTOL = 1e-12
 #: SuperLU's pivots are only checked when a solution grows like the inverse of a tiny pivot,
 #: |x| max|A| > PIVOT_CHECK_GROWTH |b| (see ``_SuperLUBackend.solver``).
 PIVOT_CHECK_GROWTH = 1e6
+#: SuperLU keeps a diagonal pivot at least this fraction of the largest entry of its column
+#: (partial pivoting otherwise); the static LU accepts a pivot on the same test, so it takes
+#: the pivots SuperLU would and falls back to SuperLU where SuperLU would interchange rows.
+DIAG_PIVOT_THRESH = 0.1
+#: The static LU stops being tried for a pattern after this many fallbacks in a row (a
+#: bordered system whose zero diagonal block always needs pivoting).
+MAX_CONSECUTIVE_FALLBACKS = 3
 
 
 class LinearSolverError(RuntimeError):
@@ -72,6 +89,7 @@ class SolverStats:
     factorizations: int = 0
     solves: int = 0
     pivot_checks: int = 0  # SuperLU factors whose pivots were inspected (see PIVOT_CHECK_GROWTH)
+    fallbacks: int = 0  # static-LU factorizations redone by SuperLU (a pivot needed pivoting)
 
 
 class _Pattern:
@@ -149,8 +167,9 @@ class Factorization:
 class LinearSolver:
     """Solves A x = b for a sequence of sparse matrices, reusing the analysis of their pattern.
 
-    ``backend``: "auto" (PARDISO if available and the system has at least
-    :data:`PARDISO_MIN_UNKNOWNS` unknowns, else SuperLU), "pardiso" or "superlu".
+    ``backend``: "auto" (the static LU below :data:`SMALL_SYSTEM` unknowns, PARDISO if
+    available and the system has at least :data:`PARDISO_MIN_UNKNOWNS` unknowns, else
+    SuperLU), "pardiso", "superlu" (SuperLU only) or "static" (the static LU at any size).
     ``symmetric``: None detects symmetry from the values at each call; True/False forces it
     (True uses the upper triangle only).
     """
@@ -159,7 +178,7 @@ class LinearSolver:
         self._pattern: _Pattern | None = None
         # one factorization per symmetry mode (PARDISO), so alternating modes keep both analyses
         self._impls: dict[bool | None, _PardisoBackend | _SuperLUBackend] = {}
-        if backend not in ("auto", "pardiso", "superlu"):
+        if backend not in ("auto", "pardiso", "superlu", "static"):
             raise ValueError(f"unknown linear solver backend '{backend}'")
         self._auto = backend == "auto"
         if backend == "pardiso" and not pardiso_available():
@@ -171,8 +190,9 @@ class LinearSolver:
 
     @property
     def backend(self) -> str:
-        """"pardiso" or "superlu"; "auto" looks for MKL only when first asked (loading it
-        takes ~0.6 s, which small problems, always solved by SuperLU, need not pay)."""
+        """"pardiso", "superlu" or "static" (if forced); "auto" looks for MKL only when first
+        asked (loading it takes ~0.6 s, which small problems, never solved by PARDISO, need not
+        pay)."""
         if self._backend is None:
             self._backend = "pardiso" if pardiso_available() else "superlu"
         return self._backend
@@ -191,20 +211,26 @@ class LinearSolver:
             self._pattern = _Pattern(A)
         if A.shape[0] == 0:
             return Factorization(self, 0, lambda b: np.zeros_like(b))
-        small = self._auto and A.shape[0] < PARDISO_MIN_UNKNOWNS
-        backend = "superlu" if small else self.backend
-        symmetric = None  # SuperLU's LU serves both (and its key in _impls)
+        backend = self._backend_for(A.shape[0])
+        symmetric = None  # an LU serves both (and its key in _impls; n fixes the LU's kind)
         if backend == "pardiso":
             symmetric = (self._pattern.is_symmetric(A.data) if self.symmetric is None
                          else self.symmetric)
         impl = self._impls.get(symmetric)
         if impl is None:
-            impl_class = _PardisoBackend if backend == "pardiso" else _SuperLUBackend
+            impl_class = _BACKEND_CLASSES[backend]
             impl = self._impls[symmetric] = impl_class(self._pattern, symmetric, self.stats)
         impl.factor(A.data)
         self._generation += 1
         return Factorization(self, A.shape[0], impl.solver(),
                              self._generation if backend == "pardiso" else None)
+
+    def _backend_for(self, n: int) -> str:
+        if not self._auto:
+            return self.backend
+        if n < SMALL_SYSTEM:
+            return "static"
+        return "superlu" if n < PARDISO_MIN_UNKNOWNS else self.backend
 
     def _release(self) -> None:
         for impl in self._impls.values():
@@ -255,7 +281,7 @@ class _SuperLUBackend:
     def factor(self, data: NDArray) -> None:
         p = self.pattern
         # SymmetricMode: FE patterns are symmetric, so prefer diagonal pivots (keeps the ordering)
-        kwargs = {"diag_pivot_thresh": 0.1, "options": {"SymmetricMode": True}}
+        kwargs = {"diag_pivot_thresh": DIAG_PIVOT_THRESH, "options": {"SymmetricMode": True}}
         if p.n < SMALL_SYSTEM:
             kwargs |= {"relax": 1, "panel_size": 1}
         try:
@@ -310,6 +336,48 @@ class _SuperLUBackend:
 
     def release(self) -> None:
         self.lu = None
+
+
+class _StaticLUBackend(_SuperLUBackend):
+    """The static LU (:mod:`static_lu`) on SuperLU's ordering; SuperLU factors the first
+    matrix of a pattern (the analysis), patterns without a full diagonal, and any matrix whose
+    pivots the static LU rejects (zero, non-finite, below DIAG_PIVOT_THRESH of its column,
+    or below PIVOT_RTOL of the largest: SuperLU then decides about singularity as before)."""
+
+    def __init__(self, pattern: _Pattern, symmetric: bool, stats: SolverStats) -> None:
+        super().__init__(pattern, symmetric, stats)
+        self.symbolic: static_lu.StaticSymbolic | None = None
+        self.usable = True  # False: the pattern is left to SuperLU
+        self.fallbacks_in_a_row = 0
+        self.static: static_lu.StaticFactor | None = None  # the current factor, if static
+
+    def factor(self, data: NDArray) -> None:
+        self.static = None
+        if self.perm is None:  # first matrix of the pattern: SuperLU's ordering, then ours
+            super().factor(data)
+            p = self.pattern
+            self.symbolic = static_lu.analyse(p.indptr, p.indices, self.perm)
+            self.usable = self.symbolic is not None
+            return
+        if self.usable:
+            self.static = static_lu.factorize(self.symbolic, data, DIAG_PIVOT_THRESH,
+                                              PIVOT_RTOL)
+        if self.static is not None:
+            self.stats.factorizations += 1
+            self.fallbacks_in_a_row = 0
+            return
+        if self.usable:
+            self.stats.fallbacks += 1
+            self.fallbacks_in_a_row += 1
+            self.usable = self.fallbacks_in_a_row < MAX_CONSECUTIVE_FALLBACKS
+        super().factor(data)
+
+    def solver(self):
+        return super().solver() if self.static is None else self.static.solve
+
+    def release(self) -> None:
+        super().release()
+        self.static = None
 
 
 def _check_pivots(lu: spla.SuperLU) -> None:
@@ -417,3 +485,7 @@ _PARDISO_ERRORS = {
 def _pardiso_message(code: int, phase: int) -> str:
     what = _PARDISO_ERRORS.get(code, "unknown error")
     return f"PARDISO failed in phase {phase} with error {code}: {what}"
+
+
+_BACKEND_CLASSES = {"pardiso": _PardisoBackend, "superlu": _SuperLUBackend,
+                    "static": _StaticLUBackend}
