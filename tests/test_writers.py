@@ -215,6 +215,21 @@ def test_vtu_round_trip_and_pvd_valid_after_two_steps(tmp_path):
     assert not list(tmp_path.rglob("*.tmp"))
 
 
+def test_pvd_quotes_series_names_and_keeps_exact_times(tmp_path):
+    """The PVD text is formatted directly (not by ElementTree): a series name with XML
+    special characters must still give a valid file, and times must survive to the bit."""
+    points, cells = unit_square_mesh()
+    name = 'run "a" & <b>'
+    writer = VtuSeriesWriter(tmp_path, name=name)
+    times = (0.0, 0.1 + 0.2, 1e-17)
+    for step, time in enumerate(times):
+        point_data, cell_data = fields(len(points), len(cells), scale=1.0)
+        writer.write(step, time, points, cells, point_data, cell_data)
+    series = read_pvd(tmp_path / f"{name}.pvd")
+    assert [t for t, _ in series] == sorted(times)
+    assert all(path.is_file() and path.parent.name == name for _, path in series)
+
+
 def test_vtu_requires_contract_fields(tmp_path):
     points, cells = unit_square_mesh()
     point_data, cell_data = fields(len(points), len(cells), 1.0)

@@ -12,6 +12,7 @@ import xml.etree.ElementTree as ET
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
+from xml.sax.saxutils import quoteattr
 
 import meshio
 import numpy as np
@@ -65,9 +66,10 @@ def stack_bodies(
 
 
 def _atomic_replace(tmp: Path, final: Path) -> None:
-    # fsync first so a crash after the rename cannot leave an empty file under the final name.
-    with open(tmp, "rb+") as handle:
-        os.fsync(handle.fileno())
+    # The rename is atomic: a run that fails, is killed or interrupted leaves either the old or
+    # the complete new file, never a partial one. There is no fsync: like the CSV rows (only
+    # flushed), the frames are protected against the run's own end, not against the machine
+    # losing power; two fsyncs per frame were ~8 ms of its ~15 ms (0.3 s of the ring impact).
     os.replace(tmp, final)
 
 
@@ -144,17 +146,16 @@ class VtuSeriesWriter:
         )
 
     def _write_pvd(self) -> None:
-        root = ET.Element(
-            "VTKFile", type="Collection", version="0.1", byte_order="LittleEndian"
-        )
-        collection = ET.SubElement(root, "Collection")
-        for time, relative in self._entries:
-            ET.SubElement(
-                collection, "DataSet", timestep=repr(time), group="", part="0", file=relative
-            )
-        ET.indent(root)
+        # The text ElementTree wrote (same declaration and indentation), formatted directly:
+        # building and indenting the tree anew for every frame cost ~4 ms by the 40th.
+        datasets = "".join(
+            f'    <DataSet timestep="{time!r}" group="" part="0" file={quoteattr(relative)} />\n'
+            for time, relative in self._entries)
+        text = ("<?xml version='1.0' encoding='utf-8'?>\n"
+                '<VTKFile type="Collection" version="0.1" byte_order="LittleEndian">\n'
+                f"  <Collection>\n{datasets}  </Collection>\n</VTKFile>")
         tmp = self.pvd_path.with_name(self.pvd_path.name + ".tmp")
-        ET.ElementTree(root).write(tmp, encoding="utf-8", xml_declaration=True)
+        tmp.write_text(text, encoding="utf-8")
         _atomic_replace(tmp, self.pvd_path)
 
 
