@@ -212,3 +212,91 @@ def test_hinted_location_and_interpolation_equal_the_numpy_code_bit_for_bit(seed
                                       g is not None)
             np.testing.assert_array_equal(got, reference_interpolation(remapper, fields, loc,
                                                                        pts, g))
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_snapping_to_the_located_cells_corners_equals_the_node_tree_query(seed):
+    """``interpolate_at_nodes`` (unmoved nodes keep their values: the corners of the located
+    cell are searched) against the k-d tree query over all nodes it replaced."""
+    from scipy.spatial import cKDTree
+
+    rng = np.random.default_rng(300 + seed)
+    nodes, cells = distorted_block(rng)
+    remapper = Remapper(nodes, cells)
+    fields = rng.standard_normal((len(nodes), 6))
+    grads = remapper.nodal_gradients(fields)
+    # points on nodes (interior and boundary), a round-off away from them, and elsewhere
+    base = rng.choice(len(nodes), 12, replace=False)
+    pts = nodes[base] + np.repeat([0.0, 1e-15, 1e-6, 0.05], 3)[:, None] * rng.standard_normal(
+        (12, 2))
+    loc = remapper.locate(pts, 10.0)
+    g = np.ascontiguousarray(grads[remapper.cells[loc.cell]])
+    for quadratic in (False, True):
+        want = kernels.interpolate(remapper.nodes, remapper.cells, fields, loc.cell, loc.xi, pts,
+                                   g, quadratic)
+        dist, node = cKDTree(nodes).query(pts)
+        same = dist <= 1e-12 * remapper.cell_size[loc.cell]
+        want[same] = fields[node[same]]
+        got = kernels.interpolate_at_nodes(remapper.nodes, remapper.cells, fields, loc.cell,
+                                           loc.xi, pts, g, quadratic, remapper.cell_size, 1e-12)
+        assert same[:6].all() and not same[6:].any()
+        np.testing.assert_array_equal(got, want)
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_masses_after_equals_the_numpy_update_bit_for_bit(seed):
+    from ntncontact.ale.motion import _DN, _SHAPE
+
+    rng = np.random.default_rng(400 + seed)
+    X, cells = distorted_block(rng)
+    density = rng.uniform(1.0, 3.0, len(cells))
+    old = kernels.element_masses(X, cells, np.arange(len(cells)), density, _DN, _SHAPE)
+    masses = np.bincount(cells.ravel(), old.ravel(), len(X))
+    idx = np.sort(rng.choice(len(cells), 7, replace=False))
+    X_new = X + 0.01 * rng.standard_normal(X.shape)
+    change = kernels.element_masses(X_new, cells, idx, density[idx], _DN, _SHAPE)
+    change -= old[idx]
+    want = masses + np.bincount(cells[idx].ravel(), change.ravel(), len(X))
+    got = kernels.masses_after(X_new, cells, idx, density, _DN, _SHAPE, old, masses)
+    np.testing.assert_array_equal(got, want)
+
+
+def test_acceptable_cells_is_acceptable_with_the_changed_cells():
+    rng = np.random.default_rng(5)
+    x, cells = distorted_block(rng)
+    reference = kernels.cell_min_sines(x, cells, np.arange(len(cells)))
+    for scale in (1e-3, 0.05, 0.3):
+        x_new = x.copy()
+        x_new[[3, 17]] += scale * rng.standard_normal((2, 2))
+        _, which = kernels.changed_cells(x_new, x, cells)
+        for quality in (0.5, 0.9, 1.0):
+            assert kernels.acceptable_cells(x_new, cells, which, quality, reference, reference) \
+                == kernels.acceptable(x_new, x, cells, quality, reference, reference)
+
+
+def reference_body_pairs(pairs_list, lo, hi):
+    """``mesh_motion._ale_nodes_and_partners`` as it was in NumPy."""
+    own, partner = [], []
+    for pairs in pairs_list:
+        for side in (1, 0):
+            nodes = pairs[:, side]
+            mine = (nodes >= lo) & (nodes < hi)
+            own.append(nodes[mine])
+            partner.append(pairs[mine, 1 - side])
+    own, partner = np.concatenate(own), np.concatenate(partner)
+    _, first = np.unique(own, return_index=True)
+    return own[np.sort(first)], partner[np.sort(first)]
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_body_pairs_and_first_occurrences_equal_the_numpy_selection(seed):
+    rng = np.random.default_rng(500 + seed)
+    lo, hi = 20, 40
+    pairs_list = [rng.integers(0, 60, (rng.integers(0, 25), 2)) for _ in range(1 + seed % 3)]
+    found = [kernels.body_pairs(p, lo, hi) for p in pairs_list]
+    own = np.concatenate([f[0] for f in found])
+    partner = np.concatenate([f[1] for f in found])
+    first = kernels.first_occurrences(own)
+    want_own, want_partner = reference_body_pairs(pairs_list, lo, hi)
+    np.testing.assert_array_equal(own[first], want_own)
+    np.testing.assert_array_equal(partner[first], want_partner)

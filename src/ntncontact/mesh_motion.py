@@ -14,6 +14,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 from numpy.typing import NDArray
 
+from .ale import kernels_numba as _kernels
 from .ale.motion import AleUpdate, move_ale_body
 from .contact import PairState
 from .model import AleSetup, Model
@@ -35,18 +36,23 @@ class MeshMotion:
 
 
 def _ale_nodes_and_partners(setup: AleSetup, contact: Sequence[PairState]):
-    """Active global nodes of this ALE body and their partners, over all interfaces."""
+    """Active global nodes of this ALE body and their partners, over all interfaces: per
+    interface the pairs whose body-2 node is the body's first (the report moves the body-2
+    node), then those whose body-1 node is; a node listed again keeps its first partner.
+    Compiled (``ale.kernels_numba.body_pairs``, ``first_occurrences``): called at every
+    augmentation with a few pairs, where NumPy's per-call overhead dominated."""
     lo, hi = setup.node_offset, setup.node_offset + setup.n_nodes
-    own, partner = [], []
-    for state in contact:
-        for side in (1, 0):  # prefer moving the body-2 node (the report's choice)
-            nodes = state.pairs[:, side]
-            mine = (nodes >= lo) & (nodes < hi)
-            own.append(nodes[mine])
-            partner.append(state.pairs[mine, 1 - side])
-    own, partner = np.concatenate(own), np.concatenate(partner)
-    _, first = np.unique(own, return_index=True)
-    return own[np.sort(first)], partner[np.sort(first)]
+    found = [_kernels.body_pairs(np.ascontiguousarray(state.pairs, dtype=np.int64), lo, hi)
+             for state in contact]
+    if len(found) == 1:
+        own, partner = found[0]
+    elif not found:
+        own = partner = np.zeros(0, np.int64)
+    else:
+        own = np.concatenate([f[0] for f in found])
+        partner = np.concatenate([f[1] for f in found])
+    first = _kernels.first_occurrences(own)
+    return own[first], partner[first]
 
 
 def move_meshes(
@@ -91,5 +97,4 @@ def _same_request(old, new, setup: AleSetup) -> bool:
     if old is None or not (np.array_equal(old[0], new[0]) and np.array_equal(old[1], new[1])):
         return False
     motion = setup.motion
-    spacing = float(motion.reference_spacing.min())
-    return float(np.abs(new[2] - old[2]).max()) <= motion.slide_tolerance * spacing
+    return float(np.abs(new[2] - old[2]).max()) <= motion.slide_tolerance * motion.min_spacing

@@ -285,6 +285,27 @@ def element_masses(X, cells, which, density, dn, shape):
     return out
 
 
+@njit(cache=True)
+def masses_after(X, cells, which, density, dn, shape, old_element_masses, masses):
+    """``_TnState.masses_after``: the lumped masses ``masses`` with the element masses of the
+    cells ``which`` (``old_element_masses`` per cell) replaced by those of X; ``density`` per
+    cell. The changes are accumulated as ``np.bincount`` does (from zero, in cell order) and
+    then added, so the result is the NumPy expression's bit for bit."""
+    dens = np.empty(which.size)
+    for k in range(which.size):
+        dens[k] = density[which[k]]
+    change = element_masses(X, cells, which, dens, dn, shape)
+    add = np.zeros(masses.size)
+    for k in range(which.size):
+        e = which[k]
+        for a in range(4):
+            add[cells[e, a]] += change[k, a] - old_element_masses[e, a]
+    out = np.empty(masses.size)
+    for i in range(masses.size):
+        out[i] = masses[i] + add[i]
+    return out
+
+
 # --- surface slides (ale.motion._surface_slides, ale.surface.local_slides) -------------------
 
 
@@ -653,6 +674,66 @@ def interpolate(nodes, cells, fields, cell, xi, pts, gradients, quadratic):
     return out
 
 
+@njit(cache=True)
+def interpolate_at_nodes(nodes, cells, fields, cell, xi, pts, gradients, quadratic, cell_size,
+                         same_node):
+    """``interpolate``, except that a point within ``same_node`` times its cell's size of a
+    corner of its cell takes that node's values exactly (``Remapper.remap``: unmoved nodes keep
+    their fields). In a conforming mesh a point on an old node is located in a cell with that
+    node as a corner (inside, or clamped onto its boundary), so the corners are the only
+    candidates: this replaces a k-d tree query over all nodes, with the same distance
+    (sqrt(d0^2 + d1^2)) and the same test."""
+    out = interpolate(nodes, cells, fields, cell, xi, pts, gradients, quadratic)
+    for q in range(pts.shape[0]):
+        e = cell[q]
+        best, near = np.inf, -1
+        for a in range(4):
+            n = cells[e, a]
+            d0, d1 = pts[q, 0] - nodes[n, 0], pts[q, 1] - nodes[n, 1]
+            dist = np.sqrt(d0 * d0 + d1 * d1)
+            if dist < best:
+                best, near = dist, n
+        if best <= same_node * cell_size[e]:
+            for j in range(fields.shape[1]):
+                out[q, j] = fields[near, j]
+    return out
+
+
+# --- contact nodes of an ALE body (ntncontact.mesh_motion) ------------------------------------
+
+
+@njit(cache=True)
+def body_pairs(pairs, lo, hi):
+    """(own node, partner) of the pairs (m, 2) with a node in [lo, hi): first the pairs whose
+    body-2 node (column 1) is there, then those whose body-1 node is, each in pair order."""
+    m = pairs.shape[0]
+    count = 0
+    for side in (1, 0):
+        for r in range(m):
+            count += lo <= pairs[r, side] < hi
+    own = np.empty(count, np.int64)
+    partner = np.empty(count, np.int64)
+    c = 0
+    for side in (1, 0):
+        for r in range(m):
+            if lo <= pairs[r, side] < hi:
+                own[c], partner[c] = pairs[r, side], pairs[r, 1 - side]
+                c += 1
+    return own, partner
+
+
+@njit(cache=True)
+def first_occurrences(values):
+    """Indices (ascending) of the first occurrence of each value: ``np.sort(np.unique(values,
+    return_index=True)[1])``."""
+    order = np.argsort(values, kind="mergesort")  # stable: equal values in index order
+    keep = np.zeros(values.size, np.bool_)
+    for k in range(values.size):
+        if k == 0 or values[order[k]] != values[order[k - 1]]:
+            keep[order[k]] = True
+    return _true_indices(keep)
+
+
 # --- moved nodes and cells (ale.motion) ------------------------------------------------------
 
 
@@ -683,6 +764,12 @@ def acceptable(x_new, x_old, cells, min_quality, reference_quality, tn_quality):
     """``ale.motion._acceptable``: every cell with a moved node keeps ``min_quality`` of its
     original smallest corner sine or does not get worse than at t_n."""
     _, which = changed_cells(x_new, x_old, cells)
+    return acceptable_cells(x_new, cells, which, min_quality, reference_quality, tn_quality)
+
+
+@njit(cache=True)
+def acceptable_cells(x_new, cells, which, min_quality, reference_quality, tn_quality):
+    """``acceptable`` with the changed cells ``which`` already known."""
     q = cell_min_sines(x_new, cells, which)
     for k in range(which.size):
         e = which[k]

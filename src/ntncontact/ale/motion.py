@@ -264,6 +264,11 @@ class AleBody:
         return boundary_node_mask(self.cells, self.n_nodes)
 
     @cached_property
+    def min_spacing(self) -> float:
+        """The smallest reference surface spacing."""
+        return float(self.reference_spacing.min())
+
+    @cached_property
     def _smoother(self) -> Smoother:
         return Smoother(self.cells, self.n_nodes, None, self.smoothing, self.name)
 
@@ -411,10 +416,8 @@ class _TnState:
         """Lumped masses with the reference images of the cells ``idx`` replaced by those of
         X_new."""
         body = self.body
-        change = _kernels.element_masses(X_new, body.cells, idx, body.cell_density[idx], _DN,
-                                         _SHAPE)
-        change -= self.element_masses[idx]
-        return self.masses + np.bincount(body.cells[idx].ravel(), change.ravel(), len(X_new))
+        return _kernels.masses_after(X_new, body.cells, idx, body.cell_density, _DN, _SHAPE,
+                                     self.element_masses, self.masses)
 
     @cached_property
     def momenta(self) -> tuple[NDArray[np.float64], float]:
@@ -567,22 +570,28 @@ def _move_surface(
                                    _kernels.GAUSS_W)
 
 
-def _acceptable(body: AleBody, tn: _TnState, x_new: NDArray) -> bool:
+def _acceptable(body: AleBody, tn: _TnState, x_new: NDArray,
+                touched: NDArray[np.int64] | None = None) -> bool:
     """Every cell changed by the move keeps min_quality of its original quality, or does not
-    get worse than at t_n."""
-    return bool(_kernels.acceptable(x_new, tn.x, body.cells, body.min_quality,
-                                    body.reference_quality, tn.quality))
+    get worse than at t_n. ``touched``: those cells if already known (``changed_cells``)."""
+    if touched is None:
+        return bool(_kernels.acceptable(x_new, tn.x, body.cells, body.min_quality,
+                                        body.reference_quality, tn.quality))
+    return bool(_kernels.acceptable_cells(x_new, body.cells, touched, body.min_quality,
+                                          body.reference_quality, tn.quality))
 
 
 def _move_interior(
-    body: AleBody, tn: _TnState, x_surf: NDArray
+    body: AleBody, tn: _TnState, x_surf: NDArray, seeds: NDArray[np.bool_],
+    touched: NDArray[np.int64],
 ) -> tuple[NDArray, SmoothingResult | None, str]:
     """Interior nodes within ``smoothing_layers`` of the moved surface nodes follow them as far
-    as needed; (positions, position-smoothing result, stage used)."""
-    seeds = np.any(x_surf != tn.x, axis=1)
+    as needed; (positions, position-smoothing result, stage used). ``seeds, touched``: the
+    nodes the surface move changed and their cells (``kernels_numba.changed_cells``); the
+    positions returned are ``x_surf`` itself when the interior does not move."""
     if not seeds.any():
         return x_surf, None, "none"
-    if body.interior == "minimal" and _acceptable(body, tn, x_surf):
+    if body.interior == "minimal" and _acceptable(body, tn, x_surf, touched):
         return x_surf, None, "surface"
     free = body.within_layers(seeds, body.smoothing_layers) & ~body.boundary
     if body.smoothing_layers <= 0 or not free.any():
@@ -637,7 +646,9 @@ def _conserve_momentum(
     if np.count_nonzero(moved) < 2:
         sub = np.zeros_like(moved)
         sub[tn.body.cells[touched].ravel()] = True
-    p_rest, l_rest = momenta(mass_new[~sub], x_new[~sub], v_new[~sub])
+    # index arrays once (the same gathered values as with the masks, fewer mask passes)
+    rest, sub = np.flatnonzero(~sub), np.flatnonzero(sub)
+    p_rest, l_rest = momenta(mass_new[rest], x_new[rest], v_new[rest])
     out = v_new.copy()
     out[sub] = conservative_velocity_correction(mass_new[sub], x_new[sub], v_new[sub],
                                                 p_old - p_rest, l_old - l_rest)
@@ -678,7 +689,7 @@ def move_ale_body(
     active = np.asarray(active_local, dtype=np.int64).reshape(-1)
     if active.size == 0:
         return _unchanged(X, d, v, a)
-    if np.unique(active).size != active.size:
+    if len(set(active.tolist())) != active.size:  # a few nodes: cheaper than np.unique
         raise ValueError(f"{body.name}: an active node is listed twice")
     if not dt > 0.0:
         raise ValueError(f"time step must be positive, got {dt}")
@@ -691,8 +702,10 @@ def move_ale_body(
     wanted_xy = np.asarray(x_target, dtype=float).reshape(-1, 2) - increment
     slides, clamped, mismatch, resets = _surface_slides(body, curve, chain, wanted_xy)
     x_surf = _move_surface(tn, curve, chain, slides)
-    x_new, smoothing, stage = _move_interior(body, tn, x_surf)
-    moved, touched = _kernels.changed_cells(x_new, x_old, body.cells)  # touched: cell indices
+    moved, touched = _kernels.changed_cells(x_surf, x_old, body.cells)  # touched: cell indices
+    x_new, smoothing, stage = _move_interior(body, tn, x_surf, moved, touched)
+    if x_new is not x_surf:  # the interior moved too
+        moved, touched = _kernels.changed_cells(x_new, x_old, body.cells)
     if not moved.any():
         return _unchanged(X, d, v, a, mismatch, active[clamped])
     _check_cells(body, x_new, touched, body.name)

@@ -64,6 +64,7 @@ RemapMethod = Literal["linear", "quadratic"]
 # reference coordinates of the CCW Q4 corners
 _XI = np.array([[-1.0, -1.0], [1.0, -1.0], [1.0, 1.0], [-1.0, 1.0]])
 _INSIDE_TOL = 1e-9  # reference-coordinate slack for points on a shared edge (round-off)
+_SAME_NODE = 1e-12  # a point this close (times the cell size) to an old node takes its value
 
 
 def q4_shape(xi: ArrayLike) -> NDArray[np.float64]:
@@ -165,10 +166,6 @@ class Remapper:
     def _box_hi(self) -> NDArray[np.float64]:
         return self._cell_xy.max(axis=1)
 
-    @cached_property
-    def _node_tree(self) -> cKDTree:
-        return cKDTree(self.nodes)
-
     def _search(self, points: NDArray, k: int) -> tuple[NDArray, NDArray]:
         """Containing cell (or -1) and its xi for each point among its k nearest centroids.
 
@@ -209,12 +206,14 @@ class Remapper:
         """
         pts = np.atleast_2d(np.asarray(points, dtype=float))
         n = len(pts)
-        cell, xi = np.full(n, -1), np.zeros((n, 2))
-        clamped = np.zeros(n, bool)
-        if hint is not None:
-            self._try_hints(pts, np.asarray(hint, dtype=np.int64).reshape(n), outside_tol,
-                            cell, xi, clamped)
+        if hint is not None:  # the kernel's misses are -1, xi = 0, not clamped, as below
+            cell, xi, clamped = self._try_hints(pts, np.asarray(hint, dtype=np.int64).reshape(n),
+                                                outside_tol)
+        else:
+            cell, xi, clamped = np.full(n, -1), np.zeros((n, 2)), np.zeros(n, bool)
         todo = np.flatnonzero(cell < 0)
+        if todo.size == 0:  # every hint held (the ALE update's usual case)
+            return PointLocation(cell, xi, clamped)
         # nearest few centroids first, then a wider search for the rest
         for k in (min(4, self._k), min(4 * self._k, len(self.cells))):
             if todo.size == 0:
@@ -229,15 +228,13 @@ class Remapper:
             clamped[todo] = True
         return PointLocation(cell, xi, clamped)
 
-    def _try_hints(self, pts: NDArray, hint: NDArray, outside_tol: float, cell: NDArray,
-                   xi: NDArray, clamped: NDArray) -> None:
-        """Fill the points found in (or just outside a boundary edge of) their hint cell
-        (compiled: ``kernels_numba.locate_in_hints``)."""
-        found, found_xi, out = _kernels.locate_in_hints(
-            self._cell_xy, self.cell_size, self._outer_edge, np.ascontiguousarray(pts), hint,
-            outside_tol, _INSIDE_TOL, 12)
-        hit = found >= 0
-        cell[hit], xi[hit], clamped[hit] = found[hit], found_xi[hit], out[hit]
+    def _try_hints(self, pts: NDArray, hint: NDArray, outside_tol: float
+                   ) -> tuple[NDArray, NDArray, NDArray]:
+        """(cell or -1, xi, clamped) of the points found in (or just outside a boundary edge
+        of) their hint cell (compiled: ``kernels_numba.locate_in_hints``)."""
+        return _kernels.locate_in_hints(self._cell_xy, self.cell_size, self._outer_edge,
+                                        np.ascontiguousarray(pts), hint, outside_tol,
+                                        _INSIDE_TOL, 12)
 
     def _clamp(
         self, pts: NDArray, todo: NDArray, cell: NDArray, xi: NDArray, outside_tol: float
@@ -291,13 +288,13 @@ class Remapper:
                 g = np.asarray(gradients, float).reshape(len(self.nodes), f2.shape[1], 2)[nodes]
         # sum_a N_a f_a, and for "quadratic" + 1/2 sum_a N_a g_a . (p - x_a) + 1/2 sum_a N_a
         # g_a . (p - x(xi)) (a clamped point lies off its cell: continue linearly to it)
-        out = _kernels.interpolate(self.nodes, self.cells, np.ascontiguousarray(f2), loc.cell,
-                                   np.ascontiguousarray(loc.xi), np.ascontiguousarray(pts),
-                                   np.ascontiguousarray(g, dtype=float), method == "quadratic")
-        # an unmoved node keeps its own value exactly (no round-off of the interpolation)
-        dist, node = self._node_tree.query(pts)
-        same = dist <= 1e-12 * self.cell_size[loc.cell]
-        out[same] = f2[node[same]]
+        # ... and a point on an old node keeps that node's value exactly (no round-off of the
+        # interpolation; the node is a corner of the located cell: no node search needed)
+        out = _kernels.interpolate_at_nodes(
+            self.nodes, self.cells, np.ascontiguousarray(f2), loc.cell,
+            np.ascontiguousarray(loc.xi), np.ascontiguousarray(pts),
+            np.ascontiguousarray(g, dtype=float), method == "quadratic", self.cell_size,
+            _SAME_NODE)
         return out.reshape((len(pts), *f.shape[1:]))
 
     def _gradient_operators(
@@ -358,8 +355,9 @@ class LazyGradients:
 
     def at(self, nodes: NDArray[np.int64]) -> NDArray[np.float64]:
         """Gradients of the nodes ``nodes`` (any shape s), (*s, k, 2)."""
-        missing = np.unique(nodes[~self._known[nodes]])
-        if missing.size:
+        known = self._known[nodes]
+        if not known.all():  # the later augmentations of a step mostly find them all known
+            missing = np.unique(nodes[~known])
             self._values[missing] = self.remapper.nodal_gradients(self.fields, missing)
             self._known[missing] = True
         return self._values[nodes]
@@ -431,4 +429,8 @@ def conservative_velocity_correction(
     inertia = m @ np.einsum("ni,ni->n", r, r)
     torque_of_a = total * (centre[0] * a[1] - centre[1] * a[0])
     omega = (target_angular - angular - torque_of_a) / inertia if inertia > 0 else 0.0
-    return v + a + omega * np.column_stack([-r[:, 1], r[:, 0]])
+    # omega e_z x r = omega (-r_y, r_x); rounding is symmetric, so negating omega r_y after the
+    # product gives the same bits as omega (-r_y) (and spares the column_stack)
+    spin = omega * r[:, ::-1]
+    spin[:, 0] = -spin[:, 0]
+    return v + a + spin
