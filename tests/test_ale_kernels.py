@@ -300,3 +300,13 @@ def test_body_pairs_and_first_occurrences_equal_the_numpy_selection(seed):
     want_own, want_partner = reference_body_pairs(pairs_list, lo, hi)
     np.testing.assert_array_equal(own[first], want_own)
     np.testing.assert_array_equal(partner[first], want_partner)
+
+
+def test_any_min_sine_below_is_the_numpy_test():
+    rng = np.random.default_rng(9)
+    x, cells = distorted_block(rng)
+    which = np.arange(len(cells))
+    sines = kernels.cell_min_sines(x, cells, which)
+    for tol in (sines.min() - 1e-12, sines.min(), np.median(sines), 2.0):
+        assert kernels.any_min_sine_below(x, cells, which, tol) == bool(np.any(sines <= tol))
+    assert not kernels.any_min_sine_below(x, cells, which[:0], 1.0)

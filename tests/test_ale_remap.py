@@ -196,3 +196,40 @@ def test_hints_give_the_same_location_and_clamp_just_outside_a_boundary_edge():
     np.testing.assert_allclose(hinted.xi, searched.xi, atol=1e-12)
     field = 2.0 * nodes[:, 0] + 1.0
     assert remapper.remap(field, out, hint=[2])[0] == pytest.approx(5.8, abs=1e-12)
+
+
+def reference_gradient_operators(remapper, nodes):
+    """``Remapper._gradient_operators`` as it was: the linear fit for every node, overridden by
+    the quadratic one where the patch determines it."""
+    patch, lengths = remapper._topology.patches
+    patch, lengths = patch[nodes], lengths[nodes]
+    centre = remapper.nodes[nodes]
+    valid = patch >= 0
+    d = (remapper.nodes[np.where(valid, patch, 0)] - centre[:, None, :]) * valid[..., None]
+    scale = np.sqrt(np.sum(d**2, axis=(1, 2)) / np.maximum(lengths, 1))
+    scale = np.where(scale > 0, scale, 1.0)
+    ds = d / scale[:, None, None]
+    dx, dy = ds[..., 0], ds[..., 1]
+    quad = np.stack([dx, dy, 0.5 * dx * dx, dx * dy, 0.5 * dy * dy], axis=-1)
+    ops = np.zeros((len(patch), 2, patch.shape[1]))
+    for basis, terms in ((ds, 2), (quad, 5)):
+        u, sv, vt = np.linalg.svd(basis, full_matrices=False)
+        ok = (lengths >= terms) & (sv[:, -1] > 1e-8 * sv[:, 0])
+        inv = np.where(sv > 1e-8 * sv[:, :1], 1.0 / np.where(sv > 0, sv, 1.0), 0.0)
+        pinv = np.einsum("nji,nj,nqj->niq", vt, inv, u)
+        ops[ok] = pinv[ok, :2, :] / scale[ok, None, None]
+    return patch, ops
+
+
+@pytest.mark.parametrize("shape", [(6, 1), (1, 5), (5, 4), (2, 2), (1, 1)])
+def test_gradient_operators_equal_the_linear_then_quadratic_fits_bit_for_bit(shape):
+    """The quadratic fit first and the linear one only for the nodes left (strips one cell
+    thick have nodes whose patch cannot carry a quadratic) gives the same operators."""
+    nodes, cells = perturbed_grid(*shape, seed=3)
+    remapper = Remapper(nodes, cells)
+    rng = np.random.default_rng(7)
+    for which in (np.arange(len(nodes)), rng.choice(len(nodes), min(5, len(nodes)), False)):
+        patch, ops = remapper._gradient_operators(which)
+        want_patch, want_ops = reference_gradient_operators(remapper, which)
+        np.testing.assert_array_equal(patch, want_patch)
+        np.testing.assert_array_equal(ops, want_ops)

@@ -260,6 +260,16 @@ def cell_min_sines(nodes, cells, which):
 
 
 @njit(cache=True)
+def any_min_sine_below(nodes, cells, which, tol):
+    """``np.any(cell_min_sines(nodes, cells, which) <= tol)`` without the array (NaN: False)."""
+    q = cell_min_sines(nodes, cells, which)
+    for k in range(q.size):
+        if q[k] <= tol:
+            return True
+    return False
+
+
+@njit(cache=True)
 def element_masses(X, cells, which, density, dn, shape):
     """Per cell of ``which`` its 4 lumped nodal masses (``ale.motion._element_masses``);
     ``dn`` (g, a, k) natural gradients and ``shape`` (g, a) shape values at the Gauss points,

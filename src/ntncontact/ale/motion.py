@@ -619,7 +619,7 @@ def _hints(body: AleBody, tn: _TnState, chain: _Chain, curve: SurfaceCurve, slid
 
 def _check_cells(body: AleBody, x: NDArray, cells: NDArray[np.int64], label: str) -> None:
     """MeshError (naming the element) if one of the cells ``cells`` is inverted or degenerate."""
-    if np.any(_kernels.cell_min_sines(x, body.cells, cells) <= 1e-10):
+    if _kernels.any_min_sine_below(x, body.cells, cells, 1e-10):
         check_elements(x, body.cells, label)
 
 

@@ -318,12 +318,19 @@ class Remapper:
         dx, dy = ds[..., 0], ds[..., 1]
         quad = np.stack([dx, dy, 0.5 * dx * dx, dx * dy, 0.5 * dy * dy], axis=-1)
         ops = np.zeros((len(patch), 2, patch.shape[1]))
-        for basis, terms in ((ds, 2), (quad, 5)):  # the quadratic fit overrides where ok
-            u, sv, vt = np.linalg.svd(basis, full_matrices=False)
-            ok = (lengths >= terms) & (sv[:, -1] > 1e-8 * sv[:, 0])
+        # the quadratic fit where the patch determines it, else the linear one: the linear fit
+        # is made only for the nodes left (none in a mesh two or more cells across), with the
+        # same per-node operations (each node's SVD and pseudo-inverse are its own)
+        rows = np.arange(len(patch))
+        for basis, terms in ((quad, 5), (ds, 2)):
+            u, sv, vt = np.linalg.svd(basis[rows], full_matrices=False)
+            ok = (lengths[rows] >= terms) & (sv[:, -1] > 1e-8 * sv[:, 0])
             inv = np.where(sv > 1e-8 * sv[:, :1], 1.0 / np.where(sv > 0, sv, 1.0), 0.0)
             pinv = np.einsum("nji,nj,nqj->niq", vt, inv, u)  # (n, terms, width)
-            ops[ok] = pinv[ok, :2, :] / scale[ok, None, None]
+            ops[rows[ok]] = pinv[ok, :2, :] / scale[rows[ok], None, None]
+            rows = rows[~ok]
+            if rows.size == 0:
+                break
         if nodes is None:
             self._gradient_ops = (patch, ops)
         return patch, ops
