@@ -310,3 +310,38 @@ def test_any_min_sine_below_is_the_numpy_test():
     for tol in (sines.min() - 1e-12, sines.min(), np.median(sines), 2.0):
         assert kernels.any_min_sine_below(x, cells, which, tol) == bool(np.any(sines <= tol))
     assert not kernels.any_min_sine_below(x, cells, which[:0], 1.0)
+
+
+def reference_tangents(curve):
+    """``SurfaceCurve._tangents`` as it was in NumPy."""
+    d = np.diff(curve.points, axis=0)
+    start, end = d - curve.bulge, d + curve.bulge
+    start /= np.linalg.norm(start, axis=1, keepdims=True)
+    end /= np.linalg.norm(end, axis=1, keepdims=True)
+    inner = ~curve.breaks[1:-1]
+    mean = end[:-1] + start[1:]
+    mean /= np.linalg.norm(mean, axis=1, keepdims=True)
+    end[:-1][inner], start[1:][inner] = mean[inner], mean[inner]
+    return start, end
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_curve_construction_kernels_equal_the_numpy_code_bit_for_bit(seed):
+    """Bulges, segment lengths (``_arc`` with u = 1) and end tangents of ``SurfaceCurve``."""
+    from ntncontact.ale.surface import SurfaceCurve, _bulges
+
+    rng = np.random.default_rng(600 + seed)
+    n = int(rng.integers(2, 40))
+    t = np.sort(rng.uniform(0.0, 3.0, n))
+    xy = np.column_stack([t, 0.3 * np.sin(2.0 * t) + 0.01 * rng.standard_normal(n)])
+    if seed == 0:
+        xy[3] = xy[2]  # a zero-length segment
+    corners = rng.uniform(size=n) < 0.2
+    curve = SurfaceCurve.from_chain(xy, corners)
+    np.testing.assert_array_equal(curve.bulge, _bulges(curve.points, curve.breaks))
+    seg = np.arange(n - 1)
+    lengths = curve._arc(seg, np.ones(n - 1))
+    np.testing.assert_array_equal(curve.node_s, np.concatenate([[0.0], np.cumsum(lengths)]))
+    if seed != 0:  # (a zero-length segment has no tangent)
+        for got, want in zip(curve._tangents, reference_tangents(curve), strict=True):
+            np.testing.assert_array_equal(got, want)

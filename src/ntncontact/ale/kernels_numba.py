@@ -47,6 +47,71 @@ def _arc(points, bulge, seg, u, gauss_u, gauss_w):
 
 
 @njit(cache=True)
+def bulges(points, breaks):
+    """``ale.surface._bulges`` (elementwise, in its operations' order): q_i of every segment."""
+    n = points.shape[0]
+    h = np.empty(n - 1)
+    slope = np.empty((n - 1, 2))
+    for i in range(n - 1):
+        c0, c1 = points[i + 1, 0] - points[i, 0], points[i + 1, 1] - points[i, 1]
+        h[i] = np.sqrt(c0 * c0 + c1 * c1)
+        w = h[i] if h[i] > 0 else 1.0
+        slope[i, 0], slope[i, 1] = c0 / w, c1 / w
+    d2 = np.zeros((n, 2))
+    tiny = np.finfo(np.float64).tiny
+    for i in range(1, n - 1):
+        span = h[i] + h[i - 1]
+        if not (span >= tiny or np.isnan(span)):  # np.maximum(span, tiny), NaN kept
+            span = tiny
+        d2[i, 0] = (slope[i, 0] - slope[i - 1, 0]) / span
+        d2[i, 1] = (slope[i, 1] - slope[i - 1, 1]) / span
+    out = np.empty((n - 1, 2))
+    for i in range(n - 1):
+        left, right = 0.0 if breaks[i] else 1.0, 0.0 if breaks[i + 1] else 1.0
+        count = max(int(left) + int(right), 1)
+        factor = h[i] * h[i] / count
+        for k in range(2):
+            out[i, k] = factor * (d2[i, k] * left + d2[i + 1, k] * right)
+    return out
+
+
+@njit(cache=True)
+def segment_speeds(points, bulge, gauss_u):
+    """|dx/du| of every segment at the Gauss points u (n - 1, g): the integrand of the
+    segment lengths (``SurfaceCurve._arc`` with u = 1 before its quadrature sum)."""
+    out = np.empty((bulge.shape[0], gauss_u.size))
+    for i in range(bulge.shape[0]):
+        for g in range(gauss_u.size):
+            _, _, dx0, dx1 = _eval(points, bulge, i, 1.0 * gauss_u[g])
+            out[i, g] = np.sqrt(dx0 * dx0 + dx1 * dx1)
+    return out
+
+
+@njit(cache=True)
+def end_tangents(points, bulge, breaks):
+    """``SurfaceCurve._tangents``: unit tangents at the start and end of every segment, the
+    normalized mean of the two one-sided tangents at a smooth node."""
+    m = bulge.shape[0]
+    start, end = np.empty((m, 2)), np.empty((m, 2))
+    for i in range(m):
+        d0, d1 = points[i + 1, 0] - points[i, 0], points[i + 1, 1] - points[i, 1]
+        s0, s1 = d0 - bulge[i, 0], d1 - bulge[i, 1]
+        e0, e1 = d0 + bulge[i, 0], d1 + bulge[i, 1]
+        ns, ne = np.sqrt(s0 * s0 + s1 * s1), np.sqrt(e0 * e0 + e1 * e1)
+        start[i, 0], start[i, 1] = s0 / ns, s1 / ns
+        end[i, 0], end[i, 1] = e0 / ne, e1 / ne
+    for i in range(m - 1):  # node i + 1 joins segments i and i + 1
+        if breaks[i + 1]:
+            continue
+        a0, a1 = end[i, 0] + start[i + 1, 0], end[i, 1] + start[i + 1, 1]
+        na = np.sqrt(a0 * a0 + a1 * a1)
+        a0, a1 = a0 / na, a1 / na
+        end[i, 0], end[i, 1] = a0, a1
+        start[i + 1, 0], start[i + 1, 1] = a0, a1
+    return start, end
+
+
+@njit(cache=True)
 def segment_of(points, bulge, node_s, s, gauss_u, gauss_w):
     """Segment and local u of arc-length positions s (``SurfaceCurve._segment_of``)."""
     n_seg = bulge.shape[0]

@@ -58,7 +58,8 @@ def _break_mask(n: int, corner_mask: ArrayLike | None) -> NDArray[np.bool_]:
 
 
 def _bulges(points: NDArray, breaks: NDArray) -> NDArray:
-    """q_i of every segment: h_i^2 times the mean second divided difference at its smooth ends."""
+    """q_i of every segment: h_i^2 times the mean second divided difference at its smooth ends
+    (the NumPy form of ``kernels_numba.bulges``, which ``SurfaceCurve.from_chain`` uses)."""
     chord = np.diff(points, axis=0)
     h = np.linalg.norm(chord, axis=1)
     slope = chord / np.where(h > 0, h, 1.0)[:, None]
@@ -87,10 +88,11 @@ class SurfaceCurve:
         if points.ndim != 2 or points.shape[1] != 2 or len(points) < 2:
             raise ValueError(f"a surface chain needs shape (n >= 2, 2), got {points.shape}")
         breaks = _break_mask(len(points), corner_mask)
-        bulge = _bulges(points, breaks)
-        seg = np.arange(len(points) - 1)
-        partial = cls(points, breaks, bulge, np.zeros(len(points)))
-        lengths = partial._arc(seg, np.ones(len(seg)))
+        # built once per t_n state of an ALE body: the elementwise parts compiled (the same
+        # operations as ``_bulges`` and ``_arc(seg, 1)``), the quadrature's sum left to NumPy
+        # (a BLAS product, whose summation order a loop cannot reproduce)
+        bulge = _kernels.bulges(points, breaks)
+        lengths = _kernels.segment_speeds(points, bulge, _GAUSS_U) @ _GAUSS_W
         return cls(points, breaks, bulge, np.concatenate([[0.0], np.cumsum(lengths)]))
 
     @property
@@ -183,15 +185,9 @@ class SurfaceCurve:
     def _tangents(self) -> tuple[NDArray, NDArray]:
         """Unit tangents at the start and end of every segment from the continuous nodal
         tangent field: at a smooth node the normalized mean of the two segments' one-sided
-        tangents (so both segments share it), at a break the segment's own."""
-        d = np.diff(self.points, axis=0)
-        start, end = d - self.bulge, d + self.bulge
-        start /= np.linalg.norm(start, axis=1, keepdims=True)
-        end /= np.linalg.norm(end, axis=1, keepdims=True)
-        inner = ~self.breaks[1:-1]  # node i + 1 joins segments i and i + 1
-        mean = end[:-1] + start[1:]
-        mean /= np.linalg.norm(mean, axis=1, keepdims=True)
-        end[:-1][inner], start[1:][inner] = mean[inner], mean[inner]
+        tangents (so both segments share it), at a break the segment's own (compiled:
+        ``kernels_numba.end_tangents``, the same operations)."""
+        start, end = _kernels.end_tangents(self.points, self.bulge, self.breaks)
         start.setflags(write=False)
         end.setflags(write=False)
         return start, end
