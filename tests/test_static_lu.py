@@ -119,11 +119,12 @@ def test_fill_pattern_is_the_exact_lu_pattern():
         L[k + 1:, k] = U[k + 1:, k] / U[k, k]
         U[k + 1:] -= np.outer(L[k + 1:, k], U[k])
     dense_lower = set(zip(*np.nonzero(np.abs(np.tril(L, -1)) > 1e-14), strict=True))
-    static_lower = {(int(i), j) for j in range(n) for i in
-                    symbolic.l_rows[symbolic.l_ptr[j]:symbolic.l_ptr[j + 1]]}
+    l_ptr, l_rows = symbolic.l_ptr.astype(int), symbolic.l_rows.astype(int)
+    u_ptr, u_rows = symbolic.u_ptr.astype(int), symbolic.u_rows.astype(int)
+    static_lower = {(int(i), j) for j in range(n) for i in l_rows[l_ptr[j]:l_ptr[j + 1]]}
     assert dense_lower == static_lower
-    static_L = sp.csc_matrix((factor.l_vals, symbolic.l_rows, symbolic.l_ptr), shape=(n, n))
-    static_U = sp.csc_matrix((factor.u_vals, symbolic.u_rows, symbolic.u_ptr), shape=(n, n))
+    static_L = sp.csc_matrix((factor.l_vals, l_rows, l_ptr), shape=(n, n))
+    static_U = sp.csc_matrix((factor.u_vals, u_rows, u_ptr), shape=(n, n))
     np.testing.assert_allclose(static_L.toarray(), np.tril(L, -1), atol=1e-12)
     np.testing.assert_allclose(static_U.toarray() + np.diag(factor.diag), np.triu(U),
                                atol=1e-12 * np.abs(U).max())

@@ -24,8 +24,11 @@ the ring impact's tangent (``benchmarks/static_lu.py``): see ``benchmarks/README
   With the threshold, every multiplier is bounded by 1/threshold as in threshold partial
   pivoting.
 
-The kernels are plain functions of arrays (int64 indices, float64 values, right-hand sides as
-C-contiguous (n, m) arrays), so each has one compiled signature, cached on disk.
+The kernels are plain functions of arrays (float64 values, right-hand sides as C-contiguous
+(n, m) arrays), so each has one compiled signature, cached on disk. The numerical kernels
+index with uint64 arrays: Numba then drops the test for negative (wrap-around) indices on every
+gather and scatter, which made the factorization 1.6x faster (0.50 -> 0.31 ms on the ring
+tangent) with bit-identical results.
 """
 
 from __future__ import annotations
@@ -46,17 +49,18 @@ class StaticSymbolic:
 
     ``a_*``: CSC of the permuted matrix, each entry's position in the CSR data of A (gather);
     ``l_*``: strictly lower L by columns; ``u_*``: strictly upper U by columns; rows ascending.
+    All index arrays are uint64 (module doc).
     """
 
     n: int
-    perm: NDArray[np.int64]
-    a_ptr: NDArray[np.int64]
-    a_rows: NDArray[np.int64]
-    a_gather: NDArray[np.int64]
-    l_ptr: NDArray[np.int64]
-    l_rows: NDArray[np.int64]
-    u_ptr: NDArray[np.int64]
-    u_rows: NDArray[np.int64]
+    perm: NDArray[np.uint64]
+    a_ptr: NDArray[np.uint64]
+    a_rows: NDArray[np.uint64]
+    a_gather: NDArray[np.uint64]
+    l_ptr: NDArray[np.uint64]
+    l_rows: NDArray[np.uint64]
+    u_ptr: NDArray[np.uint64]
+    u_rows: NDArray[np.uint64]
 
     @property
     def flops(self) -> int:
@@ -103,9 +107,9 @@ def analyse(indptr: NDArray, indices: NDArray, perm: NDArray) -> StaticSymbolic 
     parent = _etree(s_ptr, s_rows)
     u_ptr, u_rows = _upper_pattern(s_ptr, s_rows, parent)
     l_ptr, l_rows = _transpose_pattern(u_ptr, u_rows)
-    return StaticSymbolic(n, perm, permuted.indptr.astype(np.int64),
-                          permuted.indices.astype(np.int64),
-                          permuted.data.astype(np.int64) - 1, l_ptr, l_rows, u_ptr, u_rows)
+    gather = permuted.data.astype(np.int64) - 1
+    index_arrays = (perm, permuted.indptr, permuted.indices, gather, l_ptr, l_rows, u_ptr, u_rows)
+    return StaticSymbolic(n, *(a.astype(np.uint64) for a in index_arrays))
 
 
 def factorize(symbolic: StaticSymbolic, data: NDArray, threshold: float,
