@@ -155,9 +155,15 @@ def compare_results(a: Path, b: Path) -> None:
         scale = np.abs(ca).max()
         if scale > 0:
             differences.append((np.abs(ca - cb).max() / scale, key, scale))
-    print(f"history.csv: {len(ha)} rows; largest differences of a column relative to its "
-          "largest value:", ", ".join(f"{key} {d:.1e} (largest value {scale:.1e})"
-                                      for d, key, scale in sorted(differences)[-3:]))
+    significant = sorted(d for d in differences if d[2] > 1e-10)[-3:]
+    tiny = sorted(d for d in differences if d[2] <= 1e-10)
+
+    def listed(rows: list) -> str:
+        return ", ".join(f"{key} {d:.1e} (largest {scale:.1e}, differs by {d * scale:.1e})"
+                         for d, key, scale in reversed(rows))
+    print(f"history.csv, {len(ha)} rows: largest differences of a column relative to its "
+          f"largest value: {listed(significant)}; columns at round-off level throughout "
+          f"(largest value <= 1e-10): {listed(tiny)}")
 
 
 def main() -> None:

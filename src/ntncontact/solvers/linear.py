@@ -14,8 +14,9 @@ Three backends:
   interchanges on the fill pattern computed once per sparsity pattern
   (:mod:`ntncontact.solvers.static_lu`); SuperLU does the first factorization of a pattern
   (which gives the ordering) and every factorization whose pivots the static LU rejects
-  (``SolverStats.fallbacks``). Ring impact tangent (890 unknowns): ~0.5 ms per factorization
-  against ~1.3 ms for SuperLU (see ``benchmarks/README.md``).
+  (``SolverStats.fallbacks``). Ring impact tangent (890 unknowns): 0.4-0.6 ms per
+  factorization against 1.0-1.2 ms for SuperLU, solves 2-3x faster; the ring run's time loop
+  13-18 % shorter (see ``benchmarks/README.md``).
 
 ``"auto"`` uses ``"static"`` below :data:`SMALL_SYSTEM` unknowns, SuperLU up to
 :data:`PARDISO_MIN_UNKNOWNS`, and above it PARDISO when it loads: on a 2-core machine it was
@@ -204,7 +205,8 @@ class LinearSolver:
     def factorize(self, A: sp.spmatrix) -> Factorization:
         """Factor A once to solve for many right-hand sides, later ones included (modified
         Newton): the result stays valid until this solver factors another matrix with PARDISO
-        (whose factor lives in the shared handle); SuperLU factors are kept by the result."""
+        (whose factor lives in the shared handle); SuperLU and static-LU factors are kept by the
+        result (each static factor has its own value arrays)."""
         A = _canonical_csr(A)
         if self._pattern is None or not self._pattern.matches(A):
             self._release()

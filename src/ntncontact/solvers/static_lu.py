@@ -4,11 +4,15 @@ Why: the contact problems of the examples are small (ring impact: 890 unknowns, 
 entries) and keep one sparsity pattern over hundreds of factorizations (``fem/sparse.py``
 keeps a union pattern). SuperLU redoes its symbolic work (column etree, supernode and panel
 detection, memory expansion) at every ``splu`` call, which for such matrices costs as much as
-the arithmetic (~321 000 multiply-adds): ``gstrf`` takes ~1.1 ms and ``splu`` 1.2-1.7 ms. Here
+the arithmetic (~325 000 multiply-adds): ``gstrf`` takes ~1.1 ms and ``splu`` 1.2-1.7 ms. Here
 the fill pattern of L and U, and the map from the CSR data of A to the permuted matrix, are
 computed once per pattern; a factorization is then one left-looking sweep over that pattern and
 a solve two triangular sweeps, with no allocation but the factor's value arrays. Measured on
-the ring impact's tangent (``benchmarks/static_lu.py``): see ``benchmarks/README.md``.
+the ring impact's tangent through ``LinearSolver`` (``benchmarks/static_lu.py``, noisy 2-core
+machine): factorization 0.37-0.61 ms against SuperLU's 1.03-1.22 ms (the compiled sweep
+alone 0.31 ms), solve 0.03-0.06 ms against 0.10-0.13 ms; the whole ring impact's time loop
+3.85 -> 3.34 s and 5.37 -> 4.38 s (minima of interleaved runs), same results to round-off.
+Details in ``benchmarks/README.md``.
 
 - Ordering: the symmetric permutation ``perm`` (the matrix factored is ``A[perm][:, perm]``) is
   supplied by the caller; ``LinearSolver`` takes SuperLU's MMD(A^T + A) column ordering from the
