@@ -102,3 +102,32 @@ def test_run_with_compare_prints_and_writes_the_comparison(tmp_path, capsys):
     assert "ring_impact" in printed and "energy_initial" in printed
     assert printed.index("results written") < printed.index("energy_initial")
     assert (out / "comparison.csv").is_file()
+
+
+def _console(args: list[str]):
+    """The installed command's entry point, in a child process (it ends the process)."""
+    import os
+    import subprocess
+    import sys
+
+    code = f"import sys; sys.argv = ['ntncontact'] + {args!r}; " \
+           "from ntncontact.cli import console_main; console_main()"
+    # buffered streams, as for a user's pipe (PYTHONUNBUFFERED would hide a missing flush)
+    env = {k: v for k, v in os.environ.items() if k != "PYTHONUNBUFFERED"}
+    return subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                          timeout=120, env=env)
+
+
+def test_console_command_flushes_its_output_and_keeps_the_exit_code(tmp_path, capsys):
+    """console_main ends the process without the interpreter's teardown: what main printed
+    must still arrive whole (the streams are pipes here, so block-buffered), and main's exit
+    code must be the process's."""
+    scenario = str(EXAMPLES / "ring_impact.toml")
+    assert main(["mesh-quality", scenario]) == 0
+    expected = capsys.readouterr().out
+    done = _console(["mesh-quality", scenario])
+    assert done.returncode == 0 and done.stdout == expected and len(expected) > 100
+    bad = tmp_path / "bad.toml"
+    bad.write_text((EXAMPLES / "spinning_block.toml").read_text().replace("dt =", "dtt ="))
+    failed = _console(["run", str(bad), "--out", str(tmp_path / "o"), "--quiet"])
+    assert failed.returncode == 1 and "analysis.dtt: unknown key" in failed.stderr
