@@ -23,7 +23,10 @@ def test_run_with_plot_writes_the_figures_of_plot(tmp_path, capsys):
     names = {p.name for p in live.glob("*.png")} | {p.name for p in live.glob("*.gif")}
     assert names == {p.name for p in after.glob("*.png")} | {p.name for p in after.glob("*.gif")}
     assert {"snapshots.png", "animation.gif", "energies.png", "pair_history.png"} <= names
+    assert "deformed_von_mises.png" not in names  # the snapshots at the times take its place
     assert all(str(live / name) in printed for name in names)
+    assert main(["plot", str(after)]) == 0  # no times: six evenly spaced meshes
+    assert (after / "deformed_von_mises.png").is_file()
 
 
 def test_snapshots_are_drawn_once_their_frames_exist_and_before_the_run_ends(tmp_path,

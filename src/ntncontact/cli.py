@@ -38,10 +38,10 @@ def _run(args: argparse.Namespace) -> int:
 
             sim.run(progress)
         print(f"results written to {out} (history.csv, summary.json, fields.pvd)")
+        if args.compare:  # while the figure workers draw
+            _print_comparison(out)
         if figures:
             print("figures:", *figures.paths(), sep="\n  ")
-    if args.compare:
-        _print_comparison(out)
     return 0
 
 
@@ -158,8 +158,9 @@ def build_parser() -> argparse.ArgumentParser:
 
 def _figure_options(parser: argparse.ArgumentParser, note: str = "") -> None:
     parser.add_argument("--times", type=float, nargs="+", metavar="T",
-                        help="also draw the deformed meshes nearest to these times "
-                             f"(snapshots.png) {note}".strip())
+                        help="draw the deformed meshes nearest to these times (snapshots.png) "
+                             "instead of six evenly spaced ones (deformed_von_mises.png) "
+                             f"{note}".strip())
     parser.add_argument("--gif", action="store_true",
                         help=f"also write animation.gif {note}".strip())
 

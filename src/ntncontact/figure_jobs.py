@@ -39,7 +39,9 @@ def _import_matplotlib() -> None:
 
 
 class FigureJobs:
-    """The figures ``ntncontact plot DIR [--gif] [--times T ...]`` writes, as jobs.
+    """The figures ``ntncontact plot DIR [--gif] [--times T ...]`` writes, as jobs: with
+    ``times``, the deformed meshes at those times (snapshots.png) instead of six evenly spaced
+    ones (deformed_von_mises.png).
 
     ``start()`` forks the workers; ``on_step``/``on_finish`` make it a simulation observer (put
     it after the results writer) that submits each figure once its data are on disk; ``paths()``
@@ -75,8 +77,9 @@ class FigureJobs:
         self._submit_animation()
         self._submit_snapshots()
         if not self._figures:
-            self._figures = [self._submit(plot_figure, make, self.directory)
-                             for make in FIGURE_MAKERS]
+            # the snapshots at the asked times take the place of six evenly spaced ones
+            makers = [m for m in FIGURE_MAKERS if not (self.times and m is plot_deformed)]
+            self._figures = [self._submit(plot_figure, make, self.directory) for make in makers]
 
     def on_step(self, model: object, record: Any) -> None:
         """Snapshots go out once a frame at or after their last time is written: the frames
