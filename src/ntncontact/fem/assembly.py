@@ -122,6 +122,13 @@ class Assembler:
     def _numba_groups(self) -> list:
         return [NumbaAssembly(g.kind, self.cells, g.elements) for g in self.groups]
 
+    @cached_property
+    def _csr_indptr(self) -> NDArray:
+        """``pattern.indptr`` in the index type of ``pattern.indices``: SciPy then builds the
+        CSR matrix without converting it (int64 indptr + int32 indices: 33 us, same: 14 us on
+        the ring's 890 rows). The matrix gets the same arrays either way."""
+        return self.pattern.indptr.astype(self.pattern.indices.dtype)
+
     def _internal_numba(
         self, X: NDArray, x: NDArray, need_tangent: bool
     ) -> tuple[NDArray, sp.csr_matrix | None, float]:
@@ -135,8 +142,7 @@ class Assembler:
             energy += kernel.add(X, x, self.lam, self.mu, self.pattern.entry_map, force, data)
         if data is None:
             return force, None, energy
-        p = self.pattern
-        return force, sp.csr_matrix((data, p.indices, p.indptr), shape=p.shape), energy
+        return force, self.pattern_matrix(data), energy
 
     def element_energies(self, X: NDArray, x: NDArray) -> NDArray:
         """Strain energy of each element."""
@@ -192,4 +198,5 @@ class Assembler:
     def pattern_matrix(self, data: NDArray) -> sp.csr_matrix:
         """A CSR matrix with the stiffness pattern and these data."""
         p = self.pattern
-        return sp.csr_matrix((data, p.indices, p.indptr), shape=p.shape)
+        # a fresh indptr per matrix, as SciPy's conversion of the int64 one used to give
+        return sp.csr_matrix((data, p.indices, self._csr_indptr.copy()), shape=p.shape)

@@ -84,38 +84,96 @@ def _comb4(a, b, ca, cb):
 
 
 @njit(cache=True, error_model="numpy", inline="always")
-def _element(model, e, X, x, cells, lam, mu, need_tangent, Ke, status):
-    """Force (fx, fy) 4-tuples, upper block triangle of Ke (8,8) and energy of element e.
+def _reference(p, Xx, Xy, geo, Xc):
+    """Recompute geo[p] (Gx, Gy and det J * weight per Gauss point) from the element's reference
+    coordinates; return the number of Gauss points with det J > 0 (4: element valid).
 
-    Sets status[1] (1: reference, 2: current configuration) and stops at an inverted point.
+    These are the expressions the kernel always used, so the cached values are the same bits.
+    Xc[p] records the coordinates only when all four points are valid; otherwise it is poisoned
+    (NaN never compares equal) so that the element is recomputed, and found inverted, next time.
     """
-    n0, n1, n2, n3 = cells[e, 0], cells[e, 1], cells[e, 2], cells[e, 3]
-    Xx = (X[n0, 0], X[n1, 0], X[n2, 0], X[n3, 0])
-    Xy = (X[n0, 1], X[n1, 1], X[n2, 1], X[n3, 1])
-    xx = (x[n0, 0], x[n1, 0], x[n2, 0], x[n3, 0])
-    xy = (x[n0, 1], x[n1, 1], x[n2, 1], x[n3, 1])
-    fx = fy = (0.0, 0.0, 0.0, 0.0)
-    if need_tangent:
-        Ke[:, :] = 0.0
-    energy = 0.0
     for g in range(4):
         dxi, deta = _DXI[g], _DETA[g]
         # reference Jacobian J_ij = dX_i/dxi_j and dN_a/dX = dN_a/dxi J^-1
         J00, J01, J10, J11 = _dot4(Xx, dxi), _dot4(Xx, deta), _dot4(Xy, dxi), _dot4(Xy, deta)
         det = J00 * J11 - J01 * J10
         if not det > 0.0:
-            status[1] = 1
-            return fx, fy, energy
+            Xc[p, 0] = np.nan
+            return g
         r = 1.0 / det
         Gx = _comb4(dxi, deta, J11 * r, -J10 * r)
         Gy = _comb4(dxi, deta, -J01 * r, J00 * r)
+        for a in range(4):
+            geo[p, g, a] = Gx[a]
+            geo[p, g, 4 + a] = Gy[a]
+        geo[p, g, 8] = det * _GW[g]
+    for a in range(4):
+        Xc[p, a] = Xx[a]
+        Xc[p, 4 + a] = Xy[a]
+    return 4
+
+
+@njit(cache=True, inline="always")
+def _same_reference(Xx, Xy, xc):
+    """Whether element p's reference coordinates are those geo[p] was computed from.
+
+    Equal floats may differ only in the sign of a zero, which cannot change the gradients of an
+    element with det J > 0 (a Jacobian entry is a signed zero only if det J = 0).
+    """
+    return (Xx[0] == xc[0] and Xx[1] == xc[1] and Xx[2] == xc[2] and Xx[3] == xc[3]
+            and Xy[0] == xc[4] and Xy[1] == xc[5] and Xy[2] == xc[6] and Xy[3] == xc[7])
+
+
+@njit(cache=True, inline="always")
+def _gradients(gp, g):
+    """Gx, Gy and the weight of Gauss point g from an element's cached row gp = geo[p]."""
+    return ((gp[g, 0], gp[g, 1], gp[g, 2], gp[g, 3]),
+            (gp[g, 4], gp[g, 5], gp[g, 6], gp[g, 7]), gp[g, 8])
+
+
+@njit(cache=True, error_model="numpy")
+def _where_inverted(model, p, valid, xx, xy, geo):
+    """Where code of an element whose reference det J fails at Gauss point ``valid``: the
+    current configuration (2) if a Neo-Hookean det F fails at an earlier point, as the points
+    are checked in order, else the reference one (1)."""
+    for g in range(valid):
+        Gx, Gy, _ = _gradients(geo[p], g)
+        F00, F01, F10, F11 = _dot4(xx, Gx), _dot4(xx, Gy), _dot4(xy, Gx), _dot4(xy, Gy)
+        if model == 1 and not F00 * F11 - F01 * F10 > 0.0:
+            return 2
+    return 1
+
+
+@njit(cache=True, error_model="numpy", inline="always")
+def _element(model, p, e, X, x, ecells, lam, mu, geo, Xc, need_tangent, Ke, status):
+    """Force (fx, fy) 4-tuples, upper block triangle of Ke (8,8) and energy of element e, the
+    p-th of its group (the row of its cached reference data).
+
+    Sets status[1] (1: reference, 2: current configuration) and stops at an inverted point.
+    """
+    n0, n1, n2, n3 = ecells[p, 0], ecells[p, 1], ecells[p, 2], ecells[p, 3]
+    xx = (x[n0, 0], x[n1, 0], x[n2, 0], x[n3, 0])
+    xy = (x[n0, 1], x[n1, 1], x[n2, 1], x[n3, 1])
+    fx = fy = (0.0, 0.0, 0.0, 0.0)
+    energy = 0.0
+    Xx = (X[n0, 0], X[n1, 0], X[n2, 0], X[n3, 0])
+    Xy = (X[n0, 1], X[n1, 1], X[n2, 1], X[n3, 1])
+    if not _same_reference(Xx, Xy, Xc[p]):  # X moved (ALE) or first call
+        valid = _reference(p, Xx, Xy, geo, Xc)
+        if valid < 4:
+            status[1] = _where_inverted(model, p, valid, xx, xy, geo)
+            return fx, fy, energy
+    if need_tangent:
+        Ke[:, :] = 0.0
+    gp = geo[p]
+    for g in range(4):
+        Gx, Gy, w = _gradients(gp, g)
         F00, F01, F10, F11 = _dot4(xx, Gx), _dot4(xx, Gy), _dot4(xy, Gx), _dot4(xy, Gy)
         if model == 1 and not F00 * F11 - F01 * F10 > 0.0:
             status[1] = 2
             return fx, fy, energy
         W, P00, P01, P10, P11, Fi00, Fi01, Fi10, Fi11, c1 = _material(
             model, F00, F01, F10, F11, lam[e], mu[e])
-        w = det * _GW[g]
         energy += w * W
         fx = _comb4(fx, _comb4(Gx, Gy, P00, P01), 1.0, w)  # f_ai += w P_iJ G_aJ
         fy = _comb4(fy, _comb4(Gx, Gy, P10, P11), 1.0, w)
@@ -144,10 +202,10 @@ def _add_tangent(Gx, Gy, Hx, Hy, c1, lam, mu, Ke):
 
 
 @njit(cache=True)
-def _scatter(e, cells, fx, fy, Ke, need_tangent, entry_map, force, data):
+def _scatter(p, e, ecells, fx, fy, Ke, need_tangent, entry_map, force, data):
     """Add element e's force and tangent (lower blocks mirrored) to the global arrays."""
     for a in range(4):
-        n = cells[e, a]
+        n = ecells[p, a]
         force[2 * n] += fx[a]
         force[2 * n + 1] += fy[a]
     if not need_tangent:
@@ -159,48 +217,68 @@ def _scatter(e, cells, fx, fy, Ke, need_tangent, entry_map, force, data):
             data[entry_map[base + 8 * r + c]] += v
 
 
-@njit(cache=True)
-def _run(model, elems, lo, hi, X, x, cells, lam, mu, need_tangent, entry_map, force, data, status):
-    """Process elems[lo:hi] in order; return the energy. Stops at the first inverted element."""
+@njit(cache=True, inline="always")
+def _run(model, order, lo, hi, X, x, ecells, lam, mu, geo, Xc, need_tangent, entry_map, force,
+         data, status):
+    """Process order[lo:hi]; return the energy. Stops at the first inverted element."""
     Ke = np.empty((8, 8))
     energy = 0.0
     for p in range(lo, hi):
-        e = elems[p]
-        fx, fy, w = _element(model, e, X, x, cells, lam, mu, need_tangent, Ke, status)
+        e = order[p]
+        fx, fy, w = _element(model, p, e, X, x, ecells, lam, mu, geo, Xc, need_tangent, Ke,
+                             status)
         if status[1] != 0:
             status[0] = p
             return energy
         energy += w
-        _scatter(e, cells, fx, fy, Ke, need_tangent, entry_map, force, data)
+        _scatter(p, e, ecells, fx, fy, Ke, need_tangent, entry_map, force, data)
     return energy
 
 
 @njit(cache=True)
-def assemble_serial(model, elems, X, x, cells, lam, mu, need_tangent, entry_map, force, data,
-                    status):
-    """Serial assembly over ``elems``: adds into ``force`` and ``data``; returns the energy.
+def _run_both(model, order, lo, hi, X, x, ecells, lam, mu, geo, Xc, need_tangent, entry_map,
+              force, data, status):
+    """:func:`_run` compiled once per case, so that the force-only loop has no tangent code in
+    it (and behind a call: Numba's parallel pass fails on the inlined loop)."""
+    if need_tangent:
+        return _run(model, order, lo, hi, X, x, ecells, lam, mu, geo, Xc, True, entry_map,
+                    force, data, status)
+    return _run(model, order, lo, hi, X, x, ecells, lam, mu, geo, Xc, False, entry_map, force,
+                data, status)
 
-    ``status`` (int64[2]) receives (position in elems, where code) of the first inverted element.
+
+@njit(cache=True)
+def assemble_serial(model, order, X, x, ecells, lam, mu, geo, Xc, need_tangent, entry_map,
+                    force, data, status):
+    """Serial assembly of the elements ``order``: adds into ``force`` and ``data``.
+
+    ``ecells`` = cells[order]; ``geo`` and ``Xc`` are the reference data cache (see
+    :class:`NumbaAssembly`). ``status`` (int64[2]) is reset, then receives (position in order,
+    where code) of the first inverted element. Returns (energy, whether an element inverted).
     """
-    return _run(model, elems, 0, elems.size, X, x, cells, lam, mu, need_tangent, entry_map,
-                force, data, status)
+    status[0] = status[1] = 0
+    energy = _run_both(model, order, 0, order.size, X, x, ecells, lam, mu, geo, Xc,
+                       need_tangent, entry_map, force, data, status)
+    return energy, status[1] != 0
 
 
 @njit(cache=True, parallel=True)
-def assemble_blocks(model, elems, starts, deferred, X, x, cells, lam, mu, need_tangent, entry_map,
-                    force, data, status):
-    """Threaded assembly: block t is elems[starts[t]:starts[t+1]], then ``deferred`` serially.
+def assemble_blocks(model, order, starts, X, x, ecells, lam, mu, geo, Xc, need_tangent,
+                    entry_map, force, data, status):
+    """Threaded assembly: block t is order[starts[t]:starts[t+1]], then order[starts[-1]:]
+    (the deferred elements) serially.
 
     Blocks must not share nodes (see :func:`block_partition`). ``status`` is (nblocks + 1, 2).
     """
     nb = starts.size - 1
+    status[:, :] = 0
     energies = np.zeros(nb + 1)
     for t in prange(nb):
-        energies[t] = _run(model, elems, starts[t], starts[t + 1], X, x, cells, lam, mu,
-                           need_tangent, entry_map, force, data, status[t])
-    energies[nb] = _run(model, deferred, 0, deferred.size, X, x, cells, lam, mu, need_tangent,
-                        entry_map, force, data, status[nb])
-    return energies.sum()
+        energies[t] = _run_both(model, order, starts[t], starts[t + 1], X, x, ecells, lam, mu,
+                                geo, Xc, need_tangent, entry_map, force, data, status[t])
+    energies[nb] = _run_both(model, order, starts[nb], order.size, X, x, ecells, lam, mu, geo,
+                             Xc, need_tangent, entry_map, force, data, status[nb])
+    return energies.sum(), status[:, 1].any()
 
 
 def block_partition(cells: NDArray, elements: NDArray, nblocks: int) -> tuple[NDArray, NDArray,
@@ -230,6 +308,12 @@ class NumbaAssembly:
     ``force`` and CSR ``data`` arrays. ``threads`` defaults to :data:`THREADS`; it is reduced
     so that each thread has at least :data:`MIN_ELEMENTS_PER_THREAD` elements and to Numba's
     thread count; 1 means the serial loop.
+
+    The reference-configuration data (dN/dX and det J * weight at the Gauss points, 36 floats
+    per element) are cached between calls with the reference coordinates they came from: X
+    changes only when an ALE mesh moves, so an element is recomputed only when one of its
+    nodes' X differs from the kept copy (compared at every call, in the kernel). Not thread
+    safe: one instance must not be used by two calls at once.
     """
 
     def __init__(self, kind: MaterialKind, cells: NDArray, elements: NDArray,
@@ -243,7 +327,17 @@ class NumbaAssembly:
                           self.elements.size // MIN_ELEMENTS_PER_THREAD)
         self.threads = max(threads, 1)
         if self.threads > 1:
-            self.blocks = block_partition(self.cells, self.elements, self.threads)
+            elems, self.starts, deferred = block_partition(self.cells, self.elements,
+                                                           self.threads)
+            order = np.concatenate([elems, deferred])
+        else:
+            order = self.elements
+        # processing order and its cells, unsigned: Numba then skips the negative-index test
+        self.order = order.astype(np.uint64)
+        self.ecells = np.ascontiguousarray(self.cells[order], dtype=np.uint64)
+        self.geo = np.empty((order.size, 4, 9))  # per Gauss point: Gx (4), Gy (4), weight
+        self.Xc = np.full((order.size, 8), np.nan)  # X of each element's geo row; NaN: none
+        self.status = np.zeros((self.starts.size if self.threads > 1 else 1, 2), dtype=np.int64)
 
     def add(self, X: NDArray, x: NDArray, lam: NDArray, mu: NDArray, entry_map: NDArray,
             force: NDArray, data: NDArray | None) -> float:
@@ -253,23 +347,29 @@ class NumbaAssembly:
         element (reference Jacobian, or det F for Neo-Hookean, not positive at a Gauss point).
         """
         need_tangent = data is not None
-        data_ = data if need_tangent else np.empty(0)
-        args = (X, x, self.cells, lam, mu, need_tangent, entry_map, force, data_)
+        data_ = data if need_tangent else _NO_DATA
         if self.threads > 1:
-            elems, starts, deferred = self.blocks
-            status = np.zeros((starts.size, 2), dtype=np.int64)
-            energy = assemble_blocks(self.model, elems, starts, deferred, *args, status)
-            # rows 0..nb-1 hold positions in elems, the last row a position in deferred
-            orders = [elems] * (starts.size - 1) + [deferred]
+            energy, failed = assemble_blocks(
+                self.model, self.order, self.starts, X, x, self.ecells, lam, mu, self.geo,
+                self.Xc, need_tangent, entry_map, force, data_, self.status)
         else:
-            status = np.zeros((1, 2), dtype=np.int64)
-            energy = assemble_serial(self.model, self.elements, *args, status[0])
-            orders = [self.elements]
-        bad = [int(orders[t][status[t, 0]]) for t in np.flatnonzero(status[:, 1])]
-        if bad:
-            t = np.flatnonzero(status[:, 1])[int(np.argmin(bad))]
-            _raise_inverted(min(bad), int(status[t, 1]), X, x, self.cells)
-        return float(energy)
+            energy, failed = assemble_serial(
+                self.model, self.order, X, x, self.ecells, lam, mu, self.geo, self.Xc,
+                need_tangent, entry_map, force, data_, self.status[0])
+        if failed:
+            self._raise(X, x)
+        return energy
+
+    def _raise(self, X: NDArray, x: NDArray) -> None:
+        """Raise for the first inverted element (the lowest global index over the blocks)."""
+        rows = np.flatnonzero(self.status[:, 1])
+        bad = [int(self.order[self.status[t, 0]]) for t in rows]
+        t = rows[int(np.argmin(bad))]
+        _raise_inverted(min(bad), int(self.status[t, 1]), X, x, self.cells)
+
+
+#: The ``data`` argument of force-only calls (never written).
+_NO_DATA = np.empty(0)
 
 
 def _raise_inverted(e: int, where: int, X: NDArray, x: NDArray, cells: NDArray) -> None:
