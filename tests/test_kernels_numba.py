@@ -149,3 +149,95 @@ def test_numpy_path_names_global_element_of_a_group(monkeypatch):
         monkeypatch.setattr(assembly, "KERNEL", name)
         with pytest.raises(InvertedElementError, match="element 6 .*current"):
             asm.internal(nodes, x)
+
+
+def numba_internal(asm, X, x, need_tangent=True):
+    """The Numba path's force, CSR data and energy."""
+    f, K, W = asm.internal(X, x, need_tangent)
+    return f, None if K is None else K.data, W
+
+
+def assert_identical(a, b):
+    for u, v in zip(a, b, strict=True):
+        assert (u is None and v is None) or np.array_equal(u, v)
+
+
+@pytest.mark.parametrize("threads", [1, 2])
+def test_reference_cache_follows_x_moved_in_place(monkeypatch, threads):
+    """The cached dN/dX are recomputed for the elements whose nodes moved, even when X is the
+    same array modified in place, and the results are those of a fresh kernel bit for bit."""
+    monkeypatch.setattr(assembly, "KERNEL", "numba")
+    monkeypatch.setattr(kernels_numba, "MIN_ELEMENTS_PER_THREAD", 10)
+    rng = np.random.default_rng(8)
+    nodes, cells = distorted_grid(30, 20, rng)
+    ne = len(cells)
+    neo = rng.permutation(ne)[: ne // 2]
+    groups = [MaterialGroup("neo_hookean", neo),
+              MaterialGroup("linear_elastic", np.setdiff1d(np.arange(ne), neo))]
+    asm = make_assembler(nodes, cells, groups, rng)
+
+    def fresh(X, x, need_tangent=True):
+        asm.__dict__.pop("_numba_groups", None)
+        asm._numba_groups = [NumbaAssembly(g.kind, cells, g.elements, threads) for g in groups]
+        return numba_internal(asm, X, x, need_tangent)
+
+    X = nodes.copy()
+    x = deformed(nodes, rng, 1 / 20)
+    first = fresh(X, x)
+    assert_identical(numba_internal(asm, X, x), first)  # from the cache
+    assert_identical(numba_internal(asm, X.copy(), x), first)  # equal values, other array
+    moved = rng.random(len(X)) < 0.1
+    X[moved] += 0.01 / 20 * rng.standard_normal((moved.sum(), 2))  # in place, as ALE does
+    for need_tangent in (False, True):
+        result = numba_internal(asm, X, x, need_tangent)
+        expected = fresh(X, x, need_tangent)
+        assert_identical(result, expected)
+        assert not np.array_equal(result[0], first[0])  # a stale cache would give `first`
+        numba_internal(asm, X, x, need_tangent)
+    assert_identical(numba_internal(asm, nodes, x), first)  # moved back
+
+
+def test_cached_kernel_still_matches_numpy(monkeypatch):
+    rng = np.random.default_rng(9)
+    nodes, cells = distorted_grid(12, 7, rng)
+    asm = make_assembler(nodes, cells, [MaterialGroup("neo_hookean", np.arange(len(cells)))],
+                         rng)
+    for step in range(3):  # the reference moves between calls (ALE): cache refreshed each time
+        X = nodes + 0.01 / 7 * step * rng.standard_normal(nodes.shape)
+        x = deformed(X, rng, 1 / 7)
+        for _ in range(2):  # second call from the cache
+            assert_same(*both_kernels(monkeypatch, asm, X, x))
+
+
+def test_reference_inversion_after_cached_calls_and_recovery(monkeypatch):
+    """An element whose X is moved in place until it inverts is reported (its cached data are
+    not used), and once X is restored the results are those of the first call again."""
+    monkeypatch.setattr(assembly, "KERNEL", "numba")
+    rng = np.random.default_rng(10)
+    nodes, cells = distorted_grid(6, 4, rng, jitter=0.0)
+    asm = make_assembler(nodes, cells, [MaterialGroup("neo_hookean", np.arange(len(cells)))],
+                         rng)
+    X = nodes.copy()
+    x = deformed(nodes, rng, 1 / 4)
+    first = numba_internal(asm, X, x)
+    n0, n2 = cells[9, 0], cells[9, 2]
+    X[n2] = nodes[n0] - 0.3 * (nodes[n2] - nodes[n0])  # element 9 folded over its corner 0
+    for _ in range(2):  # the failed element must not be taken from the cache the second time
+        with pytest.raises(InvertedElementError, match=r"element \d+ .*reference"):
+            asm.internal(X, X)
+    X[n2] = nodes[n2]
+    assert_identical(numba_internal(asm, X, x), first)
+
+
+def test_current_inversion_reported_before_a_later_reference_one(monkeypatch):
+    """Gauss points are checked in order: det F failing at an earlier point than a
+    non-convex reference element's det J names the current configuration, as before caching."""
+    monkeypatch.setattr(assembly, "KERNEL", "numba")
+    nodes = np.array([[0.0, 0.0], [1.0, 0.0], [0.2, 0.2], [0.0, 1.0]])  # re-entrant corner 2
+    asm = Assembler(np.array([[0, 1, 2, 3]]), 4, [MaterialGroup("neo_hookean", np.arange(1))],
+                    np.ones(1), np.ones(1), np.ones(1))
+    with pytest.raises(InvertedElementError, match="element 0 .*reference"):
+        asm.internal(nodes, nodes)
+    x = nodes[[0, 3, 2, 1]]  # mirrored: det F < 0 wherever det J > 0
+    with pytest.raises(InvertedElementError, match="element 0 .*current"):
+        asm.internal(nodes, x)
