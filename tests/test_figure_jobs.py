@@ -65,3 +65,33 @@ def test_failed_run_with_plot_stops_its_workers_and_keeps_the_folder(tmp_path, c
     assert not list(out.glob("*.png"))  # nothing drawn for a failed run
     assert main(["plot", str(out)]) == 0  # but the folder is still plottable
     assert (out / "energies.png").is_file()
+
+
+def _record_warm_up(log):
+    import os
+    import time
+
+    def warm_up():
+        start = time.monotonic()
+        time.sleep(0.3)
+        with open(log, "a") as handle:
+            handle.write(f"{os.getpid()} {start} {time.monotonic()}\n")
+    return warm_up
+
+
+def _warm_up_intervals(tmp_path, monkeypatch, beside_a_run):
+    log = tmp_path / f"warm_{beside_a_run}.log"
+    monkeypatch.setattr(figure_jobs, "warm_up", _record_warm_up(log))
+    with figure_jobs.FigureJobs(tmp_path).start(beside_a_run=beside_a_run):
+        pass  # closing waits for the workers, hence for their initializers
+    rows = [line.split() for line in log.read_text().splitlines()]
+    return sorted((float(a), float(b)) for _, a, b in rows)
+
+
+def test_workers_beside_a_run_prepare_one_at_a_time(tmp_path, monkeypatch):
+    """Beside a run the two workers take turns (one core stays with the run); for
+    ``ntncontact plot`` they prepare together."""
+    first, second = _warm_up_intervals(tmp_path, monkeypatch, beside_a_run=True)
+    assert second[0] >= first[1]
+    first, second = _warm_up_intervals(tmp_path, monkeypatch, beside_a_run=False)
+    assert second[0] < first[1]

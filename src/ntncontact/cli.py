@@ -27,7 +27,7 @@ def _run(args: argparse.Namespace) -> int:
                           overrides=list(args.set or []))
     plotting = args.plot or args.gif or bool(args.times)
     with _figure_jobs(out, args) if plotting else contextlib.nullcontext() as figures:
-        sim = Simulation(model, [writer] + ([figures.start()] if figures else []))
+        sim = Simulation(model, [writer] + ([figures.start(beside_a_run=True)] if figures else []))
         t_end = model.analysis.t_end
         with tqdm(total=t_end, unit="t", disable=args.quiet or None, desc=scenario.stem,
                   bar_format="{l_bar}{bar}| t={n:.4g}/{total:.4g} [{elapsed}<{remaining}]") \

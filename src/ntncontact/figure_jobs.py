@@ -9,6 +9,7 @@ fork, the figures are drawn one after the other in the calling process.
 
 from __future__ import annotations
 
+import contextlib
 import multiprocessing as mp
 import os
 from collections.abc import Callable, Sequence
@@ -29,13 +30,15 @@ from .plotting import (
 WORKERS = 2  # this code's CI and demo machines have two cores
 
 
-def _import_matplotlib() -> None:
+def _import_matplotlib(turn: Any = None) -> None:
     """Worker initializer: the ~1 s matplotlib import and the first figure's one-off work
-    (:func:`~ntncontact.plotting.warm_up`), paid before the first figure is asked."""
-    from matplotlib.backends import backend_agg  # noqa: F401
-    from PIL import Image  # noqa: F401
+    (:func:`~ntncontact.plotting.warm_up`), paid before the first figure is asked; holding
+    ``turn`` (a lock shared by the workers) if given, so that one worker at a time does it."""
+    with turn if turn is not None else contextlib.nullcontext():
+        from matplotlib.backends import backend_agg  # noqa: F401
+        from PIL import Image  # noqa: F401
 
-    warm_up()
+        warm_up()
 
 
 class FigureJobs:
@@ -63,11 +66,16 @@ class FigureJobs:
     def __exit__(self, *exc: object) -> None:
         self.close()
 
-    def start(self) -> FigureJobs:
-        """Fork the workers now (cheap before a run has built its arrays)."""
+    def start(self, beside_a_run: bool = False) -> FigureJobs:
+        """Fork the workers now (cheap before a run has built its arrays). ``beside_a_run``:
+        the workers prepare one after the other, leaving the second core to the run, which
+        starts at the same time (on two cores, three busy processes slowed its start-up);
+        they still have the whole run to get ready."""
         if self._pool is None and "fork" in mp.get_all_start_methods():
-            self._pool = ProcessPoolExecutor(WORKERS, mp.get_context("fork"),
-                                             initializer=_import_matplotlib)
+            context = mp.get_context("fork")
+            turn = context.Lock() if beside_a_run else None
+            self._pool = ProcessPoolExecutor(WORKERS, context, initializer=_import_matplotlib,
+                                             initargs=(turn,))
             for _ in range(WORKERS):  # the pool forks its workers at the first submission
                 self._pool.submit(int)
         return self
