@@ -37,12 +37,11 @@ rigid-body velocity that restores the linear and angular momentum (METHOD_NOTES,
 from __future__ import annotations
 
 from functools import cached_property
-from typing import Literal, NamedTuple
+from typing import Any, Literal, NamedTuple
 
 import numpy as np
 import scipy.sparse as sp
 from numpy.typing import ArrayLike, NDArray
-from scipy.spatial import cKDTree
 
 from ntncontact.ale import kernels_numba as _kernels
 from ntncontact.mesh.quadmesh import MeshError
@@ -155,7 +154,10 @@ class Remapper:
 
     # the search structures are built on first use: a hinted ALE move rarely needs them
     @cached_property
-    def _tree(self) -> cKDTree:
+    def _tree(self) -> Any:
+        # imported here: scipy.spatial costs ~0.08 s at start-up and hinted moves never ask
+        from scipy.spatial import cKDTree
+
         return cKDTree(self._cell_xy.mean(axis=1))
 
     @cached_property
