@@ -12,8 +12,8 @@ $(BIN)/python:
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --upgrade pip
 
-# After installing, compile the Numba kernels into .numba_cache on two processes (~20 s once;
-# otherwise the first run pays ~30 s for them on one core).
+# After installing, compile the Numba kernels into .numba_cache on two processes (~35-40 s once;
+# otherwise the first run pays about a minute for them on one core).
 $(STAMP): pyproject.toml | $(BIN)/python
 	$(BIN)/python -m pip install --quiet -e ".[test]"
 	$(BIN)/python -m ntncontact.warmup

@@ -1,6 +1,6 @@
 """Compile the Numba kernels into their on-disk cache before the first run.
 
-With a cold cache the first simulation spends ~25-40 s compiling (element, contact and ALE
+With a cold cache the first simulation spends about a minute compiling (element, contact and ALE
 kernels, in that order, on one core). ``python -m ntncontact.warmup`` (run by ``make`` after
 installing) compiles them on two processes side by side, each through the real code paths so
 that exactly the type signatures a run uses are cached:
