@@ -158,3 +158,66 @@ def test_augment_tangential_update():
     # a sticking pair's trial grows by eps_T delta g_T at the same configuration
     np.testing.assert_allclose(again.trial_T[stick], res.t_T[stick]
                                + law.eps_T * res.slip_measure[stick], rtol=1e-14, atol=1e-14)
+
+
+def first_newton_step(x, anchors, interface, state, law):
+    """The first iterate of solve_fixed_multipliers from x."""
+    res = evaluate_contact(x, None, None, interface, state, law)
+    r = (spring_residual(x, anchors) + res.force)[FREE]
+    jac = np.diag(np.repeat(K_SPRING, 2)) + res.tangent_matrix().toarray()[np.ix_(FREE, FREE)]
+    x = x.copy()
+    x[:3] -= np.linalg.solve(jac, r).reshape(-1, 2)
+    return x
+
+
+def test_pairs_with_a_multiplier_stay_on_the_pressed_branch():
+    """laws.held_pairs: starting 0.1 clear of the wall, a frictionless augmented pair with
+    lambda_N > 0 keeps t_N = lambda_N + eps_N g (tensile there) and its stiffness, so the first
+    Newton step gets the penetration (~0.01) within 0.002; a bracketed pair has neither there,
+    and the first step goes to where the springs alone balance the load, 0.1-0.26 deep, ten
+    times the solution's penetration."""
+    x0, anchors, interface, pairs = setup()
+    law = ContactLaw("augmented_lagrangian", eps_N=200.0)
+    held = PairState.from_pairs(pairs).with_multipliers(np.full(3, 1.0))
+    res = evaluate_contact(x0, None, None, interface, held, law)
+    np.testing.assert_allclose(res.gap, -HEIGHT, rtol=1e-12)
+    np.testing.assert_allclose(res.t_N, 1.0 - 200.0 * HEIGHT, rtol=1e-12)  # tensile
+    assert np.abs(res.vals).max() > 0.0
+    _, solution = solve_fixed_multipliers(x0, anchors, interface, held, law)
+    x1 = first_newton_step(x0, anchors, interface, held, law)
+    gap_1 = evaluate_contact(x1, None, None, interface, held, law).gap
+    assert np.abs(gap_1 - solution.gap).max() < 0.02 * HEIGHT
+    # without a multiplier (lambda_N = 0), or with friction, the bracket applies: t_N = 0
+    bracketed = PairState.from_pairs(pairs)
+    frictional = ContactLaw("augmented_lagrangian", eps_N=200.0, eps_T=5.0, mu=0.2)
+    for state, other in ((bracketed, law), (held, frictional)):
+        res = evaluate_contact(x0, None, None, interface, state, other, x_start=x0)
+        np.testing.assert_array_equal(res.t_N, 0.0)
+    res = evaluate_contact(x0, None, None, interface, bracketed, law)
+    np.testing.assert_array_equal(res.vals, 0.0)  # no normal stiffness either
+    _, solution = solve_fixed_multipliers(x0, anchors, interface, bracketed, law)
+    x1 = first_newton_step(x0, anchors, interface, bracketed, law)
+    np.testing.assert_allclose(x1[:3], anchors + LOAD / K_SPRING[:, None], rtol=1e-12)
+    gap_1 = evaluate_contact(x1, None, None, interface, bracketed, law).gap
+    assert np.all(gap_1 > 5.0 * solution.gap)
+
+
+def test_tensile_held_pairs_are_released_and_not_converged():
+    """A held pair that comes out tensile is not converged (its solve used a traction the
+    bracketed law does not allow) and its next multiplier is 0."""
+    x0, anchors, interface, pairs = setup()
+    law = ContactLaw("augmented_lagrangian", eps_N=200.0)
+    state = PairState.from_pairs(pairs).with_multipliers(np.array([1.0, 30.0, 1.0]))
+    x = x0.copy()
+    x[:3] = x0[3:] + np.array([0.01, -0.001, 0.01])[:, None] * NW  # clear, in, clear
+    res = evaluate_contact(x, None, None, interface, state, law)
+    np.testing.assert_allclose(res.t_N, state.lambda_N + 200.0 * res.gap, rtol=1e-12)
+    np.testing.assert_array_equal(res.t_N < 0.0, [True, False, True])
+    new = augment(state, res, law)
+    np.testing.assert_array_equal(new.lambda_N, np.maximum(res.t_N, 0.0))
+    tol = AugmentationTolerances(normal=1.0, tangential=1.0)  # changes alone would pass
+    check = check_augmentation(res, res, law, tol)
+    assert not check.converged and check.tensile_pairs == 2
+    pressed = evaluate_contact(x, None, None, interface, new, law)
+    check = check_augmentation(pressed, pressed, law, tol)
+    assert check.converged and check.tensile_pairs == 0

@@ -233,6 +233,19 @@ def below_foundation(model, x: np.ndarray, exclude: np.ndarray) -> np.ndarray:
     return np.interp(x[arc, 0], surface[:, 0], surface[:, 1]) - x[arc, 1]
 
 
+def newton_force_bound(model, state) -> float:
+    """Bound on |sum of the cylinder's vertical contact forces - load| from Newton's stopping
+    test |R| <= rtol scale (solvers.newton, problem.StepProblem): the cylinder's internal forces
+    sum to zero, so that difference is the sum of its nodes' vertical residuals, at most
+    sqrt(n) |R| (Cauchy-Schwarz). The scale is at least the round-off floor
+    1e-4 max|K_ii| L (~3e8 on these meshes, so |R| <= 0.03) and |f_int|."""
+    f_int, K, _ = model.assembler.internal(state.X, state.X + state.d, need_tangent=True)
+    length = float(np.ptp(model.X0, axis=0).max())
+    scale = max(1e-4 * np.abs(K.diagonal()).max() * length, np.linalg.norm(f_int))
+    nodes = model.body("cylinder").nodes.size
+    return np.sqrt(nodes) * model.analysis.newton_rtol * scale
+
+
 def check_hertz_level(level: int) -> dict[str, float]:
     h = MESH_SIZE[level]
     out = {}
@@ -241,8 +254,9 @@ def check_hertz_level(level: int) -> dict[str, float]:
         a, p0 = hertz(load)
         rows, model, state = hertz_profile(level, step)
         pressed = rows["normal_traction"] > 0.0
-        # equilibrium: the contact forces carry the load (residual tolerance 1e-10)
-        assert rows["vertical_force"].sum() == pytest.approx(load, rel=1e-8)
+        # equilibrium: the contact forces carry the load, to what Newton's stopping test
+        # guarantees (~5e-7 of the smallest load here)
+        assert abs(rows["vertical_force"].sum() - load) <= newton_force_bound(model, state)
         # symmetric about the lowest point (the mesh is mirror-symmetric)
         np.testing.assert_allclose(rows["p_ref"], mirrored(rows, "p_ref"), rtol=0.0,
                                    atol=AUGMENTED_TRACTION)

@@ -4,11 +4,13 @@ Per step: Newton converges with the multipliers of ``state`` fixed, giving a Con
 if :func:`check_augmentation` (r_{k-1}, r_k) is not converged, ``state = augment(state, r_k)``
 and the ALE motion + Newton are repeated.
 
-Update (Uzawa):   lambda_N <- <lambda_N + eps_N gdot> = t_N^(k)          (5.4 step 4.1)
+Update (Uzawa):   lambda_N <- <lambda_N + eps_N gdot> = <t_N^(k)>        (5.4 step 4.1)
                   dlambda_T <- t_T^(k) - t_T,n                           (5.4 step 4.2)
 The tangential update covers both branches of 4.2: on a sticking pair t_T^(k) = t_T,n + dlambda_T
 + eps_T gdot_T, so dlambda_T grows by eps_T gdot_T; on a slipping pair t_T^(k) = mu t_N^(k)
 trial/|trial|, so dlambda_T = mu lambda_N^(k) trial/|trial| - t_T,n.
+A pair held on the pressed branch during the solve (``laws.held_pairs``) may come out with a
+tensile t_N^(k) < 0: it is not converged, and its multiplier drops to 0 (the bracket).
 """
 
 from __future__ import annotations
@@ -31,7 +33,8 @@ def augment(state: PairState, result: ContactResult, law: ContactLaw) -> PairSta
         raise ValueError(f"augment() applies to 'augmented_lagrangian', not {law.method!r}")
     if not np.array_equal(result.pairs, state.pairs):
         raise ValueError("result and state describe different active sets")
-    return replace(state, lambda_N=result.t_N.copy(), dlambda_T=result.t_T - state.t_T)
+    return replace(state, lambda_N=np.maximum(result.t_N, 0.0),
+                   dlambda_T=result.t_T - state.t_T)
 
 
 @dataclass(frozen=True)
@@ -56,6 +59,8 @@ class AugmentationCheck:
     status_changes: int
     constraint_violation: float
     converged: bool
+    #: pairs held on the pressed branch whose traction came out tensile (laws.held_pairs)
+    tensile_pairs: int = 0
 
 
 def _max_abs(values: np.ndarray) -> float:
@@ -69,7 +74,8 @@ def check_augmentation(
     """Report 5.4 step 4 between two successive augmentations of one step.
 
     Also requires the stick/slip status to be unchanged, since a status switch means the
-    multipliers were built for a different friction branch.
+    multipliers were built for a different friction branch, and no tensile traction (a pair
+    held by its multiplier during the solve, ``laws.held_pairs``, that wants to separate).
     """
     if not np.array_equal(previous.pairs, current.pairs):
         raise ValueError("augmentations of one step must share the active set")
@@ -80,7 +86,9 @@ def check_augmentation(
     changes = int(np.count_nonzero((current.status == SLIP) != (previous.status == SLIP)))
     pressed = current.t_N > 0.0
     violation = _max_abs(current.normal_measure[pressed])
+    tensile = int(np.count_nonzero(current.t_N < 0.0))
     ok = (normal <= tol.normal and tangential <= tol.tangential and slip_excess <= tol.slip
           and (changes == 0 or not law.frictional)
-          and (tol.constraint is None or violation <= tol.constraint))
-    return AugmentationCheck(normal, tangential, slip_excess, changes, violation, bool(ok))
+          and (tol.constraint is None or violation <= tol.constraint) and tensile == 0)
+    return AugmentationCheck(normal, tangential, slip_excess, changes, violation, bool(ok),
+                             tensile)

@@ -108,11 +108,13 @@ def _sign(a):
 
 
 @njit(cache=True, inline="always")
-def _normal_traction(method, lambda_n, eps_N, measure):
+def _normal_traction(method, lambda_n, eps_N, measure, frictional):
     """(t_N, dt_N/d measure) of laws.normal_traction; "lagrange": the multiplier itself."""
     if method == 2:
         return lambda_n, 0.0
     trial = (0.0 if method == 0 else lambda_n) + eps_N * measure
+    if method == 1 and not frictional and lambda_n > 0.0:  # laws.held_pairs
+        return trial, eps_N
     return (trial, eps_N) if trial >= 0.0 else (0.0, 0.0)
 
 
@@ -213,7 +215,7 @@ def evaluate_pairs(x, v, x_start, table1, table2, pairs, lambda_N, dlambda_T, t_
         else:
             slip = _project(0.0, 0.0, 0.0, e0, e1, de, d_slip)
         measure, d_measure = (gap_rate, d_rate) if rate_law else (gap, d_gap)
-        t_n, dt_dm = _normal_traction(method, lambda_N[p], eps_N, measure)
+        t_n, dt_dm = _normal_traction(method, lambda_N[p], eps_N, measure, frictional)
         t_t, trial, stat, ds_coef, dn_coef = 0.0, 0.0, _SLIP, 0.0, 0.0
         if frictional:
             dlam = dlambda_T[p] if method != 0 else 0.0
