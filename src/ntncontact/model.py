@@ -142,6 +142,8 @@ class ContactInterface:
     max_augmentations: int
     ordered_pairing: bool = False  # distinct partners in surface order (ALE partner surface)
     predicted_detection: bool = False  # penetration tested at x + dt v (see interfaces)
+    #: "uzawa" (report 5.4) or "newton" (augmentation.newton_update, frictionless pairs)
+    multiplier_update: str = "uzawa"
 
 
 @dataclass(frozen=True)

@@ -5,7 +5,13 @@ dof = 2 node + component). See :mod:`.evaluate` for the force/tangent convention
 :mod:`.lagrange`, :mod:`.augmentation`, :mod:`.detection` for the step-level procedures.
 """
 
-from .augmentation import AugmentationCheck, AugmentationTolerances, augment, check_augmentation
+from .augmentation import (
+    AugmentationCheck,
+    AugmentationTolerances,
+    augment,
+    check_augmentation,
+    newton_update,
+)
 from .detection import Detection, detect, release_mask
 from .evaluate import ContactResult, contact_term, evaluate_contact, pair_response
 from .friction import SLIP, STICK, ReturnMapping, frictional_dissipation, return_mapping
@@ -43,6 +49,7 @@ __all__ = [
     "evaluate_contact",
     "frictional_dissipation",
     "lagrange_blocks",
+    "newton_update",
     "normal_traction",
     "pair_kinematics",
     "pair_response",

@@ -212,6 +212,7 @@ class AugmentationConfig(Strict):
     gap_tolerance: Positive = 1e-8
     slip_tolerance: Positive = 1e-8
     traction_tolerance: Positive = 1e-8
+    update: Literal["uzawa", "newton"] = "uzawa"
 
 
 class ContactConfig(Strict):
