@@ -104,8 +104,16 @@ class ResultWriter:
         )
 
     def on_finish(self, status: str, error: str | None) -> None:
-        self.results.close()
-        self.results.summary.finish(status, error, mesh_quality=self._mesh_quality())
+        """Close the files (waiting for the VTU frames still being written), then the summary;
+        a frame that could not be written makes a completed run a failed one."""
+        try:
+            self.results.close()
+        except Exception as err:
+            if status == "completed":
+                status, error = "failed", str(err)
+            raise
+        finally:
+            self.results.summary.finish(status, error, mesh_quality=self._mesh_quality())
 
     def _mesh_quality(self) -> dict:
         """Table 4.1 statistics of each body's current mesh (node positions x) at the end."""

@@ -2,7 +2,8 @@
 
 Layout: ``DIR/<name>.pvd`` lists ``DIR/<name>/<name>_<step:05d>.vtu``. Each VTU is written to a
 temporary file and renamed into place; the PVD is rewritten (also atomically) only after the VTU
-it newly lists is complete, so every file a PVD names exists and parses.
+it newly lists is complete, so every file a PVD names exists and parses. The file format itself
+is in :mod:`ntncontact.io.vtu`.
 """
 
 from __future__ import annotations
@@ -10,12 +11,14 @@ from __future__ import annotations
 import os
 import xml.etree.ElementTree as ET
 from collections.abc import Mapping, Sequence
+from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
 
-import meshio
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
+
+from .vtu import VtuArrays, VtuLayout, encode_vtu, read_vtu_arrays, vtu_layout
 
 REQUIRED_POINT_DATA = ("displacement", "velocity")
 REQUIRED_CELL_DATA = ("von_mises", "body_id")
@@ -98,15 +101,24 @@ class VtuSeriesWriter:
     Call :meth:`write` once per output step with the mesh points (material positions X at the
     nodes, which move for ALE bodies), Q4 cells, point data (at least ``displacement`` = x - X and
     ``velocity``) and cell data (at least ``von_mises`` and ``body_id``).
+
+    With ``background=True`` :meth:`write` checks and copies the arrays, and one worker thread
+    compresses and writes the files in order (zlib releases the GIL, so this runs beside the
+    caller's next step); :meth:`close` waits for them. A failed write is raised by the next
+    :meth:`write` or by :meth:`close`; the frames before it stay listed and readable.
     """
 
-    def __init__(self, directory: str | os.PathLike, name: str = "fields") -> None:
+    def __init__(self, directory: str | os.PathLike, name: str = "fields",
+                 background: bool = False) -> None:
         self.directory = Path(directory)
         self.name = name
         self.pvd_path = self.directory / f"{name}.pvd"
         self.vtu_directory = self.directory / name
         self.vtu_directory.mkdir(parents=True, exist_ok=True)
         self._entries: list[tuple[float, str]] = []
+        self.background = background
+        self._pool: ThreadPoolExecutor | None = None  # started at the first write
+        self._pending: list[Future] = []
 
     @property
     def entries(self) -> list[tuple[float, str]]:
@@ -122,18 +134,49 @@ class VtuSeriesWriter:
         point_data: Mapping[str, ArrayLike],
         cell_data: Mapping[str, ArrayLike],
     ) -> Path:
-        """Write output step ``step`` as a VTU, list it in the PVD and return the VTU path."""
-        mesh = self._build_mesh(points, cells, point_data, cell_data)
+        """Write output step ``step`` as a VTU, list it in the PVD and return the VTU path
+        (in the background: where it will be once :meth:`close` returns)."""
+        layout = self._layout(points, cells, point_data, cell_data)
         vtu_path = self.vtu_directory / f"{self.name}_{int(step):05d}.vtu"
-        tmp = vtu_path.with_name(vtu_path.name + ".tmp")
-        meshio.write(tmp, mesh, file_format="vtu")
-        _atomic_replace(tmp, vtu_path)
-        self._entries.append((float(time), f"{self.name}/{vtu_path.name}"))
-        self._write_pvd()
+        if not self.background:
+            self._store(vtu_path, float(time), layout)
+            return vtu_path
+        self._raise_failed(wait=False)
+        if self._pool is None:
+            self._pool = ThreadPoolExecutor(1, thread_name_prefix="vtu-writer")
+        self._pending.append(self._pool.submit(self._store, vtu_path, float(time), layout))
         return vtu_path
 
+    def close(self) -> None:
+        """Wait for the background writes (if any), then raise the first that failed."""
+        try:
+            self._raise_failed(wait=True)
+        finally:
+            if self._pool is not None:
+                self._pool.shutdown(wait=True)
+                self._pool = None
+
+    def _raise_failed(self, wait: bool) -> None:
+        """Forget the finished writes (all of them if ``wait``); raise the first failure."""
+        keep = []
+        for future in self._pending:
+            if wait or future.done():
+                if future.exception() is not None:
+                    self._pending = []  # reported once; close() still waits for the later ones
+                    raise future.exception()
+            else:
+                keep.append(future)
+        self._pending = keep
+
+    def _store(self, vtu_path: Path, time: float, layout: VtuLayout) -> None:
+        tmp = vtu_path.with_name(vtu_path.name + ".tmp")
+        tmp.write_bytes(encode_vtu(layout))
+        _atomic_replace(tmp, vtu_path)
+        self._entries.append((time, f"{self.name}/{vtu_path.name}"))
+        self._write_pvd()
+
     @staticmethod
-    def _build_mesh(points, cells, point_data, cell_data) -> meshio.Mesh:
+    def _layout(points, cells, point_data, cell_data) -> VtuLayout:
         xy = np.asarray(points, dtype=float)
         quads = np.asarray(cells, dtype=np.int64)
         if xy.ndim != 2 or xy.shape[1] != 2:
@@ -144,12 +187,9 @@ class VtuSeriesWriter:
             raise ValueError("cells refer to points that do not exist")
         pdata = _check_data("point", point_data, len(xy), REQUIRED_POINT_DATA)
         cdata = _check_data("cell", cell_data, len(quads), REQUIRED_CELL_DATA)
-        return meshio.Mesh(
-            pad_to_3d(xy),
-            [("quad", quads)],
-            point_data={name: pad_to_3d(v) for name, v in pdata.items()},
-            cell_data={name: [pad_to_3d(v)] for name, v in cdata.items()},
-        )
+        return vtu_layout(pad_to_3d(xy), quads,
+                          {name: pad_to_3d(v) for name, v in pdata.items()},
+                          {name: pad_to_3d(v) for name, v in cdata.items()})
 
     def _write_pvd(self) -> None:
         # The text ElementTree wrote (same declaration and indentation), formatted directly:
@@ -180,25 +220,35 @@ def read_pvd(pvd_path: str | os.PathLike) -> list[tuple[float, Path]]:
 def read_vtu(path: str | os.PathLike, time: float = float("nan")) -> VtuFrame:
     """Read a VTU written by :class:`VtuSeriesWriter` back into 2D arrays.
 
-    Raises ``meshio.ReadError`` (or ``xml.etree.ElementTree.ParseError``) on a corrupt file.
+    Other VTU layouts are read by meshio. Raises ``meshio.ReadError`` (or
+    ``xml.etree.ElementTree.ParseError``) on a corrupt file.
     """
-    # meshio.read() calls sys.exit on a corrupt file; the format reader raises ReadError instead.
-    mesh = meshio.vtu.read(os.fspath(path))
-    quads = np.vstack([block.data for block in mesh.cells if block.type == "quad"])
-    n_points = len(mesh.points)
-    point_data = {name: _drop_z(v, n_points) for name, v in mesh.point_data.items()}
-    cell_data = {}
-    for name, blocks in mesh.cell_data.items():
-        values = np.concatenate([np.asarray(b) for b in blocks], axis=0)
-        cell_data[name] = _drop_z(values, len(quads))
+    try:
+        arrays = read_vtu_arrays(Path(path).read_bytes())
+    except OSError:
+        raise
+    except Exception:  # noqa: BLE001 - not this package's layout: meshio's reader decides
+        arrays = _read_with_meshio(path)
+    n_points, n_cells = len(arrays.points), len(arrays.quads)
     return VtuFrame(
         time=time,
         path=Path(path),
-        points=np.asarray(mesh.points[:, :2], dtype=float),
-        cells=quads.astype(np.int64),
-        point_data=point_data,
-        cell_data=cell_data,
+        points=np.asarray(arrays.points[:, :2], dtype=float),
+        cells=arrays.quads,
+        point_data={name: _drop_z(v, n_points) for name, v in arrays.point_data.items()},
+        cell_data={name: _drop_z(v, n_cells) for name, v in arrays.cell_data.items()},
     )
+
+
+def _read_with_meshio(path: str | os.PathLike) -> VtuArrays:
+    import meshio  # ~0.06 s to import: only for files this package did not write
+
+    # meshio.read() calls sys.exit on a corrupt file; the format reader raises ReadError instead.
+    mesh = meshio.vtu.read(os.fspath(path))
+    quads = np.vstack([block.data for block in mesh.cells if block.type == "quad"])
+    cell_data = {name: np.concatenate([np.asarray(b) for b in blocks], axis=0)
+                 for name, blocks in mesh.cell_data.items()}
+    return VtuArrays(mesh.points, quads.astype(np.int64), dict(mesh.point_data), cell_data)
 
 
 def _drop_z(values: NDArray, count: int) -> NDArray:
