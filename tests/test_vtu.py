@@ -153,3 +153,30 @@ def test_results_directory_waits_for_its_frames(tmp_path):
             out.fields.write(step, float(step), points, cells, *fields(6, 2, 1.0))
     assert len(read_pvd(tmp_path / "fields.pvd")) == 3
     assert json.loads((tmp_path / "summary.json").read_text())["status"] == "completed"
+
+
+def test_an_interrupted_run_keeps_every_frame_it_handed_over(tmp_path):
+    """Ctrl-C in the middle of a run: the frames given to the background writer before it are
+    all on disk and listed, the summary says interrupted, and no temporary file is left."""
+    from helpers import model_from_example
+
+    from ntncontact.io.results import ResultWriter
+    from ntncontact.simulation import Simulation
+
+    class Interrupt:
+        def on_step(self, model, record) -> None:
+            if record.state.step == 7:
+                raise KeyboardInterrupt
+
+        def on_finish(self, status: str, error: str | None) -> None:
+            pass
+
+    model = model_from_example("spinning_block.toml", ["analysis.output_interval=0.02"])
+    writer = ResultWriter(tmp_path, model)
+    with pytest.raises(KeyboardInterrupt):
+        Simulation(model, [writer, Interrupt()]).run()
+    series = read_pvd(tmp_path / "fields.pvd")
+    assert [round(t / 0.02) for t, _ in series] == list(range(8))  # steps 0..7
+    assert all(read_vtu(path).cells.shape == (72, 4) for _, path in series)
+    assert json.loads((tmp_path / "summary.json").read_text())["status"] == "interrupted"
+    assert not list(tmp_path.rglob("*.tmp"))
