@@ -102,10 +102,12 @@ class VtuSeriesWriter:
     nodes, which move for ALE bodies), Q4 cells, point data (at least ``displacement`` = x - X and
     ``velocity``) and cell data (at least ``von_mises`` and ``body_id``).
 
-    With ``background=True`` :meth:`write` checks and copies the arrays, and one worker thread
-    compresses and writes the files in order (zlib releases the GIL, so this runs beside the
-    caller's next step); :meth:`close` waits for them. A failed write is raised by the next
-    :meth:`write` or by :meth:`close`; the frames before it stay listed and readable.
+    With ``background=True`` :meth:`write` checks and copies the arrays, and a worker thread
+    compresses and writes the files (zlib releases the GIL, so this runs beside the caller's
+    next steps). One frame at most is in flight: :meth:`write` first waits for the previous
+    one, so when it returns every earlier frame is listed (what is on disk lags by one frame
+    at most, for those who watch the PVD), and :meth:`close` waits for the last. A failed write
+    is raised by the next :meth:`write` or by :meth:`close`; the frames before it stay listed.
     """
 
     def __init__(self, directory: str | os.PathLike, name: str = "fields",
@@ -118,7 +120,7 @@ class VtuSeriesWriter:
         self._entries: list[tuple[float, str]] = []
         self.background = background
         self._pool: ThreadPoolExecutor | None = None  # started at the first write
-        self._pending: list[Future] = []
+        self._in_flight: Future | None = None
 
     @property
     def entries(self) -> list[tuple[float, str]]:
@@ -141,32 +143,26 @@ class VtuSeriesWriter:
         if not self.background:
             self._store(vtu_path, float(time), layout)
             return vtu_path
-        self._raise_failed(wait=False)
+        self._wait()
         if self._pool is None:
             self._pool = ThreadPoolExecutor(1, thread_name_prefix="vtu-writer")
-        self._pending.append(self._pool.submit(self._store, vtu_path, float(time), layout))
+        self._in_flight = self._pool.submit(self._store, vtu_path, float(time), layout)
         return vtu_path
 
     def close(self) -> None:
-        """Wait for the background writes (if any), then raise the first that failed."""
+        """Wait for the frame being written in the background (if any); raise its error."""
         try:
-            self._raise_failed(wait=True)
+            self._wait()
         finally:
             if self._pool is not None:
                 self._pool.shutdown(wait=True)
                 self._pool = None
 
-    def _raise_failed(self, wait: bool) -> None:
-        """Forget the finished writes (all of them if ``wait``); raise the first failure."""
-        keep = []
-        for future in self._pending:
-            if wait or future.done():
-                if future.exception() is not None:
-                    self._pending = []  # reported once; close() still waits for the later ones
-                    raise future.exception()
-            else:
-                keep.append(future)
-        self._pending = keep
+    def _wait(self) -> None:
+        """Wait for the frame in flight (if any); raise its error."""
+        future, self._in_flight = self._in_flight, None
+        if future is not None and future.exception() is not None:
+            raise future.exception()
 
     def _store(self, vtu_path: Path, time: float, layout: VtuLayout) -> None:
         tmp = vtu_path.with_name(vtu_path.name + ".tmp")
