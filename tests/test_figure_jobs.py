@@ -8,6 +8,7 @@ import ntncontact.figure_jobs as figure_jobs
 from ntncontact.cli import main
 from ntncontact.io.results import ResultWriter
 from ntncontact.io.vtk import read_pvd
+from ntncontact.plotting import ANIMATION_SHAPE, animate, panels_shape
 from ntncontact.simulation import Simulation
 
 TIMES = ["0.1", "0.3"]
@@ -50,19 +51,21 @@ def test_snapshots_are_drawn_once_their_frames_exist_and_before_the_run_ends(tmp
     Simulation(model, [ResultWriter(out, model), jobs]).run()
     assert len(seen) == 1
     written, final = seen[0], [t for t, _ in read_pvd(out / "fields.pvd")]
-    assert written[-1] >= 0.23 and written[-2] < 0.23  # the first frame after the last time
+    # a frame after the last time was listed, and the run went on (the frames are written on
+    # a background thread: the PVD may list one more by the step that sees the first)
+    assert written[-1] >= 0.23 and sum(t >= 0.23 for t in written) <= 2
     assert len(written) < len(final)
     assert jobs.paths() == [out / "snapshots.png"]
 
 
 def test_failed_run_with_plot_stops_its_workers_and_keeps_the_folder(tmp_path, capsys):
     out = tmp_path / "o"
-    code = main(["run", str(EXAMPLES / "rod_impact.toml"), "--out", str(out), "--quiet", "--plot",
+    code = main(["run", str(EXAMPLES / "rod_impact.toml"), "--out", str(out), "--quiet", "--gif",
                  "--set", "analysis.t_end=0.5", "--set", "analysis.max_cutbacks=0",
                  "--set", "analysis.newton.max_iterations=1"])
     assert code == 1 and "error" in capsys.readouterr().err
     assert json.loads((out / "summary.json").read_text())["status"] == "failed"
-    assert not list(out.glob("*.png"))  # nothing drawn for a failed run
+    assert not list(out.glob("*.png")) and not list(out.glob("*.gif"))  # nothing drawn
     assert main(["plot", str(out)]) == 0  # but the folder is still plottable
     assert (out / "energies.png").is_file()
 
@@ -95,3 +98,110 @@ def test_workers_beside_a_run_prepare_one_at_a_time(tmp_path, monkeypatch):
     assert second[0] >= first[1]
     first, second = _warm_up_intervals(tmp_path, monkeypatch, beside_a_run=False)
     assert second[0] < first[1]
+
+
+def _log_calls(monkeypatch, module, name, log, describe):
+    """Replace module.name by a wrapper appending ``pid describe(args)`` lines to ``log`` (a
+    file: the workers, forked later, inherit the wrapper)."""
+    import os
+
+    original = getattr(module, name)
+
+    def logged(*args, **kwargs):
+        with open(log, "a") as handle:
+            handle.write(f"{os.getpid()} {describe(*args)}\n")
+        return original(*args, **kwargs)
+
+    monkeypatch.setattr(module, name, logged)
+
+
+def _lines(log):
+    text = log.read_text() if log.exists() else ""
+    return [tuple(line.split(" ", 1)) for line in text.splitlines()]
+
+
+class _HoldRun:
+    """Observer after the figure jobs: once ``frames`` frames are written, it holds the run
+    (up to a minute) until ``ready(log lines)``; ``held`` tells if it came."""
+
+    def __init__(self, folder, log, frames, ready):
+        self.folder, self.log, self.frames, self.ready, self.held = folder, log, frames, ready, None
+
+    def on_step(self, model, record):
+        import time
+
+        pvd = self.folder / "fields.pvd"
+        if self.held is not None or not pvd.is_file() or len(read_pvd(pvd)) < self.frames:
+            return
+        deadline = time.monotonic() + 60.0
+        while not self.ready(_lines(self.log)) and time.monotonic() < deadline:
+            time.sleep(0.02)
+        self.held = self.ready(_lines(self.log))
+
+    def on_finish(self, status, error):
+        pass
+
+
+def _animation_pid(lines):
+    """The worker that made the animation's figure."""
+    return next((pid for pid, what in lines if what == f"build {ANIMATION_SHAPE}"), None)
+
+
+def test_animation_reads_the_frames_during_the_run_and_others_use_prepared_figures(
+        tmp_path, monkeypatch):
+    """Beside a run, the animation's worker reads each frame as it is written, never twice,
+    and its GIF is the one ``animate`` draws afterwards; the other worker makes the
+    snapshots' figure ahead and draws them on it. (The run is held at its third frame until
+    the animation's worker has read the second and the other one has made its figure.)"""
+    from ntncontact import plotting
+
+    log = tmp_path / "calls.log"
+    _log_calls(monkeypatch, plotting, "read_vtu", log, lambda path, **_: f"read {path.name}")
+    _log_calls(monkeypatch, plotting, "_build_figure", log, lambda *shape: f"build {shape}")
+    monkeypatch.setattr(figure_jobs, "FIGURE_MAKERS", ())
+    monkeypatch.setattr(figure_jobs, "check_made", lambda made, directory: made)
+    model = model_from_example("rod_impact.toml", ["analysis.t_end=0.5"])
+    out = tmp_path / "r"
+    panels = f"build {panels_shape(1)}"
+
+    def ready(lines):
+        gif = _animation_pid(lines)
+        return (gif, "read fields_00001.vtu") in lines and \
+            any(pid != gif and what == panels for pid, what in lines)
+
+    hold = _HoldRun(out, log, 3, ready)
+    with figure_jobs.FigureJobs(out, gif=True, times=[0.2]) as jobs:
+        Simulation(model, [ResultWriter(out, model), jobs.start(beside_a_run=True), hold]).run()
+        assert jobs.paths() == [out / "animation.gif", out / "snapshots.png"]
+    assert hold.held
+    lines = _lines(log)
+    gif = _animation_pid(lines)
+    builds = [line for line in lines if line[1].startswith("build")]
+    assert builds.count((gif, f"build {ANIMATION_SHAPE}")) == 1  # made ahead, then used
+    assert len([line for line in builds if line[1] == panels]) == 1  # the same
+    reads = [what for pid, what in lines if pid == gif and what.startswith("read")]
+    assert len(reads) == len(set(reads)) == len(read_pvd(out / "fields.pvd"))
+    again = animate(out, tmp_path / "again.gif")
+    assert again.read_bytes() == (out / "animation.gif").read_bytes()
+
+
+def test_closing_before_the_run_ends_stops_the_waiting_animation(tmp_path, monkeypatch):
+    """An interrupted run (no on_finish): the animation's worker, waiting for the run, gives
+    up, and closing returns."""
+    import threading
+    import time
+
+    from ntncontact import plotting
+
+    log = tmp_path / "calls.log"
+    _log_calls(monkeypatch, plotting, "_build_figure", log, lambda *shape: f"build {shape}")
+    jobs = figure_jobs.FigureJobs(tmp_path, gif=True).start(beside_a_run=True)
+    deadline = time.monotonic() + 60.0
+    while _animation_pid(_lines(log)) is None and time.monotonic() < deadline:
+        time.sleep(0.02)  # until the animation is running, in its loop
+    closing = threading.Thread(target=jobs.close)
+    closing.start()
+    closing.join(60.0)
+    assert not closing.is_alive()
+    assert jobs._requested["animation"].result() is None
+    assert not (tmp_path / "animation.gif").exists()

@@ -8,6 +8,7 @@ lists (and that parse) are used.
 
 from __future__ import annotations
 
+import contextlib
 import os
 import warnings
 from collections.abc import Callable, Sequence
@@ -33,7 +34,32 @@ class ResultsNotFoundError(FileNotFoundError):
     """A results folder (or one of its files) is missing or holds no data yet."""
 
 
-def _new_figure(nrows: int = 1, ncols: int = 1, size: tuple[float, float] = (7.0, 4.5)):
+#: A figure's layout: rows and columns of axes, size (inches), and a colour bar axes or not.
+FigureShape = tuple[int, int, tuple[float, float], bool]
+HISTORY_SHAPE: FigureShape = (2, 1, (7.0, 6.0), False)  # energies, momenta, tractions
+PAIR_SHAPE: FigureShape = (3, 1, (7.0, 8.0), False)
+ANIMATION_SHAPE: FigureShape = (1, 1, (6.0, 4.5), True)
+_TICKS_AHEAD = 11  # major ticks per axis made ahead: the axes here draw 6 to 11
+_PREPARED: dict[FigureShape, list[tuple[Figure, NDArray, Any]]] = {}
+
+
+def panels_shape(count: int) -> FigureShape:
+    """The shape of :func:`plot_deformed` for ``count`` meshes: up to 3 per row."""
+    ncols = min(3, count)
+    nrows = -(-count // ncols)
+    return nrows, ncols, (3.6 * ncols + 1.0, 3.2 * nrows), True
+
+
+def _new_figure(nrows: int, ncols: int, size: tuple[float, float],
+                colorbar: bool) -> tuple[Figure, NDArray, Any]:
+    """A figure, its grid of axes and its colour bar axes (None without): one that
+    :func:`prepare_figures` made if there is one of this shape."""
+    prepared = _PREPARED.get((nrows, ncols, size, colorbar))
+    return prepared.pop() if prepared else _build_figure(nrows, ncols, size, colorbar)
+
+
+def _build_figure(nrows: int, ncols: int, size: tuple[float, float],
+                  colorbar: bool) -> tuple[Figure, NDArray, Any]:
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
 
@@ -42,7 +68,22 @@ def _new_figure(nrows: int = 1, ncols: int = 1, size: tuple[float, float] = (7.0
     fig = Figure(figsize=size, dpi=DPI)
     FigureCanvasAgg(fig)
     axes = fig.subplots(nrows, ncols, squeeze=False)
-    return fig, axes
+    cax = fig.add_axes((0.9, 0.1, 0.02, 0.8)) if colorbar else None  # placed by _fit_layout
+    return fig, axes, cax
+
+
+def prepare_figures(shapes: Sequence[FigureShape]) -> None:
+    """Make empty figures of these shapes now, for the next figures of those shapes this
+    process draws. A figure's axes and the tick objects they will draw (each tick two
+    markers, a grid line and two labels) were ~20 % of a figure's time, which a figure worker
+    pays this way while the run is still going. The figures drawn are the same."""
+    for shape in shapes:
+        fig, axes, cax = _build_figure(*shape)
+        for ax in [*axes.flat, *([cax] if cax is not None else [])]:
+            ax.xaxis.get_major_ticks(_TICKS_AHEAD)
+            ax.yaxis.get_major_ticks(_TICKS_AHEAD)
+        fig.canvas.get_renderer()
+        _PREPARED.setdefault(shape, []).append((fig, axes, cax))
 
 
 _PAD = 4.0 / 72.0  # inches between decorations and the figure edge or the next axes
@@ -185,7 +226,7 @@ def warm_up() -> None:
 
     from matplotlib.collections import PolyCollection
 
-    fig, axes = _new_figure(1, 1, size=(3.0, 2.0))
+    fig, axes, cax = _build_figure(1, 1, (3.0, 2.0), True)
     ax = axes[0, 0]
     ax.plot([0.0, 1.0], [0.0, 1.0], "o-", ms=3, label="a")
     ax.legend(loc="best", fontsize="small")
@@ -194,7 +235,6 @@ def warm_up() -> None:
                                 edgecolors=(0.0, 0.0, 0.0, 0.35), linewidths=0.3)
     ax.add_collection(collection)
     _title(ax, "t = 0", fontsize="small")
-    cax = fig.add_axes((0.9, 0.1, 0.02, 0.8))
     fig.colorbar(collection, cax=cax, label="field")
     _fit_layout(fig, axes, cax)
     fig.savefig(io.BytesIO(), format="png", pil_kwargs={"compress_level": 3})
@@ -218,7 +258,7 @@ def plot_energies(directory: str | os.PathLike, path: str | os.PathLike | None =
     folder = Path(directory)
     history = _load_table(folder, HISTORY_FILE)
     time, total = history["time"], history["total_energy"]
-    fig, axes = _new_figure(2, 1, size=(7.0, 6.0))
+    fig, axes, _ = _new_figure(*HISTORY_SHAPE)
     top, bottom = axes[0, 0], axes[1, 0]
     for column in ("kinetic_energy", "strain_energy", "total_energy"):
         top.plot(time, history[column], label=column.replace("_", " "))
@@ -241,7 +281,7 @@ def plot_momenta(directory: str | os.PathLike, path: str | os.PathLike | None = 
     """Linear momentum components and angular momentum against time."""
     folder = Path(directory)
     history = _load_table(folder, HISTORY_FILE)
-    fig, axes = _new_figure(2, 1, size=(7.0, 6.0))
+    fig, axes, _ = _new_figure(*HISTORY_SHAPE)
     top, bottom = axes[0, 0], axes[1, 0]
     top.plot(history["time"], history["linear_momentum_x"], label="linear momentum x")
     top.plot(history["time"], history["linear_momentum_y"], label="linear momentum y")
@@ -288,12 +328,56 @@ def load_frames(
     for i in indices:
         time, vtu = series[i]
         try:
-            frames.append(read_vtu(vtu, time=time))
+            frames.append(_read_frame(vtu, time))
         except Exception as error:  # a corrupt file (any parser error) must not stop the plot
             warnings.warn(f"skipping unreadable {vtu}: {error}", stacklevel=2)
     if not frames:
         raise ResultsNotFoundError(f"no readable VTU files in results folder {directory}")
     return frames
+
+
+# VTU path -> ((mtime, size) when read, frame): what prefetch_frames read in this process
+_READ_AHEAD: dict[Path, tuple[tuple[int, int] | None, VtuFrame]] = {}
+
+
+def prefetch_frames(directory: str | os.PathLike) -> int:
+    """Read the frames the folder's PVD lists that this process has not read yet, and keep
+    them for :func:`load_frames`: a figure worker reads the frames while the run writes
+    them (~1 ms each) instead of all of them after it (the GIF and the pair history read
+    every frame). Returns how many it read."""
+    pvd = Path(directory) / PVD_FILE
+    if not pvd.is_file():
+        return 0
+    count = 0
+    for time, vtu in read_pvd(pvd):
+        if _read_ahead(vtu, time) is None:
+            stamp = _stamp(vtu)  # before reading: a file replaced meanwhile is read again
+            with contextlib.suppress(Exception):  # unreadable: load_frames will warn
+                _READ_AHEAD[vtu] = (stamp, read_vtu(vtu, time=time))
+                count += 1
+    return count
+
+
+def _stamp(path: Path) -> tuple[int, int] | None:
+    try:
+        status = path.stat()
+    except OSError:
+        return None
+    return status.st_mtime_ns, status.st_size
+
+
+def _read_ahead(vtu: Path, time: float) -> VtuFrame | None:
+    """The frame prefetch_frames read, if the file has not changed since (frames are
+    written once, by a rename, but a run can be started again in the same folder)."""
+    stamp, frame = _READ_AHEAD.get(vtu, (None, None))
+    if frame is None or stamp is None or stamp != _stamp(vtu) or frame.time != time:
+        return None
+    return frame
+
+
+def _read_frame(vtu: Path, time: float) -> VtuFrame:
+    frame = _read_ahead(vtu, time)
+    return frame if frame is not None else read_vtu(vtu, time=time)
 
 
 def cell_values(frame: VtuFrame, field: str) -> NDArray[np.float64]:
@@ -353,15 +437,12 @@ def plot_deformed(
     """Deformed meshes of all bodies at up to six times, coloured by ``field``, one colour bar."""
     folder = Path(directory)
     frames = load_frames(folder, times, MAX_PANELS)
-    ncols = min(3, len(frames))
-    nrows = -(-len(frames) // ncols)
-    fig, axes = _new_figure(nrows, ncols, size=(3.6 * ncols + 1.0, 3.2 * nrows))
+    fig, axes, cax = _new_figure(*panels_shape(len(frames)))
     norm, xlim, ylim = _common_view(frames, field)
     for ax, frame in zip(axes.flat, frames, strict=False):
         collection = _draw_mesh(ax, frame, field, norm, (xlim, ylim))
     for ax in list(axes.flat)[len(frames):]:
         ax.set_visible(False)
-    cax = fig.add_axes((0.9, 0.1, 0.02, 0.8))  # placed by _fit_layout
     fig.colorbar(collection, cax=cax, label=field.replace("_", " "))
     return _save(fig, Path(path) if path else folder / f"deformed_{field}.png", axes, cax)
 
@@ -385,7 +466,7 @@ def plot_contact_tractions(
     contact = _load_table(folder, CONTACT_FILE)
     chosen = _pick_steps(np.unique(contact["step"]), steps)
     interfaces = list(dict.fromkeys(contact["interface"].tolist()))
-    fig, axes = _new_figure(2, 1, size=(7.0, 6.0))
+    fig, axes, _ = _new_figure(*HISTORY_SHAPE)
     top, bottom = axes[0, 0], axes[1, 0]
     for step in chosen:
         for interface in interfaces:
@@ -420,7 +501,7 @@ def plot_pair_history(
     node_1 = int(nodes[np.argmax(counts)])
     rows = contact["node_1"] == node_1
     node_2 = int(np.bincount(contact["node_2"][rows]).argmax())
-    fig, axes = _new_figure(3, 1, size=(7.0, 8.0))
+    fig, axes, _ = _new_figure(*PAIR_SHAPE)
     tn = contact["normal_traction"][rows]
     peak = np.abs(tn).max() or 1.0
     axes[0, 0].plot(contact["time"][rows], tn / peak, "o-", ms=3)
@@ -487,10 +568,9 @@ def animate(
 
     frames = load_frames(directory, None, max_frames)
     norm, xlim, ylim = _common_view(frames, field)
-    fig, axes = _new_figure(1, 1, size=(6.0, 4.5))
+    fig, axes, cax = _new_figure(*ANIMATION_SHAPE)
     ax = axes[0, 0]
     # The colour bar gets its own mappable: the mesh collection is replaced every frame.
-    cax = fig.add_axes((0.9, 0.1, 0.02, 0.8))  # placed by _fit_layout
     fig.colorbar(ScalarMappable(norm, FIELD_CMAP), cax=cax, label=field.replace("_", " "))
     collection = _draw_mesh(ax, frames[0], field, norm, (xlim, ylim))
     # Axes, ticks and colour bar never change: draw them once (blitting) and only draw the
