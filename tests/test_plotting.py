@@ -230,3 +230,14 @@ def test_prefetched_frames_are_not_read_again(tmp_path, monkeypatch):
     again = plotting.load_frames(tmp_path, max_frames=N_STEPS)
     assert reads == ["fields_00002.vtu"]
     assert np.array_equal(again[2].points, frames[2].points)
+
+
+def test_prefetching_stops_at_its_memory_budget(tmp_path, monkeypatch):
+    from ntncontact import plotting
+
+    write_run(tmp_path)
+    monkeypatch.setattr(plotting, "_READ_AHEAD", {})
+    frame_bytes = plotting._frame_bytes(plotting.load_frames(tmp_path, times=[0.0])[0])
+    monkeypatch.setattr(plotting, "READ_AHEAD_BYTES", 2 * frame_bytes)
+    assert plotting.prefetch_frames(tmp_path) == 3  # the third goes over: no more after it
+    assert len(plotting.load_frames(tmp_path, max_frames=N_STEPS)) == N_STEPS  # the rest read

@@ -17,7 +17,7 @@ import contextlib
 import multiprocessing as mp
 import os
 from collections.abc import Callable, Sequence
-from concurrent.futures import Future, ProcessPoolExecutor
+from concurrent.futures import BrokenExecutor, Future, ProcessPoolExecutor
 from pathlib import Path
 from typing import Any
 
@@ -198,7 +198,8 @@ class FigureJobs:
         stamp = _mtime(self.directory / PVD_FILE)
         if stamp is not None and stamp != self._pvd_seen:
             self._pvd_seen = stamp
-            self._prefetch = self._pool.submit(prefetch_frames, self.directory)
+            with contextlib.suppress(BrokenExecutor):  # the figures will report it, not the run
+                self._prefetch = self._pool.submit(prefetch_frames, self.directory)
 
     def _submit_snapshots(self) -> None:
         if self.times and "snapshots" not in self._requested:

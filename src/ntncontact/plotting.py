@@ -338,24 +338,35 @@ def load_frames(
 
 # VTU path -> ((mtime, size) when read, frame): what prefetch_frames read in this process
 _READ_AHEAD: dict[Path, tuple[tuple[int, int] | None, VtuFrame]] = {}
+READ_AHEAD_BYTES = 256 * 2**20  # frames kept at most per process (the ring's 41: ~2 MB)
 
 
 def prefetch_frames(directory: str | os.PathLike) -> int:
     """Read the frames the folder's PVD lists that this process has not read yet, and keep
     them for :func:`load_frames`: a figure worker reads the frames while the run writes
     them (~1 ms each) instead of all of them after it (the GIF and the pair history read
-    every frame). Returns how many it read."""
+    every frame). Up to :data:`READ_AHEAD_BYTES` (the others are read when drawn). Returns
+    how many it read."""
     pvd = Path(directory) / PVD_FILE
     if not pvd.is_file():
         return 0
-    count = 0
+    count, kept = 0, sum(_frame_bytes(frame) for _, frame in _READ_AHEAD.values())
     for time, vtu in read_pvd(pvd):
+        if kept > READ_AHEAD_BYTES:
+            break
         if _read_ahead(vtu, time) is None:
             stamp = _stamp(vtu)  # before reading: a file replaced meanwhile is read again
             with contextlib.suppress(Exception):  # unreadable: load_frames will warn
-                _READ_AHEAD[vtu] = (stamp, read_vtu(vtu, time=time))
+                frame = read_vtu(vtu, time=time)
+                _READ_AHEAD[vtu] = (stamp, frame)
+                kept += _frame_bytes(frame)
                 count += 1
     return count
+
+
+def _frame_bytes(frame: VtuFrame) -> int:
+    arrays = [frame.points, frame.cells, *frame.point_data.values(), *frame.cell_data.values()]
+    return sum(np.asarray(a).nbytes for a in arrays)
 
 
 def _stamp(path: Path) -> tuple[int, int] | None:
