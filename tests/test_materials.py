@@ -87,3 +87,20 @@ def test_lame_round_trip():
     assert m.young == pytest.approx(800.0) and m.poisson == pytest.approx(0.3)
     with pytest.raises(MaterialError, match="shear"):
         Material("neo_hookean", 1.0, 0.0, 1.0)
+
+
+def test_cauchy_stress_is_p_f_transpose_over_j_without_the_tangent():
+    """cauchy_stress takes the Neo-Hookean P without computing its tangent: the same bits as
+    sigma = P F^T / J from neo_hookean, and the closed form (mu (F F^T - I) + lam ln J I) / J."""
+    lam, mu = 2.0, 1.3
+    P, _, _ = neo_hookean(F_SAMPLES, lam, mu)
+    J = np.linalg.det(F_SAMPLES)
+    assert np.all(J > 0.0)
+    sigma, s33 = cauchy_stress("neo_hookean", F_SAMPLES, lam, mu)
+    np.testing.assert_array_equal(sigma, np.einsum("...iJ,...kJ->...ik", P, F_SAMPLES)
+                                  / (F_SAMPLES[:, 0, 0] * F_SAMPLES[:, 1, 1]
+                                     - F_SAMPLES[:, 0, 1] * F_SAMPLES[:, 1, 0])[:, None, None])
+    B = np.einsum("...iJ,...kJ->...ik", F_SAMPLES, F_SAMPLES)
+    closed = (mu * (B - np.eye(2)) + lam * np.log(J)[:, None, None] * np.eye(2)) / J[:, None, None]
+    np.testing.assert_allclose(sigma, closed, rtol=1e-13, atol=1e-13)
+    np.testing.assert_allclose(s33, lam * np.log(J) / J, rtol=1e-14)
