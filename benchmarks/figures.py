@@ -14,6 +14,7 @@ frames read), if this code does it.
 from __future__ import annotations
 
 import argparse
+import inspect
 import shutil
 import time
 from pathlib import Path
@@ -45,7 +46,10 @@ def _prepare(name: str, results: Path) -> None:
               "pair_history": p.PAIR_SHAPE}
     p.prepare_figures([shapes.get(name, p.HISTORY_SHAPE)])
     if hasattr(p, "prefetch_frames") and name in ("snapshots", "animation", "pair_history"):
-        p.prefetch_frames(results)
+        if name == "animation" and "meshes" in inspect.signature(p.prefetch_frames).parameters:
+            p.prefetch_frames(results, meshes=True)
+        else:
+            p.prefetch_frames(results)
 
 
 def main() -> None:

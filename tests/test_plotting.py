@@ -265,3 +265,22 @@ def test_png_writer_matches_savefig(results, tmp_path):
     with matplotlib.rc_context({"savefig.dpi": DPI / 2}):
         half = plot_energies(results, tmp_path / "half.png")
     assert mpimg.imread(half).shape[1] == round(7.0 * DPI / 2)
+
+
+def test_animation_frames_equal_whole_canvas_quantization(results, tmp_path, monkeypatch):
+    """Each GIF frame quantizes only the pixels the axes and the title cover: the frames come
+    out as when the whole canvas is quantized."""
+    from PIL import Image
+
+    from ntncontact import plotting
+
+    cropped = animate(results, tmp_path / "cropped.gif")
+    monkeypatch.setattr(plotting, "_changed_box",
+                        lambda fig, ax: (0, 0, *fig.canvas.get_width_height()))
+    whole = animate(results, tmp_path / "whole.gif")
+    with Image.open(cropped) as a, Image.open(whole) as b:
+        assert a.n_frames == b.n_frames == N_STEPS
+        for index in range(N_STEPS):
+            a.seek(index)
+            b.seek(index)
+            assert np.array_equal(np.asarray(a.convert("RGB")), np.asarray(b.convert("RGB")))

@@ -379,14 +379,16 @@ def load_frames(
 # VTU path -> ((mtime, size) when read, frame): what prefetch_frames read in this process
 _READ_AHEAD: dict[Path, tuple[tuple[int, int] | None, VtuFrame]] = {}
 READ_AHEAD_BYTES = 256 * 2**20  # frames kept at most per process (the ring's 41: ~2 MB)
+_MESHES: dict[Path, tuple[VtuFrame, list]] = {}  # VTU path -> (frame, its mesh_paths)
 
 
-def prefetch_frames(directory: str | os.PathLike) -> int:
+def prefetch_frames(directory: str | os.PathLike, meshes: bool = False) -> int:
     """Read the frames the folder's PVD lists that this process has not read yet, and keep
     them for :func:`load_frames`: a figure worker reads the frames while the run writes
     them (~1 ms each) instead of all of them after it (the GIF and the pair history read
-    every frame). Up to :data:`READ_AHEAD_BYTES` (the others are read when drawn). Returns
-    how many it read."""
+    every frame). Up to :data:`READ_AHEAD_BYTES` (the others are read when drawn).
+    ``meshes``: also make the frames' :func:`mesh_paths` (for the animation). Returns how
+    many it read."""
     pvd = Path(directory) / PVD_FILE
     if not pvd.is_file():
         return 0
@@ -401,6 +403,10 @@ def prefetch_frames(directory: str | os.PathLike) -> int:
                 _READ_AHEAD[vtu] = (stamp, frame)
                 kept += _frame_bytes(frame)
                 count += 1
+    if meshes:
+        for vtu, (_, frame) in _READ_AHEAD.items():
+            if _MESHES.get(vtu, (None,))[0] is not frame:
+                _MESHES[vtu] = (frame, mesh_paths(frame))
     return count
 
 
@@ -460,11 +466,25 @@ def _common_view(frames: Sequence[VtuFrame], field: str):
     return norm, (lower[0] - pad, upper[0] + pad), (lower[1] - pad, upper[1] + pad)
 
 
-def _draw_mesh(ax: Any, frame: VtuFrame, field: str, norm: Any, limits: tuple) -> Any:
+def mesh_paths(frame: VtuFrame) -> list:
+    """The deformed cells of ``frame`` as closed matplotlib paths; those of the frames
+    ``prefetch_frames(..., meshes=True)`` read are made then (~1 ms a frame)."""
     from matplotlib.collections import PolyCollection
 
-    collection = PolyCollection(
-        frame.deformed_points[frame.cells],
+    kept = _MESHES.get(frame.path)
+    if kept is not None and kept[0] is frame:
+        return kept[1]
+    # a PolyCollection makes the paths of many polygons fastest (one template path)
+    return PolyCollection(frame.deformed_points[frame.cells]).get_paths()
+
+
+def _draw_mesh(ax: Any, frame: VtuFrame, field: str, norm: Any, limits: tuple) -> Any:
+    from matplotlib.collections import PathCollection
+
+    # the paths of a PolyCollection, but one whose paths can be swapped for others as they
+    # are (a PolyCollection's set_paths takes vertices): the animation's frames
+    collection = PathCollection(
+        mesh_paths(frame),
         array=cell_values(frame, field),
         cmap=FIELD_CMAP,
         norm=norm,
@@ -615,7 +635,6 @@ def animate(
 ) -> Path:
     """A GIF of the deformed meshes over (up to ``max_frames`` evenly spaced) output steps."""
     from matplotlib.cm import ScalarMappable
-    from PIL import Image
 
     frames = load_frames(directory, None, max_frames)
     norm, xlim, ylim = _common_view(frames, field)
@@ -633,18 +652,20 @@ def animate(
     background = fig.canvas.copy_from_bbox(fig.bbox)
     collection.set_visible(True)
     palette = _gif_palette(FIELD_CMAP)
-    size = fig.canvas.get_width_height()
+    still = _quantized(fig.canvas, (0, 0, *fig.canvas.get_width_height()), palette)
     images = []
     for frame in frames:
         fig.canvas.restore_region(background)
-        collection.set_verts(frame.deformed_points[frame.cells])
+        collection.set_paths(mesh_paths(frame))
         collection.set_array(cell_values(frame, field))
         ax.title.set_text(f"t = {frame.time:.4g}")
         ax.draw_artist(collection)
         ax.draw_artist(ax.title)
-        # PIL drops the alpha channel itself (a strided numpy copy cost ~3 ms per frame)
-        rgb = Image.frombuffer("RGBA", size, fig.canvas.buffer_rgba(), "raw", "RGBA", 0, 1)
-        images.append(rgb.convert("RGB").quantize(palette=palette, dither=Image.Dither.NONE))
+        # only the axes and the title change: the rest of the frame is the still one's
+        box = _changed_box(fig, ax)
+        image = still.copy()
+        image.paste(_quantized(fig.canvas, box, palette), box[:2])
+        images.append(image)
     output = Path(path_gif)
     # optimize=False: PIL's default made every unchanged pixel of a frame transparent (a
     # difference, a mask and a paste per frame: half of the ~0.1 s the saving took) for no
@@ -653,6 +674,27 @@ def animate(
     images[0].save(output, save_all=True, append_images=images[1:], duration=int(1000 / fps),
                    loop=0, optimize=False)
     return output
+
+
+def _changed_box(fig: Figure, ax: Any) -> tuple[int, int, int, int]:
+    """The canvas pixels (left, top, right, bottom) the mesh (clipped to the axes) and the
+    title of an animation frame can reach, with a 2-pixel margin for antialiasing."""
+    from matplotlib.transforms import Bbox
+
+    width, height = fig.canvas.get_width_height()
+    box = Bbox.union([ax.bbox, ax.title.get_window_extent(fig.canvas.get_renderer())])
+    return (max(int(box.x0) - 2, 0), max(int(height - box.y1) - 2, 0),
+            min(int(box.x1) + 3, width), min(int(height - box.y0) + 3, height))
+
+
+def _quantized(canvas: Any, box: tuple[int, int, int, int], palette: Any):
+    """The ``box`` of the canvas in the GIF's palette (each pixel to its nearest colour)."""
+    from PIL import Image
+
+    # PIL drops the alpha channel itself (a strided numpy copy cost ~3 ms per frame)
+    rgba = Image.frombuffer("RGBA", canvas.get_width_height(), canvas.buffer_rgba(), "raw",
+                            "RGBA", 0, 1)
+    return rgba.crop(box).convert("RGB").quantize(palette=palette, dither=Image.Dither.NONE)
 
 
 def _gif_palette(cmap: str):
