@@ -244,8 +244,9 @@ def test_prefetching_stops_at_its_memory_budget(tmp_path, monkeypatch):
 
 
 def test_png_writer_matches_savefig(results, tmp_path):
-    """Figures are encoded by png_bytes (no row filters): the same pixels and resolution as
-    savefig's PNG; a matplotlibrc that changes what savefig writes still gets savefig."""
+    """PNG figures are encoded by _png_bytes (no row filters): the same pixels and resolution
+    as savefig's PNG; a matplotlibrc that changes what savefig writes, or another format,
+    still gets savefig."""
     import matplotlib
     from PIL import Image
 
@@ -265,6 +266,8 @@ def test_png_writer_matches_savefig(results, tmp_path):
     with matplotlib.rc_context({"savefig.dpi": DPI / 2}):
         half = plot_energies(results, tmp_path / "half.png")
     assert mpimg.imread(half).shape[1] == round(7.0 * DPI / 2)
+    pdf = plot_energies(results, tmp_path / "e.pdf")
+    assert pdf.read_bytes()[:5] == b"%PDF-"  # savefig's format, from the name
 
 
 def test_animation_frames_equal_whole_canvas_quantization(results, tmp_path, monkeypatch):
