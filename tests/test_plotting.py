@@ -252,7 +252,7 @@ def test_png_writer_matches_savefig(results, tmp_path):
 
     from ntncontact import plotting
 
-    fig, axes, _ = plotting._new_figure(*plotting.HISTORY_SHAPE)
+    fig, axes, _ = plotting._figure_of(plotting.HISTORY_SHAPE)
     axes[0, 0].plot([0.0, 1.0], [1.0, 3.0], label="a line")
     axes[0, 0].legend()
     axes[1, 0].set_title("title")

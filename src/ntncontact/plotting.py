@@ -52,12 +52,18 @@ def panels_shape(count: int) -> FigureShape:
     return nrows, ncols, (3.6 * ncols + 1.0, 3.2 * nrows), True
 
 
-def _new_figure(nrows: int, ncols: int, size: tuple[float, float],
-                colorbar: bool) -> tuple[Figure, NDArray, Any]:
-    """A figure, its grid of axes and its colour bar axes (None without): one that
-    :func:`prepare_figures` made if there is one of this shape."""
-    prepared = _PREPARED.get((nrows, ncols, size, colorbar))
-    return prepared.pop() if prepared else _build_figure(nrows, ncols, size, colorbar)
+def _new_figure(nrows: int = 1, ncols: int = 1,
+                size: tuple[float, float] = (7.0, 4.5)) -> tuple[Figure, NDArray]:
+    """A figure and its grid of axes (validation.py's figures too)."""
+    fig, axes, _ = _figure_of((nrows, ncols, size, False))
+    return fig, axes
+
+
+def _figure_of(shape: FigureShape) -> tuple[Figure, NDArray, Any]:
+    """A figure of this shape, its grid of axes and its colour bar axes (None without): one
+    that :func:`prepare_figures` made if there is one."""
+    prepared = _PREPARED.get(shape)
+    return prepared.pop() if prepared else _build_figure(*shape)
 
 
 def _build_figure(nrows: int, ncols: int, size: tuple[float, float],
@@ -299,7 +305,7 @@ def plot_energies(directory: str | os.PathLike, path: str | os.PathLike | None =
     folder = Path(directory)
     history = _load_table(folder, HISTORY_FILE)
     time, total = history["time"], history["total_energy"]
-    fig, axes, _ = _new_figure(*HISTORY_SHAPE)
+    fig, axes, _ = _figure_of(HISTORY_SHAPE)
     top, bottom = axes[0, 0], axes[1, 0]
     for column in ("kinetic_energy", "strain_energy", "total_energy"):
         top.plot(time, history[column], label=column.replace("_", " "))
@@ -322,7 +328,7 @@ def plot_momenta(directory: str | os.PathLike, path: str | os.PathLike | None = 
     """Linear momentum components and angular momentum against time."""
     folder = Path(directory)
     history = _load_table(folder, HISTORY_FILE)
-    fig, axes, _ = _new_figure(*HISTORY_SHAPE)
+    fig, axes, _ = _figure_of(HISTORY_SHAPE)
     top, bottom = axes[0, 0], axes[1, 0]
     top.plot(history["time"], history["linear_momentum_x"], label="linear momentum x")
     top.plot(history["time"], history["linear_momentum_y"], label="linear momentum y")
@@ -509,7 +515,7 @@ def plot_deformed(
     """Deformed meshes of all bodies at up to six times, coloured by ``field``, one colour bar."""
     folder = Path(directory)
     frames = load_frames(folder, times, MAX_PANELS)
-    fig, axes, cax = _new_figure(*panels_shape(len(frames)))
+    fig, axes, cax = _figure_of(panels_shape(len(frames)))
     norm, xlim, ylim = _common_view(frames, field)
     for ax, frame in zip(axes.flat, frames, strict=False):
         collection = _draw_mesh(ax, frame, field, norm, (xlim, ylim))
@@ -538,7 +544,7 @@ def plot_contact_tractions(
     contact = _load_table(folder, CONTACT_FILE)
     chosen = _pick_steps(np.unique(contact["step"]), steps)
     interfaces = list(dict.fromkeys(contact["interface"].tolist()))
-    fig, axes, _ = _new_figure(*HISTORY_SHAPE)
+    fig, axes, _ = _figure_of(HISTORY_SHAPE)
     top, bottom = axes[0, 0], axes[1, 0]
     for step in chosen:
         for interface in interfaces:
@@ -573,7 +579,7 @@ def plot_pair_history(
     node_1 = int(nodes[np.argmax(counts)])
     rows = contact["node_1"] == node_1
     node_2 = int(np.bincount(contact["node_2"][rows]).argmax())
-    fig, axes, _ = _new_figure(*PAIR_SHAPE)
+    fig, axes, _ = _figure_of(PAIR_SHAPE)
     tn = contact["normal_traction"][rows]
     peak = np.abs(tn).max() or 1.0
     axes[0, 0].plot(contact["time"][rows], tn / peak, "o-", ms=3)
@@ -639,7 +645,7 @@ def animate(
 
     frames = load_frames(directory, None, max_frames)
     norm, xlim, ylim = _common_view(frames, field)
-    fig, axes, cax = _new_figure(*ANIMATION_SHAPE)
+    fig, axes, cax = _figure_of(ANIMATION_SHAPE)
     ax = axes[0, 0]
     # The colour bar gets its own mappable: the mesh collection is replaced every frame.
     fig.colorbar(ScalarMappable(norm, FIELD_CMAP), cax=cax, label=field.replace("_", " "))
