@@ -296,11 +296,15 @@ class Simulation:
         start, dt = problem.state, problem.dt
         v_eval = midpoint_velocity(d, start.d, dt) if self.dynamic and ci.persistency else None
         rate = velocity_factor(dt) if v_eval is not None else None
-        blocks = lagrange_blocks(start.X + d, v_eval, rate, ci.interface, state, ci.law, start.x)
-        G, B = blocks.matrices(self.model.ndof)
-        free = problem.free_dofs
+        b = lagrange_blocks(start.X + d, v_eval, rate, ci.interface, state, ci.law, start.x)
+        # dense blocks on the unknowns straight from the triplets (sparse matrices and their
+        # fancy indexing took half of this function's time): position of each dof among them
+        position = np.full(self.model.ndof, -1)
+        position[problem.free_dofs] = np.arange(problem.free_dofs.size)
+        column = np.cumsum(pressed) - 1  # pressed pair -> column of S
+        keep = pressed[b.b_cols] & (position[b.b_rows] >= 0)
         forces = np.zeros((y.size, int(pressed.sum())))  # unknowns: free dofs, then multipliers
-        forces[: free.size] = B[free][:, pressed].toarray()
+        np.add.at(forces, (position[b.b_rows[keep]], column[b.b_cols[keep]]), b.b_vals[keep])
         if factors is not None:
             factor = (factors.factor if factors.usable(y.size)
                       else factors.refresh(problem.jacobian(y)))
@@ -308,7 +312,11 @@ class Simulation:
         else:
             jacobian = problem.jacobian(y)
             response = np.column_stack([self.solve(jacobian, f) for f in forces.T])
-        return G[pressed][:, free] @ response[: free.size]
+        keep = pressed[b.g_rows] & (position[b.g_cols] >= 0)
+        S = np.zeros((forces.shape[1], forces.shape[1]))
+        np.add.at(S, column[b.g_rows[keep]],
+                  b.g_vals[keep, None] * response[position[b.g_cols[keep]]])
+        return S
 
     def _conserve_energy(self, problem: StepProblem, result, mass):
         """Report 5.5 (see ``dynamics.energy``): if the Lagrange step changed the total energy,
