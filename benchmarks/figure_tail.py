@@ -6,8 +6,9 @@ Runs the ``make demo`` command (``ntncontact run examples/ring_impact.toml --gif
 --compare``) ``N`` times with this checkout's figure code and ``N`` times with the figure code
 (plotting.py, figure_jobs.py) of ``DIR`` (another checkout's ``src/ntncontact``, e.g. a git
 worktree of an earlier commit), alternately; everything else is this checkout's. Prints the
-tail (end of ``Simulation.run`` to the exit of the process, as ``console_main`` ends it) and
-the whole wall time of each run, then the minima.
+tail (end of ``Simulation.run`` to the exit of the process, as ``console_main`` ends it), the
+whole wall time and the time loop (``Simulation.run``, which the workers beside it must not
+slow down) of each run, then the minima and medians.
 """
 
 from __future__ import annotations
@@ -40,6 +41,7 @@ if src:
 from ntncontact import cli, simulation
 run, marks = simulation.Simulation.run, {}
 def timed_run(self, *args, **kwargs):
+    marks["loop_start"] = time.time()
     try:
         return run(self, *args, **kwargs)
     finally:
@@ -54,8 +56,8 @@ os._exit(code)
 """
 
 
-def run_once(figure_src: str | None, out: Path) -> tuple[float, float]:
-    """(tail, wall) seconds of one demo run."""
+def run_once(figure_src: str | None, out: Path) -> tuple[float, float, float]:
+    """(tail, wall, time loop) seconds of one demo run."""
     env = dict(os.environ, MPLBACKEND="Agg", NUMBA_CACHE_DIR=str(ROOT / ".numba_cache"))
     env.pop("FIGURE_SRC", None)
     if figure_src:
@@ -67,7 +69,7 @@ def run_once(figure_src: str | None, out: Path) -> tuple[float, float]:
                        env=env, check=True, stdout=subprocess.DEVNULL)
         end = time.time()
         marks = json.loads(Path(marks_file.name).read_text())
-    return end - marks["loop_end"], end - start
+    return end - marks["loop_end"], end - start, marks["loop_end"] - marks["loop_start"]
 
 
 def main() -> None:
@@ -76,17 +78,23 @@ def main() -> None:
     parser.add_argument("--base", help="src/ntncontact of the checkout to compare with")
     args = parser.parse_args()
     variants = {"this": None} | ({"base": args.base} if args.base else {})
-    results: dict[str, list[tuple[float, float]]] = {name: [] for name in variants}
+    results: dict[str, list[tuple[float, float, float]]] = {name: [] for name in variants}
     with tempfile.TemporaryDirectory() as scratch:
         for _ in range(args.repeat):
             for name, src in variants.items():
-                tail, wall = run_once(src, Path(scratch) / name)
-                results[name].append((tail, wall))
-                print(f"{name:5s} tail {tail:.3f} s  wall {wall:.3f} s", flush=True)
+                tail, wall, loop = run_once(src, Path(scratch) / name)
+                results[name].append((tail, wall, loop))
+                print(f"{name:5s} tail {tail:.3f} s  wall {wall:.3f} s  loop {loop:.3f} s",
+                      flush=True)
     for name, rows in results.items():
-        tails, walls = zip(*rows, strict=True)
+        tails, walls, loops = zip(*rows, strict=True)
         print(f"{name:5s} min tail {min(tails):.3f} s  min wall {min(walls):.3f} s  "
-              f"(median tail {sorted(tails)[len(tails) // 2]:.3f} s)")
+              f"min loop {min(loops):.3f} s  (medians {_median(tails):.3f} / "
+              f"{_median(walls):.3f} / {_median(loops):.3f} s)")
+
+
+def _median(values: tuple[float, ...]) -> float:
+    return sorted(values)[len(values) // 2]
 
 
 if __name__ == "__main__":

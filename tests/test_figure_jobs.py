@@ -74,7 +74,7 @@ def _record_warm_up(log):
     import os
     import time
 
-    def warm_up():
+    def warm_up(*args):
         start = time.monotonic()
         time.sleep(0.3)
         with open(log, "a") as handle:
@@ -98,6 +98,26 @@ def test_workers_beside_a_run_prepare_one_at_a_time(tmp_path, monkeypatch):
     assert second[0] >= first[1]
     first, second = _warm_up_intervals(tmp_path, monkeypatch, beside_a_run=False)
     assert second[0] < first[1]
+
+
+def test_beside_a_run_the_workers_also_make_their_figures_in_turn(tmp_path, monkeypatch):
+    """The empty figures made ahead (the animation's, and the other worker's) wait for the
+    warm-ups and for each other: one worker busy beside the run at a time."""
+    import time
+
+    from matplotlib.backends import backend_agg  # noqa: F401 - the workers' imports: instant
+    from PIL import Image  # noqa: F401
+
+    log = tmp_path / "turns.log"
+    monkeypatch.setattr(figure_jobs, "warm_up", _record_warm_up(log))
+    monkeypatch.setattr(figure_jobs, "prepare_figures", _record_warm_up(log))
+    with figure_jobs.FigureJobs(tmp_path, gif=True).start(beside_a_run=True):
+        deadline = time.monotonic() + 60.0
+        while len(_lines(log)) < 4 and time.monotonic() < deadline:
+            time.sleep(0.02)
+    intervals = sorted(tuple(map(float, what.split())) for _, what in _lines(log))
+    assert len(intervals) == 4
+    assert all(b[0] >= a[1] for a, b in zip(intervals, intervals[1:], strict=False))
 
 
 def _log_calls(monkeypatch, module, name, log, describe):

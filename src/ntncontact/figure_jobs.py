@@ -42,22 +42,35 @@ from .plotting import (
 WORKERS = 2  # this code's CI and demo machines have two cores
 POLL_SECONDS = 0.05  # how often the animation looks for new frames during the run
 
-# In a worker: (run ended, run completed), the events FigureJobs sets when the run ends.
+# In a worker: (run ended, run completed), the events FigureJobs sets when the run ends, and
+# the lock the workers beside a run take turns with.
 _RUN_END: tuple[Any, Any] | None = None
+_TURN: Any = None
 
 
 def _import_matplotlib(turn: Any = None, run_end: tuple[Any, Any] | None = None) -> None:
     """Worker initializer: the ~1 s matplotlib import and the first figure's one-off work
     (:func:`~ntncontact.plotting.warm_up`), paid before the first figure is asked; holding
-    ``turn`` (a lock shared by the workers) if given, so that one worker at a time does it.
-    ``run_end``: the events of the run's end, which only fork can hand over."""
-    global _RUN_END
-    _RUN_END = run_end
-    with turn if turn is not None else contextlib.nullcontext():
+    ``turn`` (a lock shared by the workers) if given, so that one worker at a time does it
+    (and later makes its empty figures). ``run_end``: the events of the run's end. Only fork
+    can hand these over."""
+    global _RUN_END, _TURN
+    _RUN_END, _TURN = run_end, turn
+    with _in_turn():
         from matplotlib.backends import backend_agg  # noqa: F401
         from PIL import Image  # noqa: F401
 
         warm_up()
+
+
+def _in_turn() -> Any:
+    """The workers' turn (beside a run: one at a time does its heavy preparation)."""
+    return _TURN if _TURN is not None else contextlib.nullcontext()
+
+
+def _prepare_in_turn(shapes: Sequence[FigureShape]) -> None:
+    with _in_turn():
+        prepare_figures(shapes)
 
 
 def _animate_during_run(directory: Path, path: Path) -> Path | None:
@@ -67,7 +80,7 @@ def _animate_during_run(directory: Path, path: Path) -> Path | None:
     was stopped: its frames' common colour scale and axis limits are only known at the end."""
     assert _RUN_END is not None, "only in a worker started by FigureJobs.start"
     ended, completed = _RUN_END
-    prepare_figures([ANIMATION_SHAPE])
+    _prepare_in_turn([ANIMATION_SHAPE])
     seen = None
     while not ended.wait(POLL_SECONDS):
         stamp = _mtime(directory / PVD_FILE)
@@ -133,7 +146,7 @@ class FigureJobs:
                 # in this order: the animation takes the first worker ready for good, so
                 # that the other worker prepares (and later draws) the other figures
                 self._submit_animation()
-                self._pool.submit(prepare_figures, self._shapes_drawn_beside())
+                self._pool.submit(_prepare_in_turn, self._shapes_drawn_beside())
         return self
 
     def _shapes_drawn_beside(self) -> list[FigureShape]:
