@@ -13,7 +13,9 @@ $(BIN)/python:
 	$(BIN)/python -m pip install --quiet --upgrade pip
 
 # After installing, compile the Numba kernels into .numba_cache on two processes (~35-40 s once;
-# otherwise the first run pays about a minute for them on one core).
+# otherwise the first run pays about a minute for them on one core) and write the package's
+# bytecode (not written at run time where PYTHONDONTWRITEBYTECODE is set). After editing the
+# sources, run `.venv/bin/python -m ntncontact.warmup` again.
 $(STAMP): pyproject.toml | $(BIN)/python
 	$(BIN)/python -m pip install --quiet -e ".[test]"
 	$(BIN)/python -m ntncontact.warmup
