@@ -3,17 +3,13 @@ augmentations before the last stop early; every step still ends with a solve to 
 run gives the exact-solve results to within the augmentation tolerance, with fewer iterations."""
 
 import numpy as np
-from helpers import Recorder, model_from_example
+from helpers import Recorder, recorded_ring_impact
 
 from ntncontact.simulation import Simulation
 
 
 def ring_impact(ratio: float) -> Recorder:
-    model = model_from_example("ring_impact.toml", [
-        "analysis.t_end=0.2", f"analysis.newton.inexact_augmentations={ratio}"])
-    recorder = Recorder()
-    Simulation(model, [recorder]).run()
-    return recorder
+    return recorded_ring_impact(f"analysis.newton.inexact_augmentations={ratio}")
 
 
 def test_ring_impact_with_inexact_augmentations_matches_exact_solves():

@@ -4,17 +4,13 @@ fewer augmentations; frictional interfaces keep the Uzawa update."""
 
 import numpy as np
 import pytest
-from helpers import Recorder, model_from_example
+from helpers import Recorder, model_from_example, recorded_ring_impact
 
-from ntncontact.simulation import Simulation, _newton_updated
+from ntncontact.simulation import _newton_updated
 
 
 def ring_impact(update: str) -> Recorder:
-    model = model_from_example("ring_impact.toml", [
-        "analysis.t_end=0.2", f'contact.0.augmentation.update="{update}"'])
-    recorder = Recorder()
-    Simulation(model, [recorder]).run()
-    return recorder
+    return recorded_ring_impact(f'contact.0.augmentation.update="{update}"')
 
 
 def test_ring_impact_with_newton_updates_matches_uzawa_in_fewer_augmentations():
