@@ -92,8 +92,7 @@ def default_linear_solve() -> Callable[[sp.spmatrix, NDArray], NDArray]:
 
 def _newton_updated(ci) -> bool:
     """Whether an interface's multipliers take Newton updates (``contact.newton_update``)."""
-    return (ci.multiplier_update == "newton" and ci.law.method == "augmented_lagrangian"
-            and not ci.law.frictional)
+    return ci.multiplier_update == "newton" and ci.law.frictionless_augmented
 
 
 def initial_state(model: Model) -> StepState:

@@ -44,6 +44,12 @@ class ContactLaw:
         return self.mu > 0.0 and self.eps_T > 0.0
 
     @property
+    def frictionless_augmented(self) -> bool:
+        """Frictionless augmented Lagrangian: where pairs may be held (:func:`held_pairs`) and
+        multipliers may take Newton updates (``augmentation.newton_update``)."""
+        return self.method == "augmented_lagrangian" and not self.frictional
+
+    @property
     def uses_multipliers(self) -> bool:
         return self.method != "penalty"
 
@@ -84,6 +90,6 @@ def held_pairs(law: ContactLaw, lambda_N: NDArray[np.float64]) -> NDArray[np.boo
     third of the fresh Newton steps. Frictional pairs are left bracketed: a tensile t_N would
     flip the sign of the Coulomb limit mu t_N."""
     lambda_N = np.asarray(lambda_N, dtype=float)
-    if law.method != "augmented_lagrangian" or law.frictional:
+    if not law.frictionless_augmented:
         return np.zeros(lambda_N.shape, dtype=bool)
     return lambda_N > 0.0
