@@ -162,6 +162,25 @@ class _HoldRun:
         pass
 
 
+class _AwaitSnapshots:
+    """Observer after the figure jobs: once the snapshots are submitted, it holds the run
+    until they are drawn. The animation's worker is busy until the run ends, so the other
+    worker must draw them (without this, a loaded machine could leave them queued until the
+    animation's worker is free again, which draws them on a figure of its own)."""
+
+    def __init__(self, jobs):
+        self.jobs, self.drawn = jobs, False
+
+    def on_step(self, model, record):
+        snapshots = self.jobs._requested.get("snapshots")
+        if snapshots is not None and not self.drawn:
+            snapshots.result(timeout=60.0)
+            self.drawn = True
+
+    def on_finish(self, status, error):
+        pass
+
+
 def _animation_pid(lines):
     """The worker that made the animation's figure."""
     return next((pid for pid, what in lines if what == f"build {ANIMATION_SHAPE}"), None)
@@ -172,7 +191,8 @@ def test_animation_reads_the_frames_during_the_run_and_others_use_prepared_figur
     """Beside a run, the animation's worker reads each frame as it is written, never twice,
     and its GIF is the one ``animate`` draws afterwards; the other worker makes the
     snapshots' figure ahead and draws them on it. (The run is held at its third frame until
-    the animation's worker has read the second and the other one has made its figure.)"""
+    the animation's worker has read the second and the other one has made its figure, and
+    again once the snapshots are submitted, until they are drawn.)"""
     from ntncontact import plotting
 
     log = tmp_path / "calls.log"
@@ -191,9 +211,11 @@ def test_animation_reads_the_frames_during_the_run_and_others_use_prepared_figur
 
     hold = _HoldRun(out, log, 3, ready)
     with figure_jobs.FigureJobs(out, gif=True, times=[0.2]) as jobs:
-        Simulation(model, [ResultWriter(out, model), jobs.start(beside_a_run=True), hold]).run()
+        snapshots = _AwaitSnapshots(jobs)
+        Simulation(model, [ResultWriter(out, model), jobs.start(beside_a_run=True), hold,
+                           snapshots]).run()
         assert jobs.paths() == [out / "animation.gif", out / "snapshots.png"]
-    assert hold.held
+    assert hold.held and snapshots.drawn
     lines = _lines(log)
     gif = _animation_pid(lines)
     builds = [line for line in lines if line[1].startswith("build")]
