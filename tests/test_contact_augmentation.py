@@ -256,3 +256,23 @@ def test_newton_update_converges_faster_than_uzawa():
     # measured 2.0, 2.6e-2, 9.2e-6, 1.6e-12: each error below the square of the one before
     assert np.all(newton[2:] < newton[1:-1] ** 2)
     assert newton[3] < 1e-10 * newton[0]
+
+
+@pytest.mark.parametrize("mu", [0.0, 0.3])
+def test_tangential_tests_apply_with_friction_only(mu):
+    """Two augmentations whose pairs moved only along the wall: the same gaps and tractions,
+    a different slip. Without friction no multiplier acts along the surface, so the step is
+    converged; with friction TOL2 still asks the slip to settle."""
+    x0, anchors, interface, pairs = setup()
+    law = ContactLaw("augmented_lagrangian", eps_N=200.0, eps_T=200.0 if mu else 0.0, mu=mu)
+    state = PairState.from_pairs(pairs).with_multipliers(np.full(3, 5.0))
+    x = x0.copy()
+    x[:3] = x0[3:] - 0.001 * NW  # pressed a little into the wall
+    slid = x.copy()
+    slid[:3] += 0.01 * D  # along the wall: the gaps do not change
+    before = evaluate_contact(x, None, None, interface, state, law, x_start=x0)
+    after = evaluate_contact(slid, None, None, interface, state, law, x_start=x0)
+    tol = AugmentationTolerances(normal=1e-10, tangential=1e-6)
+    check = check_augmentation(before, after, law, tol)
+    assert check.normal_change <= 1e-12 and check.tangential_change > 1e-3  # the set-up
+    assert check.converged is (mu == 0.0)
