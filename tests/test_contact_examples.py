@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 from helpers import Recorder, model_from_dict, model_from_example
 
-from ntncontact.simulation import Simulation
+from ntncontact.simulation import Simulation, SimulationError
 
 
 def body_mean_velocity(model, state, body):
@@ -148,14 +148,66 @@ def test_augmentations_shrink_the_penetration_towards_the_lagrange_solution():
                                        "vector": [0.0, -2.0]}]
         model = model_from_dict({**base, "analysis": one_step, "contact": [{
             "body_1": "top", "surface_1": "bottom", "body_2": "base", "surface_2": "top",
-            "penalty_normal": 1e3, "augmentation": {"max_iterations": k,
+            "penalty_normal": 1e3, "augmentation": {"max_iterations": k, "on_limit": "accept",
                                                     "gap_tolerance": 1e-14}}]})
         rec = Recorder()
         Simulation(model, [rec]).run()
         rows = rec.records[-1].extra["contact_rows"]
+        assert rec.records[-1].extra["augmentations_converged"] == 0  # accepted, and so noted
         gaps.append(np.abs(rows["gap"][rows["normal_traction"] > 0]).max())
     gaps = np.array(gaps)
     assert np.all(np.diff(gaps) < 0) and gaps[-1] < 1e-2 * gaps[0], gaps
+
+
+def _off_centre_load(augmentation, **analysis):
+    base = _stacked_dict()
+    base["bodies"][0]["loads"] = [{"type": "point", "set": "corner_top_right",
+                                   "vector": [0.0, -2.0]}]
+    return model_from_dict({**base, "analysis": {"kind": "static", "dt": 1.0, "t_end": 1.0,
+                                                 **analysis},
+                            "contact": [{"name": "glued", "body_1": "top",
+                                         "surface_1": "bottom", "body_2": "base",
+                                         "surface_2": "top", "penalty_normal": 1e3,
+                                         "augmentation": augmentation}]})
+
+
+@pytest.mark.parametrize(("iterations", "why"), [
+    (1, "one augmentation only, and the test compares two"),
+    (3, "change of the normal rate"),
+])
+def test_a_step_whose_augmentations_run_out_is_cut_back_then_fails(iterations, why):
+    """By default the limit of augmentations is a failed step (not a silently accepted one):
+    it is halved, and once the halvings run out the error names the interface and the test
+    that failed."""
+    model = _off_centre_load({"max_iterations": iterations, "gap_tolerance": 1e-14},
+                             max_cutbacks=2)
+    with pytest.raises(SimulationError) as err:
+        Simulation(model).run()
+    message = str(err.value)
+    assert "failed after 2 halvings" in message
+    assert f"did not converge in {iterations}" in message
+    assert f"interface 'glued': {why}" in message
+
+
+def test_accepted_unconverged_steps_are_counted_in_the_results(tmp_path):
+    """augmentation.on_limit = "accept" keeps the last augmentation (report Fig. 6.5 studies a
+    fixed number of them); history.csv and summary.json say which steps did."""
+    import json
+
+    from ntncontact.io.results import ResultWriter
+    from ntncontact.io.writers import read_csv_table
+
+    accepting = _off_centre_load({"max_iterations": 2, "gap_tolerance": 1e-14,
+                                  "on_limit": "accept"}, dt=0.5)
+    Simulation(accepting, [ResultWriter(tmp_path, accepting)]).run()
+    history = read_csv_table(tmp_path / "history.csv")
+    np.testing.assert_array_equal(history["augmentations_converged"], [1, 0, 0])  # t = 0 first
+    assert json.loads((tmp_path / "summary.json").read_text())["unconverged_steps"] == 2
+    converging = _off_centre_load({"gap_tolerance": 1e-8}, dt=0.5)
+    Simulation(converging, [ResultWriter(tmp_path / "ok", converging)]).run()
+    history = read_csv_table(tmp_path / "ok" / "history.csv")
+    np.testing.assert_array_equal(history["augmentations_converged"], [1, 1, 1])
+    assert json.loads((tmp_path / "ok" / "summary.json").read_text())["unconverged_steps"] == 0
 
 
 def test_three_bodies_and_two_interfaces_carry_the_same_pressure():

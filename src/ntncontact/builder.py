@@ -237,7 +237,7 @@ def _interface(cfg: ContactConfig, index: int, bodies: tuple[Body, ...],
                                    else "penetration")) == "predicted"
     return ContactInterface(cfg.name or f"interface{index}", Interface(surface1, surface2), law,
                             persistency, candidates, cfg.release_steps, tol, max_aug, ordered,
-                            predicted, aug.update)
+                            predicted, aug.update, aug.on_limit == "accept")
 
 
 def _xy(body: Body, surface: ContactSurface) -> np.ndarray:

@@ -200,6 +200,46 @@ def augment_all(
     return tuple(new_states), done
 
 
+def unconverged_interfaces(
+    interfaces: Sequence[ContactInterface], states: Sequence[PairState],
+    previous: Sequence[ContactResult | None] | None, current: Sequence[ContactResult | None],
+) -> list[tuple[ContactInterface, str]]:
+    """The interfaces that fail report 5.4's test between their last two augmentations
+    (Lagrange interfaces: that still release pairs in tension), each with what failed: the
+    message of a step whose augmentations ran out."""
+    failed = []
+    for i, (ci, state, res) in enumerate(zip(interfaces, states, current, strict=True)):
+        prev = None if previous is None else previous[i]
+        if res is None:
+            continue
+        if ci.law.method == "lagrange":
+            if release_tensile_pairs(state, state.lambda_N)[1].any():
+                failed.append((ci, "pairs still released in tension"))
+        elif ci.law.method == "augmented_lagrangian":
+            reason = _augmentation_failure(ci, prev, res)
+            if reason:
+                failed.append((ci, reason))
+    return failed
+
+
+def _augmentation_failure(ci: ContactInterface, prev: ContactResult | None,
+                          res: ContactResult) -> str:
+    if prev is None:
+        return "one augmentation only, and the test compares two"
+    check = check_augmentation(prev, res, ci.law, ci.tolerances)
+    if check.converged:
+        return ""
+    tol = ci.tolerances
+    out = [f"change of the normal rate {check.normal_change:.3g} (gap_tolerance {tol.normal:.3g})"]
+    if ci.law.frictional:
+        out += [f"change of the slip {check.tangential_change:.3g} "
+                f"(slip_tolerance {tol.tangential:.3g})",
+                f"{check.status_changes} stick/slip switches"]
+    if check.tensile_pairs:
+        out.append(f"{check.tensile_pairs} pairs in tension")
+    return ", ".join(out)
+
+
 def commit_all(
     interfaces: Sequence[ContactInterface], states: Sequence[PairState],
     results: Sequence[ContactResult | None],

@@ -144,6 +144,8 @@ class ContactInterface:
     predicted_detection: bool = False  # penetration tested at x + dt v (see interfaces)
     #: "uzawa" (report 5.4) or "newton" (augmentation.newton_update, frictionless pairs)
     multiplier_update: str = "uzawa"
+    #: augmentation.on_limit = "accept": a step whose augmentations ran out keeps its last one
+    accept_unconverged: bool = False
 
 
 @dataclass(frozen=True)

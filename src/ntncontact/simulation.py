@@ -27,6 +27,7 @@ from .interfaces import (
     detect_all,
     evaluate_all,
     lagrange_terms,
+    unconverged_interfaces,
     with_solved_multipliers,
 )
 from .mesh_motion import move_meshes
@@ -39,6 +40,11 @@ from .ties import tie_forces, tie_terms, tie_violation
 
 class SimulationError(RuntimeError):
     """A step could not be completed even after cutting it back."""
+
+
+class AugmentationError(RuntimeError):
+    """A step's contact multipliers did not pass report 5.4's test within
+    ``augmentation.max_iterations``: the step is cut back, like a failed Newton solve."""
 
 
 @dataclass(frozen=True)
@@ -135,6 +141,7 @@ class Simulation:
         self.ledger = dict.fromkeys(LEDGER, 0.0)  # cumulative energy ledger
         self._step_work = dict.fromkeys(LEDGER, 0.0)
         self._last_mismatch = 0.0
+        self._augmentations_converged = True  # False: a sub-step accepted its last augmentation
         self._last_tie_forces: dict = {}
         self._energy_multiplier = 0.0
         # the energy-conserving solve (report 5.5) starts from each augmentation's exact one
@@ -194,7 +201,7 @@ class Simulation:
         interfaces = self.model.interfaces
         base, motion = state, None
         x_pred = state.x + dt * state.v  # first prediction of the end-of-step positions
-        previous, iterations, guess, floor = None, 0, None, None
+        previous, before, iterations, guess, floor = None, None, 0, None, None
         factors = self._factor_cache()  # one factor serves the augmentations (modified Newton)
         sensitivities: dict = {}  # per interface and pressed set, for Newton multiplier updates
         for augmentation in range(1, self.max_augmentations + 1):  # noqa: B007 (used after)
@@ -237,11 +244,26 @@ class Simulation:
             x_pred = state.X + (2.0 * d - state.d if self.dynamic else d)
             if done:
                 break
-            previous = results
+            previous, before = results, previous
+        if not done:  # raises unless the failing interfaces accept (then so noted)
+            self._augmentations_converged = self._accept_unconverged(
+                augmentation, unconverged_interfaces(interfaces, used, before, previous))
         mismatch = motion.mismatch if motion is not None else 0.0
         ties = tie_forces(problem.constraints, problem.multipliers(result.y)) \
             if self.model.ties else {}
         return SolvedStep(state, d, used, results, augmentation, iterations, mismatch, ties)
+
+    @staticmethod
+    def _accept_unconverged(augmentations: int, failed: list) -> bool:
+        """False if every interface that failed the test asked for its last augmentation to
+        be accepted (``augmentation.on_limit = "accept"``); else the step fails and is cut
+        back, like a failed Newton solve."""
+        if all(ci.accept_unconverged for ci, _ in failed):
+            return False
+        raise AugmentationError(
+            f"contact augmentations did not converge in {augmentations} (report 5.4; "
+            "augmentation.max_iterations): "
+            + "; ".join(f"interface {ci.name!r}: {why}" for ci, why in failed))
 
     def _test_augmentation(self, problem: StepProblem, result, split, contact, previous,
                            last_contact: dict, factors):
@@ -404,6 +426,7 @@ class Simulation:
         state, remaining, iterations, cuts = self.state, dt, 0, 0
         h = dt
         self._step_work = dict.fromkeys(LEDGER, 0.0)  # summed over the accepted sub-steps
+        self._augmentations_converged = True
         while remaining > 1e-12 * dt:
             h = min(h, remaining)
             try:
@@ -475,6 +498,7 @@ class Simulation:
             "frictional_dissipation": self.ledger["frictional_dissipation"],
             "contact_work": self.ledger["contact_work"],
             "augmentations": augmentations,
+            "augmentations_converged": int(self._augmentations_converged),
             "ale_mismatch": self._last_mismatch,
             "energy_multiplier": self._energy_multiplier,
             "contact_rows": contact_rows(self.model.interfaces, results, self.state.x),

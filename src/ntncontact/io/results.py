@@ -12,7 +12,8 @@ from ..simulation import StepRecord
 from .writers import ResultsDirectory
 
 CONTACT_HISTORY = ("active_pairs", "frictional_dissipation", "contact_work", "augmentations",
-                   "ale_mismatch", "energy_multiplier")
+                   "ale_mismatch", "energy_multiplier", "augmentations_converged")
+HISTORY_DEFAULTS = {"augmentations_converged": 1}  # of the initial row and contact-free steps
 
 
 def tie_history(model: Model) -> tuple[str, ...]:
@@ -32,7 +33,8 @@ class ResultWriter:
         if model.interfaces:
             extra_history = extra_history + CONTACT_HISTORY
             summary_extra = {"contact_start_time": None, "contact_end_time": None,
-                             "max_penetration": 0.0, "max_active_pairs": 0} | summary_extra
+                             "max_penetration": 0.0, "max_active_pairs": 0,
+                             "unconverged_steps": 0} | summary_extra
         if model.ties:
             extra_history = extra_history + tie_history(model)
             summary_extra = {"max_tie_violation": 0.0} | summary_extra
@@ -55,13 +57,16 @@ class ResultWriter:
             "angular_momentum": b.angular_momentum,
             "newton_iterations": record.newton_iterations,
         }
-        row |= {k: record.extra.get(k, 0.0) for k in self.extra_history}
+        row |= {k: record.extra.get(k, HISTORY_DEFAULTS.get(k, 0.0)) for k in self.extra_history}
         self.results.write_history(row)
         if "tie_violation" in record.extra:
             summary = self.results.summary
             worst = max(record.extra["tie_violation"], summary.data.get("max_tie_violation", 0.0))
             summary.update(max_tie_violation=worst)
         self._last = record
+        if record.extra.get("augmentations_converged", 1) == 0:  # augmentation.on_limit
+            summary = self.results.summary
+            summary.update(unconverged_steps=summary.data["unconverged_steps"] + 1)
         rows = record.extra.get("contact_rows")
         if rows is not None:
             self._write_contact(s.step, s.time, record.dt, rows)

@@ -213,6 +213,7 @@ class AugmentationConfig(Strict):
     slip_tolerance: Positive = 1e-8
     traction_tolerance: Positive = 1e-8
     update: Literal["uzawa", "newton"] = "uzawa"
+    on_limit: Literal["cut_back", "accept"] = "cut_back"
 
 
 class ContactConfig(Strict):
