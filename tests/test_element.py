@@ -102,6 +102,24 @@ def test_mass_matrices_carry_the_total_mass_and_lumping_keeps_it():
     np.testing.assert_allclose(np.asarray(Mc.sum(axis=1)).ravel(), Ml.diagonal(), rtol=1e-13)
 
 
+def test_balance_takes_the_nodal_or_the_dof_mass():
+    """The dof mass is the nodal one times the 2 x 2 identity: the same energies and momenta
+    (the time loop passes the dof mass of an ALE body's current mesh)."""
+    from ntncontact.diagnostics import balance
+
+    nodes, cells = distorted_grid(3, 2)
+    asm = make_assembler(nodes, cells, "linear_elastic")
+    rng = np.random.default_rng(3)
+    x, v = nodes + 0.01 * rng.standard_normal(nodes.shape), rng.standard_normal(nodes.shape)
+    for lumped in (False, True):
+        by_node = balance(asm.nodal_mass(nodes, lumped), x, v, 2.0)
+        by_dof = balance(asm.mass(nodes, lumped), x, v, 2.0)
+        np.testing.assert_allclose(by_dof.linear_momentum, by_node.linear_momentum, rtol=1e-13)
+        for name in ("kinetic_energy", "angular_momentum"):
+            assert getattr(by_dof, name) == pytest.approx(getattr(by_node, name), rel=1e-13)
+        assert by_dof.kinetic_energy > 0.0
+
+
 def test_inverted_element_is_named():
     nodes, cells = distorted_grid(2, 1)
     asm = make_assembler(nodes, cells, "neo_hookean")

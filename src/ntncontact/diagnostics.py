@@ -21,13 +21,18 @@ class Balance:
         return self.kinetic_energy + self.strain_energy
 
 
-def balance(nodal_mass: sp.spmatrix, x: NDArray, v: NDArray, strain_energy: float) -> Balance:
+def balance(mass: sp.spmatrix, x: NDArray, v: NDArray, strain_energy: float) -> Balance:
     """Kinetic energy 1/2 v.Mv, linear momentum sum_a (Mv)_a, angular momentum about the origin.
 
-    ``nodal_mass`` is the scalar (per node) mass matrix, ``x`` current positions, ``v`` velocities.
-    The angular momentum sum_ab M_ab x_a x v_b is the quantity the mid-point rule conserves exactly.
+    ``mass`` is the scalar (per node) mass matrix, or the mass on the dofs (x_a, y_a
+    interleaved: the nodal one times the 2 x 2 identity), ``x`` current positions, ``v``
+    velocities. The angular momentum sum_ab M_ab x_a x v_b is the quantity the mid-point rule
+    conserves exactly.
     """
-    p = nodal_mass @ v  # nodal momenta (n, 2)
+    if mass.shape[0] == v.shape[0]:
+        p = mass @ v  # nodal momenta (n, 2)
+    else:
+        p = (mass @ v.ravel()).reshape(v.shape)
     kinetic = 0.5 * float(np.sum(v * p))
     angular = float(np.sum(x[:, 0] * p[:, 1] - x[:, 1] * p[:, 0]))
     return Balance(kinetic, strain_energy, (float(p[:, 0].sum()), float(p[:, 1].sum())), angular)

@@ -152,7 +152,9 @@ class Simulation:
 
     def balance(self, state: StepState) -> Balance:
         _, _, energy = self.model.assembler.internal(state.X, state.x, need_tangent=False)
-        return balance(self._nodal(state), state.x, state.v, energy)
+        # ALE bodies: the dof mass of the step's mesh, which the solve built already
+        mass = self._dof_mass(state) if self.model.ale_bodies else self._nodal_mass
+        return balance(mass, state.x, state.v, energy)
 
     def advance(self, state: StepState, dt: float) -> tuple[StepState, int]:
         """One step of size dt from ``state`` (report 5.4): detection, then the augmented
@@ -406,11 +408,6 @@ class Simulation:
         if not self.model.ale_bodies:
             return self._mass
         return self._moving_mass.matrix(state.X)
-
-    def _nodal(self, state: StepState) -> sp.csr_matrix:
-        if not self.model.ale_bodies:
-            return self._nodal_mass
-        return self.model.assembler.nodal_mass(state.X, self.lumped)
 
     def _contact_results(self, interfaces, contact, state: StepState, d: NDArray, dt: float,
                          last: dict | None = None):
