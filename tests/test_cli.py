@@ -131,3 +131,43 @@ def test_console_command_flushes_its_output_and_keeps_the_exit_code(tmp_path, ca
     bad.write_text((EXAMPLES / "spinning_block.toml").read_text().replace("dt =", "dtt ="))
     failed = _console(["run", str(bad), "--out", str(tmp_path / "o"), "--quiet"])
     assert failed.returncode == 1 and "analysis.dtt: unknown key" in failed.stderr
+
+
+def _demo_recipe() -> tuple[list[str], str]:
+    """The Makefile's demo target: the ntncontact command's arguments and what it echoes."""
+    import shlex
+
+    lines = (EXAMPLES.parent / "Makefile").read_text().split("\ndemo:", 1)[1].splitlines()[1:]
+    recipe = []
+    for line in lines:
+        if not line.startswith("\t"):
+            break
+        recipe.append(line.strip())
+    command = " ".join(recipe).split("@echo")[0].replace("\\", " ")
+    words = shlex.split(command)
+    run = words[words.index("$(BIN)/ntncontact") + 1:]
+    echoed = " ".join(line for line in recipe if line.startswith("@echo"))
+    return run, echoed
+
+
+def test_the_demo_runs_the_ring_impact_and_writes_what_it_says(tmp_path):
+    """`make demo`'s command, run as the installed command (into another folder): the whole
+    ring impact, completed, with the comparison printed, and every file its closing lines
+    point to."""
+    import json
+
+    run, echoed = _demo_recipe()
+    assert run[:2] == ["run", "examples/ring_impact.toml"] and "--gif" in run
+    folder = run[run.index("--out") + 1]
+    run[run.index("--out") + 1] = str(tmp_path)
+    run[1] = str(EXAMPLES / "ring_impact.toml")
+    done = _console(run)
+    assert done.returncode == 0, done.stderr
+    assert "energy_max_relative_variation" in done.stdout  # --compare
+    summary = json.loads((tmp_path / "summary.json").read_text())
+    assert summary["status"] == "completed" and summary["unconverged_steps"] == 0
+    named = {word.strip(',;:"') for word in echoed.replace(folder + "/", " ").split()}
+    files = {"fields.pvd", "history.csv", "contact.csv", "summary.json", "animation.gif"}
+    assert files <= named
+    assert all((tmp_path / name).is_file() for name in files)
+    assert {"snapshots.png", "energies.png"} <= {p.name for p in tmp_path.glob("*.png")}
