@@ -247,21 +247,22 @@ class Simulation:
             if done:
                 break
             previous, before = results, previous
-        if not done:  # raises unless the failing interfaces accept (then so noted)
-            self._augmentations_converged = self._accept_unconverged(
-                augmentation, unconverged_interfaces(interfaces, used, before, previous))
+        if not done:
+            self._require_accepted(augmentation,
+                                   unconverged_interfaces(interfaces, used, before, previous))
+            self._augmentations_converged = False
         mismatch = motion.mismatch if motion is not None else 0.0
         ties = tie_forces(problem.constraints, problem.multipliers(result.y)) \
             if self.model.ties else {}
         return SolvedStep(state, d, used, results, augmentation, iterations, mismatch, ties)
 
     @staticmethod
-    def _accept_unconverged(augmentations: int, failed: list) -> bool:
-        """False if every interface that failed the test asked for its last augmentation to
-        be accepted (``augmentation.on_limit = "accept"``); else the step fails and is cut
-        back, like a failed Newton solve."""
+    def _require_accepted(augmentations: int, failed: list) -> None:
+        """Unless every interface that failed the test asked for its last augmentation to be
+        kept (``augmentation.on_limit = "accept"``), the step fails and is cut back, like a
+        failed Newton solve."""
         if all(ci.accept_unconverged for ci, _ in failed):
-            return False
+            return
         raise AugmentationError(
             f"contact augmentations did not converge in {augmentations} (report 5.4; "
             "augmentation.max_iterations): "
