@@ -64,7 +64,7 @@ class ResultWriter:
             worst = max(record.extra["tie_violation"], summary.data.get("max_tie_violation", 0.0))
             summary.update(max_tie_violation=worst)
         self._last = record
-        if record.extra.get("augmentations_converged", 1) == 0:  # augmentation.on_limit
+        if row.get("augmentations_converged") == 0:  # augmentation.on_limit = "accept"
             summary = self.results.summary
             summary.update(unconverged_steps=summary.data["unconverged_steps"] + 1)
         rows = record.extra.get("contact_rows")
