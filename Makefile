@@ -3,7 +3,6 @@ PYTHON ?= python3
 VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
-export NUMBA_CACHE_DIR ?= $(CURDIR)/.numba_cache
 export MPLBACKEND ?= Agg
 
 .PHONY: demo test test-fast bench lint clean
@@ -16,7 +15,9 @@ $(STAMP): pyproject.toml | $(BIN)/python
 	$(BIN)/python -m pip install --quiet -e ".[test]"
 	touch $(STAMP)
 
-# Compile the Numba kernels into .numba_cache on two processes (~35-40 s the first time;
+# Compile the Numba kernels into the package's kernel cache (NUMBA_CACHE_DIR if set, else
+# ~/.cache/ntncontact/numba: the package chooses it, for make, the command and pytest alike) on
+# two processes (~35-40 s the first time;
 # otherwise the first run pays about a minute for them on one core) and write the package's
 # bytecode (not written at run time where PYTHONDONTWRITEBYTECODE is set). Done again whenever
 # a source file changed: ~2 s when only the edited modules' kernels need compiling again.
@@ -46,4 +47,4 @@ lint: $(STAMP)
 	$(BIN)/ruff check src tests benchmarks
 
 clean:
-	rm -rf $(VENV) .numba_cache results
+	rm -rf $(VENV) results

@@ -21,6 +21,7 @@ from __future__ import annotations
 import time
 from pathlib import Path
 
+from . import jit, kernel_cache_dir
 from .builder import build_model
 from .io.scenario import parse_scenario
 from .simulation import Simulation
@@ -95,7 +96,9 @@ def main() -> int:
 
     start = time.perf_counter()
     compile_bytecode()
-    print("Compiling the Numba kernels (once; cached for later runs)...", flush=True)
+    print(f"Compiling the Numba kernels into {kernel_cache_dir()} (once; cached for later "
+          "runs)...", flush=True)
+    jit.NOTE.said = True  # said here, not again by each process
     if "fork" in mp.get_all_start_methods():
         with ProcessPoolExecutor(max_workers=2, mp_context=mp.get_context("fork")) as pool:
             list(pool.map(compile_group, (True, False)))

@@ -16,7 +16,8 @@ per-call overhead.
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
+
+from ..jit import njit
 
 # 8-point Gauss-Legendre on [0, 1] (as ale.surface)
 _GX, _GW = np.polynomial.legendre.leggauss(8)

@@ -10,7 +10,8 @@ The COO triplets come out in the reference's order, [pair, node (i/j), slot, r, 
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
+
+from ..jit import njit
 
 #: Integer codes of the normal laws compiled into the kernel (ContactLaw.method).
 METHOD_CODES: dict[str, int] = {"penalty": 0, "augmented_lagrangian": 1, "lagrange": 2}

@@ -15,9 +15,10 @@ from __future__ import annotations
 
 import numba
 import numpy as np
-from numba import njit, prange
+from numba import prange
 from numpy.typing import NDArray
 
+from ..jit import njit
 from ..materials.models import MaterialKind
 from .q4 import DN_GP, GAUSS_WEIGHTS, InvertedElementError
 

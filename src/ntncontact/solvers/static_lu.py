@@ -41,8 +41,9 @@ from dataclasses import dataclass
 
 import numpy as np
 import scipy.sparse as sp
-from numba import njit
 from numpy.typing import NDArray
+
+from ..jit import njit
 
 __all__ = ["StaticFactor", "StaticSymbolic", "analyse", "factorize"]
 
