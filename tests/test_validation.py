@@ -16,14 +16,11 @@ from ntncontact.reference import (
     table,
     table_4_1,
 )
-from ntncontact.validation import (
-    CASES,
-    DELAMINATION_POSITIONS,
-    EXAMPLES,
+from ntncontact.validation import link_results, validate
+from ntncontact.validation_cases import CASES, EXAMPLES, KINDS, Case, parse_cases
+from ntncontact.validation_checks import (
     HERTZ_BETA,
     HERTZ_CONVERGENCE_FRACTION,
-    KINDS,
-    Case,
     CaseResult,
     DelaminationPosition,
     HertzSnapshot,
@@ -33,10 +30,9 @@ from ntncontact.validation import (
     hertz_friction_rows,
     hertz_rows,
     impact_rows,
-    link_results,
     mesh_motion_rows,
-    validate,
 )
+from ntncontact.validation_measure import DELAMINATION_POSITIONS
 
 
 def failed(rows):
@@ -58,6 +54,49 @@ def test_cases_cover_every_example_of_the_report():
         assert c.kind == "mesh_motion" or (EXAMPLES / c.example).is_file(), c.name
     with pytest.raises(ValueError, match="unknown kind"):
         Case("x", "rod_impact.toml", kind="static")
+
+
+def test_case_table_rows_take_the_defaults_and_reject_unknown_columns():
+    text = """
+        [defaults]
+        quick = ["analysis.t_end=1.0"]
+        tolerance = 0.05
+        [[case]]
+        name = "a"
+        example = "rod_impact.toml"
+        [[case]]
+        name = "b"
+        example = "rod_impact.toml"
+        overrides = ["contact.0.friction=0.2"]
+        tolerance = 0.1
+    """
+    a, b = parse_cases(text)
+    assert a == Case("a", "rod_impact.toml", quick=("analysis.t_end=1.0",))
+    assert b.tolerance == 0.1 and b.friction == 0.2 and b.overrides == ("contact.0.friction=0.2",)
+    with pytest.raises(ValueError, match="case 2 .b.: unknown column.s. tolerence"):
+        parse_cases(text.replace("tolerance = 0.1", "tolerence = 0.1"))
+    with pytest.raises(ValueError, match="case names repeat: a"):
+        parse_cases(text.replace('name = "b"', 'name = "a"'))
+    with pytest.raises(ValueError, match="unknown kind"):
+        parse_cases(text.replace('tolerance = 0.1', 'kind = "static"'))
+
+
+def test_case_table_holds_every_variant_of_the_report():
+    """Hertz: three meshes with and without friction 0.3 (meshes 2, 3 from their files); fast
+    sliding: mu 0, 0.1, 0.2 with both mass types; tilted blocks: mu 0, 0.2, 10."""
+    by = {c.name: c for c in CASES}
+    for level, nx in ((2, 75), (3, 100)):
+        for suffix in ("", "_mu0.3"):
+            case = by[f"hertz_mesh{level}{suffix}"]
+            assert case.overrides[:2] == (f"bodies.0.mesh.file=meshes/hertz_cylinder_{level}.msh",
+                                          f"bodies.1.mesh.nx={nx}")
+            assert case.friction == (0.3 if suffix else 0.0)
+    fast = sorted((c.friction, c.overrides[1]) for c in CASES if c.section == "6.5")
+    assert fast == sorted((mu, f'analysis.mass="{m}"') for mu in (0.0, 0.1, 0.2)
+                          for m in ("consistent", "lumped"))
+    assert sorted(c.friction for c in CASES if c.section == "6.6") == [0.0, 0.2, 10.0]
+    assert {c.tolerance for c in CASES if c.section in ("6.4", "6.5", "6.6")} == {0.15}
+    assert by["rod_impact"].tolerance == 0.03
 
 
 # ----------------------------------------------------------------------------------------------

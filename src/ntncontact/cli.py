@@ -100,7 +100,8 @@ def _validate(args: argparse.Namespace) -> int:
     """Run every example of the report and write DIR/report.html and report.md."""
     from tqdm import tqdm
 
-    from .validation import CASES, validate
+    from .validation import validate
+    from .validation_cases import CASES
 
     out = Path(args.out)
     started: list[str] = []
