@@ -1,5 +1,6 @@
 """The report's reference values and the compare command."""
 
+import csv
 import json
 
 import numpy as np
@@ -13,6 +14,7 @@ from ntncontact.reference import (
     compare,
     first_slip_node,
     fit_hertz_ellipse,
+    format_comparison,
     hertz_plane_strain,
     our_values,
     report_values,
@@ -23,6 +25,7 @@ from ntncontact.reference import (
     table_6_1_first_slip_node,
     write_comparison_csv,
 )
+from ntncontact.validation_cases import impact_tolerance
 
 
 def test_reference_tables_ship_with_the_package():
@@ -135,5 +138,87 @@ def test_a_run_stopped_during_contact_has_no_contact_end(tmp_path):
     assert {r.quantity for r in rows} >= {"contact_start_time", "energy_initial"}
     assert "contact_end_time" not in {r.quantity for r in rows}
     path = tmp_path / "c.csv"
-    write_comparison_csv(path, [Comparison("state", "stick", "slip", 0.0, "equal")])
-    assert path.read_text().splitlines()[1] == "state,stick,slip,nan,nan,equal,FAIL"
+    write_comparison_csv(path, [Comparison("state", "stick", "slip", 0.0, "equal", note="n")])
+    assert path.read_text().splitlines()[1] == "state,stick,slip,nan,nan,equal,FAIL,n"
+
+
+def _ring_run(folder, start=0.065, end=0.2, energies=(1.6, 1.6, 1.6)):
+    """A results folder of a (short) ring impact (dt 0.005): its summary and three history
+    rows."""
+    folder.mkdir(exist_ok=True)
+    (folder / "summary.json").write_text(json.dumps({
+        "scenario": "examples/ring_impact.toml", "overrides": [], "contact_start_time": start,
+        "contact_end_time": end, "max_penetration": 0.004, "max_active_pairs": 5}))
+    with HistoryWriter(folder) as w:
+        for step, (t, e) in enumerate(zip([0.0, 0.005, 0.2], energies, strict=True)):
+            w.write({"step": step, "time": t, "kinetic_energy": e, "strain_energy": 0.0,
+                     "total_energy": e, "linear_momentum_x": 0.0, "linear_momentum_y": -3.2,
+                     "angular_momentum": 0.0, "newton_iterations": 1})
+    return folder
+
+
+def test_compare_checks_the_rows_as_validate_does(tmp_path, capsys):
+    """`ntncontact compare` shows a verdict, the tolerance and the reason of every row, with the
+    example's tolerance from the case table (ring impact: 15 %), and so does comparison.csv."""
+    _ring_run(tmp_path, start=0.1, end=0.15)  # starts 0.035 late: > 15 % and one step
+    _, rows = compare(tmp_path)
+    by = {r.quantity: r for r in rows}
+    assert by["contact_start_time"].passed() is False
+    assert by["energy_initial"].passed() is True  # 1.6 against 1.6014
+    assert by["energy_initial"].tolerance == impact_tolerance("ring_impact") == 0.15
+    assert by["max_penetration"].passed() is True and by["max_penetration"].mode == "at_most"
+    assert by["contact_end_time"].passed() is None  # shown: checked as the duration
+    assert all(r.note for r in rows)  # every row says why
+    assert main(["compare", str(tmp_path)]) == 0
+    out = capsys.readouterr().out.splitlines()
+    assert out[1].split() == ["quantity", "ours", "report", "difference", "result", "tolerance",
+                              "reason"]
+    start = next(line for line in out if line.startswith("contact_start_time"))
+    assert "FAIL" in start and "±0.15 rel." in start and "one time step" in start
+    assert "+53.85%" in start  # (0.1 - 0.065) / 0.065
+    info = next(line for line in out if line.startswith("contact_end_time"))
+    assert " info " in info and "checked as the contact duration" in info
+    with (tmp_path / "comparison.csv").open() as fh:
+        table_rows = {row["quantity"]: row for row in csv.DictReader(fh)}
+    assert table_rows["contact_start_time"]["result"] == "FAIL"
+    assert table_rows["energy_initial"]["result"] == "pass"
+    assert table_rows["contact_start_time"]["tolerance"].startswith("±0.15 rel.")
+    assert {row["result"] for row in table_rows.values()} == {"pass", "FAIL", "info"}
+
+
+def test_a_reference_value_of_zero_shows_the_absolute_difference(tmp_path):
+    row = Comparison("angular_momentum_max", 2.5e-14, 0.0, 0.15, "at_most", atol=1e-12)
+    assert row.passed() and row.difference_text() == "+2.5e-14 abs."
+    assert Comparison("q", 0.0, 0.5).difference_text() == "-100.00%"  # ours 0: really -100 %
+    assert Comparison("q", "a", "b").difference_text() == ""
+    assert "+2.5e-14 abs." in format_comparison("label", [row])
+    path = tmp_path / "c.csv"
+    write_comparison_csv(path, [row])
+    with path.open() as fh:
+        (written,) = csv.DictReader(fh)
+    assert written["relative_difference"] == "" and float(written["difference"]) == 2.5e-14
+
+
+def test_an_example_without_a_tolerance_is_shown_only(tmp_path, monkeypatch):
+    from ntncontact import validation_cases
+
+    _ring_run(tmp_path)
+    monkeypatch.setattr(validation_cases, "CASES", ())
+    _, rows = compare(tmp_path)
+    assert rows and all(r.passed() is None and "no tolerance" in r.note for r in rows)
+
+
+@pytest.mark.parametrize("make, message", [
+    (lambda d: d / "missing", "does not exist"),
+    (lambda d: d, "has no summary.json or history.csv"),
+    (lambda d: _ring_run(d / "run").joinpath("history.csv").unlink() or d / "run",
+     "has no history.csv"),
+])
+def test_compare_outside_a_results_folder_says_what_it_expected(tmp_path, capsys, make,
+                                                                message):
+    folder = make(tmp_path)
+    assert main(["compare", str(folder)]) == 1
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and message in err and str(folder) in err
+    assert "expected the results folder of `ntncontact run" in err
+    assert "Errno" not in err and "Traceback" not in err

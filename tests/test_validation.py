@@ -13,6 +13,7 @@ from ntncontact.reference import (
     Comparison,
     hertz_nodal_forces,
     hertz_plane_strain,
+    impact_rows,
     table,
     table_4_1,
 )
@@ -29,7 +30,6 @@ from ntncontact.validation_checks import (
     hertz_convergence_rows,
     hertz_friction_rows,
     hertz_rows,
-    impact_rows,
     mesh_motion_rows,
 )
 from ntncontact.validation_measure import DELAMINATION_POSITIONS
@@ -337,3 +337,34 @@ def test_quasi_static_cases_end_to_end(tmp_path):
     assert all(p.is_file() for p in hertz.images)
     md = (tmp_path / "report.md").read_text()
     assert "## hertz_mesh1: PASS" in md and "hertz_mesh1/hertz_pressure.png" in md
+
+
+@pytest.mark.parametrize("outcomes, code", [
+    ((True, True), 0),
+    ((True, False), 1),  # a case missed a tolerance
+    ((True, None), 1),  # a case raised
+])
+def test_validate_command_exits_non_zero_when_a_case_fails(tmp_path, monkeypatch, capsys,
+                                                          outcomes, code):
+    """`ntncontact validate` exits 1 when any case fails or errors, 0 when all pass (the cases'
+    results stand in for runs: validate itself is tested above)."""
+    from ntncontact import validation
+    from ntncontact.cli import main
+
+    def fake_validate(out, quick=False, progress=None, **_):
+        results = []
+        for i, ok in enumerate(outcomes):
+            case = Case(f"case{i}", "rod_impact.toml")
+            result = CaseResult(case, Path(out) / case.name, 0.1,
+                                error=None if ok is not None else "RuntimeError: boom")
+            result.rows = [Comparison("q", 1.0 if ok else 2.0, 1.0, 0.05)]
+            results.append(result)
+            if progress:
+                progress(case.name)
+        return results
+
+    monkeypatch.setattr(validation, "validate", fake_validate)
+    assert main(["validate", "--quick", "--out", str(tmp_path)]) == code
+    summary = capsys.readouterr().out.strip().splitlines()[-1]
+    assert summary.startswith("report: ") and f"{outcomes.count(True)} passed" in summary
+    assert (code == 0) == ("case1" not in summary)

@@ -87,7 +87,9 @@ def _compare(args: argparse.Namespace) -> int:
 
 
 def _print_comparison(directory: Path) -> int:
-    """The run's headline numbers beside the report's; also DIR/comparison.csv."""
+    """The run's headline numbers beside the report's, each with its verdict, tolerance and
+    reason (as `validate` checks them); also DIR/comparison.csv. A folder that is not a run's
+    results is an error naming what was expected."""
     from .reference import compare, format_comparison, write_comparison_csv
 
     label, rows = compare(directory)
@@ -117,7 +119,7 @@ def _validate(args: argparse.Namespace) -> int:
     failed = [r.case.name for r in results if not r.passed()]
     print(f"report: {out / 'report.html'} ({len(results) - len(failed)} passed, "
           f"{len(failed)} failed{': ' + ', '.join(failed) if failed else ''})")
-    return 0
+    return 1 if failed else 0  # a failed or crashed case fails the command (CI, scripts)
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -73,3 +73,14 @@ def load_cases() -> tuple[Case, ...]:
 
 CASES: tuple[Case, ...] = load_cases()
 
+
+
+def impact_tolerance(example: str) -> float | None:
+    """The relative tolerance of an example's impact cases (``example``: the scenario file's
+    stem, e.g. ``ring_impact``); None if the table has no impact case of it."""
+    tolerances = {c.tolerance for c in CASES
+                  if c.kind == "impact" and Path(c.example).stem == example}
+    if len(tolerances) > 1:
+        raise ValueError(f"{TABLE}: the impact cases of {example} have different tolerances "
+                         f"{sorted(tolerances)}; compare cannot choose")
+    return tolerances.pop() if tolerances else None

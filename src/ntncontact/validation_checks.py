@@ -33,12 +33,6 @@ from .reference import (
 )
 from .validation_cases import Case
 
-#: Impact quantities compared with the case's relative tolerance.
-CHECKED = ("contact_start_time", "energy_initial", "energy_dissipated_fraction",
-           "contact_duration")
-#: Impact quantities the report states as bounds of its own drift: ours must not exceed them.
-BOUNDS = ("linear_momentum_max_relative_variation", "angular_momentum_max", "max_penetration")
-
 
 @dataclass
 class CaseResult:
@@ -62,40 +56,6 @@ class CaseResult:
 
     def failed_rows(self) -> list[Comparison]:
         return [r for r in self.checked() if not r.passed()]
-
-
-def impact_rows(rows: list[Comparison], tolerance: float, friction: float, dt: float,
-                onset: float = 0.0) -> list[Comparison]:
-    """The checks of an impact case's headline rows (from :func:`reference.compare`).
-
-    - contact start, initial energy, contact duration, dissipated energy (with friction):
-      relative ``tolerance``; the contact start also within one time step ``dt``;
-    - ``onset``: for a run stopped during contact (``--quick``), dt / (t_end - t_start): the
-      dissipation grows about linearly from the contact start, which either computation knows
-      to one time step only, so its share of the dissipation so far is added to the tolerance;
-    - with mu = 0 the dissipated fraction is a difference of nearly equal energies: shown only;
-      the energy's largest variation is then the report's drift and must not exceed it;
-    - momentum drift, largest angular momentum, largest penetration: bounds of the report's
-      drift, ours at most the report's (+ ``tolerance``).
-    """
-    out = []
-    for r in rows:
-        q = r.quantity
-        if q == "contact_start_time":
-            r = r.with_check(tolerance, atol=dt * (1.0 + 1e-9),
-                             note=f"within {tolerance:.0%} or one time step")
-        elif q == "energy_dissipated_fraction" and friction == 0.0:
-            r = r.with_check(None, note="frictionless: both near zero; see the energy drift")
-        elif q == "energy_dissipated_fraction" and onset:
-            r = r.with_check(tolerance + onset, note=f"within {tolerance:.0%} + {onset:.0%} "
-                             "(one time step of the sliding so far)")
-        elif q in CHECKED:
-            r = r.with_check(tolerance, note=f"within {tolerance:.0%}")
-        elif q in BOUNDS or (q == "energy_max_relative_variation" and friction == 0.0):
-            r = r.with_check(tolerance, mode="at_most", atol=1e-12,
-                             note="the report's drift is a bound (+ round-off)")
-        out.append(r)
-    return out
 
 
 def mesh_motion_rows(stats: dict[str, dict[str, float]],

@@ -8,7 +8,6 @@ summary.json and the VTU snapshots of the case's run, hands the arrays to the ch
 
 from __future__ import annotations
 
-import json
 from collections.abc import Callable
 from pathlib import Path
 
@@ -24,7 +23,6 @@ from .validation_checks import (
     delamination_rows,
     hertz_friction_rows,
     hertz_rows,
-    impact_rows,
     mesh_motion_rows,
 )
 from .validation_figures import (
@@ -88,15 +86,8 @@ class _Results:
 def _measure_impact(case: Case, directory: Path, quick: bool, result: CaseResult) -> None:
     from .io.writers import read_csv_table
 
-    result.label, rows = compare(directory)
+    result.label, result.rows = compare(directory, case.tolerance)
     t = read_csv_table(directory / "history.csv")["time"]
-    dt = float(t[1] - t[0]) if len(t) > 1 else 0.0
-    summary = json.loads((directory / "summary.json").read_text())
-    start, end = summary.get("contact_start_time"), summary.get("contact_end_time")
-    onset = 0.0
-    if start is not None and end is not None and abs(end - t[-1]) <= 1e-9 and t[-1] > start:
-        onset = dt / (float(t[-1]) - start)  # stopped during contact
-    result.rows = impact_rows(rows, case.tolerance, case.friction, dt, onset)
     if quick:
         result.notes.append(f"Shortened run (to t = {t[-1]:g}): values derived from the "
                             "report's time tables are taken over the same span; quantities "
