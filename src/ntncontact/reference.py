@@ -17,6 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from .io.writers import read_csv_table
+from .validation_cases import TABLE, impact_tolerance
 
 #: Values the report states in its text (section in the comment).
 TEXT_VALUES: dict[str, dict[str, float]] = {
@@ -423,8 +424,6 @@ def compare(directory: str | Path, tolerance: float | None = None
     """Side-by-side rows for every quantity both the report and the run have, checked as
     ``ntncontact validate`` checks the example (:func:`impact_rows`) with ``tolerance``, by
     default the example's tolerance in ``data/validation_cases.toml``."""
-    from .validation_cases import TABLE, impact_tolerance
-
     directory = require_results_folder(directory)
     summary = json.loads((directory / "summary.json").read_text())
     example, friction, mass = _case(summary)
