@@ -1,6 +1,9 @@
-"""The compiled ALE kernels (``ale.kernels_numba``) against the NumPy code they replaced, bit for
-bit: the kernels repeat its operations in its order (NumPy's pairwise summation included), so
-the ALE update's results did not change when they were introduced."""
+"""The compiled ALE kernels (``ale.kernels_numba``) against the NumPy code they replaced: the
+kernels repeat its operations in its order, so the ALE update's results did not change when they
+were introduced. Bit for bit where NumPy's results are fixed by IEEE arithmetic; where the NumPy
+code sums through ``np.sum`` or ``np.einsum``, the order of those sums is NumPy's implementation
+detail (blocking, unrolling, memory layout), which other NumPy versions may change: there the
+comparison allows the round-off of a reordered sum (:data:`REORDERED`)."""
 
 from __future__ import annotations
 
@@ -13,6 +16,17 @@ from ntncontact.ale.surface import local_slides
 from ntncontact.mesh.generators import rectangle
 
 SNAP = 1e-10
+#: Round-off of a sum of up to a few hundred terms taken in another order, relative to the
+#: largest result: at most ~log2(n) eps (2e-15 for n = 300) of the sum of magnitudes, which
+#: here is of the order of the results; 1e-13 leaves a margin of 50 and stays far below any
+#: change an algorithmic difference (another branch, another term) would make.
+REORDERED = 1e-13
+
+
+def assert_equal_up_to_reordering(got, want):
+    want = np.asarray(want, float)
+    scale = max(float(np.abs(want).max(initial=0.0)), 1.0)
+    np.testing.assert_allclose(got, want, rtol=0.0, atol=REORDERED * scale)
 
 
 def reference_local_slides(s, ref, idx, slide, tolerance):
@@ -98,7 +112,7 @@ def random_chain(rng, n):
 
 
 @pytest.mark.parametrize("seed", range(6))
-def test_local_slides_equal_the_numpy_loop_bit_for_bit(seed):
+def test_local_slides_equal_the_numpy_loop(seed):
     rng = np.random.default_rng(seed)
     for n in (3, 8, 12, 41, 300):  # runs above 8 and 128 segments: NumPy's pairwise sums
         s, ref = random_chain(rng, n)
@@ -115,7 +129,7 @@ def test_local_slides_equal_the_numpy_loop_bit_for_bit(seed):
             tolerance = rng.choice([0.2, 0.5, 0.9])
             got, resets = local_slides(s, ref, idx, slide, tolerance)
             want, want_resets = reference_local_slides(s, ref, idx, slide, tolerance)
-            np.testing.assert_array_equal(got, want)
+            assert_equal_up_to_reordering(got, want)  # the reference sums with np.sum
             assert resets == want_resets
 
 
@@ -137,12 +151,21 @@ def test_anchor_targets_equal_the_numpy_clamping_bit_for_bit(seed):
 
 
 @pytest.mark.parametrize("n", [0, 1, 7, 8, 9, 100, 128, 129, 300, 1000, 4099])
-def test_pairwise_sum_is_numpys_sum(n):
+def test_pairwise_sum_is_accurate_like_numpys(n):
+    """Within the pairwise summation's error bound, (log2(n) + 1) eps sum |a|, of the exact sum
+    (math.fsum), as NumPy's sum is (whose exact order is NumPy's own business)."""
+    import math
+
     rng = np.random.default_rng(n)
     a = rng.standard_normal(n) * 10.0 ** rng.uniform(-6, 6, n)
-    assert kernels._pairwise_sum(a, 0, n) == a.sum()
-    if n > 5:
-        assert kernels._pairwise_sum(a, 2, n - 5) == a[2:n - 3].sum()
+    for lo, size in ((0, n), (2, n - 5)):
+        if size <= 0:
+            continue
+        part = a[lo:lo + size]
+        bound = (np.log2(size) + 1.0) * np.finfo(float).eps * np.abs(part).sum()
+        exact = math.fsum(part)
+        assert abs(kernels._pairwise_sum(a, lo, size) - exact) <= bound
+        assert abs(part.sum() - exact) <= bound
 
 
 def reference_try_hints(remapper, pts, hint, outside_tol):
@@ -186,7 +209,7 @@ def distorted_block(rng, nx=8, ny=5):
 
 
 @pytest.mark.parametrize("seed", range(4))
-def test_hinted_location_and_interpolation_equal_the_numpy_code_bit_for_bit(seed):
+def test_hinted_location_and_interpolation_equal_the_numpy_code(seed):
     rng = np.random.default_rng(200 + seed)
     nodes, cells = distorted_block(rng)
     remapper = Remapper(nodes, cells)
@@ -210,7 +233,8 @@ def test_hinted_location_and_interpolation_equal_the_numpy_code_bit_for_bit(seed
             got = kernels.interpolate(remapper.nodes, remapper.cells, fields, loc.cell, loc.xi,
                                       pts, np.zeros((p, 4, 6, 2)) if g is None else g,
                                       g is not None)
-            np.testing.assert_array_equal(got, reference_interpolation(remapper, fields, loc,
+            # the reference sums with np.einsum
+            assert_equal_up_to_reordering(got, reference_interpolation(remapper, fields, loc,
                                                                        pts, g))
 
 
