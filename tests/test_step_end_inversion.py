@@ -87,7 +87,8 @@ def test_ring_at_speed_50_the_inverted_end_is_named_with_step_time_body_element(
 
 
 def test_an_inverted_end_of_step_halves_the_step(monkeypatch):
-    """With cut-backs the same step is tried again from the same state at half the size."""
+    """With cut-backs the same step is tried again from the same state at half the size,
+    until a sub-step ends valid."""
     model = model_from_example("ring_impact.toml", RING_50 + ["analysis.max_cutbacks=2"])
     tried = _attempts(monkeypatch)
     with pytest.raises(SimulationError):
@@ -95,6 +96,9 @@ def test_an_inverted_end_of_step_halves_the_step(monkeypatch):
     first = next(i for i, (_, _, err) in enumerate(tried) if isinstance(err, InvertedAtStepEnd))
     start, size, _ = tried[first]
     assert tried[first + 1][:2] == (start, pytest.approx(0.5 * size))
+    # a smaller sub-step from the same state then ends with no inverted element (here a
+    # quarter step: the inversion was the step size's, there)
+    assert any(t == start and h < size and err is None for t, h, err in tried[first + 1:])
 
 
 def test_end_of_step_check_is_called_on_every_step(monkeypatch):
