@@ -148,6 +148,8 @@ CASES = [
     Case("mesh_quality_unknown_kind", ("x.txt", "expected a scenario (.toml), a Gmsh mesh "
                                        "(.msh) or a results VTU file (.vtu)"),
          command="mesh-quality", file_name="x.txt"),
+    Case("mesh_quality_set_on_a_mesh", ("x.msh", "--set", "not a scenario (.toml)"),
+         command="mesh-quality", file_name="x.msh", text="garbage\n", sets=("a.b=1",)),
     Case("mesh_quality_bad_scenario", ("analysis.dt", "inf"), command="mesh-quality",
          edit=("dt = 0.01", "dt = inf")),
 ]
@@ -240,3 +242,18 @@ def test_the_base_scenario_is_good(tmp_path):
     path = _write_case(Case("good", ()), tmp_path)
     model = build_model(load_scenario(path), tmp_path)
     assert model.analysis.dt == 0.01 and len(model.interfaces) == 1
+
+
+def test_mesh_quality_reads_a_gmsh_mesh(capsys):
+    """What a .msh used to be refused for ("not valid TOML") now works: the mesh's statistics."""
+    from ntncontact.cli import main
+    from ntncontact.mesh.gmsh_io import read_msh
+    from ntncontact.mesh.quality import quality_statistics
+
+    path = Path(__file__).resolve().parents[1] / "examples" / "meshes" / "hertz_cylinder_2.msh"
+    assert main(["mesh-quality", str(path)]) == 0
+    printed = dict(line.split() for line in capsys.readouterr().out.splitlines()[1:])
+    expected = quality_statistics(read_msh(path, name="cylinder"))
+    assert printed.keys() == expected.keys()
+    for key, value in expected.items():
+        assert float(printed[key]) == pytest.approx(value, rel=1e-5)  # printed with 6 digits

@@ -70,6 +70,8 @@ def _mesh_quality(args: argparse.Namespace) -> int:
     path = Path(args.path)
     if not path.is_file():
         raise FileNotFoundError(f"{path}: no such file (expected {QUALITY_INPUTS})")
+    if args.set and path.suffix != ".toml":
+        raise ValueError(f"{path}: --set changes scenario keys; this is not a scenario (.toml)")
     if path.suffix == ".vtu":
         from .io.vtk import read_vtu
 
