@@ -194,3 +194,15 @@ def test_bodies_overlapping_at_the_start_are_refused_with_depth_and_place(tmp_pa
 def test_touching_or_separate_bodies_are_not_an_overlap(tmp_path, lift):
     path = write(tmp_path, RING_ON_BLOCK.replace("LIFT", repr(lift)))
     assert len(build_model(load_scenario(path), tmp_path).interfaces) == 1
+
+
+@pytest.mark.parametrize("dt, t_end", [(5e-324, 1.0), (float("nan"), 1.0), (0.01, float("inf")),
+                                       (2.0, 1.0), (0.0, 1.0)])
+def test_analysis_settings_built_in_python_are_checked_too(dt, t_end):
+    """The Python API (no scenario file) refuses the same steps, instead of an OverflowError
+    in the step count or a run of no step."""
+    from ntncontact.model import AnalysisSettings
+
+    with pytest.raises(ValueError, match="analysis"):
+        AnalysisSettings(dt=dt, t_end=t_end)
+    assert AnalysisSettings(dt=0.5, t_end=0.5).dt == 0.5
