@@ -121,3 +121,88 @@ def test_a_contact_scenario_builds_its_interface(tmp_path):
     (ci,) = model.interfaces
     assert ci.name == "interface0" and ci.persistency  # the dynamic default is persistency
     assert ci.interface.surface1.size == 3 and ci.interface.surface2.size == 3
+
+
+def test_strict_types_keep_integers_for_floats_and_arrays_for_pairs(tmp_path):
+    """Strict validation converts nothing, but an integer is a valid float and a TOML array a
+    valid pair (E = 10, origin = [0, 1])."""
+    text = GOOD.replace("E = 10.0", "E = 10").replace("nx = 2, ny = 2",
+                                                       "nx = 2, ny = 2, origin = [0, 1]")
+    cfg = load_scenario(write(tmp_path, text))
+    assert cfg.bodies[0].material.E == 10.0 and isinstance(cfg.bodies[0].material.E, float)
+    assert cfg.bodies[0].mesh.origin == (0.0, 1.0)
+    for bad in ("nx = true", 'nx = "2"', "nx = 2.0"):
+        with pytest.raises(ScenarioError, match="bodies.0.mesh.nx = "):
+            load_scenario(write(tmp_path, GOOD.replace("nx = 2", bad)))
+
+
+def test_errors_are_one_line_naming_each_key_and_value(tmp_path):
+    text = GOOD.replace("dt = 0.01", "dt = -1.0").replace("density = 1.0", "density = nan")
+    with pytest.raises(ScenarioError) as info:
+        load_scenario(write(tmp_path, text))
+    message = str(info.value)
+    assert "\n" not in message
+    assert "analysis.dt = -1.0" in message and "bodies.0.material.density = nan" in message
+
+
+def test_utf8_with_a_byte_order_mark_is_read(tmp_path):
+    path = tmp_path / "bom.toml"
+    path.write_bytes(GOOD.encode("utf-8-sig"))
+    assert load_scenario(path).analysis.dt == 0.01
+
+
+def test_max_steps_allows_a_longer_run(tmp_path):
+    path = write(tmp_path, GOOD.replace("t_end = 0.1", "t_end = 1e6"))
+    with pytest.raises(ScenarioError, match="analysis.max_steps = 10000000"):
+        load_scenario(path)
+    assert load_scenario(path, ["analysis.max_steps=100000000"]).analysis.max_steps == 10**8
+
+
+RING_ON_BLOCK = GOOD + """
+[[bodies]]
+name = "ring"
+mesh.type = "annulus"
+mesh.r_inner = 0.5
+mesh.r_outer = 1.0
+mesh.n_radial = 2
+mesh.n_circ = 64
+mesh.center = [0.5, LIFT]
+material = { model = "neo_hookean", E = 10.0, nu = 0.3, density = 1.0 }
+
+[[contact]]
+body_1 = "ring"
+surface_1 = "outer"
+body_2 = "block"
+surface_2 = "top"
+penalty_normal = 10.0
+"""
+
+
+@pytest.mark.parametrize("lift, depth", [(1.9, 0.1), (1.7, 0.3)])
+def test_bodies_overlapping_at_the_start_are_refused_with_depth_and_place(tmp_path, lift, depth):
+    """A ring (closed surface) pushed into the block's top (y = 1) by ``depth``: the lowest ring
+    node (0.5, 1 - depth) is reported with its depth below the block's surface."""
+    path = write(tmp_path, RING_ON_BLOCK.replace("LIFT", str(lift)))
+    with pytest.raises(ScenarioError) as info:
+        build_model(load_scenario(path), tmp_path)
+    message = str(info.value)
+    assert "contact.0: bodies 'ring' and 'block' overlap at t = 0" in message
+    assert f"at (0.5, {1.0 - depth:.6g}) is {depth:.3g} deep inside 'block'" in message
+
+
+@pytest.mark.parametrize("lift", [2.0, 2.0 + 1e-12, 2.5])
+def test_touching_or_separate_bodies_are_not_an_overlap(tmp_path, lift):
+    path = write(tmp_path, RING_ON_BLOCK.replace("LIFT", repr(lift)))
+    assert len(build_model(load_scenario(path), tmp_path).interfaces) == 1
+
+
+@pytest.mark.parametrize("dt, t_end", [(5e-324, 1.0), (float("nan"), 1.0), (0.01, float("inf")),
+                                       (2.0, 1.0), (0.0, 1.0)])
+def test_analysis_settings_built_in_python_are_checked_too(dt, t_end):
+    """The Python API (no scenario file) refuses the same steps, instead of an OverflowError
+    in the step count or a run of no step."""
+    from ntncontact.model import AnalysisSettings
+
+    with pytest.raises(ValueError, match="analysis"):
+        AnalysisSettings(dt=dt, t_end=t_end)
+    assert AnalysisSettings(dt=0.5, t_end=0.5).dt == 0.5

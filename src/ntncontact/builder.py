@@ -29,6 +29,7 @@ from .io.scenario import (
 from .materials.models import Material, MaterialError
 from .mesh import generators
 from .mesh.boundary import surface_chain
+from .mesh.overlap import deepest_overlap
 from .mesh.quadmesh import MeshError, QuadMesh
 from .mesh.quality import check_elements
 from .model import AleSetup, AnalysisSettings, Body, ContactInterface, Model, stack_bodies
@@ -128,6 +129,8 @@ def build_model(config: ScenarioConfig, base_dir: str | Path = ".") -> Model:
         functions += f
     a = config.analysis
     interfaces = tuple(_interface(c, i, bodies, a.kind) for i, c in enumerate(config.contact))
+    for i, (c, ci) in enumerate(zip(config.contact, interfaces, strict=True)):
+        _check_no_overlap(i, c, ci, bodies)
     if a.energy_conserving and a.kind != "dynamic":
         raise ScenarioError("analysis.energy_conserving: only for dynamic analyses (report 5.5)")
     ale_bodies = tuple(_ale_setup(i, body, bc, config) for i, (body, bc)
@@ -238,6 +241,27 @@ def _interface(cfg: ContactConfig, index: int, bodies: tuple[Body, ...],
     return ContactInterface(cfg.name or f"interface{index}", Interface(surface1, surface2), law,
                             persistency, candidates, cfg.release_steps, tol, max_aug, ordered,
                             predicted, aug.update, aug.on_limit == "accept")
+
+
+def _check_no_overlap(index: int, cfg: ContactConfig, ci: ContactInterface,
+                      bodies: tuple[Body, ...]) -> None:
+    """Refuse bodies that overlap at t = 0: node-to-node contact would not push them apart
+    (they would pass through each other). Each side's surface nodes are tested against the
+    other body's elements; the message gives the deepest node, its place and its depth below
+    the other body's boundary."""
+    by_name = {b.name: b for b in bodies}
+    sides = ((by_name[cfg.body_1], ci.interface.surface1, by_name[cfg.body_2]),
+             (by_name[cfg.body_2], ci.interface.surface2, by_name[cfg.body_1]))
+    for body, surface, other in sides:
+        local = surface.nodes - body.node_offset
+        found = deepest_overlap(body.mesh.nodes[local], other.mesh.nodes, other.mesh.cells)
+        if found is not None:
+            x, y = found.position
+            raise ScenarioError(
+                f"contact.{index}: bodies '{body.name}' and '{other.name}' overlap at t = 0: "
+                f"node {int(local[found.point])} of '{body.name}' at ({x:.6g}, {y:.6g}) is "
+                f"{found.depth:.3g} deep inside '{other.name}'; place the bodies apart "
+                "(bodies.*.mesh origin, center or transform)")
 
 
 def _xy(body: Body, surface: ContactSurface) -> np.ndarray:

@@ -59,22 +59,36 @@ def _plot(args: argparse.Namespace) -> int:
     return 0
 
 
+QUALITY_INPUTS = "a scenario (.toml), a Gmsh mesh (.msh) or a results VTU file (.vtu)"
+
+
 def _mesh_quality(args: argparse.Namespace) -> int:
-    """Table 4.1 statistics of every body of a scenario (reference meshes) or of a VTU file."""
+    """Table 4.1 statistics of every body of a scenario (reference meshes), of a Gmsh mesh or
+    of a VTU file."""
     from .mesh.quality import quality_statistics
 
     path = Path(args.path)
+    if not path.is_file():
+        raise FileNotFoundError(f"{path}: no such file (expected {QUALITY_INPUTS})")
+    if args.set and path.suffix != ".toml":
+        raise ValueError(f"{path}: --set changes scenario keys; this is not a scenario (.toml)")
     if path.suffix == ".vtu":
         from .io.vtk import read_vtu
 
         frame = read_vtu(path)
         tables = {path.name: quality_statistics(frame.deformed_points, frame.cells)}
-    else:
+    elif path.suffix == ".msh":
+        from .mesh.gmsh_io import read_msh
+
+        tables = {path.name: quality_statistics(read_msh(path, name=path.stem))}
+    elif path.suffix == ".toml":
         from .builder import build_model
         from .io.scenario import load_scenario
 
         model = build_model(load_scenario(path, args.set), path.parent)
         tables = {b.name: quality_statistics(b.mesh) for b in model.bodies}
+    else:
+        raise ValueError(f"{path}: expected {QUALITY_INPUTS}, by its file name extension")
     for name, stats in tables.items():
         print(f"{name}:")
         for key, value in stats.items():
@@ -175,9 +189,28 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:
         print("interrupted: files written so far are valid", file=sys.stderr)
         return 130
-    except (ValueError, RuntimeError, OSError) as err:
-        print(f"error: {err}", file=sys.stderr)
+    except (ValueError, RuntimeError, OSError, ArithmeticError, MemoryError) as err:
+        print(f"error: {_one_line(_with_source(err, args))}", file=sys.stderr)
         return 1
+
+
+def _with_source(err: BaseException, args: argparse.Namespace) -> str:
+    """The message, led by the scenario file when it is about the scenario and does not name
+    it yet (the model builder knows the keys, not the file)."""
+    from .io.scenario import ScenarioError
+
+    text = str(err) or type(err).__name__  # a bare MemoryError has no message
+    if isinstance(err, MemoryError):
+        text = f"out of memory ({text})"
+    source = getattr(args, "scenario", None) or getattr(args, "path", None)
+    if isinstance(err, ScenarioError) and source and not text.startswith(str(source)):
+        text = f"{source}: {text}"
+    return text
+
+
+def _one_line(text: str) -> str:
+    """Error messages are one line (several problems are separated by '; ')."""
+    return "; ".join(line.strip() for line in text.splitlines() if line.strip())
 
 
 #: numpy's optional submodules that ``import scipy.sparse`` loads (its array-API layer copies

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 from typing import Literal
 
@@ -66,6 +67,15 @@ class AnalysisSettings:
     #: Newton of an augmentation that may not be the last stops once |R| <= this x its start
     newton_inexact_augmentations: float = 1e-4
     energy_conserving: bool = False  # report 5.5: energy multiplier bordering the contact step
+
+    def __post_init__(self) -> None:
+        # the scenario validation says the same with the file and key; this guards the API
+        # (a non-finite or denormal step would overflow the step count or run forever)
+        if not (0.0 < self.dt <= self.t_end < math.inf):
+            raise ValueError(f"analysis needs 0 < dt <= t_end < inf, got dt = {self.dt!r}, "
+                             f"t_end = {self.t_end!r}")
+        if not self.t_end / self.dt < math.inf:
+            raise ValueError(f"analysis: t_end / dt = {self.t_end!r} / {self.dt!r} overflows")
 
 
 @dataclass(frozen=True)

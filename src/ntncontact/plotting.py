@@ -260,7 +260,12 @@ def _load_table(directory: Path, name: str) -> dict[str, NDArray]:
 
 
 def plot_energies(directory: str | os.PathLike, path: str | os.PathLike | None = None) -> Path:
-    """Kinetic, strain and total energy against time, and the total energy's drift."""
+    """Kinetic, strain and total energy and the work of the loads and contact against time;
+    below, the energy balance error (E - E0 - W_ext - W_contact) / S, S the largest energy of
+    the ledger (``diagnostics.energy_balance``): it stays small with loads, where E - E0 does
+    not."""
+    from ntncontact.diagnostics import energy_balance
+
     folder = Path(directory)
     history = _load_table(folder, HISTORY_FILE)
     time, total = history["time"], history["total_energy"]
@@ -268,15 +273,18 @@ def plot_energies(directory: str | os.PathLike, path: str | os.PathLike | None =
     top, bottom = axes[0, 0], axes[1, 0]
     for column in ("kinetic_energy", "strain_energy", "total_energy"):
         top.plot(time, history[column], label=column.replace("_", " "))
-    for column in ("frictional_dissipation", "contact_work"):
+    works = {}
+    for column in ("external_work", "contact_work", "frictional_dissipation"):
         if column in history and history[column].dtype.kind in "iuf":
+            works[column] = history[column]
             top.plot(time, history[column], "--", label=column.replace("_", " "))
     top.set_ylabel("energy")
     top.legend(loc="best", fontsize="small")
-    scale = abs(total[0])
-    drift = (total - total[0]) / scale if scale > 0 else total - total[0]
-    bottom.plot(time, drift, color="k")
-    bottom.set_ylabel("(E - E0) / |E0|" if scale > 0 else "E - E0")
+    error, scale = energy_balance(total, works.get("external_work", 0.0),
+                                  works.get("contact_work", 0.0))
+    bottom.plot(time, error / scale if scale > 0 else error, color="k")
+    bottom.set_ylabel("(E - E0 - W_ext - W_c) / max|E, W|" if scale > 0
+                      else "E - E0 - W_ext - W_c")
     bottom.set_xlabel("time")
     for ax in (top, bottom):
         ax.grid(True, alpha=0.3)

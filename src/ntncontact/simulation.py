@@ -12,7 +12,7 @@ from numpy.typing import NDArray
 
 from .contact import PairState, lagrange_blocks, newton_update
 from .convection import convective_terms
-from .diagnostics import Balance, balance
+from .diagnostics import Balance, balance, check_end_of_step, named_failure
 from .dynamics.energy import EndEnergy, EnergyConsistentContact
 from .dynamics.mass import MovingMass
 from .dynamics.midpoint import end_of_step, midpoint_velocity, velocity_factor
@@ -178,6 +178,7 @@ class Simulation:
             d1, v1, a1 = end_of_step(d, s.d, s.v, dt)
         else:
             d1, v1, a1 = d, (d - s.d) / dt, np.zeros_like(d)
+        check_end_of_step(self.model, s.X + d1, s.time + dt)  # inverted: cut back (issue 14)
         results = solved.results
         committed = commit_all(interfaces, solved.used, results) if interfaces else ()
         self._last_contact = (results if interfaces else (), solved.augmentations)
@@ -436,7 +437,7 @@ class Simulation:
                     raise SimulationError(
                         f"step {self.state.step + 1} (t = {self.state.time:.6g} -> "
                         f"{self.state.time + dt:.6g}) failed after {cuts - 1} halvings of the "
-                        f"step: {err}"
+                        f"step: {named_failure(self.model, err)}"
                     ) from err
                 self._step_work = before
                 h *= 0.5

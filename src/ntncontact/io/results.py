@@ -6,6 +6,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..diagnostics import EnergyAudit
 from ..model import Model
 from ..postprocess import element_von_mises
 from ..simulation import StepRecord
@@ -38,6 +39,8 @@ class ResultWriter:
         if model.ties:
             extra_history = extra_history + tie_history(model)
             summary_extra = {"max_tie_violation": 0.0} | summary_extra
+        summary_extra = dict.fromkeys(EnergyAudit.KEYS) | summary_extra  # energy balance
+        self._energy = EnergyAudit()
         self.results = ResultsDirectory(directory, history_columns=extra_history,
                                         **summary_extra)
         self.model = model
@@ -59,6 +62,8 @@ class ResultWriter:
         }
         row |= {k: record.extra.get(k, HISTORY_DEFAULTS.get(k, 0.0)) for k in self.extra_history}
         self.results.write_history(row)
+        self.results.summary.update(**self._energy.add(
+            row["total_energy"], row["external_work"], row.get("contact_work", 0.0)))
         if "tie_violation" in record.extra:
             summary = self.results.summary
             worst = max(record.extra["tie_violation"], summary.data.get("max_tie_violation", 0.0))

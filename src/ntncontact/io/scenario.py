@@ -4,9 +4,16 @@ from __future__ import annotations
 
 import sys
 from pathlib import Path
-from typing import Annotated, Any, Literal
+from typing import Annotated, Any, Literal, get_args
 
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
+from pydantic import (
+    BaseModel,
+    BeforeValidator,
+    ConfigDict,
+    Field,
+    ValidationError,
+    model_validator,
+)
 
 if sys.version_info >= (3, 11):
     import tomllib
@@ -18,13 +25,25 @@ class ScenarioError(ValueError):
     """A scenario file that cannot be used; the message names the file and the key."""
 
 
+#: Default of ``analysis.max_steps``: a run of more steps is refused before it starts.
+MAX_STEPS = 10**7
+
+
 class Strict(BaseModel):
-    model_config = ConfigDict(extra="forbid", frozen=True, populate_by_name=True)
+    # strict: no coercion (true is not 1, "0.02" is not a number, "yes" is not a boolean);
+    # every float must be finite (TOML has inf and nan)
+    model_config = ConfigDict(extra="forbid", frozen=True, populate_by_name=True, strict=True,
+                              allow_inf_nan=False)
+
+
+def _list_to_tuple(value: Any) -> Any:
+    """TOML arrays are lists; strict validation takes a tuple only from a tuple."""
+    return tuple(value) if isinstance(value, list) else value
 
 
 Positive = Annotated[float, Field(gt=0)]
 NonNegative = Annotated[float, Field(ge=0)]
-Vector = tuple[float, float]
+Vector = Annotated[tuple[float, float], BeforeValidator(_list_to_tuple)]
 
 
 class TimeFunctionConfig(Strict):
@@ -96,6 +115,8 @@ class GmshMesh(Strict):
 MeshConfig = Annotated[
     RectangleMesh | AnnulusMesh | HalfDiskMesh | GmshMesh, Field(discriminator="type")
 ]
+MESH_TYPES = frozenset(get_args(m.model_fields["type"].annotation)[0]
+                       for m in (RectangleMesh, AnnulusMesh, HalfDiskMesh, GmshMesh))
 
 
 class MaterialConfig(Strict):
@@ -203,6 +224,21 @@ class AnalysisConfig(Strict):
     max_cutbacks: Annotated[int, Field(ge=0, le=20)] = 4
     newton: NewtonConfig = NewtonConfig()
     energy_conserving: bool = False
+    max_steps: Annotated[int, Field(ge=1)] = MAX_STEPS
+
+    @model_validator(mode="after")
+    def _step_count(self) -> AnalysisConfig:
+        """dt no larger than t_end, and at most max_steps steps (checked before any is run:
+        t_end = 1e15 or dt = 5e-324 would otherwise run until killed)."""
+        if self.dt > self.t_end:
+            raise ValueError(f"analysis.dt = {self.dt!r} is larger than analysis.t_end = "
+                             f"{self.t_end!r}")
+        steps = self.t_end / self.dt  # a float: may be inf, never an overflowing int
+        if steps > self.max_steps:
+            raise ValueError(f"analysis.t_end / analysis.dt = {self.t_end!r} / {self.dt!r} = "
+                             f"{steps:.3g} steps, more than analysis.max_steps = "
+                             f"{self.max_steps} (raise it to allow a longer run)")
+        return self
 
 
 class AugmentationConfig(Strict):
@@ -285,14 +321,36 @@ class ScenarioConfig(Strict):
 
 
 def _format_error(path: Path, err: ValidationError) -> str:
-    lines = [f"{path}: invalid scenario"]
-    for e in err.errors():
-        loc = ".".join(str(p) for p in e["loc"] if not str(p).startswith("function-"))
-        msg = e["msg"]
-        if e["type"] == "extra_forbidden":
-            msg = "unknown key"
-        lines.append(f"  {loc or '(top level)'}: {msg}")
-    return "\n".join(lines)
+    """One line: the file, then each offending key with its value and what is wrong."""
+    return f"{path}: " + "; ".join(_format_item(e) for e in err.errors())
+
+
+def _format_item(e: Any) -> str:
+    parts = e["loc"]
+    # drop the names pydantic adds to the path: validator functions and the mesh type tag
+    loc = ".".join(str(p) for i, p in enumerate(parts) if not str(p).startswith("function-")
+                   and not (i > 0 and parts[i - 1] == "mesh" and p in MESH_TYPES))
+    msg = e["msg"].removeprefix("Value error, ")
+    if e["type"] == "extra_forbidden":
+        return f"{loc}: unknown key"
+    if msg.startswith(f"{loc}.") or msg.startswith(f"{loc} "):
+        return msg  # a check across keys that names them itself
+    if isinstance(e["input"], dict):  # a check of a whole table: its message says what
+        return f"{loc or '(top level)'}: {msg}"
+    return f"{loc} = {_toml_value(e['input'])}: {msg}"
+
+
+def _toml_value(value: Any, limit: int = 60) -> str:
+    """A value as it would be written in the scenario file (shortened)."""
+    if isinstance(value, bool):
+        text = "true" if value else "false"
+    elif isinstance(value, str):
+        text = '"' + value.replace('"', '\\"') + '"'
+    elif isinstance(value, float):
+        text = repr(value)
+    else:
+        text = repr(value).replace("'", '"')
+    return text if len(text) <= limit else text[: limit - 3] + "..."
 
 
 def parse_scenario(data: dict[str, Any], path: Path) -> ScenarioConfig:
@@ -309,12 +367,30 @@ def load_scenario(path: str | Path, overrides: list[str] | None = None) -> Scena
     if not path.is_file():
         raise ScenarioError(f"{path}: scenario file not found")
     try:
-        data = tomllib.loads(path.read_text())
+        data = tomllib.loads(read_text(path))
     except tomllib.TOMLDecodeError as err:
         raise ScenarioError(f"{path}: not valid TOML: {err}") from None
     for item in overrides or []:
         apply_override(data, item, path)
     return parse_scenario(data, path)
+
+
+def read_text(path: Path) -> str:
+    """The file's text: TOML is UTF-8 (a leading byte-order mark is allowed). Other encodings
+    are refused with a message naming the file, not decoded to garbage."""
+    raw = path.read_bytes()
+    if raw.startswith((b"\xff\xfe", b"\xfe\xff")):
+        raise ScenarioError(f"{path}: the file is UTF-16 text; TOML scenario files must be "
+                            "UTF-8 (save it as UTF-8)")
+    if b"\x00" in raw:  # UTF-16 without a byte-order mark, or not text at all
+        raise ScenarioError(f"{path}: the file holds NUL bytes (UTF-16 or binary?); TOML "
+                            "scenario files are UTF-8 text")
+    try:
+        return raw.decode("utf-8-sig")
+    except UnicodeDecodeError as err:
+        line = raw[: err.start].count(b"\n") + 1
+        raise ScenarioError(f"{path}: not UTF-8 text (byte 0x{raw[err.start]:02x} on line "
+                            f"{line}); TOML scenario files must be UTF-8") from None
 
 
 def apply_override(data: dict[str, Any], item: str, path: Path) -> None:
