@@ -297,8 +297,7 @@ class ResultsDirectory:
         self.directory.mkdir(parents=True, exist_ok=True)
         self.history = HistoryWriter(self.directory, history_columns)
         self.contact = ContactWriter(self.directory, contact_columns)
-        # the VTU frames are compressed and written beside the time loop (see close)
-        self.fields = VtuSeriesWriter(self.directory, background=True) if write_fields else None
+        self.fields = VtuSeriesWriter(self.directory) if write_fields else None
         self.summary = SummaryWriter(self.directory, **summary_extra)
 
     def write_history(self, row: Mapping[str, Any]) -> None:
@@ -308,11 +307,9 @@ class ResultsDirectory:
         self.summary.update()
 
     def close(self) -> None:
-        """Close the CSV files and wait for the VTU frames; raises a frame that failed."""
+        """Close the CSV files."""
         self.history.close()
         self.contact.close()
-        if self.fields is not None:
-            self.fields.close()
 
     def __enter__(self) -> ResultsDirectory:
         return self
@@ -325,10 +322,6 @@ class ResultsDirectory:
     ) -> None:
         try:
             self.close()
-        except Exception as err:  # a frame that could not be written fails the run
-            if exc_type is None:
-                exc_type, exc = type(err), err
-            raise
         finally:
             if exc_type is None:
                 self.summary.finish("completed")
