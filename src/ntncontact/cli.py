@@ -23,8 +23,8 @@ def _run(args: argparse.Namespace) -> int:
     config = load_scenario(scenario, args.set)
     model = build_model(config, scenario.parent)
     out = Path(args.out)
-    writer = ResultWriter(out, model, scenario=str(scenario), title=config.title,
-                          overrides=list(args.set or []))
+    writer = ResultWriter(out, model, overwrite=args.overwrite, scenario=str(scenario),
+                          title=config.title, overrides=list(args.set or []))
     plotting = args.plot or args.gif or bool(args.times)
     with _figure_jobs(out, args) if plotting else contextlib.nullcontext() as figures:
         sim = Simulation(model, [writer] + ([figures.start(beside_a_run=True)] if figures else []))
@@ -129,6 +129,9 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--set", action="append", metavar="KEY=VALUE",
                      help="override a scenario key, e.g. analysis.mass=\"lumped\" (repeatable)")
     run.add_argument("--quiet", action="store_true", help="no progress bar")
+    run.add_argument("--overwrite", action="store_true",
+                     help="replace the results already in the folder (only the files a run "
+                          "writes: CSV, JSON, fields.pvd and fields/*.vtu, PNG and GIF figures)")
     run.add_argument("--plot", action="store_true",
                      help="also write the figures of `ntncontact plot`, drawn on two worker "
                           "processes while the run goes on")

@@ -543,7 +543,8 @@ def _run_scenario(case: Case, directory: Path, quick: bool) -> None:
     """The case's scenario through the CLI's own code path."""
     from .cli import main
 
-    args = ["run", str(EXAMPLES / case.example), "--out", str(directory), "--quiet"]
+    args = ["run", str(EXAMPLES / case.example), "--out", str(directory), "--quiet",
+            "--overwrite"]  # validate reruns every case
     for item in _overrides(case, quick):
         args += ["--set", item]
     with contextlib.redirect_stdout(io.StringIO()):

@@ -28,7 +28,7 @@ class ResultWriter:
     """Writes history.csv, summary.json and fields.pvd/VTU as the simulation advances."""
 
     def __init__(self, directory: str | Path, model: Model, extra_history: tuple[str, ...] = (),
-                 **summary_extra: object) -> None:
+                 overwrite: bool = False, **summary_extra: object) -> None:
         extra_history = ("external_work",) + extra_history
         if model.interfaces:
             extra_history = extra_history + CONTACT_HISTORY
@@ -39,7 +39,7 @@ class ResultWriter:
             extra_history = extra_history + tie_history(model)
             summary_extra = {"max_tie_violation": 0.0} | summary_extra
         self.results = ResultsDirectory(directory, history_columns=extra_history,
-                                        **summary_extra)
+                                        overwrite=overwrite, **summary_extra)
         self.model = model
         self.extra_history = extra_history
         self.interval = model.analysis.output_interval
@@ -109,11 +109,16 @@ class ResultWriter:
         )
 
     def on_finish(self, status: str, error: str | None) -> None:
-        """Close the files, then write the final summary."""
+        """Close the files, write the final summary and release the folder (once: later calls,
+        such as the CLI's for an interruption before the time loop, do nothing)."""
+        if self.results.closed:
+            return
         try:
-            self.results.close()
-        finally:
-            self.results.summary.finish(status, error, mesh_quality=self._mesh_quality())
+            quality = self._mesh_quality()
+        except Exception:
+            self.results.close(status, error)
+            raise
+        self.results.close(status, error, mesh_quality=quality)
 
     def _mesh_quality(self) -> dict:
         """Table 4.1 statistics of each body's current mesh (node positions x) at the end."""

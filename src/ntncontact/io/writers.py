@@ -2,7 +2,9 @@
 
 Every writer leaves valid files behind at any moment: CSV rows are flushed as they are written
 (a reader drops an unterminated last line, see :func:`read_csv_table`) and the summary JSON is
-replaced atomically. :class:`ResultsDirectory` bundles the four writers for a time loop.
+replaced atomically. Files are created without following symbolic links (see
+:mod:`ntncontact.io.run_folder`). :class:`ResultsDirectory` bundles the four writers for a time
+loop and holds the folder's lock meanwhile.
 """
 
 from __future__ import annotations
@@ -20,6 +22,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from ntncontact.io.run_folder import RunLock, create_new_text, prepare, replace_atomically
 from ntncontact.io.vtk import VtuSeriesWriter
 
 HISTORY_FILE = "history.csv"
@@ -96,13 +99,14 @@ def _check_keys(given: Sequence[str], expected: Sequence[str], what: str) -> Non
 
 
 class _CsvWriter:
-    """A CSV file opened for writing with its header written and flushed."""
+    """A new CSV file opened for writing with its header written and flushed (refused if the
+    name is taken, by a file or a symbolic link)."""
 
     def __init__(self, path: Path, columns: tuple[str, ...]) -> None:
         self.path = path
         self.columns = columns
         path.parent.mkdir(parents=True, exist_ok=True)
-        self._file = open(path, "w", newline="", encoding="utf-8")
+        self._file = create_new_text(path)
         self._csv = csv.writer(self._file, lineterminator="\n")
         self._write_rows([list(columns)])
 
@@ -197,13 +201,8 @@ def _json_text(data: Mapping[str, Any]) -> str:
 
 
 def _write_text_atomic(path: str | os.PathLike, text: str) -> None:
-    final = Path(path)
-    tmp = final.with_name(final.name + ".tmp")
-    with open(tmp, "w", encoding="utf-8") as handle:
-        handle.write(text + "\n")
-        handle.flush()
-        os.fsync(handle.fileno())
-    os.replace(tmp, final)
+    replace_atomically(Path(path), lambda tmp: tmp.write_text(text + "\n", encoding="utf-8"),
+                       sync=True)
 
 
 class SummaryWriter:
@@ -279,10 +278,13 @@ class SummaryWriter:
 
 
 class ResultsDirectory:
-    """All writers of one run folder; use as a context manager around the time loop.
+    """All writers of one run folder; use as a context manager around the time loop, or call
+    :meth:`close` with the run's status.
 
-    On leaving the ``with`` block the summary status becomes ``completed``, ``interrupted``
-    (KeyboardInterrupt) or ``failed`` (any other exception, message in ``error``).
+    The folder is locked while the writers are open, and refused if it holds results already
+    unless ``overwrite`` (see :func:`ntncontact.io.run_folder.prepare`). On leaving the ``with``
+    block the summary status becomes ``completed``, ``interrupted`` (KeyboardInterrupt) or
+    ``failed`` (any other exception, message in ``error``).
     """
 
     def __init__(
@@ -291,14 +293,23 @@ class ResultsDirectory:
         history_columns: Sequence[str] = (),
         contact_columns: Sequence[str] = (),
         write_fields: bool = True,
+        overwrite: bool = False,
         **summary_extra: Any,
     ) -> None:
         self.directory = Path(directory)
-        self.directory.mkdir(parents=True, exist_ok=True)
-        self.history = HistoryWriter(self.directory, history_columns)
-        self.contact = ContactWriter(self.directory, contact_columns)
-        self.fields = VtuSeriesWriter(self.directory) if write_fields else None
-        self.summary = SummaryWriter(self.directory, **summary_extra)
+        self._lock: RunLock | None = prepare(self.directory, overwrite)
+        try:
+            self.history = HistoryWriter(self.directory, history_columns)
+            self.contact = ContactWriter(self.directory, contact_columns)
+            self.fields = VtuSeriesWriter(self.directory) if write_fields else None
+            self.summary = SummaryWriter(self.directory, **summary_extra)
+        except BaseException:
+            self._lock.release()
+            raise
+
+    @property
+    def closed(self) -> bool:
+        return self._lock is None
 
     def write_history(self, row: Mapping[str, Any]) -> None:
         """Append a history row and refresh the summary's step count and energy statistics."""
@@ -306,10 +317,21 @@ class ResultsDirectory:
         self.summary.record_energy(row["step"], row["total_energy"])
         self.summary.update()
 
-    def close(self) -> None:
-        """Close the CSV files."""
-        self.history.close()
-        self.contact.close()
+    def close(self, status: str = "completed", error: str | None = None,
+              **summary_fields: Any) -> None:
+        """Close the CSV files, write the final summary and release the folder (only the
+        first call acts)."""
+        if self._lock is None:
+            return
+        try:
+            self.history.close()
+            self.contact.close()
+        finally:
+            try:
+                self.summary.finish(status, error, **summary_fields)
+            finally:
+                self._lock.release()
+                self._lock = None
 
     def __enter__(self) -> ResultsDirectory:
         return self
@@ -320,15 +342,12 @@ class ResultsDirectory:
         exc: BaseException | None,
         traceback: TracebackType | None,
     ) -> None:
-        try:
-            self.close()
-        finally:
-            if exc_type is None:
-                self.summary.finish("completed")
-            elif issubclass(exc_type, KeyboardInterrupt):
-                self.summary.finish("interrupted", error="interrupted by the user")
-            else:
-                self.summary.finish("failed", error=f"{exc_type.__name__}: {exc}")
+        if exc_type is None:
+            self.close("completed")
+        elif issubclass(exc_type, KeyboardInterrupt):
+            self.close("interrupted", "interrupted by the user")
+        else:
+            self.close("failed", f"{exc_type.__name__}: {exc}")
 
 
 def read_csv_table(path: str | os.PathLike) -> dict[str, NDArray]:
