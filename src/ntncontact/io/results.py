@@ -58,28 +58,27 @@ class ResultWriter:
             "newton_iterations": record.newton_iterations,
         }
         row |= {k: record.extra.get(k, HISTORY_DEFAULTS.get(k, 0.0)) for k in self.extra_history}
-        self.results.write_history(row)
+        summary = self.results.summary.data
+        fields = {}  # the summary's new values: written once, with the history row
         if "tie_violation" in record.extra:
-            summary = self.results.summary
-            worst = max(record.extra["tie_violation"], summary.data.get("max_tie_violation", 0.0))
-            summary.update(max_tie_violation=worst)
-        self._last = record
+            fields["max_tie_violation"] = max(record.extra["tie_violation"],
+                                              summary.get("max_tie_violation", 0.0))
         if row.get("augmentations_converged") == 0:  # augmentation.on_limit = "accept"
-            summary = self.results.summary
-            summary.update(unconverged_steps=summary.data["unconverged_steps"] + 1)
+            fields["unconverged_steps"] = summary["unconverged_steps"] + 1
         rows = record.extra.get("contact_rows")
-        if rows is not None:
-            self._write_contact(s.step, s.time, record.dt, rows)
+        if rows is not None and len(rows["node_1"]):
+            self.results.contact.write_step(s.step, s.time, rows)
+            fields |= self._contact_summary(s.time, record.dt, rows, summary)
+        self.results.write_history(row, **fields)
+        self._last = record
         if self._due(s.time, model):
             self._write_fields(model, record)
 
-    def _write_contact(self, step: int, time: float, dt: float, rows: dict) -> None:
-        """contact.csv rows and the contact summary. Contact lasts from the start of the first
-        step that carried a positive normal traction to the end of the last such step."""
-        if len(rows["node_1"]) == 0:
-            return
-        self.results.contact.write_step(step, time, rows)
-        summary = self.results.summary.data
+    @staticmethod
+    def _contact_summary(time: float, dt: float, rows: dict, summary: dict) -> dict:
+        """The contact summary after a step with contact rows. Contact lasts from the start of
+        the first step that carried a positive normal traction to the end of the last such
+        step."""
         penetration = max(float(np.max(rows["gap"])), summary.get("max_penetration") or 0.0)
         fields = {"max_penetration": penetration,
                   "max_active_pairs": max(len(rows["node_1"]), summary["max_active_pairs"])}
@@ -87,7 +86,7 @@ class ResultWriter:
             if summary.get("contact_start_time") is None:
                 fields["contact_start_time"] = time - dt
             fields["contact_end_time"] = time
-        self.results.summary.update(**fields)
+        return fields
 
     def _due(self, time: float, model: Model) -> bool:
         last = time >= model.analysis.t_end - 1e-9 * model.analysis.dt

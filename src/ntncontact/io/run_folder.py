@@ -3,7 +3,8 @@
 - **Lock**: a run holds ``DIR/ntncontact.lock`` (an ``flock`` on it, and its text names the PID,
   host and start time). A second run into the folder fails with an error naming the first. The
   kernel releases an ``flock`` when its process dies, even by SIGKILL, so a killed run never
-  blocks the folder; its lock file stays behind, naming a PID that is gone.
+  blocks the folder; its lock file stays behind, naming a PID that is gone, which is how
+  :func:`run_status` tells a dead run ("stale") from a running one.
 - **Old results**: a folder that already holds results (:data:`RESULT_FILES`, the ``fields/``
   frames, figures) is refused unless ``overwrite``; then exactly those are removed first. Other
   files in the folder are never touched, so ``--out`` pointing at a folder with other work in it
@@ -24,6 +25,7 @@ import socket
 import tempfile
 import time
 from collections.abc import Callable
+from dataclasses import dataclass
 from pathlib import Path
 from typing import IO, Any
 
@@ -51,6 +53,19 @@ def create_new_text(path: Path) -> IO[str]:
     return os.fdopen(fd, "w", newline="", encoding="utf-8")
 
 
+#: The process's umask, read once (reading it means setting it), for the temporary files.
+_UMASK = os.umask(0o022)
+os.umask(_UMASK)
+
+
+def new_temporary(path: Path) -> tuple[int, Path]:
+    """A new file beside ``path`` with a fresh random name (created exclusively), open for
+    writing, with the permissions a plain ``open`` would give (mkstemp's are 0600)."""
+    fd, name = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    os.fchmod(fd, 0o666 & ~_UMASK)
+    return fd, Path(name)
+
+
 def replace_atomically(path: Path, write: Callable[[Path], None], sync: bool = False) -> None:
     """Have ``write`` fill a new temporary file beside ``path``, then rename it over ``path``.
 
@@ -58,8 +73,7 @@ def replace_atomically(path: Path, write: Callable[[Path], None], sync: bool = F
     has a fresh random name (created exclusively), and the rename replaces a symbolic link at
     ``path`` rather than following it. ``sync`` flushes the file to disk before the rename
     (protection against power loss; the run's own end is covered without it)."""
-    fd, name = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    tmp = Path(name)
+    fd, tmp = new_temporary(path)
     try:
         os.close(fd)
         write(tmp)
@@ -163,6 +177,33 @@ def _describe(info: dict[str, Any] | None) -> str:
     return f"PID {info.get('pid')} on {info.get('host')}, started {info.get('started')}"
 
 
+def lock_holder_alive(directory: Path, info: dict[str, Any]) -> bool:
+    """Whether the run a lock file names still runs: on this host, whether its PID exists;
+    on another host, whether the lock is still held (which is as good as the file system's
+    locks across hosts)."""
+    if info.get("host") == socket.gethostname():
+        try:
+            os.kill(int(info["pid"]), 0)
+        except ProcessLookupError:
+            return False
+        except PermissionError:  # another user's process
+            return True
+        except (KeyError, TypeError, ValueError):
+            return False
+        return True
+    try:
+        fd = os.open(directory / LOCK_FILE, os.O_RDONLY | os.O_NOFOLLOW | os.O_CLOEXEC)
+    except OSError:
+        return False
+    try:
+        fcntl.flock(fd, fcntl.LOCK_SH | fcntl.LOCK_NB)
+    except BlockingIOError:
+        return True
+    finally:
+        os.close(fd)
+    return False
+
+
 # ------------------------------------------------------------------------------------------------
 # Old results
 # ------------------------------------------------------------------------------------------------
@@ -214,3 +255,53 @@ def prepare(directory: Path, overwrite: bool) -> RunLock:
         lock.release()
         raise
     return lock
+
+
+# ------------------------------------------------------------------------------------------------
+# Status
+# ------------------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class RunStatus:
+    """A results folder's run as a reader sees it. ``state`` is the summary's status, except
+    "running" when no live process holds the folder, which is "stale" (the run was killed)."""
+
+    state: str
+    steps: int | None
+    time: float | None
+    error: str | None
+    lock: dict[str, Any] | None
+
+
+def read_summary(directory: Path, tries: int = 5) -> dict[str, Any]:
+    """``directory``/summary.json, read again (up to ``tries`` times, 10 ms apart) when caught
+    mid-write: while a run goes on it is rewritten in place (see ``SummaryWriter``)."""
+    path = directory / "summary.json"
+    for _ in range(tries - 1):
+        with contextlib.suppress(ValueError):
+            return _read_json(path)
+        time.sleep(0.01)
+    try:
+        return _read_json(path)
+    except ValueError as err:
+        raise RunFolderError(f"{path} is not valid JSON: {err}") from None
+
+
+def _read_json(path: Path) -> dict[str, Any]:
+    try:
+        return json.loads(path.read_text(encoding="utf-8"))
+    except FileNotFoundError:
+        raise RunFolderError(f"{path.parent} holds no run (no summary.json)") from None
+
+
+def run_status(directory: Path) -> RunStatus:
+    """The status of the run in ``directory`` (see :class:`RunStatus`)."""
+    summary = read_summary(directory)
+    lock = read_lock(directory)
+    state = summary.get("status")
+    alive = lock is not None and lock_holder_alive(directory, lock)
+    if alive:
+        state = "running"
+    elif state == "running":
+        state = "stale"
+    return RunStatus(str(state), summary.get("steps"), summary.get("time"), summary.get("error"),
+                     lock)
