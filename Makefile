@@ -28,7 +28,7 @@ $(WARM): $(STAMP) $(SOURCES)
 	touch $(WARM)
 
 demo: $(WARM)
-	$(BIN)/ntncontact run examples/ring_impact.toml --out results/ring_impact \
+	$(BIN)/ntncontact run examples/ring_impact.toml --out results/ring_impact --overwrite \
 		--gif --times 0.075 0.145 0.285 0.425 0.565 0.805 --compare
 	@echo "Ring impact (report 6.4) done. Pictures: results/ring_impact/*.png and animation.gif;"
 	@echo "ParaView: open results/ring_impact/fields.pvd; numbers: history.csv, contact.csv, summary.json"

@@ -281,16 +281,34 @@ def test_read_vtu_raises_on_corrupt_file(tmp_path):
         read_vtu(bad)
 
 
-def test_summary_rewrites_are_throttled_while_running_but_never_lost(tmp_path):
-    """While "running", rewrites wait min_interval (each is synced to disk); the data are kept
-    in memory, and a status change or finish() writes everything at once."""
-    summary = SummaryWriter(tmp_path, min_interval=3600.0, scenario="ball")
-    summary.update(max_gap=0.5)
-    on_disk = json.loads((tmp_path / "summary.json").read_text())
-    assert "max_gap" not in on_disk and summary.data["max_gap"] == 0.5
-    summary.finish("failed", "diverged")
-    on_disk = json.loads((tmp_path / "summary.json").read_text())
-    assert on_disk["max_gap"] == 0.5 and on_disk["status"] == "failed"
-    eager = SummaryWriter(tmp_path / "eager", min_interval=0.0)
-    eager.update(max_gap=0.25)
-    assert json.loads((tmp_path / "eager" / "summary.json").read_text())["max_gap"] == 0.25
+def test_summary_is_rewritten_at_every_update_with_step_and_time(tmp_path):
+    """No throttling: what a reader finds on disk is always the latest update (the summary
+    never lags history.csv by more than the step being written)."""
+    with ResultsDirectory(tmp_path, EXTRA, write_fields=False, scenario="ball") as out:
+        for step in range(4):
+            row = history_row(step) | {"time": 0.25 * step}
+            out.write_history(row, max_gap=0.5 * step)
+            on_disk = json.loads((tmp_path / "summary.json").read_text())
+            assert on_disk["status"] == "running" and on_disk["steps"] == step
+            assert on_disk["time"] == 0.25 * step and on_disk["max_gap"] == 0.5 * step
+            assert on_disk["scenario"] == "ball"
+    assert json.loads((tmp_path / "summary.json").read_text())["status"] == "completed"
+    assert not list(tmp_path.glob("*.tmp")) and not list(tmp_path.glob(".*.tmp"))
+
+
+def test_result_files_get_the_permissions_open_would_give(tmp_path):
+    """The temporary files behind the atomic rewrites are created 0600 by mkstemp: the results
+    must still be readable as any file the user creates (umask applied)."""
+    import os
+
+    umask = os.umask(0o022)
+    os.umask(umask)
+    points, cells = unit_square_mesh()
+    with ResultsDirectory(tmp_path, EXTRA) as out:
+        out.write_history(history_row(0))
+        out.fields.write(0, 0.0, points, cells, *fields(len(points), len(cells), 1.0))
+        running = os.stat(tmp_path / "summary.json").st_mode & 0o777
+    expected = 0o666 & ~umask
+    assert running == expected
+    for path in ("summary.json", "history.csv", "fields.pvd", "fields/fields_00000.vtu"):
+        assert os.stat(tmp_path / path).st_mode & 0o777 == expected, path

@@ -5,28 +5,86 @@ from __future__ import annotations
 import argparse
 import contextlib
 import os
+import signal
 import sys
+import threading
 from pathlib import Path
 
 from . import __version__
 
 
+class StopOnSignal:
+    """SIGINT and SIGTERM ask a run to stop; the time loop stops at its next step
+    (``Simulation.run``'s ``stop_reason``), and the run ends as interrupted with every file
+    closed. Raising KeyboardInterrupt from the handler instead could land inside a compiled
+    kernel and surface as a SystemError. A second signal stops at once (KeyboardInterrupt).
+    The handlers are installed in the main thread only, and the previous ones restored."""
+
+    SIGNALS = (signal.SIGINT, signal.SIGTERM)
+
+    def __init__(self) -> None:
+        self.signum: int | None = None
+        self._previous: dict[int, object] = {}
+
+    def __enter__(self) -> StopOnSignal:
+        if threading.current_thread() is threading.main_thread():
+            for signum in self.SIGNALS:
+                self._previous[signum] = signal.signal(signum, self._handle)
+        return self
+
+    def __exit__(self, *exc_info: object) -> None:
+        for signum, handler in self._previous.items():
+            signal.signal(signum, handler)
+
+    def _handle(self, signum: int, frame: object) -> None:
+        if self.signum is not None:
+            raise KeyboardInterrupt(self.reason())
+        self.signum = signum
+        # os.write: print() from a signal handler can meet the stream mid-write
+        os.write(2, f"\n{signal.Signals(signum).name}: stopping after this step "
+                    "(again to stop at once)\n".encode())
+
+    def reason(self) -> str | None:
+        """Why the run should stop, or None."""
+        return None if self.signum is None else \
+            f"interrupted by {signal.Signals(self.signum).name}"
+
+    @property
+    def exit_code(self) -> int:
+        """The shell's code for the signal: 130 for SIGINT, 143 for SIGTERM."""
+        return 128 + (self.signum or signal.SIGINT)
+
+
 def _run(args: argparse.Namespace) -> int:
+    with StopOnSignal() as stop:
+        try:
+            return _run_until_stopped(args, stop)
+        except BaseException:
+            if stop.signum is None:
+                raise
+        print(f"{stop.reason()}: files written so far are valid", file=sys.stderr)
+        return stop.exit_code
+
+
+def _run_until_stopped(args: argparse.Namespace, stop: StopOnSignal) -> int:
     from tqdm import tqdm
 
     from .builder import build_model
     from .io.results import ResultWriter
     from .io.scenario import load_scenario
-    from .simulation import Simulation
+    from .simulation import RunInterrupted, Simulation
 
     scenario = Path(args.scenario)
     config = load_scenario(scenario, args.set)
     model = build_model(config, scenario.parent)
+    if stop.signum is not None:  # before any file is written
+        raise RunInterrupted(stop.reason())
     out = Path(args.out)
-    writer = ResultWriter(out, model, scenario=str(scenario), title=config.title,
-                          overrides=list(args.set or []))
+    writer = ResultWriter(out, model, overwrite=args.overwrite, scenario=str(scenario),
+                          title=config.title, overrides=list(args.set or []))
     plotting = args.plot or args.gif or bool(args.times)
-    with _figure_jobs(out, args) if plotting else contextlib.nullcontext() as figures:
+    with _finished_on_error(writer, stop), \
+            _figure_jobs(out, args) if plotting else contextlib.nullcontext() as figures:
         sim = Simulation(model, [writer] + ([figures.start(beside_a_run=True)] if figures else []))
         t_end = model.analysis.t_end
         with tqdm(total=t_end, unit="t", disable=args.quiet or None, desc=scenario.stem,
@@ -36,12 +94,41 @@ def _run(args: argparse.Namespace) -> int:
             def progress(t: float) -> None:
                 bar.update(t - bar.n)
 
-            sim.run(progress)
+            sim.run(progress, stop.reason)
         print(f"results written to {out} (history.csv, summary.json, fields.pvd)")
         if args.compare:  # while the figure workers draw
             _print_comparison(out)
         if figures:
             print("figures:", *figures.paths(), sep="\n  ")
+    return 0
+
+
+@contextlib.contextmanager
+def _finished_on_error(writer, stop: StopOnSignal):
+    """An exception before the time loop took over (a signal during start-up): the summary
+    says so too (after the time loop, ``writer.on_finish`` does nothing)."""
+    try:
+        yield
+    except BaseException as err:
+        interrupted = stop.signum is not None or isinstance(err, KeyboardInterrupt)
+        writer.on_finish("interrupted" if interrupted else "failed",
+                         stop.reason() or str(err) or "interrupted by the user")
+        raise
+
+
+def _status(args: argparse.Namespace) -> int:
+    """The run in a results folder: its status (stale: killed), step, time."""
+    from .io.run_folder import run_status
+
+    status = run_status(Path(args.directory))
+    print(f"status: {status.state}")
+    print(f"step:   {status.steps}")
+    print(f"time:   {status.time}")
+    if status.lock is not None and status.state in ("running", "stale"):
+        gone = " (gone)" if status.state == "stale" else ""
+        print(f"pid:    {status.lock.get('pid')}{gone} on {status.lock.get('host')}")
+    if status.error:
+        print(f"error:  {status.error}")
     return 0
 
 
@@ -146,6 +233,9 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--set", action="append", metavar="KEY=VALUE",
                      help="override a scenario key, e.g. analysis.mass=\"lumped\" (repeatable)")
     run.add_argument("--quiet", action="store_true", help="no progress bar")
+    run.add_argument("--overwrite", action="store_true",
+                     help="replace the results already in the folder (only the files a run "
+                          "writes: CSV, JSON, fields.pvd and fields/*.vtu, PNG and GIF figures)")
     run.add_argument("--plot", action="store_true",
                      help="also write the figures of `ntncontact plot`, drawn on two worker "
                           "processes while the run goes on")
@@ -164,6 +254,11 @@ def build_parser() -> argparse.ArgumentParser:
     comp = sub.add_parser("compare", help="compare a results folder with the report's numbers")
     comp.add_argument("directory")
     comp.set_defaults(func=_compare)
+    status = sub.add_parser("status", help="the status of the run in a results folder: "
+                                           "running, completed, interrupted, failed, or stale "
+                                           "(killed)")
+    status.add_argument("directory")
+    status.set_defaults(func=_status)
     quality = sub.add_parser("mesh-quality",
                              help="edge and angle statistics (report Table 4.1) of a scenario's "
                                   "meshes or of a VTU snapshot")

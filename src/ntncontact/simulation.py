@@ -42,6 +42,11 @@ class SimulationError(RuntimeError):
     """A step could not be completed even after cutting it back."""
 
 
+class RunInterrupted(KeyboardInterrupt):
+    """Raised between steps when the run was asked to stop (``Simulation.run``'s
+    ``stop_reason``; the CLI's signal handlers)."""
+
+
 class AugmentationError(RuntimeError):
     """A step's contact multipliers did not pass report 5.4's test within
     ``augmentation.max_iterations``: the step is cut back, like a failed Newton solve."""
@@ -446,13 +451,21 @@ class Simulation:
             remaining -= h
         return replace(state, step=self.state.step + 1, time=self.state.time + dt), iterations, h
 
-    def run(self, progress: Callable[[float], None] | None = None) -> StepState:
-        """Run to t_end; observers get every step; on error they are told and it re-raises."""
+    def run(self, progress: Callable[[float], None] | None = None,
+            stop_reason: Callable[[], str | None] | None = None) -> StepState:
+        """Run to t_end; observers get every step; on error they are told and it re-raises.
+
+        ``stop_reason`` is asked before every step: a reason (not None) ends the run there with
+        :class:`RunInterrupted`. A signal handler that only records the request this way
+        stops the run between steps, never inside a compiled kernel."""
         analysis = self.model.analysis
         n_steps = int(np.ceil(analysis.t_end / analysis.dt - 1e-9))
-        self._notify(StepRecord(self.state, self.balance(self.state), 0, 0.0))
         try:
+            self._notify(StepRecord(self.state, self.balance(self.state), 0, 0.0))
             for k in range(n_steps):
+                reason = stop_reason() if stop_reason is not None else None
+                if reason is not None:
+                    raise RunInterrupted(reason)
                 # target times k dt (not accumulated sums) so output times are exact
                 t_next = min((k + 1) * analysis.dt, analysis.t_end)
                 dt = t_next - self.state.time
@@ -462,11 +475,13 @@ class Simulation:
                 self._notify(StepRecord(self.state, self.balance(self.state), its, dt, extra))
                 if progress is not None:
                     progress(self.state.time)
-        except KeyboardInterrupt:
-            self._finish("interrupted", "interrupted by the user")
+        except KeyboardInterrupt as err:
+            self._finish("interrupted", str(err) or "interrupted by the user")
             raise
         except Exception as err:
-            self._finish("failed", str(err))
+            # asked to stop, then an error (a second Ctrl-C inside a kernel): interrupted
+            reason = stop_reason() if stop_reason is not None else None
+            self._finish("interrupted" if reason else "failed", reason or str(err))
             raise
         self._finish("completed", None)
         return self.state

@@ -46,7 +46,7 @@ def _run_scenario(case: Case, directory: Path, quick: bool) -> None:
     config = load_scenario(scenario, items)
     model = build_model(config, scenario.parent)
     writer = ResultWriter(directory, model, scenario=str(scenario), title=config.title,
-                          overrides=items)
+                          overrides=items, overwrite=True)  # validate reruns every case
     Simulation(model, [writer]).run()  # raises if the run fails
 
 

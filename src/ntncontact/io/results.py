@@ -29,7 +29,7 @@ class ResultWriter:
     """Writes history.csv, summary.json and fields.pvd/VTU as the simulation advances."""
 
     def __init__(self, directory: str | Path, model: Model, extra_history: tuple[str, ...] = (),
-                 **summary_extra: object) -> None:
+                 overwrite: bool = False, **summary_extra: object) -> None:
         extra_history = ("external_work",) + extra_history
         if model.interfaces:
             extra_history = extra_history + CONTACT_HISTORY
@@ -42,7 +42,7 @@ class ResultWriter:
         summary_extra = dict.fromkeys(EnergyAudit.KEYS) | summary_extra  # energy balance
         self._energy = EnergyAudit()
         self.results = ResultsDirectory(directory, history_columns=extra_history,
-                                        **summary_extra)
+                                        overwrite=overwrite, **summary_extra)
         self.model = model
         self.extra_history = extra_history
         self.interval = model.analysis.output_interval
@@ -61,30 +61,29 @@ class ResultWriter:
             "newton_iterations": record.newton_iterations,
         }
         row |= {k: record.extra.get(k, HISTORY_DEFAULTS.get(k, 0.0)) for k in self.extra_history}
-        self.results.write_history(row)
-        self.results.summary.update(**self._energy.add(
-            row["total_energy"], row["external_work"], row.get("contact_work", 0.0)))
+        summary = self.results.summary.data
+        # the summary's new values: written once, with the history row
+        fields = self._energy.add(row["total_energy"], row["external_work"],
+                                  row.get("contact_work", 0.0))
         if "tie_violation" in record.extra:
-            summary = self.results.summary
-            worst = max(record.extra["tie_violation"], summary.data.get("max_tie_violation", 0.0))
-            summary.update(max_tie_violation=worst)
-        self._last = record
+            fields["max_tie_violation"] = max(record.extra["tie_violation"],
+                                              summary.get("max_tie_violation", 0.0))
         if row.get("augmentations_converged") == 0:  # augmentation.on_limit = "accept"
-            summary = self.results.summary
-            summary.update(unconverged_steps=summary.data["unconverged_steps"] + 1)
+            fields["unconverged_steps"] = summary["unconverged_steps"] + 1
         rows = record.extra.get("contact_rows")
-        if rows is not None:
-            self._write_contact(s.step, s.time, record.dt, rows)
+        if rows is not None and len(rows["node_1"]):
+            self.results.contact.write_step(s.step, s.time, rows)
+            fields |= self._contact_summary(s.time, record.dt, rows, summary)
+        self.results.write_history(row, **fields)
+        self._last = record
         if self._due(s.time, model):
             self._write_fields(model, record)
 
-    def _write_contact(self, step: int, time: float, dt: float, rows: dict) -> None:
-        """contact.csv rows and the contact summary. Contact lasts from the start of the first
-        step that carried a positive normal traction to the end of the last such step."""
-        if len(rows["node_1"]) == 0:
-            return
-        self.results.contact.write_step(step, time, rows)
-        summary = self.results.summary.data
+    @staticmethod
+    def _contact_summary(time: float, dt: float, rows: dict, summary: dict) -> dict:
+        """The contact summary after a step with contact rows. Contact lasts from the start of
+        the first step that carried a positive normal traction to the end of the last such
+        step."""
         penetration = max(float(np.max(rows["gap"])), summary.get("max_penetration") or 0.0)
         fields = {"max_penetration": penetration,
                   "max_active_pairs": max(len(rows["node_1"]), summary["max_active_pairs"])}
@@ -92,7 +91,7 @@ class ResultWriter:
             if summary.get("contact_start_time") is None:
                 fields["contact_start_time"] = time - dt
             fields["contact_end_time"] = time
-        self.results.summary.update(**fields)
+        return fields
 
     def _due(self, time: float, model: Model) -> bool:
         last = time >= model.analysis.t_end - 1e-9 * model.analysis.dt
@@ -114,16 +113,16 @@ class ResultWriter:
         )
 
     def on_finish(self, status: str, error: str | None) -> None:
-        """Close the files (waiting for the VTU frames still being written), then the summary;
-        a frame that could not be written makes a completed run a failed one."""
+        """Close the files, write the final summary and release the folder (once: later calls,
+        such as the CLI's for an interruption before the time loop, do nothing)."""
+        if self.results.closed:
+            return
         try:
-            self.results.close()
-        except Exception as err:
-            if status == "completed":
-                status, error = "failed", str(err)
+            quality = self._mesh_quality()
+        except Exception:
+            self.results.close(status, error)
             raise
-        finally:
-            self.results.summary.finish(status, error, mesh_quality=self._mesh_quality())
+        self.results.close(status, error, mesh_quality=quality)
 
     def _mesh_quality(self) -> dict:
         """Table 4.1 statistics of each body's current mesh (node positions x) at the end."""
