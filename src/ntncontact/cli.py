@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import argparse
-import contextlib
 import os
 import sys
 from pathlib import Path
@@ -25,37 +24,32 @@ def _run(args: argparse.Namespace) -> int:
     out = Path(args.out)
     writer = ResultWriter(out, model, scenario=str(scenario), title=config.title,
                           overrides=list(args.set or []))
-    plotting = args.plot or args.gif or bool(args.times)
-    with _figure_jobs(out, args) if plotting else contextlib.nullcontext() as figures:
-        sim = Simulation(model, [writer] + ([figures.start(beside_a_run=True)] if figures else []))
-        t_end = model.analysis.t_end
-        with tqdm(total=t_end, unit="t", disable=args.quiet or None, desc=scenario.stem,
-                  bar_format="{l_bar}{bar}| t={n:.4g}/{total:.4g} [{elapsed}<{remaining}]") \
-                as bar:
+    sim = Simulation(model, [writer])
+    t_end = model.analysis.t_end
+    with tqdm(total=t_end, unit="t", disable=args.quiet or None, desc=scenario.stem,
+              bar_format="{l_bar}{bar}| t={n:.4g}/{total:.4g} [{elapsed}<{remaining}]") as bar:
 
-            def progress(t: float) -> None:
-                bar.update(t - bar.n)
+        def progress(t: float) -> None:
+            bar.update(t - bar.n)
 
-            sim.run(progress)
-        print(f"results written to {out} (history.csv, summary.json, fields.pvd)")
-        if args.compare:  # while the figure workers draw
-            _print_comparison(out)
-        if figures:
-            print("figures:", *figures.paths(), sep="\n  ")
+        sim.run(progress)
+    print(f"results written to {out} (history.csv, summary.json, fields.pvd)")
+    if args.compare:
+        _print_comparison(out)
+    if args.plot or args.gif or args.times:
+        print("figures:", *_draw_figures(out, args), sep="\n  ")
     return 0
 
 
-def _figure_jobs(directory: Path, args: argparse.Namespace):
-    from .figure_jobs import FigureJobs
+def _draw_figures(directory: Path, args: argparse.Namespace) -> list[Path]:
+    from .plotting import plot_all
 
-    return FigureJobs(directory, gif=args.gif, times=args.times)
+    return plot_all(directory, times=args.times, gif=args.gif)
 
 
 def _plot(args: argparse.Namespace) -> int:
-    with _figure_jobs(Path(args.directory), args) as figures:
-        figures.start().submit_all()
-        for path in figures.paths():
-            print(path)
+    for path in _draw_figures(Path(args.directory), args):
+        print(path)
     return 0
 
 
@@ -130,8 +124,7 @@ def build_parser() -> argparse.ArgumentParser:
                      help="override a scenario key, e.g. analysis.mass=\"lumped\" (repeatable)")
     run.add_argument("--quiet", action="store_true", help="no progress bar")
     run.add_argument("--plot", action="store_true",
-                     help="also write the figures of `ntncontact plot`, drawn on two worker "
-                          "processes while the run goes on")
+                     help="then write the figures of `ntncontact plot`")
     _figure_options(run, "(implies --plot)")
     run.add_argument("--compare", action="store_true",
                      help="then print the comparison with the report (as `ntncontact compare`)")
