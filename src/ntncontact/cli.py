@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import argparse
-import os
 import sys
 from pathlib import Path
 
@@ -170,46 +169,9 @@ def main(argv: list[str] | None = None) -> int:
         return 1
 
 
-#: numpy's optional submodules that ``import scipy.sparse`` loads (its array-API layer copies
-#: numpy's namespace, attribute by attribute) but that nothing in a run uses: ~0.08 s at
-#: start-up. (numpy.ma and numpy.polynomial are used: by np.unique and by Numba's import.)
-UNUSED_NUMPY_MODULES = ("numpy.f2py", "numpy.testing", "numpy.ctypeslib")
-
-
-def defer_imports(names: tuple[str, ...]) -> list[str]:
-    """Make the modules ``names`` (not yet imported) load at the first use of one of their
-    attributes instead of at their import (the standard library's ``LazyLoader``); return the
-    names deferred. Their parent packages are imported now."""
-    import importlib.util
-
-    deferred = []
-    for name in names:
-        if name in sys.modules:
-            continue
-        spec = importlib.util.find_spec(name)
-        if spec is None or spec.loader is None:
-            continue
-        spec.loader = importlib.util.LazyLoader(spec.loader)
-        module = importlib.util.module_from_spec(spec)
-        sys.modules[name] = module
-        spec.loader.exec_module(module)
-        parent, _, child = name.rpartition(".")
-        setattr(sys.modules[parent], child, module)  # numpy's own lazy __getattr__ would recurse
-        deferred.append(name)
-    return deferred
-
-
 def console_main() -> None:
-    """The ``ntncontact`` command: :func:`main`, then the process ends without the
-    interpreter's teardown, which spent ~0.4 s after every run releasing the compiled kernels
-    (LLVM). When main returns, every results file is closed and the figure workers have
-    exited, so only the standard streams are left to flush. An exception main does not handle
-    still ends the process normally, with its traceback."""
-    defer_imports(UNUSED_NUMPY_MODULES)
-    code = main()
-    sys.stdout.flush()
-    sys.stderr.flush()
-    os._exit(code)
+    """The ``ntncontact`` command: :func:`main`'s return value is the exit code."""
+    sys.exit(main())
 
 
 if __name__ == "__main__":  # pragma: no cover
