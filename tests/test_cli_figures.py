@@ -39,3 +39,52 @@ def test_failed_run_with_plot_draws_nothing_and_keeps_the_folder(tmp_path, capsy
     assert not _figures(out)  # nothing drawn
     assert main(["plot", str(out)]) == 0  # but the folder is still plottable
     assert (out / "energies.png").is_file()
+
+
+def _processes() -> list[tuple[int, int, int]]:
+    """(pid, parent pid, session id) of every process (Linux /proc)."""
+    from pathlib import Path
+
+    rows = []
+    for stat in Path("/proc").glob("[0-9]*/stat"):
+        try:
+            fields = stat.read_text().rsplit(")", 1)[1].split()
+        except OSError:  # ended meanwhile
+            continue
+        rows.append((int(stat.parent.name), int(fields[1]), int(fields[3])))
+    return rows
+
+
+def test_a_killed_run_with_plot_leaves_no_process_behind(tmp_path):
+    """``run --plot --gif`` starts no other process; SIGKILL mid-run leaves none alive in its
+    session, and the caller's pipes reach their end at once (nothing else holds them)."""
+    import os
+    import signal
+    import subprocess
+    import sys
+    import time
+    from pathlib import Path
+
+    import pytest
+
+    from ntncontact.io.vtk import read_pvd
+
+    if not Path("/proc/self/stat").is_file():
+        pytest.skip("needs Linux /proc")
+    out = tmp_path / "ring"
+    run = subprocess.Popen(
+        [sys.executable, "-m", "ntncontact.cli", "run", str(EXAMPLES / "ring_impact.toml"),
+         "--out", str(out), "--plot", "--gif", "--quiet"],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, start_new_session=True)
+    deadline = time.monotonic() + 300.0
+    while time.monotonic() < deadline and run.poll() is None:
+        pvd = out / "fields.pvd"
+        if pvd.is_file() and len(read_pvd(pvd)) >= 3:
+            break
+        time.sleep(0.1)
+    assert run.poll() is None, "the run ended before it could be killed"
+    assert [pid for pid, parent, _ in _processes() if parent == run.pid] == []
+    os.kill(run.pid, signal.SIGKILL)
+    run.communicate(timeout=10.0)  # end of output: no process left holding the pipes
+    assert run.returncode == -signal.SIGKILL
+    assert [pid for pid, _, session in _processes() if session == run.pid] == []
