@@ -88,3 +88,22 @@ def test_a_killed_run_with_plot_leaves_no_process_behind(tmp_path):
     run.communicate(timeout=10.0)  # end of output: no process left holding the pipes
     assert run.returncode == -signal.SIGKILL
     assert [pid for pid, _, session in _processes() if session == run.pid] == []
+
+
+def test_times_outside_the_run_are_refused_in_one_line(tmp_path, capsys):
+    """`plot --times 100 -1` names both and draws nothing; `run --times` past t_end is refused
+    before the run starts."""
+    out = tmp_path / "rods"
+    args = [str(EXAMPLES / "rod_impact.toml"), "--quiet", "--set", "analysis.t_end=0.5"]
+    assert main(["run", *args, "--out", str(out)]) == 0
+    capsys.readouterr()
+    assert main(["plot", str(out), "--times", "100", "-1"]) == 1
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "Traceback" not in err
+    assert "times 100, -1 are outside" in err and "fields.pvd (t = 0 to 0.5)" in err
+    assert not _figures(out)
+    late = tmp_path / "late"
+    assert main(["run", *args, "--out", str(late), "--times", "0.2", "0.7"]) == 1
+    err = capsys.readouterr().err
+    assert "time 0.7 is outside the run of" in err and "(t = 0 to 0.5)" in err
+    assert not late.exists()  # refused before anything ran or was written

@@ -172,3 +172,74 @@ def test_figures_follow_the_matplotlibrc_and_the_file_name(results, tmp_path):
     assert mpimg.imread(half).shape[1] == round(7.0 * DPI / 2)
     pdf = plot_energies(results, tmp_path / "e.pdf")
     assert pdf.read_bytes()[:5] == b"%PDF-"
+
+
+def _expected_state(step: float, folder: Path):
+    """What write_run's fields are at a (fractional) step: all of them are linear in it."""
+    from ntncontact.io.vtk import read_vtu
+
+    first = read_vtu(folder / "fields" / "fields_00000.vtu")
+    is_block = first.cell_data["body_id"] == 0
+    points = first.points
+    on_block = np.zeros(len(points), dtype=bool)
+    on_block[first.cells[is_block].ravel()] = True
+    displacement = np.column_stack([0.02 * step * points[:, 1] * on_block,
+                                    -0.2 * step * on_block])
+    return displacement, np.linspace(0.0, step + 1.0, len(first.cells))
+
+
+def test_frames_between_outputs_are_interpolated_linearly(results):
+    from ntncontact.plotting import frames_at
+
+    (frame, interpolated), = frames_at(results, [0.25])
+    assert interpolated and frame.time == 0.25
+    displacement, von_mises = _expected_state(2.5, results)
+    assert np.allclose(frame.point_data["displacement"], displacement, rtol=0.0, atol=1e-12)
+    assert np.allclose(frame.cell_data["von_mises"], von_mises, rtol=0.0, atol=1e-12)
+    assert frame.cell_data["body_id"].dtype.kind in "iu"
+
+
+def test_a_time_with_a_frame_draws_that_frame(results):
+    from ntncontact.io.vtk import read_vtu
+    from ntncontact.plotting import frames_at
+
+    (frame, interpolated), = frames_at(results, [0.3])
+    written = read_vtu(results / "fields" / "fields_00003.vtu")
+    assert not interpolated and frame.time == pytest.approx(0.3, abs=1e-15)
+    assert np.array_equal(frame.point_data["displacement"], written.point_data["displacement"])
+
+
+def test_interpolation_steps_over_an_unreadable_frame(tmp_path):
+    from ntncontact.plotting import frames_at
+
+    write_run(tmp_path)
+    (tmp_path / "fields" / "fields_00003.vtu").write_text("<VTKFile")  # half-written
+    with pytest.warns(UserWarning, match="fields_00003"):
+        (frame, interpolated), = frames_at(tmp_path, [0.25])  # between 0.2 and 0.4 now
+    displacement, von_mises = _expected_state(2.5, tmp_path)
+    assert interpolated
+    assert np.allclose(frame.point_data["displacement"], displacement, rtol=0.0, atol=1e-12)
+    assert np.allclose(frame.cell_data["von_mises"], von_mises, rtol=0.0, atol=1e-12)
+
+
+@pytest.mark.parametrize("times", [[0.5], [-0.1], [0.1, float("nan")], [100.0, -1.0]])
+def test_times_outside_the_frames_are_refused(results, tmp_path, times):
+    with pytest.raises(ValueError, match=r"outside the frames of .*fields\.pvd \(t = 0 to 0\.4\)"):
+        plot_deformed(results, times=times, path=tmp_path / "x.png")
+    assert not (tmp_path / "x.png").exists()
+
+
+def test_every_time_asked_for_is_drawn_under_its_own_title(results, tmp_path, monkeypatch):
+    """Seven times (more than the six evenly spaced panels), in the order given, each panel
+    titled with the time it shows."""
+    from ntncontact import plotting
+
+    drawn = []
+    save = plotting._save
+    monkeypatch.setattr(plotting, "_save", lambda fig, path: drawn.append(fig) or save(fig, path))
+    times = [0.0, 0.05, 0.1, 0.15, 0.4, 0.333, 0.2]
+    assert_real_image(plot_deformed(results, times=times, path=tmp_path / "seven.png"),
+                      width_in=3.6 * 3 + 1.0)
+    titles = [ax.get_title() for ax in drawn[0].axes if ax.get_visible() and ax.get_title()]
+    assert titles == ["t = 0", "t = 0.05 (interpolated)", "t = 0.1", "t = 0.15 (interpolated)",
+                      "t = 0.4", "t = 0.333 (interpolated)", "t = 0.2"]

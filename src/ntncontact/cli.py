@@ -20,6 +20,10 @@ def _run(args: argparse.Namespace) -> int:
     scenario = Path(args.scenario)
     config = load_scenario(scenario, args.set)
     model = build_model(config, scenario.parent)
+    if args.times:  # refused before the run, not after it
+        from .plotting import check_times
+
+        check_times(args.times, 0.0, model.analysis.t_end, f"the run of {scenario}")
     out = Path(args.out)
     writer = ResultWriter(out, model, scenario=str(scenario), title=config.title,
                           overrides=list(args.set or []))
@@ -150,9 +154,10 @@ def build_parser() -> argparse.ArgumentParser:
 
 def _figure_options(parser: argparse.ArgumentParser, note: str = "") -> None:
     parser.add_argument("--times", type=float, nargs="+", metavar="T",
-                        help="draw the deformed meshes nearest to these times (snapshots.png) "
-                             "instead of six evenly spaced ones (deformed_von_mises.png) "
-                             f"{note}".strip())
+                        help="draw the deformed meshes at these times (snapshots.png; "
+                             "interpolated linearly between the output frames around a time "
+                             "no frame was written at) instead of six evenly spaced ones "
+                             f"(deformed_von_mises.png) {note}".strip())
     parser.add_argument("--gif", action="store_true",
                         help=f"also write animation.gif {note}".strip())
 

@@ -138,27 +138,85 @@ def _read_or_warn(vtu: Path, time: float) -> VtuFrame | None:
         return None
 
 
-def _nearest(available: NDArray, targets: Sequence[float]) -> list[int]:
-    picks = [int(np.argmin(np.abs(available - t))) for t in targets]
-    return list(dict.fromkeys(picks))  # unique, in the requested order
-
-
-def load_frames(
-    directory: str | os.PathLike, times: Sequence[float] | None = None,
-    max_frames: int = EVENLY_SPACED_PANELS,
-) -> list[VtuFrame]:
-    """Snapshots nearest to ``times``, or up to ``max_frames`` evenly spaced; bad files skipped."""
+def load_frames(directory: str | os.PathLike, max_frames: int = EVENLY_SPACED_PANELS
+                ) -> list[VtuFrame]:
+    """Up to ``max_frames`` evenly spaced frames of the folder; unreadable files skipped."""
     series = _series(Path(directory))
-    available = np.array([t for t, _ in series])
-    if times is None:
-        indices = _evenly_spaced(len(series), max_frames)
-    else:
-        indices = _nearest(available, times)[:max_frames]
-    read = (_read_or_warn(series[i][1], series[i][0]) for i in indices)
-    frames = [frame for frame in read if frame is not None]
+    frames = []
+    for index in _evenly_spaced(len(series), max_frames):
+        frame = _read_or_warn(series[index][1], series[index][0])
+        if frame is not None:
+            frames.append(frame)
     if not frames:
         raise ResultsNotFoundError(f"no readable VTU files in results folder {directory}")
     return frames
+
+
+def check_times(times: Sequence[float], first: float, last: float, where: str) -> None:
+    """A one-line ValueError naming the times not within ``first``..``last`` (NaN included)
+    and ``where`` they were looked for."""
+    outside = [f"{t:g}" for t in times if not first <= t <= last]
+    if outside:
+        what = "time " + outside[0] + " is" if len(outside) == 1 else \
+            "times " + ", ".join(outside) + " are"
+        raise ValueError(f"{what} outside {where} (t = {first:g} to {last:g})")
+
+
+def frames_at(directory: str | os.PathLike, times: Sequence[float]
+              ) -> list[tuple[VtuFrame, bool]]:
+    """The state at each of ``times``, with True where it is interpolated: the frame written
+    at that time (within 1e-9 of the run's span), or else the linear interpolation between the
+    readable frames before and after it. Times outside the frames raise a ValueError."""
+    folder = Path(directory)
+    series = _series(folder)
+    written = np.array([t for t, _ in series])
+    check_times(times, written[0], written[-1], f"the frames of {folder / PVD_FILE}")
+    read: dict[int, VtuFrame | None] = {}
+
+    def frame(index: int) -> VtuFrame | None:
+        if index not in read:
+            read[index] = _read_or_warn(series[index][1], series[index][0])
+        return read[index]
+
+    tolerance = 1e-9 * max(written[-1] - written[0], abs(written[-1]))
+    states = []
+    for time in times:
+        first_after = int(np.searchsorted(written, time - tolerance))
+        later = next((i for i in range(first_after, len(series)) if frame(i) is not None), None)
+        if later is not None and abs(written[later] - time) <= tolerance:
+            states.append((frame(later), False))
+            continue
+        earlier = next((i for i in range(first_after - 1, -1, -1) if frame(i) is not None),
+                       None)
+        if earlier is None or later is None:
+            raise ResultsNotFoundError(f"no readable frames around t = {time:g} in {folder}")
+        states.append((interpolate(frame(earlier), frame(later), time), True))
+    return states
+
+
+def interpolate(before: VtuFrame, after: VtuFrame, time: float) -> VtuFrame:
+    """The linear interpolation in time between two frames of one mesh: of the points and of
+    every floating-point field; other fields (body_id) are taken from the nearer frame."""
+    if not np.array_equal(before.cells, after.cells):
+        raise ValueError(f"cannot interpolate between {before.path} and {after.path}: "
+                         "their cells differ")
+    weight = (time - before.time) / (after.time - before.time)
+
+    def mix(a: NDArray, b: NDArray) -> NDArray:
+        if a.dtype.kind == "f" and a.shape == b.shape:
+            return (1.0 - weight) * a + weight * b
+        return a if weight < 0.5 else b
+
+    return VtuFrame(
+        time=time,
+        path=before.path if weight < 0.5 else after.path,
+        points=mix(before.points, after.points),
+        cells=before.cells,
+        point_data={k: mix(v, after.point_data[k]) for k, v in before.point_data.items()
+                    if k in after.point_data},
+        cell_data={k: mix(v, after.cell_data[k]) for k, v in before.cell_data.items()
+                   if k in after.cell_data},
+    )
 
 
 def cell_values(frame: VtuFrame, field: str) -> NDArray[np.float64]:
@@ -190,8 +248,8 @@ def _common_view(frames: Sequence[VtuFrame], field: str):
     return norm, (lower[0] - pad, upper[0] + pad), (lower[1] - pad, upper[1] + pad)
 
 
-def _time_title(frame: VtuFrame) -> str:
-    return f"t = {frame.time:.4g}"
+def _time_title(frame: VtuFrame, interpolated: bool = False) -> str:
+    return f"t = {frame.time:g}" + (" (interpolated)" if interpolated else "")
 
 
 def _draw_mesh(ax: Any, frame: VtuFrame, field: str, norm: Any, limits: tuple) -> Any:
@@ -218,14 +276,19 @@ def plot_deformed(
     field: str = "von_mises",
     path: str | os.PathLike | None = None,
 ) -> Path:
-    """Deformed meshes of all bodies at up to six times, coloured by ``field``, one colour bar."""
+    """Deformed meshes of all bodies coloured by ``field``, with one colour bar: at each of
+    ``times`` (see :func:`frames_at`), or at six evenly spaced output frames."""
     folder = Path(directory)
-    frames = load_frames(folder, times)
+    if times is None:
+        states = [(frame, False) for frame in load_frames(folder)]
+    else:
+        states = frames_at(folder, times)
+    frames = [frame for frame, _ in states]
     fig, axes = _new_figure(*panels_shape(len(frames)), layout="compressed")
     norm, xlim, ylim = _common_view(frames, field)
-    for ax, frame in zip(axes.flat, frames, strict=False):
+    for ax, (frame, interpolated) in zip(axes.flat, states, strict=False):
         collection = _draw_mesh(ax, frame, field, norm, (xlim, ylim))
-        ax.set_title(_time_title(frame), fontsize="small")
+        ax.set_title(_time_title(frame, interpolated), fontsize="small")
     for ax in list(axes.flat)[len(frames):]:
         ax.set_visible(False)
     fig.colorbar(collection, ax=axes, label=field.replace("_", " "))
@@ -351,7 +414,7 @@ def animate(
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from PIL import Image
 
-    frames = load_frames(directory, None, max_frames)
+    frames = load_frames(directory, max_frames)
     norm, xlim, ylim = _common_view(frames, field)
     fig, axes = _new_figure(*ANIMATION_SHAPE)
     canvas = FigureCanvasAgg(fig)
