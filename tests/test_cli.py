@@ -105,7 +105,7 @@ def test_run_with_compare_prints_and_writes_the_comparison(tmp_path, capsys):
 
 
 def _console(args: list[str]):
-    """The installed command's entry point, in a child process (it ends the process)."""
+    """The installed command's entry point, in a child process (it exits)."""
     import os
     import subprocess
     import sys
@@ -119,9 +119,8 @@ def _console(args: list[str]):
 
 
 def test_console_command_flushes_its_output_and_keeps_the_exit_code(tmp_path, capsys):
-    """console_main ends the process without the interpreter's teardown: what main printed
-    must still arrive whole (the streams are pipes here, so block-buffered), and main's exit
-    code must be the process's."""
+    """What main printed arrives whole through the installed command's entry point (the
+    streams are pipes here, so block-buffered), and main's exit code is the process's."""
     scenario = str(EXAMPLES / "ring_impact.toml")
     assert main(["mesh-quality", scenario]) == 0
     expected = capsys.readouterr().out

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import os
 from pathlib import Path
 
 import matplotlib.image as mpimg
@@ -163,89 +162,9 @@ def test_empty_folder_error_names_it(tmp_path):
         animate(empty, tmp_path / "x.gif")
 
 
-def test_warm_up_draws_in_memory_only(tmp_path, monkeypatch):
-    """The figure workers' warm-up (figure_jobs) must leave no file behind, wherever it runs."""
-    from ntncontact.plotting import warm_up
-
-    monkeypatch.chdir(tmp_path)
-    warm_up()
-    assert list(tmp_path.iterdir()) == []
-
-
-def _pixels(path: Path) -> np.ndarray:
-    return mpimg.imread(path)
-
-
-@pytest.mark.parametrize("shape, draw", [
-    ("history", lambda folder, out: plot_energies(folder, out)),
-    ("panels", lambda folder, out: plot_deformed(folder, times=[0.0, 0.2, 0.4], path=out)),
-    ("animation", lambda folder, out: animate(folder, out, max_frames=3)),
-])
-def test_prepared_figures_draw_the_same_images(results, tmp_path, shape, draw):
-    """A figure made ahead (what a figure worker does during the run) is used by the next
-    figure of its shape, which comes out pixel for pixel as on a new figure."""
-    from PIL import Image
-
-    from ntncontact import plotting
-
-    shapes = {"history": plotting.HISTORY_SHAPE, "panels": plotting.panels_shape(3),
-              "animation": plotting.ANIMATION_SHAPE}
-    suffix = ".gif" if shape == "animation" else ".png"
-    plotting._PREPARED.clear()
-    fresh = draw(results, tmp_path / f"fresh{suffix}")
-    plotting.prepare_figures([shapes[shape]])
-    prepared_fig = plotting._PREPARED[shapes[shape]][0][0]
-    ahead = draw(results, tmp_path / f"ahead{suffix}")
-    assert not plotting._PREPARED[shapes[shape]]  # taken
-    assert prepared_fig.axes[0].has_data()  # and drawn on
-    with Image.open(fresh) as a, Image.open(ahead) as b:
-        assert getattr(a, "n_frames", 1) == getattr(b, "n_frames", 1)
-        for index in range(getattr(a, "n_frames", 1)):
-            a.seek(index)
-            b.seek(index)
-            assert np.array_equal(np.asarray(a.convert("RGB")), np.asarray(b.convert("RGB")))
-
-
-def test_prefetched_frames_are_not_read_again(tmp_path, monkeypatch):
-    """load_frames takes what prefetch_frames read, unless the file changed since."""
-    from ntncontact import plotting
-    from ntncontact.io.vtk import read_vtu
-
-    write_run(tmp_path)
-    assert plotting.prefetch_frames(tmp_path) == N_STEPS
-    assert plotting.prefetch_frames(tmp_path) == 0  # nothing new
-    reads = []
-
-    def counting_read(path, time=float("nan")):
-        reads.append(Path(path).name)
-        return read_vtu(path, time=time)
-
-    monkeypatch.setattr(plotting, "read_vtu", counting_read)
-    frames = plotting.load_frames(tmp_path, max_frames=N_STEPS)
-    assert reads == [] and [f.time for f in frames] == pytest.approx([0.1 * s for s in
-                                                                       range(N_STEPS)])
-    changed = tmp_path / "fields" / "fields_00002.vtu"
-    changed.write_bytes(changed.read_bytes())  # rewritten: another mtime
-    os.utime(changed, ns=(0, 0))
-    again = plotting.load_frames(tmp_path, max_frames=N_STEPS)
-    assert reads == ["fields_00002.vtu"]
-    assert np.array_equal(again[2].points, frames[2].points)
-
-
-def test_prefetching_stops_at_its_memory_budget(tmp_path, monkeypatch):
-    from ntncontact import plotting
-
-    write_run(tmp_path)
-    monkeypatch.setattr(plotting, "_READ_AHEAD", {})
-    frame_bytes = plotting._frame_bytes(plotting.load_frames(tmp_path, times=[0.0])[0])
-    monkeypatch.setattr(plotting, "READ_AHEAD_BYTES", 2 * frame_bytes)
-    assert plotting.prefetch_frames(tmp_path) == 3  # the third goes over: no more after it
-    assert len(plotting.load_frames(tmp_path, max_frames=N_STEPS)) == N_STEPS  # the rest read
-
-
 def test_figures_follow_the_matplotlibrc_and_the_file_name(results, tmp_path):
     """savefig writes the figures: a matplotlibrc's resolution applies, and a .pdf name gets a
-    PDF (the PNG compression option is only passed for .png names)."""
+    PDF."""
     import matplotlib
 
     with matplotlib.rc_context({"savefig.dpi": DPI / 2}):
@@ -255,20 +174,72 @@ def test_figures_follow_the_matplotlibrc_and_the_file_name(results, tmp_path):
     assert pdf.read_bytes()[:5] == b"%PDF-"
 
 
-def test_animation_frames_equal_whole_canvas_quantization(results, tmp_path, monkeypatch):
-    """Each GIF frame quantizes only the pixels the axes and the title cover: the frames come
-    out as when the whole canvas is quantized."""
-    from PIL import Image
+def _expected_state(step: float, folder: Path):
+    """What write_run's fields are at a (fractional) step: all of them are linear in it."""
+    from ntncontact.io.vtk import read_vtu
 
+    first = read_vtu(folder / "fields" / "fields_00000.vtu")
+    is_block = first.cell_data["body_id"] == 0
+    points = first.points
+    on_block = np.zeros(len(points), dtype=bool)
+    on_block[first.cells[is_block].ravel()] = True
+    displacement = np.column_stack([0.02 * step * points[:, 1] * on_block,
+                                    -0.2 * step * on_block])
+    return displacement, np.linspace(0.0, step + 1.0, len(first.cells))
+
+
+def test_frames_between_outputs_are_interpolated_linearly(results):
+    from ntncontact.plotting import frames_at
+
+    (frame, interpolated), = frames_at(results, [0.25])
+    assert interpolated and frame.time == 0.25
+    displacement, von_mises = _expected_state(2.5, results)
+    assert np.allclose(frame.point_data["displacement"], displacement, rtol=0.0, atol=1e-12)
+    assert np.allclose(frame.cell_data["von_mises"], von_mises, rtol=0.0, atol=1e-12)
+    assert frame.cell_data["body_id"].dtype.kind in "iu"
+
+
+def test_a_time_with_a_frame_draws_that_frame(results):
+    from ntncontact.io.vtk import read_vtu
+    from ntncontact.plotting import frames_at
+
+    (frame, interpolated), = frames_at(results, [0.3])
+    written = read_vtu(results / "fields" / "fields_00003.vtu")
+    assert not interpolated and frame.time == pytest.approx(0.3, abs=1e-15)
+    assert np.array_equal(frame.point_data["displacement"], written.point_data["displacement"])
+
+
+def test_interpolation_steps_over_an_unreadable_frame(tmp_path):
+    from ntncontact.plotting import frames_at
+
+    write_run(tmp_path)
+    (tmp_path / "fields" / "fields_00003.vtu").write_text("<VTKFile")  # half-written
+    with pytest.warns(UserWarning, match="fields_00003"):
+        (frame, interpolated), = frames_at(tmp_path, [0.25])  # between 0.2 and 0.4 now
+    displacement, von_mises = _expected_state(2.5, tmp_path)
+    assert interpolated
+    assert np.allclose(frame.point_data["displacement"], displacement, rtol=0.0, atol=1e-12)
+    assert np.allclose(frame.cell_data["von_mises"], von_mises, rtol=0.0, atol=1e-12)
+
+
+@pytest.mark.parametrize("times", [[0.5], [-0.1], [0.1, float("nan")], [100.0, -1.0]])
+def test_times_outside_the_frames_are_refused(results, tmp_path, times):
+    with pytest.raises(ValueError, match=r"outside the frames of .*fields\.pvd \(t = 0 to 0\.4\)"):
+        plot_deformed(results, times=times, path=tmp_path / "x.png")
+    assert not (tmp_path / "x.png").exists()
+
+
+def test_every_time_asked_for_is_drawn_under_its_own_title(results, tmp_path, monkeypatch):
+    """Seven times (more than the six evenly spaced panels), in the order given, each panel
+    titled with the time it shows."""
     from ntncontact import plotting
 
-    cropped = animate(results, tmp_path / "cropped.gif")
-    monkeypatch.setattr(plotting, "_changed_box",
-                        lambda fig, ax: (0, 0, *fig.canvas.get_width_height()))
-    whole = animate(results, tmp_path / "whole.gif")
-    with Image.open(cropped) as a, Image.open(whole) as b:
-        assert a.n_frames == b.n_frames == N_STEPS
-        for index in range(N_STEPS):
-            a.seek(index)
-            b.seek(index)
-            assert np.array_equal(np.asarray(a.convert("RGB")), np.asarray(b.convert("RGB")))
+    drawn = []
+    save = plotting._save
+    monkeypatch.setattr(plotting, "_save", lambda fig, path: drawn.append(fig) or save(fig, path))
+    times = [0.0, 0.05, 0.1, 0.15, 0.4, 0.333, 0.2]
+    assert_real_image(plot_deformed(results, times=times, path=tmp_path / "seven.png"),
+                      width_in=3.6 * 3 + 1.0)
+    titles = [ax.get_title() for ax in drawn[0].axes if ax.get_visible() and ax.get_title()]
+    assert titles == ["t = 0", "t = 0.05 (interpolated)", "t = 0.1", "t = 0.15 (interpolated)",
+                      "t = 0.4", "t = 0.333 (interpolated)", "t = 0.2"]

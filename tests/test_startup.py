@@ -1,4 +1,4 @@
-"""Start-up of the command: modules loaded only when used, bytecode written by the warm-up."""
+"""Start-up and exit of the command; bytecode written by the warm-up."""
 
 import importlib.util
 import subprocess
@@ -14,26 +14,20 @@ def _python(code: str) -> subprocess.CompletedProcess:
                           text=True, timeout=120)
 
 
-def test_deferred_numpy_modules_load_at_first_use_only():
-    """scipy.sparse's import no longer runs numpy.f2py and numpy.testing; they still work
-    when used, and modules already imported are left alone."""
-    done = _python("""
-        import sys
-        from ntncontact.cli import UNUSED_NUMPY_MODULES, defer_imports
-        import numpy.ma
-        assert defer_imports(UNUSED_NUMPY_MODULES + ("numpy.ma",)) == list(UNUSED_NUMPY_MODULES)
-        import scipy.sparse
-        import numpy
-        lazy = [n for n in UNUSED_NUMPY_MODULES if type(sys.modules[n]).__name__ != "module"]
-        assert lazy == list(UNUSED_NUMPY_MODULES), lazy
-        assert "numpy.f2py.crackfortran" not in sys.modules
-        from numpy.testing import assert_array_equal  # loads it now
-        assert_array_equal(numpy.arange(3), [0, 1, 2])
-        assert callable(numpy.f2py.run_main) and "numpy.f2py.crackfortran" in sys.modules
-        print("ok")
+def test_the_command_ends_through_the_interpreters_normal_exit(tmp_path):
+    """console_main returns main's exit code through sys.exit: atexit handlers run and
+    buffered output (a pipe here) arrives whole."""
+    marker = tmp_path / "atexit_ran"
+    done = _python(f"""
+        import atexit, pathlib, sys
+        atexit.register(pathlib.Path({str(marker)!r}).write_text, "yes")
+        sys.argv = ["ntncontact", "compare", {str(tmp_path / "missing")!r}]
+        from ntncontact.cli import console_main
+        console_main()
     """)
-    assert done.returncode == 0, done.stderr
-    assert done.stdout.strip() == "ok"
+    assert done.returncode == 1 and "error" in done.stderr, done.stderr
+    assert "Traceback" not in done.stderr
+    assert marker.read_text() == "yes"
 
 
 def test_compile_bytecode_writes_it_even_where_python_would_not(tmp_path, monkeypatch):

@@ -79,13 +79,15 @@ def _run_until_stopped(args: argparse.Namespace, stop: StopOnSignal) -> int:
     model = build_model(config, scenario.parent)
     if stop.signum is not None:  # before any file is written
         raise RunInterrupted(stop.reason())
+    if args.times:  # refused before the run, not after it
+        from .plotting import check_times
+
+        check_times(args.times, 0.0, model.analysis.t_end, f"the run of {scenario}")
     out = Path(args.out)
     writer = ResultWriter(out, model, overwrite=args.overwrite, scenario=str(scenario),
                           title=config.title, overrides=list(args.set or []))
-    plotting = args.plot or args.gif or bool(args.times)
-    with _finished_on_error(writer, stop), \
-            _figure_jobs(out, args) if plotting else contextlib.nullcontext() as figures:
-        sim = Simulation(model, [writer] + ([figures.start(beside_a_run=True)] if figures else []))
+    with _finished_on_error(writer, stop):
+        sim = Simulation(model, [writer])
         t_end = model.analysis.t_end
         with tqdm(total=t_end, unit="t", disable=args.quiet or None, desc=scenario.stem,
                   bar_format="{l_bar}{bar}| t={n:.4g}/{total:.4g} [{elapsed}<{remaining}]") \
@@ -95,11 +97,11 @@ def _run_until_stopped(args: argparse.Namespace, stop: StopOnSignal) -> int:
                 bar.update(t - bar.n)
 
             sim.run(progress, stop.reason)
-        print(f"results written to {out} (history.csv, summary.json, fields.pvd)")
-        if args.compare:  # while the figure workers draw
-            _print_comparison(out)
-        if figures:
-            print("figures:", *figures.paths(), sep="\n  ")
+    print(f"results written to {out} (history.csv, summary.json, fields.pvd)")
+    if args.compare:
+        _print_comparison(out)
+    if args.plot or args.gif or args.times:
+        print("figures:", *_draw_figures(out, args), sep="\n  ")
     return 0
 
 
@@ -132,17 +134,15 @@ def _status(args: argparse.Namespace) -> int:
     return 0
 
 
-def _figure_jobs(directory: Path, args: argparse.Namespace):
-    from .figure_jobs import FigureJobs
+def _draw_figures(directory: Path, args: argparse.Namespace) -> list[Path]:
+    from .plotting import plot_all
 
-    return FigureJobs(directory, gif=args.gif, times=args.times)
+    return plot_all(directory, times=args.times, gif=args.gif)
 
 
 def _plot(args: argparse.Namespace) -> int:
-    with _figure_jobs(Path(args.directory), args) as figures:
-        figures.start().submit_all()
-        for path in figures.paths():
-            print(path)
+    for path in _draw_figures(Path(args.directory), args):
+        print(path)
     return 0
 
 
@@ -237,8 +237,7 @@ def build_parser() -> argparse.ArgumentParser:
                      help="replace the results already in the folder (only the files a run "
                           "writes: CSV, JSON, fields.pvd and fields/*.vtu, PNG and GIF figures)")
     run.add_argument("--plot", action="store_true",
-                     help="also write the figures of `ntncontact plot`, drawn on two worker "
-                          "processes while the run goes on")
+                     help="then write the figures of `ntncontact plot`")
     _figure_options(run, "(implies --plot)")
     run.add_argument("--compare", action="store_true",
                      help="then print the comparison with the report (as `ntncontact compare`)")
@@ -270,9 +269,10 @@ def build_parser() -> argparse.ArgumentParser:
 
 def _figure_options(parser: argparse.ArgumentParser, note: str = "") -> None:
     parser.add_argument("--times", type=float, nargs="+", metavar="T",
-                        help="draw the deformed meshes nearest to these times (snapshots.png) "
-                             "instead of six evenly spaced ones (deformed_von_mises.png) "
-                             f"{note}".strip())
+                        help="draw the deformed meshes at these times (snapshots.png; "
+                             "interpolated linearly between the output frames around a time "
+                             "no frame was written at) instead of six evenly spaced ones "
+                             f"(deformed_von_mises.png) {note}".strip())
     parser.add_argument("--gif", action="store_true",
                         help=f"also write animation.gif {note}".strip())
 
@@ -308,46 +308,9 @@ def _one_line(text: str) -> str:
     return "; ".join(line.strip() for line in text.splitlines() if line.strip())
 
 
-#: numpy's optional submodules that ``import scipy.sparse`` loads (its array-API layer copies
-#: numpy's namespace, attribute by attribute) but that nothing in a run uses: ~0.08 s at
-#: start-up. (numpy.ma and numpy.polynomial are used: by np.unique and by Numba's import.)
-UNUSED_NUMPY_MODULES = ("numpy.f2py", "numpy.testing", "numpy.ctypeslib")
-
-
-def defer_imports(names: tuple[str, ...]) -> list[str]:
-    """Make the modules ``names`` (not yet imported) load at the first use of one of their
-    attributes instead of at their import (the standard library's ``LazyLoader``); return the
-    names deferred. Their parent packages are imported now."""
-    import importlib.util
-
-    deferred = []
-    for name in names:
-        if name in sys.modules:
-            continue
-        spec = importlib.util.find_spec(name)
-        if spec is None or spec.loader is None:
-            continue
-        spec.loader = importlib.util.LazyLoader(spec.loader)
-        module = importlib.util.module_from_spec(spec)
-        sys.modules[name] = module
-        spec.loader.exec_module(module)
-        parent, _, child = name.rpartition(".")
-        setattr(sys.modules[parent], child, module)  # numpy's own lazy __getattr__ would recurse
-        deferred.append(name)
-    return deferred
-
-
 def console_main() -> None:
-    """The ``ntncontact`` command: :func:`main`, then the process ends without the
-    interpreter's teardown, which spent ~0.4 s after every run releasing the compiled kernels
-    (LLVM). When main returns, every results file is closed and the figure workers have
-    exited, so only the standard streams are left to flush. An exception main does not handle
-    still ends the process normally, with its traceback."""
-    defer_imports(UNUSED_NUMPY_MODULES)
-    code = main()
-    sys.stdout.flush()
-    sys.stderr.flush()
-    os._exit(code)
+    """The ``ntncontact`` command: :func:`main`'s return value is the exit code."""
+    sys.exit(main())
 
 
 if __name__ == "__main__":  # pragma: no cover
