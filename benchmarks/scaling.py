@@ -6,6 +6,7 @@ Usage::
     .venv/bin/python benchmarks/scaling.py                 # k = 1, 2, 4 (~10-20 min, loaded)
     .venv/bin/python benchmarks/scaling.py --k 1 2 4 8     # + k = 8 (much longer)
     .venv/bin/python benchmarks/scaling.py --cases ring --k 1 2
+    .venv/bin/python benchmarks/scaling.py --threads ring 4 2   # thread settings, A/B/C
 
 Each (case, k) runs in a fresh process (its own peak memory) as ``ntncontact run`` does:
 results written by ``ResultWriter`` into a temporary folder. The dynamic cases run a window
@@ -115,6 +116,7 @@ def hertz_mesh(k: int, directory: Path) -> Path:
     (contact-zone size 6 / k), written as examples/meshes/make_meshes.py writes it."""
     sys.path.insert(0, str(EXAMPLES / "meshes"))
     import make_meshes
+
     from ntncontact.mesh.generators import _HERTZ_LEVELS, half_disk
 
     bottom_size, n_arc, n_radial = _HERTZ_LEVELS[1]
@@ -143,6 +145,10 @@ def child(case: str, k: int, out: Path) -> dict:
     from ntncontact.simulation import Simulation
     from ntncontact.solvers.linear import LinearSolver
 
+    if os.environ.get("SCALING_THREADED_BLAS"):  # the A/B variant of --threads
+        from ntncontact.solvers import newton
+
+        newton.SERIAL_BLAS_FROM = sys.maxsize
     filename, t_end, refine = CASES[case]
     overrides = refine(k)
     if case == "hertz":
@@ -192,10 +198,10 @@ def child(case: str, k: int, out: Path) -> dict:
     }
 
 
-def run_child(case: str, k: int, tmp: Path) -> dict:
-    out = tmp / f"{case}_k{k}"
+def run_child(case: str, k: int, tmp: Path, env: dict | None = None, tag: str = "") -> dict:
+    out = tmp / f"{case}_k{k}{tag}"
     proc = subprocess.run([sys.executable, __file__, "--child", case, str(k), str(out)],
-                          capture_output=True, text=True)
+                          capture_output=True, text=True, env=os.environ | (env or {}))
     if proc.returncode != 0:
         return {"case": case, "k": k, "error": proc.stderr.strip().splitlines()[-1:]}
     return json.loads(proc.stdout.strip().splitlines()[-1])
@@ -245,16 +251,57 @@ def report(rows: list[dict]) -> str:
     return "\n".join(lines)
 
 
+#: --threads: the thread settings compared (environment of the child run)
+THREAD_VARIANTS = {
+    "chosen (BLAS serial in Newton, PARDISO on pardiso_threads())": {},
+    "BLAS threaded in Newton (as before)": {"SCALING_THREADED_BLAS": "1"},
+    "PARDISO on 2 threads": {"MKL_NUM_THREADS": "2"},
+}
+
+
+def thread_report(case: str, k: int, repeats: int, tmp: Path) -> str:
+    """The thread variants run interleaved (A/B/C/A/B/C...), each ``repeats`` times."""
+    runs: dict[str, list] = {name: [] for name in THREAD_VARIANTS}
+    for repeat in range(repeats):
+        for index, (name, env) in enumerate(THREAD_VARIANTS.items()):
+            runs[name].append(run_child(case, k, tmp, env, f"_t{index}_{repeat}"))
+            print(f"{name}: {runs[name][-1].get('s_per_step', float('nan')):.3f} s/step",
+                  flush=True)
+    lines = [f"Thread settings, {case} k = {k}, {repeats} interleaved runs each (load average "
+             f"{os.getloadavg()[0]:.1f} at the end):", "",
+             "| setting | s/step (min, all) | CPU s/step (min) | solve s/step (min) "
+             "| other s/step (min) | its/step |", "| --- | ---: | ---: | ---: | ---: | ---: |"]
+    for name, rows in runs.items():
+        ok = [r for r in rows if "s_per_step" in r]
+        if not ok:
+            continue
+        walls = sorted(r["s_per_step"] for r in ok)
+        lines.append(
+            f"| {name} | {walls[0]:.3f} ({', '.join(f'{w:.3f}' for w in walls)}) "
+            f"| {min(r['cpu_per_step'] for r in ok):.3f} "
+            f"| {min(r['parts_per_step']['solve'] for r in ok):.3f} "
+            f"| {min(r['parts_per_step']['other'] for r in ok):.3f} "
+            f"| {ok[0]['its_per_step']:.1f} |")
+    return "\n".join(lines)
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--cases", nargs="+", choices=list(CASES), default=list(CASES))
     parser.add_argument("--k", nargs="+", type=int, default=[1, 2, 4])
     parser.add_argument("--out", type=Path, default=ROOT / "benchmarks" / "scaling_results.md")
+    parser.add_argument("--threads", nargs=3, metavar=("CASE", "K", "REPEATS"),
+                        help="only compare the thread settings on one case (interleaved runs)")
     parser.add_argument("--child", nargs=3, help=argparse.SUPPRESS)
     args = parser.parse_args()
     if args.child:
         case, k, out = args.child
         print(json.dumps(child(case, int(k), Path(out))))
+        return
+    if args.threads:
+        case, k, repeats = args.threads
+        with tempfile.TemporaryDirectory() as tmp:
+            print(thread_report(case, int(k), int(repeats), Path(tmp)))
         return
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
