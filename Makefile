@@ -42,6 +42,7 @@ test-fast: $(WARM)
 bench: $(WARM)
 	$(BIN)/python -m pip install --quiet -e ".[bench,fast]"
 	$(BIN)/python benchmarks/run.py
+	$(BIN)/python benchmarks/scaling.py
 
 lint: $(STAMP)
 	$(BIN)/ruff check src tests benchmarks

@@ -245,3 +245,45 @@ def test_a_kept_factor_solves_later_right_hand_sides(backend):
             factor0(b)
     with pytest.raises(LinearSolverError, match="rows"):
         factor1(b[:-1])
+
+
+def test_pardiso_threads_are_chosen_for_the_machine(monkeypatch):
+    """One MKL thread on 2 cores (no second thread competing with the Python thread), half
+    the cores up to MAX_PARDISO_THREADS on a larger machine; MKL_NUM_THREADS wins if set."""
+    from ntncontact.solvers import linear
+
+    monkeypatch.delenv("MKL_NUM_THREADS", raising=False)
+    assert linear.pardiso_threads(1) == linear.pardiso_threads(2) == 1
+    assert linear.pardiso_threads(4) == 2
+    assert linear.pardiso_threads(16) == linear.MAX_PARDISO_THREADS == 8
+    assert linear.pardiso_threads(64) == 8
+    assert linear.pardiso_threads() >= 1
+    monkeypatch.setenv("MKL_NUM_THREADS", "3")
+    assert linear.pardiso_threads(2) == 3
+
+
+@pytest.mark.skipif(not pardiso_available(), reason="pypardiso not installed")
+def test_pardiso_runs_on_the_chosen_threads(monkeypatch):
+    """Every PARDISO call runs with MKL limited to pardiso_threads(), and MKL's own setting
+    is restored after it (threadpoolctl)."""
+    from pypardiso import PyPardisoSolver
+
+    from ntncontact.solvers import linear
+
+    seen = []
+    real = PyPardisoSolver._call_pardiso
+
+    def spy(self, A, b):
+        seen.append(linear._mkl_controller().info()[0]["num_threads"])
+        return real(self, A, b)
+
+    assert LinearSolver("pardiso").backend == "pardiso"  # MKL loaded
+    before = linear._mkl_controller().info()[0]["num_threads"]
+    monkeypatch.setattr(linear, "pardiso_threads", lambda cores=None: 1)
+    monkeypatch.setattr(PyPardisoSolver, "_call_pardiso", spy)
+    A = spd_matrix()
+    b = np.ones(A.shape[0])
+    solver = LinearSolver("pardiso")
+    assert_accurate(A, b, solver.solve(A, b))
+    assert seen == [1, 1, 1]  # analysis, factorization, solve
+    assert linear._mkl_controller().info()[0]["num_threads"] == before

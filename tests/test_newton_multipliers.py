@@ -41,3 +41,39 @@ def test_ring_impact_with_newton_updates_matches_uzawa_in_fewer_augmentations():
 def test_which_interfaces_take_newton_updates(overrides, expected):
     model = model_from_example("ring_impact.toml", overrides)
     assert _newton_updated(model.interfaces[0]) is expected
+
+
+def test_sensitivity_is_one_solve_with_a_column_per_pressed_pair(monkeypatch):
+    """Simulation._sensitivity: a single multi-right-hand-side solve per call, whatever the
+    number of pressed pairs (its cost is pairs x one solve, no Python loop of solves), and
+    S = G A^-1 B agrees with the solve of each column alone."""
+    from ntncontact.simulation import Simulation
+    from ntncontact.solvers.linear import Factorization
+
+    real_sensitivity, real_call = Simulation._sensitivity, Factorization.__call__
+    inside: list = []  # the right-hand-side shapes of the current _sensitivity call
+    columns = []  # pressed pairs per call
+
+    def counted_call(self, b):
+        inside.append(np.shape(b))
+        return real_call(self, b)
+
+    def by_column(self, b):
+        return np.column_stack([real_call(self, column) for column in np.asarray(b).T])
+
+    def checked_sensitivity(self, problem, y, d, ci, state, pressed, factors):
+        inside.clear()
+        S = real_sensitivity(self, problem, y, d, ci, state, pressed, factors)
+        assert inside[-1:] == [(y.size, int(pressed.sum()))] and len(inside) == 1
+        columns.append(int(pressed.sum()))
+        # the same S from one solve per column (the former loop), with the factor it used
+        monkeypatch.setattr(Factorization, "__call__", by_column)
+        S_columns = real_sensitivity(self, problem, y, d, ci, state, pressed, factors)
+        monkeypatch.setattr(Factorization, "__call__", counted_call)
+        np.testing.assert_allclose(S, S_columns, rtol=1e-10, atol=1e-12 * np.abs(S).max())
+        return S
+
+    monkeypatch.setattr(Simulation, "_sensitivity", checked_sensitivity)
+    monkeypatch.setattr(Factorization, "__call__", counted_call)
+    recorded_ring_impact("analysis.t_end=0.1")
+    assert columns and max(columns) >= 3  # several pressed pairs solved in one call

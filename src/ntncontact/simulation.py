@@ -335,13 +335,14 @@ class Simulation:
         keep = pressed[b.b_cols] & (position[b.b_rows] >= 0)
         forces = np.zeros((y.size, int(pressed.sum())))  # unknowns: free dofs, then multipliers
         np.add.at(forces, (position[b.b_rows[keep]], column[b.b_cols[keep]]), b.b_vals[keep])
+        # one solve with a right-hand side per pressed pair: the factor's sweeps over all
+        # columns at once (one 37-column PARDISO solve 12-17 ms against 33-35 ms for 37)
         if factors is not None:
             factor = (factors.factor if factors.usable(y.size)
                       else factors.refresh(problem.jacobian(y)))
-            response = np.column_stack([factor(f) for f in forces.T])
+            response = factor(forces)
         else:
-            jacobian = problem.jacobian(y)
-            response = np.column_stack([self.solve(jacobian, f) for f in forces.T])
+            response = self.solve(problem.jacobian(y), forces)
         keep = pressed[b.g_rows] & (position[b.g_cols] >= 0)
         S = np.zeros((forces.shape[1], forces.shape[1]))
         np.add.at(S, column[b.g_rows[keep]],

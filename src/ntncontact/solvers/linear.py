@@ -2,12 +2,17 @@
 
 Three backends:
 
-- ``"pardiso"``: Intel MKL PARDISO through the ``mkl_rt`` library that ``pypardiso`` installs
-  (the ``fast`` extra). The ordering (METIS) and symbolic factorization are computed once per
-  sparsity pattern; each further matrix with that pattern only costs a numerical factorization.
-  Symmetric matrices use the symmetric indefinite mode (Bunch-Kaufman), which is valid for the
-  Neo-Hookean tangent away from equilibrium; unsymmetric ones (friction, convective terms) the
-  general mode with scaling and weighted matching.
+- ``"pardiso"``: Intel MKL PARDISO through ``pypardiso`` (the ``fast`` extra), its
+  ``PyPardisoSolver`` object. The ordering (METIS) and symbolic factorization are computed
+  once per sparsity pattern; each further matrix with that pattern only costs a numerical
+  factorization. That is the one thing pypardiso's ``factorize`` cannot give (it always runs
+  phase 12, analysis included): measured on Q4 tangents here, phase 12 costs 2.0-2.2x phase
+  22 (symmetric: 398 against 203 ms at 20 160 dofs, 8.5 against 3.8 s at 200 500 dofs, one
+  thread), so the phases are set with pypardiso's ``set_phase`` and run by its
+  ``_call_pardiso``. Symmetric matrices use the symmetric indefinite mode (Bunch-Kaufman),
+  which is valid for the Neo-Hookean tangent away from equilibrium; unsymmetric ones
+  (friction, convective terms) the general mode with scaling and weighted matching. Threads:
+  :func:`pardiso_threads`.
 - ``"superlu"``: SciPy's SuperLU, always available. The MMD(A^T + A) column ordering is computed
   once per pattern and reused by factoring the symmetrically permuted matrix in natural order.
 - ``"static"``: for small systems, the same ordering but a compiled LU without row
@@ -16,7 +21,10 @@ Three backends:
   (which gives the ordering) and every factorization whose pivots the static LU rejects
   (``SolverStats.fallbacks``). Ring impact tangent (890 unknowns): 0.4-0.6 ms per
   factorization against 1.0-1.2 ms for SuperLU, solves 2-3x faster; the ring run's time loop
-  13-18 % shorter (see ``benchmarks/README.md``).
+  13-18 % shorter (see ``benchmarks/README.md``). Against PARDISO (``benchmarks/static_lu.py``,
+  the same tangent, this session under a load of 12 on 2 cores): factorization 2.2 ms
+  against SuperLU's 9.9 and PARDISO's 5.8 (4.5x and 2.6x), solve 0.29 ms against 1.0 and
+  1.3 (3.5x and 4.5x). It is kept for that margin: at least 2x on both against either.
 
 ``"auto"`` uses ``"static"`` below :data:`SMALL_SYSTEM` unknowns, SuperLU up to
 :data:`PARDISO_MIN_UNKNOWNS`, and above it PARDISO when it loads: on a 2-core machine it was
@@ -27,7 +35,7 @@ singular matrix (e.g. a body without supports in a quasi-static problem) raises
 
 from __future__ import annotations
 
-import ctypes
+import os
 from dataclasses import dataclass
 from functools import lru_cache
 from typing import Literal
@@ -36,6 +44,7 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 from numpy.typing import NDArray
+from threadpoolctl import ThreadpoolController
 
 from . import static_lu
 
@@ -62,24 +71,50 @@ class LinearSolverError(RuntimeError):
     """The linear system cannot be solved: singular matrix, bad input or backend failure."""
 
 
+@lru_cache(maxsize=1)
 def pardiso_available() -> bool:
     """True if MKL PARDISO can be loaded (``pip install pypardiso``)."""
-    return _mkl_library() is not None
+    try:
+        import pypardiso  # noqa: F401  (it loads mkl_rt, or raises ImportError)
+    except (ImportError, OSError):  # not installed, or a broken MKL installation
+        return False
+    return True
+
+
+#: PARDISO threads on a machine with at most this many cores: one (see pardiso_threads).
+FEW_CORES = 2
+#: The most PARDISO threads used on a larger machine (see pardiso_threads).
+MAX_PARDISO_THREADS = 8
+
+
+def pardiso_threads(cores: int | None = None) -> int:
+    """MKL threads for PARDISO: ``MKL_NUM_THREADS`` if the user set it, else one thread on a
+    machine with at most :data:`FEW_CORES` cores and half the cores, at most
+    :data:`MAX_PARDISO_THREADS`, on a larger one.
+
+    Why: on 2 cores, a second MKL thread competes with the Python thread's own work between
+    solves (assembly, contact, its Numba kernels) and, after each call, MKL's OpenMP workers
+    spin for up to 200 ms on the core the next BLAS or Numba call needs. Measured on this
+    2-core machine under load: a symmetric factorization of a 20 160-dof Q4 tangent 203 ms on
+    one thread against 326 ms on two, a 200 500-dof one 3.8 s against 6.1 s
+    (``benchmarks/scaling.py``, ``benchmarks/README.md``). On 16 cores, the nested-dissection
+    tree of a 2D mesh of 10^5 dofs has too few large separators to keep more than ~8 threads
+    busy, and half the cores leave room for the Numba assembly and other processes."""
+    requested = os.environ.get("MKL_NUM_THREADS", "").strip()
+    if requested.isdigit() and int(requested) > 0:
+        return int(requested)
+    if cores is None:
+        cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") \
+            else (os.cpu_count() or 1)
+    if cores <= FEW_CORES:
+        return 1
+    return min(cores // 2, MAX_PARDISO_THREADS)
 
 
 @lru_cache(maxsize=1)
-def _mkl_library() -> ctypes.CDLL | None:
-    """Our own handle on mkl_rt (own ctypes prototypes), located the way pypardiso does."""
-    try:
-        from pypardiso import PyPardisoSolver  # it knows where pip/conda put mkl_rt
-        lib = ctypes.CDLL(PyPardisoSolver().libmkl._name)
-    except (ImportError, OSError):  # not installed, or a broken MKL installation
-        return None
-    i32, ptr = ctypes.c_int32, ctypes.POINTER
-    lib.pardiso.argtypes = [ptr(ctypes.c_int64)] + [ptr(i32)] * 5 + [ptr(ctypes.c_double)] + \
-        [ptr(i32)] * 6 + [ptr(ctypes.c_double)] * 2 + [ptr(i32)]
-    lib.pardiso.restype = None
-    return lib
+def _mkl_controller() -> ThreadpoolController:
+    """threadpoolctl's handle on the MKL that pypardiso loaded (created once it is loaded)."""
+    return ThreadpoolController().select(internal_api="mkl")
 
 
 @dataclass
@@ -392,24 +427,31 @@ def _check_pivots(lu: spla.SuperLU) -> None:
 
 
 class _PardisoBackend:
-    """MKL PARDISO: analysis (phase 11) once per pattern, numerical factorization (22) per
-    matrix, solve (33). Symmetric matrices pass their upper triangle (mtype -2)."""
+    """MKL PARDISO through pypardiso's solver object (its location of mkl_rt, its ctypes
+    prototypes, its handle and iparm): analysis (phase 11) once per pattern, numerical
+    factorization (22) per matrix, solve (33). Symmetric matrices pass their upper triangle
+    (mtype -2). The phases are driven with ``set_phase`` and the solver's ``_call_pardiso``:
+    pypardiso's ``factorize`` always runs phase 12, i.e. the METIS ordering and symbolic
+    factorization again with every matrix, which doubles a Newton factorization (module doc).
+    Every call runs on :func:`pardiso_threads` MKL threads."""
 
     def __init__(self, pattern: _Pattern, symmetric: bool, stats: SolverStats) -> None:
+        from pypardiso import PyPardisoSolver  # pardiso_available() found it
+
         self.pattern, self.symmetric, self.stats = pattern, symmetric, stats
-        self.mtype = -2 if symmetric else 11
-        self.lib = _mkl_library()
-        self.pt = np.zeros(64, dtype=np.int64)  # PARDISO's internal handle
-        self.iparm = _pardiso_iparm(symmetric)
-        if symmetric:
-            self.indptr, self.indices = pattern.upper_indptr, pattern.upper_indices
-        else:
-            self.indptr, self.indices = pattern.indptr32, pattern.indices32
+        self.pardiso = PyPardisoSolver(mtype=-2 if symmetric else 11)
+        for one_based, value in _pardiso_iparm(symmetric).items():
+            self.pardiso.set_iparm(one_based, value)
+        indptr, indices = ((pattern.upper_indptr, pattern.upper_indices) if symmetric
+                           else (pattern.indptr32, pattern.indices32))
+        self.matrix = sp.csr_matrix((np.zeros(indices.size), indices, indptr),
+                                    shape=(pattern.n, pattern.n))
+        self.threads = pardiso_threads()
         self.analysed = False
-        self.data = np.empty(0)
 
     def factor(self, data: NDArray) -> None:
-        self.data = np.ascontiguousarray(data[self.pattern.upper] if self.symmetric else data)
+        self.matrix.data = np.ascontiguousarray(data[self.pattern.upper] if self.symmetric
+                                                else data)
         fresh = not self.analysed
         if fresh:
             self._call(11)  # ordering and symbolic factorization (matching uses the values)
@@ -417,64 +459,55 @@ class _PardisoBackend:
             self.stats.analyses += 1
         self._call(22)
         self.stats.factorizations += 1
-        if self.iparm[13] > 0 and not fresh:
+        if self._perturbed() and not fresh:
             # the reused analysis (its matching/scaling) may no longer suit the values: redo it
             self._call(11)
             self.stats.analyses += 1
             self._call(22)
             self.stats.factorizations += 1
-        if self.iparm[13] > 0:
+        if self._perturbed():
             raise LinearSolverError(
-                f"matrix is numerically singular: PARDISO perturbed {self.iparm[13]} pivot(s) "
-                "(unsupported body or mechanism?)")
+                f"matrix is numerically singular: PARDISO perturbed {self._perturbed()} "
+                "pivot(s) (unsupported body or mechanism?)")
+
+    def _perturbed(self) -> int:
+        return int(self.pardiso.get_iparm(14))  # perturbed pivots of the last factorization
 
     def solver(self):
         return self.solve
 
     def solve(self, b: NDArray) -> NDArray:
-        rhs = np.asfortranarray(b)
-        x = np.zeros_like(rhs)
-        self._call(33, rhs, x, nrhs=1 if b.ndim == 1 else b.shape[1])
-        return np.ascontiguousarray(x)
+        return self._call(33, np.asfortranarray(b))
 
-    def _call(self, phase: int, b: NDArray | None = None, x: NDArray | None = None,
-              nrhs: int = 1) -> None:
-        b = np.zeros(1) if b is None else b
-        x = np.zeros(1) if x is None else x
-        error = ctypes.c_int32(0)
-        i32 = ctypes.c_int32
-        ptr = ctypes.POINTER
-        self.lib.pardiso(
-            self.pt.ctypes.data_as(ptr(ctypes.c_int64)),
-            ctypes.byref(i32(1)), ctypes.byref(i32(1)), ctypes.byref(i32(self.mtype)),
-            ctypes.byref(i32(phase)), ctypes.byref(i32(self.pattern.n)),
-            self.data.ctypes.data_as(ptr(ctypes.c_double)),
-            self.indptr.ctypes.data_as(ptr(i32)), self.indices.ctypes.data_as(ptr(i32)),
-            ctypes.POINTER(i32)(), ctypes.byref(i32(nrhs)),
-            self.iparm.ctypes.data_as(ptr(i32)), ctypes.byref(i32(0)),
-            b.ctypes.data_as(ptr(ctypes.c_double)), x.ctypes.data_as(ptr(ctypes.c_double)),
-            ctypes.byref(error))
-        if error.value != 0:
-            raise LinearSolverError(_pardiso_message(error.value, phase))
+    def _call(self, phase: int, b: NDArray | None = None) -> NDArray:
+        self.pardiso.set_phase(phase)
+        try:
+            with _mkl_controller().limit(limits=self.threads):
+                return self.pardiso._call_pardiso(self.matrix, np.zeros(1) if b is None else b)
+        except Exception as err:  # pypardiso's PyPardisoError (an error code)
+            code = getattr(err, "value", None)
+            if code is None:
+                raise
+            raise LinearSolverError(_pardiso_message(code, phase)) from None
 
     def release(self) -> None:
-        if self.analysed and self.lib is not None:
-            self.data = np.zeros(1)
+        if self.analysed:
             self.analysed = False
-            self._call(-1)  # free all of PARDISO's memory for this handle
+            with _mkl_controller().limit(limits=self.threads):
+                self.pardiso.free_memory(everything=True)  # all of PARDISO's memory (phase -1)
 
 
-def _pardiso_iparm(symmetric: bool) -> NDArray:
-    """PARDISO parameters (0-based iparm indices as in the MKL manual)."""
-    iparm = np.zeros(64, dtype=np.int32)
-    iparm[0] = 1  # use the values below, not the defaults
-    iparm[1] = 2  # METIS nested-dissection ordering
-    iparm[9] = 8 if symmetric else 13  # pivot perturbation 1e-8 / 1e-13 (the MKL defaults)
-    iparm[10] = 1  # scaling ...
-    iparm[12] = 1  # ... and weighted matching: robust for indefinite / unsymmetric tangents
-    iparm[20] = 1  # Bunch-Kaufman pivoting (symmetric indefinite)
-    iparm[34] = 1  # zero-based indices
-    return iparm
+def _pardiso_iparm(symmetric: bool) -> dict[int, int]:
+    """PARDISO parameters by their 1-based number, as pypardiso's ``set_iparm`` and the MKL
+    manual count them (pypardiso passes one-based indices itself)."""
+    return {
+        1: 1,  # use the values below, not the defaults
+        2: 2,  # METIS nested-dissection ordering
+        10: 8 if symmetric else 13,  # pivot perturbation 1e-8 / 1e-13 (the MKL defaults)
+        11: 1,  # scaling ...
+        13: 1,  # ... and weighted matching: robust for indefinite / unsymmetric tangents
+        21: 1,  # Bunch-Kaufman pivoting (symmetric indefinite)
+    }
 
 
 _PARDISO_ERRORS = {
