@@ -57,7 +57,8 @@ def random_state(rng, x, v, rate_factor, interface, pairs, law, x_start):
     stick, slip along and against the motion (reversal), trial near 0."""
     p = len(pairs)
     state = PairState.from_pairs(pairs)
-    kin = pair_kinematics(x, interface, pairs, v, rate_factor, x_start)
+    kin = pair_kinematics(x, interface, pairs, v, rate_factor, x_start,
+                          objective=law.moment_free)
     measure = kin.gap_rate if rate_factor is not None else kin.gap
     scale = max(float(np.max(np.abs(law.eps_N * measure))), 1.0)
     lam = rng.uniform(-0.5, 2.0, p) * scale
@@ -109,7 +110,8 @@ METHODS = ["penalty", "augmented_lagrangian", "lagrange"]
 @pytest.mark.parametrize("method", METHODS)
 @pytest.mark.parametrize("rate_law", [False, True])
 @pytest.mark.parametrize("friction", ["none", "coulomb"])
-def test_random_configurations(monkeypatch, seed, method, rate_law, friction):
+@pytest.mark.parametrize("moment_free", [False, True])
+def test_random_configurations(monkeypatch, seed, method, rate_law, friction, moment_free):
     rng = np.random.default_rng([seed, METHODS.index(method), rate_law, friction == "none"])
     n = int(rng.integers(3, 40))
     x, interface, pairs = random_interface(rng, n, closed2=bool(seed % 2),
@@ -120,13 +122,15 @@ def test_random_configurations(monkeypatch, seed, method, rate_law, friction):
     mu, eps_T = (0.0, 0.0) if friction == "none" else (rng.uniform(0.1, 0.8), 10.0 ** rng.uniform(
         0, 3))
     law = ContactLaw(method, eps_N=0.0 if method == "lagrange" else 10.0 ** rng.uniform(0, 4),
-                     eps_T=eps_T, mu=mu)
+                     eps_T=eps_T, mu=mu, moment_free=moment_free)
     state = random_state(rng, x, v, rate_factor, interface, pairs, law, x_start)
     fast, ref = both(monkeypatch, x, v, rate_factor, interface, state, law, x_start=x_start,
                      dt=rng.uniform(0.001, 0.1) if seed % 3 else None)
     assert_same(fast, ref)
-    if friction == "coulomb" and method != "lagrange" and seed < 4:
-        # every branch was reached across pairs (reversed pairs are STICK beyond the cone)
+    if friction == "coulomb" and method != "lagrange" and seed < 4 and not moment_free:
+        # every branch was reached across pairs (reversed pairs are STICK beyond the cone);
+        # the objective rates of the moment-free law move these few draws off some branches,
+        # which test_contact_tangent.py sets up one by one
         beyond = np.abs(ref.t_T) < np.abs(ref.trial_T)
         assert np.any(ref.status == SLIP) and np.any((ref.status == STICK) & ~beyond)
         assert np.any((ref.status == STICK) & beyond) and np.any(ref.t_N == 0.0)

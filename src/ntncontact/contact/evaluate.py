@@ -68,7 +68,8 @@ def pair_response(
     x_start: NDArray[np.float64] | None = None,
 ) -> PairResponse:
     """Tractions t_N (2.33/2.34) and t_T (2.39-2.43) with their slot gradients."""
-    kin = pair_kinematics(x_eval, interface, state.pairs, v_eval, rate_factor, x_start)
+    kin = pair_kinematics(x_eval, interface, state.pairs, v_eval, rate_factor, x_start,
+                          objective=law.moment_free)
     t_N, dt_dmeasure = normal_traction(law, state.lambda_N, kin.normal_measure)
     d_t_N = dt_dmeasure[:, None, None] * kin.d_normal_measure
     dlam = state.dlambda_T if law.uses_multipliers else np.zeros(len(state))
@@ -138,6 +139,25 @@ def _force_jacobian(resp: PairResponse) -> tuple[NDArray, NDArray]:
     return k.length[:, None] * direction, jac
 
 
+def _moment_free_couple(resp: PairResponse) -> tuple[NDArray, NDArray]:
+    """The chord part of L_c (t_N dg/dx + t_T ds/dx): C = L_c (t_T g - t_N s)/l n, applied +C on
+    the chord's node b (slot 3) and -C on a (slot 2), and dC/dx_slot; (P, 2), (P, 6, 2, 2).
+
+    g = w.n, s = w.e with w = x_i - x_j and n, e from the chord x_b - x_a of length l:
+    dg/dx_b = w.dn/dx_b = -(s/l) n and ds/dx_b = (g/l) n, so the pair's moment
+    w x F = L_c (g t_T - s t_N) is cancelled by the couple l e x C."""
+    k, t_N, t_T = resp.kin, resp.t_N, resp.friction.traction
+    moment = t_T * k.gap - t_N * k.offset
+    d_moment = (k.gap[:, None, None] * resp.d_t_T + t_T[:, None, None] * k.d_gap
+                - k.offset[:, None, None] * resp.d_t_N - t_N[:, None, None] * k.d_offset)
+    coef = k.length * moment / k.chord
+    d_coef = (moment[:, None, None] * k.d_length + k.length[:, None, None] * d_moment
+              - coef[:, None, None] * k.d_chord) / k.chord[:, None, None]
+    jac = (np.einsum("pr,pkc->pkrc", k.normal, d_coef)
+           + coef[:, None, None, None] * k.d_normal)
+    return coef[:, None] * k.normal, jac
+
+
 def assemble_pair_vectors(pairs: NDArray, vectors: NDArray, ndof: int) -> NDArray:
     """Global vector with +vectors on node1 dofs and -vectors on node2 dofs."""
     idx = np.concatenate([2 * pairs[:, 0], 2 * pairs[:, 0] + 1, 2 * pairs[:, 1],
@@ -193,12 +213,22 @@ def evaluate_contact(
             return res  # else: an error the reference reports with its own message
     resp = pair_response(x_eval, v_eval, rate_factor, interface, state, law, x_start)
     force_pp, jac = _force_jacobian(resp)
-    rows, cols, vals = assemble_pair_jacobian(state.pairs, resp.kin.slots, jac)
     k, rm = resp.kin, resp.friction
+    force = assemble_pair_vectors(state.pairs, force_pp, ndof)
+    rows, cols, vals = assemble_pair_jacobian(state.pairs, k.slots, jac)
+    if law.moment_free:
+        chord_nodes = k.slots[:, [3, 2]]
+        couple, d_couple = _moment_free_couple(resp)
+        force += assemble_pair_vectors(chord_nodes, couple, ndof)
+        couple_coo = assemble_pair_jacobian(chord_nodes, k.slots, d_couple)
+        # the compiled kernel's order: each pair's 48 pair entries, then its 48 couple entries
+        rows, cols, vals = (np.concatenate((a.reshape(len(state), -1), b.reshape(len(state), -1)),
+                                           axis=1).ravel()
+                            for a, b in zip((rows, cols, vals), couple_coo, strict=True))
     step = None if rate_factor is None else (dt if dt is not None else 2.0 / rate_factor)
     gap_rate = k.gap_rate if k.gap_rate is not None else np.full(len(state), np.nan)
     return ContactResult(
-        force=assemble_pair_vectors(state.pairs, force_pp, ndof), rows=rows, cols=cols,
+        force=force, rows=rows, cols=cols,
         vals=vals, pairs=state.pairs, gap=k.gap, gap_rate=gap_rate,
         slip_measure=k.slip_measure, t_N=resp.t_N, t_T=rm.traction, trial_T=rm.trial,
         status=rm.status, length=k.length, normal=k.normal, tangent=k.tangent,
@@ -222,7 +252,7 @@ def _evaluate_compiled(
     step = 1.0 if rate_factor is None else (dt if dt is not None else 2.0 / rate_factor)
     params = np.array([law.eps_N, law.eps_T, law.mu, rate_factor or 0.0, step])
     flags = np.array([kernels_numba.METHOD_CODES[law.method], rate_law, v_eval is not None,
-                      x_start is not None, law.frictional], dtype=np.int64)
+                      x_start is not None, law.frictional, law.moment_free], dtype=np.int64)
     pairs = state.pairs
 
     def c_float(a: NDArray | None) -> NDArray:  # one compiled signature: C-contiguous float64

@@ -16,7 +16,8 @@ from numba import njit
 METHOD_CODES: dict[str, int] = {"penalty": 0, "augmented_lagrangian": 1, "lagrange": 2}
 #: Kernel return codes; the caller re-runs the reference, which raises the matching error.
 OK, NOT_ON_SURFACE, ZERO_CHORD = 0, 1, 2
-#: Entries of a pair's force Jacobian: 2 nodes x 6 slots x 2 x 2.
+#: Entries of a pair's force Jacobian: 2 nodes x 6 slots x 2 x 2 (twice that with the
+#: moment-free couple on the two chord nodes).
 ENTRIES_PER_PAIR = 48
 #: Rows of the per-pair scalar output.
 GAP, GAP_RATE, SLIP_MEASURE, T_N, T_T, TRIAL_T, LENGTH = range(7)
@@ -148,13 +149,13 @@ def _force_jacobian(t_n, t_t, e0, e1, length, d_tn, d_tt, dn, de, d_length, jac)
 
 
 @njit(cache=True, inline="always")
-def _scatter(p, i, j, slots, f0, f1, jac, force, rows, cols, vals):
-    """+F on node i, -F on node j, and the pair's 48 COO entries in the reference's order."""
+def _scatter(q, i, j, slots, f0, f1, jac, force, rows, cols, vals):
+    """+F on node i, -F on node j, and 48 COO entries from position q in the reference's
+    order; returns the next position."""
     force[2 * i] += f0
     force[2 * i + 1] += f1
     force[2 * j] -= f0
     force[2 * j + 1] -= f1
-    q = ENTRIES_PER_PAIR * p
     for node in range(2):
         row, sgn = (2 * i, 1.0) if node == 0 else (2 * j, -1.0)
         for k in range(6):
@@ -162,6 +163,56 @@ def _scatter(p, i, j, slots, f0, f1, jac, force, rows, cols, vals):
                 for c in range(2):
                     rows[q], cols[q], vals[q] = row + r, 2 * slots[k] + c, sgn * jac[k, r, c]
                     q += 1
+    return q
+
+
+@njit(cache=True, inline="always")
+def _chord_derivative(k, c, e0, e1):
+    """d l / d x_slot of the normal chord l = |x_b - x_a| (slots a = 2, b = 3)."""
+    if k == 3:
+        return e0 if c == 0 else e1
+    if k == 2:
+        return -e0 if c == 0 else -e1
+    return 0.0
+
+
+@njit(cache=True, inline="always")
+def _add_chord_rate(sign, value, d_value, chord, e0, e1, dv0, dv1, dn, rate_factor, grad):
+    """Adds sign (value/l) n.(v_a - v_b) to a rate, returned, and its slot gradient to grad
+    (kinematics._chord_rate): the normal chord's rotation in an objective rate."""
+    n0, n1 = e1, -e0
+    nd = n0 * dv0 + n1 * dv1
+    q = value / chord
+    for k in range(6):
+        for c in range(2):
+            d_q = (d_value[k, c] - q * _chord_derivative(k, c, e0, e1)) / chord
+            g = nd * d_q + q * (dn[k, 0, c] * dv0 + dn[k, 1, c] * dv1)
+            if k == 2:
+                g += rate_factor * q * (n0 if c == 0 else n1)
+            elif k == 3:
+                g -= rate_factor * q * (n0 if c == 0 else n1)
+            grad[k, c] += sign * g
+    return sign * q * nd
+
+
+@njit(cache=True, inline="always")
+def _moment_free_couple(t_n, t_t, gap, offset, e0, e1, chord, length, d_tn, d_tt, d_gap,
+                        dn, d_length, d_offset, jac):
+    """Couple C = L_c (t_T g - t_N s)/l n on the chord nodes (+C on b, -C on a), returned, and
+    dC/dx_slot into jac (evaluate._moment_free_couple): the chord part of
+    L_c (t_N dg/dx + t_T ds/dx), with s = (x_i - x_j).e the tangential offset and l the chord."""
+    n0, n1 = e1, -e0
+    moment = t_t * gap - t_n * offset
+    coef = length * moment / chord
+    for k in range(6):
+        for c in range(2):
+            d_moment = (gap * d_tt[k, c] + t_t * d_gap[k, c] - offset * d_tn[k, c]
+                        - t_n * d_offset[k, c])
+            d_chord = _chord_derivative(k, c, e0, e1)
+            d_coef = (moment * d_length[k, c] + length * d_moment - coef * d_chord) / chord
+            jac[k, 0, c] = n0 * d_coef + coef * dn[k, 0, c]
+            jac[k, 1, c] = n1 * d_coef + coef * dn[k, 1, c]
+    return coef * n0, coef * n1
 
 
 @njit(cache=True)
@@ -170,18 +221,21 @@ def evaluate_pairs(x, v, x_start, table1, table2, pairs, lambda_N, dlambda_T, t_
     """Force, COO tangent and per-pair results of the active pairs.
 
     params: (eps_N, eps_T, mu, rate_factor, dissipation time factor).
-    flags: (method code, rate law, v given, x_start given, frictional).
-    Returns (error code, force (ndof,), rows, cols, vals (48 P,), scalars (7, P) indexed by
+    flags: (method code, rate law, v given, x_start given, frictional, moment free).
+    Returns (error code, force (ndof,), rows, cols, vals (48 P, or 96 P moment free),
+    scalars (7, P) indexed by
     GAP...LENGTH, normal (P, 2), tangent (P, 2), status (P,), dissipation).
     """
     eps_N, eps_T, mu, rate_factor, step = params[0], params[1], params[2], params[3], params[4]
     method, rate_law, has_v, has_start, frictional = (flags[0], flags[1], flags[2], flags[3],
                                                       flags[4])
+    moment_free = flags[5]
     npairs = pairs.shape[0]
     force = np.zeros(2 * x.shape[0])
-    rows = np.empty(ENTRIES_PER_PAIR * npairs, np.int64)
-    cols = np.empty(ENTRIES_PER_PAIR * npairs, np.int64)
-    vals = np.empty(ENTRIES_PER_PAIR * npairs)
+    entries = ENTRIES_PER_PAIR * (2 if moment_free else 1) * npairs
+    rows = np.empty(entries, np.int64)
+    cols = np.empty(entries, np.int64)
+    vals = np.empty(entries)
     scalars = np.empty((7, npairs))
     normal, tangent = np.empty((npairs, 2)), np.empty((npairs, 2))
     status = np.empty(npairs, np.int8)
@@ -190,7 +244,9 @@ def evaluate_pairs(x, v, x_start, table1, table2, pairs, lambda_N, dlambda_T, t_
     d_length = np.zeros((6, 2))
     d_gap, d_rate, d_slip = np.empty((6, 2)), np.empty((6, 2)), np.empty((6, 2))
     d_tn, d_tt, jac = np.empty((6, 2)), np.empty((6, 2)), np.empty((6, 2, 2))
+    d_offset = np.empty((6, 2))
     dissipation = 0.0
+    q = 0
     for p in range(npairs):
         i, j = pairs[p, 0], pairs[p, 1]
         if not _fill_slots(table1, table2, i, j, slots):
@@ -214,6 +270,17 @@ def evaluate_pairs(x, v, x_start, table1, table2, pairs, lambda_N, dlambda_T, t_
             slip = _project(s0, s1, 1.0, e0, e1, de, d_slip)
         else:
             slip = _project(0.0, 0.0, 0.0, e0, e1, de, d_slip)
+        offset = 0.0
+        if moment_free:  # objective rates (kinematics.pair_kinematics)
+            offset = _project(w0, w1, 1.0, e0, e1, de, d_offset)
+            if has_v:
+                dv0 = v[slots[2], 0] - v[slots[3], 0]
+                dv1 = v[slots[2], 1] - v[slots[3], 1]
+                gap_rate += _add_chord_rate(1.0, offset, d_offset, chord, e0, e1, dv0, dv1, dn,
+                                            rate_factor, d_rate)
+                if rate_law:
+                    slip += _add_chord_rate(-1.0, gap, d_gap, chord, e0, e1, dv0, dv1, dn,
+                                            rate_factor, d_slip)
         measure, d_measure = (gap_rate, d_rate) if rate_law else (gap, d_gap)
         t_n, dt_dm = _normal_traction(method, lambda_N[p], eps_N, measure, frictional)
         t_t, trial, stat, ds_coef, dn_coef = 0.0, 0.0, _SLIP, 0.0, 0.0
@@ -226,7 +293,11 @@ def evaluate_pairs(x, v, x_start, table1, table2, pairs, lambda_N, dlambda_T, t_
                 d_tn[k, c] = dt_dm * d_measure[k, c]
                 d_tt[k, c] = ds_coef * d_slip[k, c] + dn_coef * d_tn[k, c]
         f0, f1 = _force_jacobian(t_n, t_t, e0, e1, length, d_tn, d_tt, dn, de, d_length, jac)
-        _scatter(p, i, j, slots, f0, f1, jac, force, rows, cols, vals)
+        q = _scatter(q, i, j, slots, f0, f1, jac, force, rows, cols, vals)
+        if moment_free:
+            c0, c1 = _moment_free_couple(t_n, t_t, gap, offset, e0, e1, chord, length, d_tn,
+                                         d_tt, d_gap, dn, d_length, d_offset, jac)
+            q = _scatter(q, slots[3], slots[2], slots, c0, c1, jac, force, rows, cols, vals)
         scalars[GAP, p], scalars[GAP_RATE, p], scalars[SLIP_MEASURE, p] = gap, gap_rate, slip
         scalars[T_N, p], scalars[T_T, p], scalars[TRIAL_T, p] = t_n, t_t, trial
         scalars[LENGTH, p] = length

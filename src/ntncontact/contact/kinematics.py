@@ -52,6 +52,12 @@ class PairKinematics:
     slip_measure: NDArray[np.float64]
     d_slip_measure: NDArray[np.float64]
     rate_law: bool
+    #: objective kinematics only (``objective=True``): the tangential offset s = (x_i - x_j).e,
+    #: the normal chord's length l and their slot gradients
+    offset: NDArray[np.float64] | None = None
+    d_offset: NDArray[np.float64] | None = None
+    chord: NDArray[np.float64] | None = None
+    d_chord: NDArray[np.float64] | None = None
 
     @property
     def normal_measure(self) -> NDArray[np.float64]:
@@ -123,6 +129,21 @@ def project(
     return value, grad
 
 
+def _chord_rate(value: NDArray, d_value: NDArray, chord: NDArray, d_chord: NDArray,
+                n: NDArray, dn: NDArray, v: NDArray, slots: NDArray,
+                rate_factor: float) -> tuple[NDArray, NDArray]:
+    """(value/l) n.(v_a - v_b) and its slot gradient (dv/dx = rate_factor I): the part of an
+    objective rate that comes from the rotation of the normal chord (slots a = 2, b = 3)."""
+    dv = v[slots[:, 2]] - v[slots[:, 3]]
+    nd = np.einsum("pr,pr->p", n, dv)
+    q = value / chord
+    d_q = (d_value - q[:, None, None] * d_chord) / chord[:, None, None]
+    grad = nd[:, None, None] * d_q + q[:, None, None] * np.einsum("pkrc,pr->pkc", dn, dv)
+    grad[:, 2] += (rate_factor * q)[:, None] * n
+    grad[:, 3] -= (rate_factor * q)[:, None] * n
+    return q * nd, grad
+
+
 def pair_kinematics(
     x: NDArray[np.float64],
     interface: Interface,
@@ -130,6 +151,7 @@ def pair_kinematics(
     v: NDArray[np.float64] | None = None,
     rate_factor: float | None = None,
     x_start: NDArray[np.float64] | None = None,
+    objective: bool = False,
 ) -> PairKinematics:
     """Kinematics of ``pairs`` (P, 2) at positions ``x`` (n_nodes, 2).
 
@@ -137,6 +159,11 @@ def pair_kinematics(
     relative velocity (2.10). Gap law (``rate_factor`` None): gap (2.4) and the tangential
     relative displacement since ``x_start`` (zero if ``x_start`` is None). The gap rate is
     still reported under the gap law when ``v`` is given (used by detection).
+
+    ``objective``: the rates are the time derivatives of the invariant measures g = w.n and
+    s = w.e (w = x_i - x_j), gdot = dg/dx . v = (v_i - v_j).n + (s/l) n.(v_a - v_b) and
+    (rate law) gdot_T = ds/dx . v = (v_i - v_j).e - (g/l) n.(v_a - v_b), l the normal chord;
+    they vanish under any rigid motion (docs/theory.md, "Moment-free pair forces").
     """
     pairs = np.asarray(pairs, dtype=np.int64).reshape(-1, 2)
     slots = _slots(interface, pairs)
@@ -159,8 +186,22 @@ def pair_kinematics(
         else:
             rel = np.zeros_like(rel)
         slip, d_slip = project(rel, 1.0 if x_start is not None else 0.0, e, de)
+    if not objective:
+        return PairKinematics(slots, n, e, dn, de, length, d_length, gap, d_gap, gap_rate,
+                              d_gap_rate, slip, d_slip, rate_law)
+    offset, d_offset = project(x[i] - x[j], 1.0, e, de)
+    chord = np.linalg.norm(x[slots[:, 3]] - x[slots[:, 2]], axis=1)
+    d_chord = np.zeros((len(slots), N_SLOTS, 2))
+    d_chord[:, 3], d_chord[:, 2] = e, -e
+    if v is not None:
+        factor = rate_factor or 0.0
+        extra, d_extra = _chord_rate(offset, d_offset, chord, d_chord, n, dn, v, slots, factor)
+        gap_rate, d_gap_rate = gap_rate + extra, d_gap_rate + d_extra
+        if rate_law:
+            extra, d_extra = _chord_rate(gap, d_gap, chord, d_chord, n, dn, v, slots, factor)
+            slip, d_slip = slip - extra, d_slip - d_extra
     return PairKinematics(slots, n, e, dn, de, length, d_length, gap, d_gap, gap_rate,
-                          d_gap_rate, slip, d_slip, rate_law)
+                          d_gap_rate, slip, d_slip, rate_law, offset, d_offset, chord, d_chord)
 
 
 def pair_gaps(

@@ -80,9 +80,16 @@ def lagrange_blocks(
     g_cols = (2 * k.slots[:, :, None] + comp).ravel()
     # dF/dt_N = L_c (n + d t_T/d t_N e): +on node i, -on node j
     column = k.length[:, None] * (k.normal + resp.friction.d_normal[:, None] * k.tangent)
-    b_rows = (2 * state.pairs[:, :, None] + comp).ravel()
-    b_cols = np.repeat(np.arange(p), 4)
-    b_vals = (np.array([1.0, -1.0])[None, :, None] * column[:, None, :]).ravel()
+    nodes = state.pairs
+    if law.moment_free:  # and the couple L_c (t_T g - t_N s)/l n: +on b, -on a (evaluate.py)
+        d_coef = k.length * (resp.friction.d_normal * k.gap - k.offset) / k.chord
+        nodes = np.hstack((nodes, k.slots[:, [3, 2]]))
+        column = np.hstack((column, d_coef[:, None] * k.normal))
+    n_nodes = nodes.shape[1]
+    b_rows = (2 * nodes[:, :, None] + comp).ravel()
+    b_cols = np.repeat(np.arange(p), 2 * n_nodes)
+    sign = np.array([1.0, -1.0] * (n_nodes // 2))[None, :, None]
+    b_vals = (sign * column.reshape(p, n_nodes // 2, 2).repeat(2, axis=1)).ravel()
     return LagrangeBlocks(values, g_rows, g_cols, d_h.ravel(), b_rows, b_cols, b_vals)
 
 

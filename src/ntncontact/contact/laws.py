@@ -24,12 +24,19 @@ class ContactLaw:
     eps_N: normal penalty (2.27, 2.33-2.34); unused by "lagrange".
     eps_T: tangential penalty (2.35-2.41); friction is off when eps_T or mu is 0.
     mu: Coulomb coefficient mu_f (2.20).
+    moment_free: give each pair's force the full variation of its gap and tangential offset,
+        F = L_c (t_N dg/dx + t_T ds/dx) with g = (x_i - x_j).n, s = (x_i - x_j).e, instead of
+        the report's L_c (t_N n + t_T e) on nodes i and j only. The extra part is a couple on the
+        nodes of the normal's chord that cancels the pair's moment (x_i - x_j) x F, so contact
+        conserves angular momentum exactly under the mid-point rule (docs/theory.md,
+        "Moment-free pair forces").
     """
 
     method: Method = "augmented_lagrangian"
     eps_N: float = 0.0
     eps_T: float = 0.0
     mu: float = 0.0
+    moment_free: bool = False
 
     def __post_init__(self) -> None:
         if self.method not in _METHODS:
