@@ -10,6 +10,7 @@ from .augmentation import (
     AugmentationTolerances,
     augment,
     check_augmentation,
+    commit_step,
     newton_update,
 )
 from .detection import Detection, detect, release_mask
@@ -19,7 +20,7 @@ from .kinematics import PairKinematics, pair_kinematics
 from .lagrange import LagrangeBlocks, lagrange_blocks, release_tensile_pairs
 from .laws import ContactLaw, normal_traction
 from .pairing import Pairing, closest_pairs, ordered_partners
-from .state import PairState, commit_step
+from .state import PairState
 from .surfaces import ContactSurface, Interface, chord_normals, corner_mask
 
 __all__ = [
