@@ -24,10 +24,6 @@ from ntncontact.contact import (
     newton_update,
 )
 
-# every test here runs with the NumPy reference and the compiled contact kernel (conftest)
-pytestmark = pytest.mark.usefixtures("both_contact_kernels")
-
-
 THETA = 0.3
 D = np.array([np.cos(THETA), np.sin(THETA)])  # wall direction
 NW = np.array([-np.sin(THETA), np.cos(THETA)])  # wall outward normal (towards body 1)

@@ -1,4 +1,8 @@
-"""Coulomb return mapping (2.39)-(2.43), the reversal rule (3.3.2) and dissipation (3.18)."""
+"""Coulomb return mapping (2.39)-(2.43), the reversal rule (3.3.2) and dissipation (3.18).
+
+The return mapping's properties are tested on the NumPy oracle (tests/contact_reference.py),
+which test_contact_kernel.py shows equal to the compiled kernel in every branch; the tests
+through evaluate_contact run the kernel itself."""
 
 from __future__ import annotations
 
@@ -6,6 +10,7 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
+from contact_reference import frictional_dissipation, return_mapping
 
 from ntncontact.contact import (
     SLIP,
@@ -16,12 +21,7 @@ from ntncontact.contact import (
     PairState,
     commit_step,
     evaluate_contact,
-    frictional_dissipation,
-    return_mapping,
 )
-
-# every test here runs with the NumPy reference and the compiled contact kernel (conftest)
-pytestmark = pytest.mark.usefixtures("both_contact_kernels")
 
 
 def random_inputs(seed: int, n: int = 2000):

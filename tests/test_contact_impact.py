@@ -9,7 +9,6 @@ velocity flip exactly in one step, v_{n+1} = 2 v_{n+1/2} - v_n, so kinetic energ
 from __future__ import annotations
 
 import numpy as np
-import pytest
 
 from ntncontact.contact import (
     AugmentationTolerances,
@@ -24,10 +23,6 @@ from ntncontact.contact import (
     detect,
     evaluate_contact,
 )
-
-# every test here runs with the NumPy reference and the compiled contact kernel (conftest)
-pytestmark = pytest.mark.usefixtures("both_contact_kernels")
-
 
 DT = 0.1
 MASS = 1.0

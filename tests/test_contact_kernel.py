@@ -1,17 +1,19 @@
-"""The compiled contact kernel (contact/kernels_numba.py) against the NumPy reference of
-:func:`evaluate_contact` on random configurations covering every branch.
+"""The compiled contact kernel (:func:`evaluate_contact`) against its NumPy oracle
+(tests/contact_reference.py) on random configurations covering every branch.
 
-Tolerance 1e-12 relative: both paths evaluate the same formulas in the same order (they agree
-bit for bit on this machine); only the summation order of forces on a node shared by several
-pairs, and of the dissipation, may differ, by a few ulps of the largest term.
+Tolerance 1e-12 relative: both evaluate the same formulas in the same order (they agree bit for
+bit on this machine); only the summation order of forces on a node shared by several pairs, and
+of the dissipation, may differ, by a few ulps of the largest term.
 """
 
 from __future__ import annotations
 
 from dataclasses import replace
 
+import contact_reference as reference
 import numpy as np
 import pytest
+from contact_reference import pair_kinematics
 
 from ntncontact.contact import (
     SLIP,
@@ -20,12 +22,8 @@ from ntncontact.contact import (
     ContactSurface,
     Interface,
     PairState,
-    evaluate,
     evaluate_contact,
-    pair_kinematics,
 )
-
-pytest.importorskip("numba")
 
 RTOL = 1e-12
 FIELDS = ("gap", "gap_rate", "slip_measure", "t_N", "t_T", "trial_T", "length", "normal",
@@ -57,7 +55,8 @@ def random_state(rng, x, v, rate_factor, interface, pairs, law, x_start):
     stick, slip along and against the motion (reversal), trial near 0."""
     p = len(pairs)
     state = PairState.from_pairs(pairs)
-    kin = pair_kinematics(x, interface, pairs, v, rate_factor, x_start)
+    kin = pair_kinematics(x, interface, pairs, v, rate_factor, x_start,
+                          objective=law.moment_free)
     measure = kin.gap_rate if rate_factor is not None else kin.gap
     scale = max(float(np.max(np.abs(law.eps_N * measure))), 1.0)
     lam = rng.uniform(-0.5, 2.0, p) * scale
@@ -94,12 +93,8 @@ def assert_same(fast, ref):
     assert fast.rate_law == ref.rate_law
 
 
-def both(monkeypatch, *args, **kwargs):
-    monkeypatch.setattr(evaluate, "KERNEL", "numba")
-    fast = evaluate_contact(*args, **kwargs)
-    monkeypatch.setattr(evaluate, "KERNEL", "numpy")
-    ref = evaluate_contact(*args, **kwargs)
-    return fast, ref
+def both(*args, **kwargs):
+    return evaluate_contact(*args, **kwargs), reference.evaluate_contact(*args, **kwargs)
 
 
 METHODS = ["penalty", "augmented_lagrangian", "lagrange"]
@@ -109,7 +104,8 @@ METHODS = ["penalty", "augmented_lagrangian", "lagrange"]
 @pytest.mark.parametrize("method", METHODS)
 @pytest.mark.parametrize("rate_law", [False, True])
 @pytest.mark.parametrize("friction", ["none", "coulomb"])
-def test_random_configurations(monkeypatch, seed, method, rate_law, friction):
+@pytest.mark.parametrize("moment_free", [False, True])
+def test_random_configurations(seed, method, rate_law, friction, moment_free):
     rng = np.random.default_rng([seed, METHODS.index(method), rate_law, friction == "none"])
     n = int(rng.integers(3, 40))
     x, interface, pairs = random_interface(rng, n, closed2=bool(seed % 2),
@@ -120,13 +116,15 @@ def test_random_configurations(monkeypatch, seed, method, rate_law, friction):
     mu, eps_T = (0.0, 0.0) if friction == "none" else (rng.uniform(0.1, 0.8), 10.0 ** rng.uniform(
         0, 3))
     law = ContactLaw(method, eps_N=0.0 if method == "lagrange" else 10.0 ** rng.uniform(0, 4),
-                     eps_T=eps_T, mu=mu)
+                     eps_T=eps_T, mu=mu, moment_free=moment_free)
     state = random_state(rng, x, v, rate_factor, interface, pairs, law, x_start)
-    fast, ref = both(monkeypatch, x, v, rate_factor, interface, state, law, x_start=x_start,
+    fast, ref = both(x, v, rate_factor, interface, state, law, x_start=x_start,
                      dt=rng.uniform(0.001, 0.1) if seed % 3 else None)
     assert_same(fast, ref)
-    if friction == "coulomb" and method != "lagrange" and seed < 4:
-        # every branch was reached across pairs (reversed pairs are STICK beyond the cone)
+    if friction == "coulomb" and method != "lagrange" and seed < 4 and not moment_free:
+        # every branch was reached across pairs (reversed pairs are STICK beyond the cone);
+        # the objective rates of the moment-free law move these few draws off some branches,
+        # which test_contact_tangent.py sets up one by one
         beyond = np.abs(ref.t_T) < np.abs(ref.trial_T)
         assert np.any(ref.status == SLIP) and np.any((ref.status == STICK) & ~beyond)
         assert np.any((ref.status == STICK) & beyond) and np.any(ref.t_N == 0.0)
@@ -134,7 +132,7 @@ def test_random_configurations(monkeypatch, seed, method, rate_law, friction):
 
 @pytest.mark.parametrize("with_v", [False, True])
 @pytest.mark.parametrize("with_start", [False, True])
-def test_gap_law_optional_inputs(monkeypatch, with_v, with_start):
+def test_gap_law_optional_inputs(with_v, with_start):
     """Gap law: gap rate reported only with v (NaN otherwise), slip 0 without x_start."""
     rng = np.random.default_rng(11)
     x, interface, pairs = random_interface(rng, 12, closed2=False, partner_ends=False)
@@ -143,26 +141,25 @@ def test_gap_law_optional_inputs(monkeypatch, with_v, with_start):
     law = ContactLaw("augmented_lagrangian", eps_N=50.0, eps_T=20.0 if with_start else 0.0,
                      mu=0.3)
     state = random_state(rng, x, v, None, interface, pairs, law, x_start)
-    fast, ref = both(monkeypatch, x, v, None, interface, state, law, x_start=x_start)
+    fast, ref = both(x, v, None, interface, state, law, x_start=x_start)
     assert_same(fast, ref)
     assert np.isnan(fast.gap_rate).all() != with_v
 
 
-def test_empty_active_set(monkeypatch):
+def test_empty_active_set():
     rng = np.random.default_rng(12)
     x, interface, _ = random_interface(rng, 5, closed2=False, partner_ends=False)
     law = ContactLaw("penalty", eps_N=10.0)
-    fast, ref = both(monkeypatch, x, None, None, interface, PairState.empty(), law)
+    fast, ref = both(x, None, None, interface, PairState.empty(), law)
     assert_same(fast, ref)
     assert fast.vals.size == 0 and not fast.force.any()
 
 
-def test_errors_match_reference(monkeypatch):
-    """Bad input raises the reference's errors (the kernel hands over to the reference)."""
+def test_bad_input_errors():
+    """Bad input raises a ValueError that names the problem."""
     x = np.array([[0.0, 0.0], [1.0, 0.0], [2.0, 0.0], [1.0, -0.1], [0.0, -0.1]])
     interface = Interface(ContactSurface([0, 1, 2]), ContactSurface([3, 4]))
     law = ContactLaw("penalty", eps_N=10.0)
-    monkeypatch.setattr(evaluate, "KERNEL", "numba")
     with pytest.raises(ValueError, match="not on this contact surface"):
         evaluate_contact(x, None, None, interface, PairState.from_pairs([[1, 2]]), law)
     x_bad = x.copy()
@@ -171,7 +168,3 @@ def test_errors_match_reference(monkeypatch):
         evaluate_contact(x_bad, None, None, interface, PairState.from_pairs([[1, 3]]), law)
     with pytest.raises(ValueError, match="rate law needs velocities"):
         evaluate_contact(x, None, 20.0, interface, PairState.from_pairs([[1, 3]]), law)
-
-
-def test_default_kernel_is_compiled():
-    assert evaluate.KERNEL == "numba"

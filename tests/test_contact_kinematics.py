@@ -4,13 +4,13 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from contact_reference import pair_kinematics
 
 from ntncontact.contact import (
     ContactSurface,
     Interface,
     chord_normals,
     corner_mask,
-    pair_kinematics,
 )
 from ntncontact.mesh.boundary import SurfaceChain
 

@@ -4,8 +4,9 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from contact_reference import pair_kinematics
 
-from ntncontact.contact import ContactSurface, Interface, closest_pairs, pair_kinematics
+from ntncontact.contact import ContactSurface, Interface, closest_pairs
 from ntncontact.contact import pairing as pairing_module
 from ntncontact.contact.kinematics import pair_gaps
 

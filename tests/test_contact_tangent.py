@@ -12,6 +12,7 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
+from contact_reference import pair_kinematics
 
 from ntncontact.contact import (
     SLIP,
@@ -23,12 +24,7 @@ from ntncontact.contact import (
     contact_term,
     evaluate_contact,
     lagrange_blocks,
-    pair_kinematics,
 )
-
-# every test here runs with the NumPy reference and the compiled contact kernel (conftest)
-pytestmark = pytest.mark.usefixtures("both_contact_kernels")
-
 
 H = 1e-6
 TOL = 1e-6
@@ -84,7 +80,8 @@ def friction_history(x, v, rate_factor, interface, pairs, law, kinds, x_start=No
     """A state whose previous tangential tractions put each pair in the requested branch."""
     state = PairState.from_pairs(pairs)
     state = replace(state, lambda_N=np.broadcast_to(lam, len(pairs)).astype(float))
-    kin = pair_kinematics(x, interface, pairs, v, rate_factor, x_start)
+    kin = pair_kinematics(x, interface, pairs, v, rate_factor, x_start,
+                          objective=law.moment_free)
     measure = kin.gap_rate if rate_factor is not None else kin.gap
     t_N = np.maximum(state.lambda_N + law.eps_N * measure, 0.0)
     assert np.all(t_N > 0.1)  # pressed pairs only: the branches below are then well separated
@@ -100,26 +97,30 @@ def friction_history(x, v, rate_factor, interface, pairs, law, kinds, x_start=No
     return replace(state, t_T=t_prev, slip=kinds != "stick")
 
 
+@pytest.mark.parametrize("moment_free", [False, True])
 @pytest.mark.parametrize("method", ["penalty", "augmented_lagrangian", "lagrange"])
 @pytest.mark.parametrize("rate_factor", [None, 20.0])
-def test_normal_only_tangent(method, rate_factor):
+def test_normal_only_tangent(method, rate_factor, moment_free):
     x, interface, pairs = strips(1)
     v = velocities(x, 1)
-    law = ContactLaw(method, eps_N=0.0 if method == "lagrange" else 50.0)
+    law = ContactLaw(method, eps_N=0.0 if method == "lagrange" else 50.0,
+                     moment_free=moment_free)
     state = replace(PairState.from_pairs(pairs), lambda_N=np.linspace(0.2, 1.0, len(pairs)))
     res, k, fd = fd_tangent(x, v if rate_factor else None, rate_factor, interface, state, law)
     assert np.all(res.t_N > 0.0)  # every pair pressed: no kink of <.> at the base point
     assert rel_error(k, fd) < TOL
 
 
+@pytest.mark.parametrize("moment_free", [False, True])
 @pytest.mark.parametrize("rate_factor", [None, 20.0])
 @pytest.mark.parametrize("kind", ["stick", "slip", "reversed", "mixed"])
-def test_friction_tangent(rate_factor, kind):
+def test_friction_tangent(rate_factor, kind, moment_free):
     x, interface, pairs = strips(2)
     v = velocities(x, 2) if rate_factor else None
     x_start = None if rate_factor else x + np.array([-0.05, 0.02]) * (np.arange(len(x)) < 5)[:,
                                                                                            None]
-    law = ContactLaw("augmented_lagrangian", eps_N=40.0, eps_T=30.0, mu=0.4)
+    law = ContactLaw("augmented_lagrangian", eps_N=40.0, eps_T=30.0, mu=0.4,
+                     moment_free=moment_free)
     kinds = np.array(["stick", "slip", "reversed", "slip", "stick"]) if kind == "mixed" else \
         np.full(len(pairs), kind)
     state = friction_history(x, v, rate_factor, interface, pairs, law, kinds, x_start)
@@ -129,14 +130,16 @@ def test_friction_tangent(rate_factor, kind):
     assert rel_error(k, fd) < TOL
 
 
+@pytest.mark.parametrize("moment_free", [False, True])
 @pytest.mark.parametrize("rate_factor", [None, 20.0])
-def test_corner_and_closed_chain_tangent(rate_factor):
+def test_corner_and_closed_chain_tangent(rate_factor, moment_free):
     """Corner node 0 takes -n2 of its partner (derivatives w.r.t. surface-2 nodes); body 2's
     surface is closed so its partner normals wrap around."""
     x, interface, pairs = strips(3, closed2=True, corner_first=True)
     v = velocities(x, 3) if rate_factor else None
     x_start = None if rate_factor else x - 0.01 * np.arange(x.size).reshape(-1, 2)
-    law = ContactLaw("augmented_lagrangian", eps_N=40.0, eps_T=30.0, mu=0.4)
+    law = ContactLaw("augmented_lagrangian", eps_N=40.0, eps_T=30.0, mu=0.4,
+                     moment_free=moment_free)
     kinds = np.array(["slip", "stick", "slip", "stick", "slip"])
     state = friction_history(x, v, rate_factor, interface, pairs, law, kinds, x_start)
     res, k, fd = fd_tangent(x, v, rate_factor, interface, state, law, x_start)
@@ -163,13 +166,14 @@ def test_dropping_normal_derivative_is_detected():
     assert rel_error(k, fd) < TOL
 
 
+@pytest.mark.parametrize("moment_free", [False, True])
 @pytest.mark.parametrize("rate_factor", [None, 20.0])
-def test_lagrange_blocks_fd(rate_factor):
+def test_lagrange_blocks_fd(rate_factor, moment_free):
     """G = dh/dx and B = d force/d t_N by central differences (slipping pairs included)."""
     x, interface, pairs = strips(5, corner_first=True)
     v = velocities(x, 5) if rate_factor else None
     x_start = None if rate_factor else x + 0.02
-    law = ContactLaw("lagrange", eps_T=30.0, mu=0.3)
+    law = ContactLaw("lagrange", eps_T=30.0, mu=0.3, moment_free=moment_free)
     kinds = np.array(["slip", "stick", "slip", "stick", "stick"])
     lam = np.linspace(2.0, 4.0, len(pairs))
     state = friction_history(x, v, rate_factor, interface, pairs, law, kinds, x_start, lam)
@@ -195,11 +199,13 @@ def test_lagrange_blocks_fd(rate_factor):
     assert np.any(res.status == SLIP) and np.any(res.status == STICK)
 
 
-def test_rotation_and_translation_covariance():
+@pytest.mark.parametrize("moment_free", [False, True])
+def test_rotation_and_translation_covariance(moment_free):
     """Rotating and translating the configuration rotates forces and keeps tractions."""
     x, interface, pairs = strips(6)
     v = velocities(x, 6)
-    law = ContactLaw("augmented_lagrangian", eps_N=40.0, eps_T=30.0, mu=0.4)
+    law = ContactLaw("augmented_lagrangian", eps_N=40.0, eps_T=30.0, mu=0.4,
+                     moment_free=moment_free)
     kinds = np.array(["slip", "stick", "slip", "stick", "reversed"])
     state = friction_history(x, v, 20.0, interface, pairs, law, kinds)
     a = 0.7

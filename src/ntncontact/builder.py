@@ -228,7 +228,10 @@ def _interface(cfg: ContactConfig, index: int, bodies: tuple[Body, ...],
     surface1 = ContactSurface(surface1.nodes, surface1.closed,
                               np.isin(surface1.nodes, np.concatenate([auto, corners])))
     surface2 = ContactSurface.from_chain(chain2, b2.node_offset)
-    law = ContactLaw(cfg.method, cfg.penalty_normal, cfg.penalty_tangential, cfg.friction)
+    # moment-free pair forces conserve angular momentum under the mid-point rule (theory.md)
+    moment_free = cfg.moment_free if cfg.moment_free is not None else kind == "dynamic"
+    law = ContactLaw(cfg.method, cfg.penalty_normal, cfg.penalty_tangential, cfg.friction,
+                     moment_free)
     persistency = (cfg.law or ("persistency" if kind == "dynamic" else "gap")) == "persistency"
     aug = cfg.augmentation
     tol = AugmentationTolerances(aug.gap_tolerance, aug.slip_tolerance, aug.traction_tolerance)

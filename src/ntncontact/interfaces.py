@@ -17,6 +17,7 @@ from .contact import (
     ContactResult,
     PairState,
     augment,
+    blocks_of,
     check_augmentation,
     closest_pairs,
     commit_step,
@@ -115,7 +116,7 @@ class LagrangeTerm:
         ci, st = self.ci, self.state.with_multipliers(lam)
         v, r = (v_eval, rate) if ci.persistency else (None, None)
         res = evaluate_contact(x, v, r, ci.interface, st, ci.law, x_start=x_start, dt=self.dt)
-        b = lagrange_blocks(x, v, r, ci.interface, st, ci.law, x_start)
+        b = blocks_of(res, ci.law)
         return (res.force, (res.rows, res.cols, res.vals), b.values,
                 (b.g_rows, b.g_cols, b.g_vals), (b.b_rows, b.b_cols, b.b_vals))
 

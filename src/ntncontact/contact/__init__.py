@@ -10,16 +10,17 @@ from .augmentation import (
     AugmentationTolerances,
     augment,
     check_augmentation,
+    commit_step,
     newton_update,
 )
 from .detection import Detection, detect, release_mask
-from .evaluate import ContactResult, contact_term, evaluate_contact, pair_response
-from .friction import SLIP, STICK, ReturnMapping, frictional_dissipation, return_mapping
-from .kinematics import PairKinematics, pair_kinematics
-from .lagrange import LagrangeBlocks, lagrange_blocks, release_tensile_pairs
-from .laws import ContactLaw, normal_traction
+from .evaluate import ContactResult, contact_term, evaluate_contact
+from .friction import SLIP, STICK
+from .kinematics import pair_gaps
+from .lagrange import LagrangeBlocks, blocks_of, lagrange_blocks, release_tensile_pairs
+from .laws import ContactLaw
 from .pairing import Pairing, closest_pairs, ordered_partners
-from .state import PairState, commit_step
+from .state import PairState
 from .surfaces import ContactSurface, Interface, chord_normals, corner_mask
 
 __all__ = [
@@ -33,12 +34,11 @@ __all__ = [
     "Detection",
     "Interface",
     "LagrangeBlocks",
-    "PairKinematics",
     "PairState",
     "Pairing",
     "ordered_partners",
-    "ReturnMapping",
     "augment",
+    "blocks_of",
     "check_augmentation",
     "chord_normals",
     "closest_pairs",
@@ -47,13 +47,9 @@ __all__ = [
     "corner_mask",
     "detect",
     "evaluate_contact",
-    "frictional_dissipation",
     "lagrange_blocks",
+    "pair_gaps",
     "newton_update",
-    "normal_traction",
-    "pair_kinematics",
-    "pair_response",
     "release_mask",
     "release_tensile_pairs",
-    "return_mapping",
 ]

@@ -1,4 +1,5 @@
-"""Nested augmented-Lagrangian updates and their stopping test (report 5.4, steps 4.1-4.2).
+"""Nested augmented-Lagrangian updates and their stopping test (report 5.4, steps 4.1-4.2), and
+the history a converged step commits (:func:`commit_step`, step 1's multiplier prediction).
 
 Per step: Newton converges with the multipliers of ``state`` fixed, giving a ContactResult r_k;
 if :func:`check_augmentation` (r_{k-1}, r_k) is not converged, ``state = augment(state, r_k)``
@@ -33,7 +34,7 @@ from .laws import ContactLaw
 from .state import PairState
 
 __all__ = ["AugmentationCheck", "AugmentationTolerances", "augment", "check_augmentation",
-           "newton_update"]
+           "commit_step", "newton_update"]
 
 
 def augment(state: PairState, result: ContactResult, law: ContactLaw) -> PairState:
@@ -122,3 +123,15 @@ def check_augmentation(
           and (tol.constraint is None or violation <= tol.constraint) and tensile == 0)
     return AugmentationCheck(normal, tangential, slip_excess, changes, violation, bool(ok),
                              tensile)
+
+
+def commit_step(state: PairState, result: ContactResult, law: ContactLaw) -> PairState:
+    """History after a converged step: t_T,n+1 = t_T, the release data, and the multiplier
+    prediction of the next step, lambda_N = t_N (report 5.4 step 1: <lambda + eps gdot_{n-1/2}>
+    is the converged t_N); penalty keeps lambda_N = 0. dlambda_T restarts at 0."""
+    lam = np.zeros(len(state)) if law.method == "penalty" else result.t_N.copy()
+    return replace(
+        state, lambda_N=lam, dlambda_T=np.zeros(len(state)), t_T=result.t_T.copy(),
+        t_N=result.t_N.copy(), gap=result.gap.copy(), gap_rate=result.gap_rate.copy(),
+        slip=result.status == SLIP,
+    )

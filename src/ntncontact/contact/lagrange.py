@@ -30,13 +30,13 @@ import numpy as np
 import scipy.sparse as sp
 from numpy.typing import NDArray
 
-from .evaluate import pair_response
+from .evaluate import ContactResult, evaluate_contact
 from .kinematics import N_SLOTS
 from .laws import ContactLaw
 from .state import PairState
 from .surfaces import Interface
 
-__all__ = ["LagrangeBlocks", "lagrange_blocks", "release_tensile_pairs"]
+__all__ = ["LagrangeBlocks", "blocks_of", "lagrange_blocks", "release_tensile_pairs"]
 
 
 @dataclass(frozen=True)
@@ -69,20 +69,36 @@ def lagrange_blocks(
     x_start: NDArray[np.float64] | None = None,
 ) -> LagrangeBlocks:
     """h, G and B (module docstring) at ``x_eval`` with multipliers ``state.lambda_N``."""
-    resp = pair_response(x_eval, v_eval, rate_factor, interface, state, law, x_start)
-    k = resp.kin
-    p = len(state)
-    measure, d_measure = k.normal_measure, k.d_normal_measure
-    values = k.length * measure
-    d_h = measure[:, None, None] * k.d_length + k.length[:, None, None] * d_measure
+    if x_start is None and rate_factor is None:
+        x_start = x_eval  # the gap law's h needs no tangential increment: take it as zero
+    result = evaluate_contact(x_eval, v_eval, rate_factor, interface, state, law,
+                              x_start=x_start)
+    return blocks_of(result, law)
+
+
+def blocks_of(result: ContactResult, law: ContactLaw) -> LagrangeBlocks:
+    """h, G and B from the per-pair data of an :func:`evaluate_contact` result."""
+    p = len(result.pairs)
+    slots, d_measure, d_length = result.slots, result.gradients[:, 0], result.gradients[:, 1]
+    measure = result.normal_measure
+    values = result.length * measure
+    d_h = measure[:, None, None] * d_length + result.length[:, None, None] * d_measure
     comp = np.arange(2)
     g_rows = np.broadcast_to(np.arange(p)[:, None, None], (p, N_SLOTS, 2)).ravel()
-    g_cols = (2 * k.slots[:, :, None] + comp).ravel()
+    g_cols = (2 * slots[:, :, None] + comp).ravel()
     # dF/dt_N = L_c (n + d t_T/d t_N e): +on node i, -on node j
-    column = k.length[:, None] * (k.normal + resp.friction.d_normal[:, None] * k.tangent)
-    b_rows = (2 * state.pairs[:, :, None] + comp).ravel()
-    b_cols = np.repeat(np.arange(p), 4)
-    b_vals = (np.array([1.0, -1.0])[None, :, None] * column[:, None, :]).ravel()
+    slope = result.friction_slope
+    column = result.length[:, None] * (result.normal + slope[:, None] * result.tangent)
+    nodes = result.pairs
+    if law.moment_free:  # and the couple L_c (t_T g - t_N s)/l n: +on b, -on a (evaluate.py)
+        d_coef = result.length * (slope * result.gap - result.offset) / result.chord
+        nodes = np.hstack((nodes, slots[:, [3, 2]]))
+        column = np.hstack((column, d_coef[:, None] * result.normal))
+    n_nodes = nodes.shape[1]
+    b_rows = (2 * nodes[:, :, None] + comp).ravel()
+    b_cols = np.repeat(np.arange(p), 2 * n_nodes)
+    sign = np.array([1.0, -1.0] * (n_nodes // 2))[None, :, None]
+    b_vals = (sign * column.reshape(p, n_nodes // 2, 2).repeat(2, axis=1)).ravel()
     return LagrangeBlocks(values, g_rows, g_cols, d_h.ravel(), b_rows, b_cols, b_vals)
 
 

@@ -3,18 +3,11 @@
 from __future__ import annotations
 
 from dataclasses import dataclass, fields, replace
-from typing import TYPE_CHECKING
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from .friction import SLIP
-from .laws import ContactLaw
-
-if TYPE_CHECKING:
-    from .evaluate import ContactResult
-
-__all__ = ["PairState", "commit_step"]
+__all__ = ["PairState"]
 
 
 @dataclass(frozen=True)
@@ -77,15 +70,3 @@ class PairState:
     def with_multipliers(self, lambda_N: ArrayLike) -> PairState:
         """Same pairs with new normal multipliers (what a Lagrange solver iterates on)."""
         return replace(self, lambda_N=np.asarray(lambda_N, dtype=float))
-
-
-def commit_step(state: PairState, result: ContactResult, law: ContactLaw) -> PairState:
-    """History after a converged step: t_T,n+1 = t_T, the release data, and the multiplier
-    prediction of the next step, lambda_N = t_N (report 5.4 step 1: <lambda + eps gdot_{n-1/2}>
-    is the converged t_N); penalty keeps lambda_N = 0. dlambda_T restarts at 0."""
-    lam = np.zeros(len(state)) if law.method == "penalty" else result.t_N.copy()
-    return replace(
-        state, lambda_N=lam, dlambda_T=np.zeros(len(state)), t_T=result.t_T.copy(),
-        t_N=result.t_N.copy(), gap=result.gap.copy(), gap_rate=result.gap_rate.copy(),
-        slip=result.status == SLIP,
-    )

@@ -269,6 +269,7 @@ class ContactConfig(Strict):
     corners: list[str] = []
     release_steps: Annotated[int, Field(ge=1)] = 2
     detection: Literal["penetration", "predicted"] | None = None
+    moment_free: bool | None = None  # default: true for dynamic analyses (ContactLaw)
     augmentation: AugmentationConfig = AugmentationConfig()
 
     @model_validator(mode="after")
