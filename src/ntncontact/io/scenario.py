@@ -203,6 +203,7 @@ class AnalysisConfig(Strict):
     max_cutbacks: Annotated[int, Field(ge=0, le=20)] = 4
     newton: NewtonConfig = NewtonConfig()
     energy_conserving: bool = False
+    integrator: Literal["midpoint", "energy_momentum"] = "energy_momentum"
 
 
 class AugmentationConfig(Strict):
