@@ -67,6 +67,9 @@ class AnalysisSettings:
     #: Newton of an augmentation that may not be the last stops once |R| <= this x its start
     newton_inexact_augmentations: float = 1e-4
     energy_conserving: bool = False  # report 5.5: energy multiplier bordering the contact step
+    #: dynamic runs: "energy_momentum" (Neo-Hookean internal force by a discrete gradient,
+    #: docs/theory.md) or "midpoint" (the report's mid-point rule)
+    integrator: Literal["midpoint", "energy_momentum"] = "energy_momentum"
 
     def __post_init__(self) -> None:
         # the scenario validation says the same with the file and key; this guards the API

@@ -2,7 +2,9 @@
 
 Dynamic (report (5.15)-(5.19)), unknown d = d_{n+1/2}:
     R(d) = M a_{n+1/2}(d) + f_int(X + d) - f_ext(t_{n+1/2}) + f_extra(x, v),
-    dR/dd = 4/dt^2 M + K + K_extra.
+    dR/dd = 4/dt^2 M + K + K_extra;
+with ``analysis.integrator = "energy_momentum"`` the Neo-Hookean part of f_int is the
+discrete-gradient force f_int(x_n, x_{n+1/2}) (docs/theory.md) and K its unsymmetric tangent.
 Quasi-static, unknown d = d_{n+1}: R(d) = f_int(X + d) - f_ext(t_{n+1}) + f_extra.
 ``extra`` terms (contact, convection) are callables of (x_eval, v_eval, rate_factor, x_start)
 returning a force vector and COO triplets of its derivative with respect to x_eval.
@@ -131,8 +133,7 @@ class StepProblem:
         """R on all dofs and, if asked, its tangent K; sets ``self._scale``."""
         d = self.full(y)
         x = self.state.X.ravel() + d
-        f_int, K, _ = self.model.assembler.internal(self.state.X, x.reshape(-1, 2),
-                                                    need_tangent)
+        f_int, K = self._internal(x.reshape(-1, 2), need_tangent)
         R = f_int - self.f_ext
         scale = max(norm2(f_int), norm2(self.f_ext))
         v_eval, rate = None, None
@@ -162,6 +163,14 @@ class StepProblem:
         self._blocks = (h, G, B)
         self._scale = float(max(scale, self.scale_floor))
         return R, K
+
+    def _internal(self, x: NDArray, need_tangent: bool) -> tuple[NDArray, sp.csr_matrix | None]:
+        """Internal force at x (= x_{n+1/2} when dynamic) and its tangent; the energy-momentum
+        integrator evaluates the Neo-Hookean stress between x_n and x_{n+1} = 2 x - x_n."""
+        x_start = (self.state.x if self.dynamic
+                   and self.model.analysis.integrator == "energy_momentum" else None)
+        f_int, K, _ = self.model.assembler.internal(self.state.X, x, need_tangent, x_start)
+        return f_int, K
 
     def _add_mass(self, K: sp.csr_matrix, factor: float) -> sp.csr_matrix:
         """K + factor M, adding data arrays when M was assembled in K's pattern."""

@@ -92,11 +92,16 @@ class Assembler:
         self.node_pattern = CsrPattern.from_element_dofs(self.cells, self.n_nodes)
 
     def internal(
-        self, X: NDArray, x: NDArray, need_tangent: bool = True
+        self, X: NDArray, x: NDArray, need_tangent: bool = True, x_start: NDArray | None = None
     ) -> tuple[NDArray, sp.csr_matrix | None, float]:
-        """Internal force vector, tangent stiffness (CSR) and total strain energy."""
+        """Internal force vector, tangent stiffness (CSR) and total strain energy.
+
+        ``x_start`` = x_n with x = x_{n+1/2}: the energy-momentum scheme's force of the
+        Neo-Hookean elements and its tangent with respect to x (compiled kernel only)."""
         if KERNEL == "numba":
-            return self._internal_numba(X, x, need_tangent)
+            return self._internal_numba(X, x, need_tangent, x_start)
+        if x_start is not None:
+            raise NotImplementedError("the energy-momentum scheme needs the Numba kernel")
         ne = len(self.cells)
         fe = np.empty((ne, 8))
         Ke = np.empty((ne, 8, 8)) if need_tangent else None
@@ -130,7 +135,7 @@ class Assembler:
         return self.pattern.indptr.astype(self.pattern.indices.dtype)
 
     def _internal_numba(
-        self, X: NDArray, x: NDArray, need_tangent: bool
+        self, X: NDArray, x: NDArray, need_tangent: bool, x_start: NDArray | None = None
     ) -> tuple[NDArray, sp.csr_matrix | None, float]:
         """As :meth:`internal`, with the compiled kernel adding straight into the CSR data."""
         X = np.ascontiguousarray(X, dtype=float)
@@ -139,7 +144,8 @@ class Assembler:
         data = np.zeros(self.pattern.nnz) if need_tangent else None
         energy = 0.0
         for kernel in self._numba_groups:
-            energy += kernel.add(X, x, self.lam, self.mu, self.pattern.entry_map, force, data)
+            energy += kernel.add(X, x, self.lam, self.mu, self.pattern.entry_map, force, data,
+                                 x_start)
         if data is None:
             return force, None, energy
         return force, self.pattern_matrix(data), energy

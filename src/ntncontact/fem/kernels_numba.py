@@ -146,24 +146,34 @@ def _where_inverted(model, p, valid, xx, xy, geo):
 
 
 @njit(cache=True, error_model="numpy", inline="always")
-def _element(model, p, e, X, x, ecells, lam, mu, geo, Xc, need_tangent, Ke, status):
-    """Force (fx, fy) 4-tuples, upper block triangle of Ke (8,8) and energy of element e, the
-    p-th of its group (the row of its cached reference data).
-
-    Sets status[1] (1: reference, 2: current configuration) and stops at an inverted point.
-    """
+def _element_coordinates(model, p, X, x, ecells, geo, Xc, status):
+    """Current coordinates (xx, xy) of the p-th element of a group; refreshes its cached
+    reference data when X moved (ALE) and sets status[1] (1: reference, 2: current
+    configuration) if it is inverted."""
     n0, n1, n2, n3 = ecells[p, 0], ecells[p, 1], ecells[p, 2], ecells[p, 3]
     xx = (x[n0, 0], x[n1, 0], x[n2, 0], x[n3, 0])
     xy = (x[n0, 1], x[n1, 1], x[n2, 1], x[n3, 1])
-    fx = fy = (0.0, 0.0, 0.0, 0.0)
-    energy = 0.0
     Xx = (X[n0, 0], X[n1, 0], X[n2, 0], X[n3, 0])
     Xy = (X[n0, 1], X[n1, 1], X[n2, 1], X[n3, 1])
     if not _same_reference(Xx, Xy, Xc[p]):  # X moved (ALE) or first call
         valid = _reference(p, Xx, Xy, geo, Xc)
         if valid < 4:
             status[1] = _where_inverted(model, p, valid, xx, xy, geo)
-            return fx, fy, energy
+    return xx, xy
+
+
+@njit(cache=True, error_model="numpy", inline="always")
+def _element(model, p, e, X, x, ecells, lam, mu, geo, Xc, need_tangent, Ke, status):
+    """Force (fx, fy) 4-tuples, upper block triangle of Ke (8,8) and energy of element e, the
+    p-th of its group (the row of its cached reference data).
+
+    Sets status[1] (1: reference, 2: current configuration) and stops at an inverted point.
+    """
+    fx = fy = (0.0, 0.0, 0.0, 0.0)
+    energy = 0.0
+    xx, xy = _element_coordinates(model, p, X, x, ecells, geo, Xc, status)
+    if status[1] != 0:
+        return fx, fy, energy
     if need_tangent:
         Ke[:, :] = 0.0
     gp = geo[p]
@@ -202,9 +212,112 @@ def _add_tangent(Gx, Gy, Hx, Hy, c1, lam, mu, Ke):
             Ke[2 * a + 1, 2 * b + 1] += gab + cy[b] * Hy[a] + ly[a] * Hy[b]
 
 
+#: |z| below which :func:`_log_quotient` sums series: the closed form of phi'(z) loses about
+#: eps/|z| of relative accuracy, the series truncated after z^9 is exact to ~1e-20 there.
+_SERIES_Z = 1e-2
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def _log_quotient(z):
+    """phi(z) = log1p(z)/z = (ln I1 - ln I0)/(I1 - I0) * I0 with z = (I1 - I0)/I0, and
+    phi'(z); phi(0) = 1, accurate for every z > -1."""
+    if abs(z) < _SERIES_Z:
+        phi, dphi = 0.0, 0.0  # phi = sum_k (-z)^k/(k+1), by Horner from k = 9 down
+        for k in range(9, -1, -1):
+            sign = 1.0 if k % 2 == 0 else -1.0
+            phi = phi * z + sign / (k + 1.0)
+            if k >= 1:
+                dphi = dphi * z + sign * k / (k + 1.0)
+        return phi, dphi
+    L = np.log1p(z)
+    return L / z, (z / (1.0 + z) - L) / (z * z)
+
+
+@njit(cache=True, error_model="numpy", inline="always")
+def _element_em(p, e, X, x0, x, ecells, lam, mu, geo, Xc, need_tangent, Ke, status):
+    """Neo-Hookean element of the energy-momentum scheme (docs/theory.md), x0 = x_n and
+    x = x_{n+1/2}: force f_ai = int (F_m S_alg)_iJ G_aJ with F_m = F(x) and Gonzalez's
+    discrete gradient S_alg = mu I + 2 q cof(C_m), q = (U(I_{n+1}) - U(I_n))/(I_{n+1} - I_n)
+    for U(I) = -mu/2 ln I + lam/8 (ln I)^2 and I = det C; its full (unsymmetric) tangent with
+    respect to x in Ke; the strain energy at x. status[1] = 2 if det F <= 0 at t_n, t_{n+1/2}
+    or t_{n+1}."""
+    fx = fy = (0.0, 0.0, 0.0, 0.0)
+    energy = 0.0
+    xx, xy = _element_coordinates(1, p, X, x, ecells, geo, Xc, status)
+    if status[1] != 0:
+        return fx, fy, energy
+    n0, n1, n2, n3 = ecells[p, 0], ecells[p, 1], ecells[p, 2], ecells[p, 3]
+    ox = (x0[n0, 0], x0[n1, 0], x0[n2, 0], x0[n3, 0])
+    oy = (x0[n0, 1], x0[n1, 1], x0[n2, 1], x0[n3, 1])
+    if need_tangent:
+        Ke[:, :] = 0.0
+    gp = geo[p]
+    lam_e, mu_e = lam[e], mu[e]
+    for g in range(4):
+        Gx, Gy, w = _gradients(gp, g)
+        m00, m01, m10, m11 = _dot4(xx, Gx), _dot4(xx, Gy), _dot4(xy, Gx), _dot4(xy, Gy)
+        a00, a01, a10, a11 = _dot4(ox, Gx), _dot4(ox, Gy), _dot4(oy, Gx), _dot4(oy, Gy)
+        b00, b01, b10, b11 = 2.0 * m00 - a00, 2.0 * m01 - a01, 2.0 * m10 - a10, 2.0 * m11 - a11
+        Jm, J0, J1 = m00 * m11 - m01 * m10, a00 * a11 - a01 * a10, b00 * b11 - b01 * b10
+        if not (Jm > 0.0 and J0 > 0.0 and J1 > 0.0):
+            status[1] = 2
+            return fx, fy, energy
+        # C_m = (C_n + C_{n+1})/2 and the discrete derivative q of the volumetric energy
+        cm00 = 0.5 * (a00 * a00 + a10 * a10 + b00 * b00 + b10 * b10)
+        cm01 = 0.5 * (a00 * a01 + a10 * a11 + b00 * b01 + b10 * b11)
+        cm11 = 0.5 * (a01 * a01 + a11 * a11 + b01 * b01 + b11 * b11)
+        I0, I1 = J0 * J0, J1 * J1
+        phi, dphi = _log_quotient((J1 - J0) * (J1 + J0) / I0)
+        slope = 0.25 * lam_e * (np.log(J0) + np.log(J1)) - 0.5 * mu_e  # dU/d(ln I), averaged
+        q = slope * phi / I0
+        S00, S01, S11 = mu_e + 2.0 * q * cm11, -2.0 * q * cm01, mu_e + 2.0 * q * cm00
+        lnJ = np.log(Jm)
+        W = 0.5 * mu_e * (m00 * m00 + m01 * m01 + m10 * m10 + m11 * m11 - 2.0) - mu_e * lnJ
+        energy += w * (W + 0.5 * lam_e * lnJ * lnJ)
+        # P = F_m S_alg
+        P00, P01 = m00 * S00 + m01 * S01, m00 * S01 + m01 * S11
+        P10, P11 = m10 * S00 + m11 * S01, m10 * S01 + m11 * S11
+        fx = _comb4(fx, _comb4(Gx, Gy, P00, P01), 1.0, w)
+        fy = _comb4(fy, _comb4(Gx, Gy, P10, P11), 1.0, w)
+        if need_tangent:
+            # dq = dq/dI1 dI1 with dI1 = 4 I1 H_bk, H = dN/dx_{n+1} (x_{n+1} = 2 x - x_n)
+            r = 1.0 / J1
+            Hx = _comb4(Gx, Gy, b11 * r, -b10 * r)
+            Hy = _comb4(Gx, Gy, -b01 * r, b00 * r)
+            dq = 4.0 * slope * dphi * I1 / (I0 * I0) + 0.5 * lam_e * phi / I0
+            _add_em_tangent(Gx, Gy, Hx, Hy, (b00, b01, b10, b11), (m00, m01, m10, m11),
+                            (S00, S01, S11), (cm00, cm01, cm11), q, dq, w, Ke)
+    return fx, fy, energy
+
+
+@njit(cache=True, inline="always")
+def _add_em_tangent(Gx, Gy, Hx, Hy, F1, Fm, S, Cm, q, dq, w, Ke):
+    """Ke[2a+i, 2b+k] += w (d_ik G_a.S G_b + (F_m dS G_a)_i), dS the change of S_alg for a
+    unit x at node b, direction k: dS = 2 dq H_bk cof(C_m) + q cof(dC_{n+1}),
+    dC_{n+1} = 2 (F1^T e_k (x) G_b + G_b (x) F1^T e_k)."""
+    m00, m01, m10, m11 = Fm
+    for b in range(4):
+        gb0, gb1 = Gx[b], Gy[b]
+        sg0, sg1 = S[0] * gb0 + S[1] * gb1, S[1] * gb0 + S[2] * gb1
+        for k in range(2):
+            f0, f1 = (F1[0], F1[1]) if k == 0 else (F1[2], F1[3])
+            dq2 = 2.0 * dq * (Hx[b] if k == 0 else Hy[b])
+            dC00, dC01, dC11 = 4.0 * f0 * gb0, 2.0 * (f0 * gb1 + f1 * gb0), 4.0 * f1 * gb1
+            dS00, dS01 = dq2 * Cm[2] + q * dC11, -dq2 * Cm[1] - q * dC01
+            dS11 = dq2 * Cm[0] + q * dC00
+            T00, T01 = m00 * dS00 + m01 * dS01, m00 * dS01 + m01 * dS11
+            T10, T11 = m10 * dS00 + m11 * dS01, m10 * dS01 + m11 * dS11
+            col = 2 * b + k
+            for a in range(4):
+                gab = Gx[a] * sg0 + Gy[a] * sg1
+                Ke[2 * a, col] += w * (T00 * Gx[a] + T01 * Gy[a] + (gab if k == 0 else 0.0))
+                Ke[2 * a + 1, col] += w * (T10 * Gx[a] + T11 * Gy[a] + (gab if k == 1 else 0.0))
+
+
 @njit(cache=True)
-def _scatter(p, e, ecells, fx, fy, Ke, need_tangent, entry_map, force, data):
-    """Add element e's force and tangent (lower blocks mirrored) to the global arrays."""
+def _scatter(p, e, ecells, fx, fy, Ke, need_tangent, full, entry_map, force, data):
+    """Add element e's force and tangent (lower blocks mirrored unless ``full``) to the global
+    arrays."""
     for a in range(4):
         n = ecells[p, a]
         force[2 * n] += fx[a]
@@ -214,57 +327,66 @@ def _scatter(p, e, ecells, fx, fy, Ke, need_tangent, entry_map, force, data):
     base = e * 64
     for r in range(8):
         for c in range(8):
-            v = Ke[r, c] if (r >> 1) <= (c >> 1) else Ke[c, r]
+            v = Ke[r, c] if full or (r >> 1) <= (c >> 1) else Ke[c, r]
             data[entry_map[base + 8 * r + c]] += v
 
 
 @njit(cache=True, inline="always")
-def _run(model, order, lo, hi, X, x, ecells, lam, mu, geo, Xc, need_tangent, entry_map, force,
-         data, status):
-    """Process order[lo:hi]; return the energy. Stops at the first inverted element."""
+def _run(model, order, lo, hi, X, x0, x, ecells, lam, mu, geo, Xc, need_tangent, entry_map,
+         force, data, status):
+    """Process order[lo:hi]; return the energy. Stops at the first inverted element.
+
+    With x0 (x_n) not empty, a Neo-Hookean group takes the energy-momentum element at the
+    mid-point x = x_{n+1/2}; its tangent is unsymmetric, so it is scattered in full."""
+    full = x0.shape[0] > 0
     Ke = np.empty((8, 8))
     energy = 0.0
     for p in range(lo, hi):
         e = order[p]
-        fx, fy, w = _element(model, p, e, X, x, ecells, lam, mu, geo, Xc, need_tangent, Ke,
-                             status)
+        if full:
+            fx, fy, w = _element_em(p, e, X, x0, x, ecells, lam, mu, geo, Xc, need_tangent, Ke,
+                                    status)
+        else:
+            fx, fy, w = _element(model, p, e, X, x, ecells, lam, mu, geo, Xc, need_tangent,
+                                 Ke, status)
         if status[1] != 0:
             status[0] = p
             return energy
         energy += w
-        _scatter(p, e, ecells, fx, fy, Ke, need_tangent, entry_map, force, data)
+        _scatter(p, e, ecells, fx, fy, Ke, need_tangent, full, entry_map, force, data)
     return energy
 
 
 @njit(cache=True)
-def _run_both(model, order, lo, hi, X, x, ecells, lam, mu, geo, Xc, need_tangent, entry_map,
-              force, data, status):
+def _run_both(model, order, lo, hi, X, x0, x, ecells, lam, mu, geo, Xc, need_tangent,
+              entry_map, force, data, status):
     """:func:`_run` compiled once per case, so that the force-only loop has no tangent code in
     it (and behind a call: Numba's parallel pass fails on the inlined loop)."""
     if need_tangent:
-        return _run(model, order, lo, hi, X, x, ecells, lam, mu, geo, Xc, True, entry_map,
-                    force, data, status)
-    return _run(model, order, lo, hi, X, x, ecells, lam, mu, geo, Xc, False, entry_map, force,
-                data, status)
+        return _run(model, order, lo, hi, X, x0, x, ecells, lam, mu, geo, Xc, True,
+                    entry_map, force, data, status)
+    return _run(model, order, lo, hi, X, x0, x, ecells, lam, mu, geo, Xc, False, entry_map,
+                force, data, status)
 
 
 @njit(cache=True)
-def assemble_serial(model, order, X, x, ecells, lam, mu, geo, Xc, need_tangent, entry_map,
+def assemble_serial(model, order, X, x0, x, ecells, lam, mu, geo, Xc, need_tangent, entry_map,
                     force, data, status):
     """Serial assembly of the elements ``order``: adds into ``force`` and ``data``.
 
+    ``x0``: x_n for the energy-momentum scheme (Neo-Hookean groups), or an empty (0, 2) array.
     ``ecells`` = cells[order]; ``geo`` and ``Xc`` are the reference data cache (see
     :class:`NumbaAssembly`). ``status`` (int64[2]) is reset, then receives (position in order,
     where code) of the first inverted element. Returns (energy, whether an element inverted).
     """
     status[0] = status[1] = 0
-    energy = _run_both(model, order, 0, order.size, X, x, ecells, lam, mu, geo, Xc,
+    energy = _run_both(model, order, 0, order.size, X, x0, x, ecells, lam, mu, geo, Xc,
                        need_tangent, entry_map, force, data, status)
     return energy, status[1] != 0
 
 
 @njit(cache=True, parallel=True)
-def assemble_blocks(model, order, starts, X, x, ecells, lam, mu, geo, Xc, need_tangent,
+def assemble_blocks(model, order, starts, X, x0, x, ecells, lam, mu, geo, Xc, need_tangent,
                     entry_map, force, data, status):
     """Threaded assembly: block t is order[starts[t]:starts[t+1]], then order[starts[-1]:]
     (the deferred elements) serially.
@@ -275,10 +397,10 @@ def assemble_blocks(model, order, starts, X, x, ecells, lam, mu, geo, Xc, need_t
     status[:, :] = 0
     energies = np.zeros(nb + 1)
     for t in prange(nb):
-        energies[t] = _run_both(model, order, starts[t], starts[t + 1], X, x, ecells, lam, mu,
-                                geo, Xc, need_tangent, entry_map, force, data, status[t])
-    energies[nb] = _run_both(model, order, starts[nb], order.size, X, x, ecells, lam, mu, geo,
-                             Xc, need_tangent, entry_map, force, data, status[nb])
+        energies[t] = _run_both(model, order, starts[t], starts[t + 1], X, x0, x, ecells, lam,
+                                mu, geo, Xc, need_tangent, entry_map, force, data, status[t])
+    energies[nb] = _run_both(model, order, starts[nb], order.size, X, x0, x, ecells, lam, mu,
+                             geo, Xc, need_tangent, entry_map, force, data, status[nb])
     return energies.sum(), status[:, 1].any()
 
 
@@ -341,45 +463,55 @@ class NumbaAssembly:
         self.status = np.zeros((self.starts.size if self.threads > 1 else 1, 2), dtype=np.int64)
 
     def add(self, X: NDArray, x: NDArray, lam: NDArray, mu: NDArray, entry_map: NDArray,
-            force: NDArray, data: NDArray | None) -> float:
-        """Add internal force (and tangent if ``data`` is given); return the strain energy.
+            force: NDArray, data: NDArray | None, x_start: NDArray | None = None) -> float:
+        """Add internal force (and tangent if ``data`` is given); return the strain energy at x.
 
+        ``x_start`` (x_n, with x = x_{n+1/2}): a Neo-Hookean group adds the energy-momentum
+        scheme's force and its unsymmetric tangent instead (linear elasticity is unchanged: the
+        mid-point rule already conserves its quadratic energy).
         Raises :class:`InvertedElementError` naming the global index of the first inverted
         element (reference Jacobian, or det F for Neo-Hookean, not positive at a Gauss point).
         """
         need_tangent = data is not None
         data_ = data if need_tangent else _NO_DATA
+        em = x_start is not None and self.model == MODEL_CODES["neo_hookean"]
+        x0 = np.ascontiguousarray(x_start, dtype=float) if em else _NO_POSITIONS
         if self.threads > 1:
             energy, failed = assemble_blocks(
-                self.model, self.order, self.starts, X, x, self.ecells, lam, mu, self.geo,
+                self.model, self.order, self.starts, X, x0, x, self.ecells, lam, mu, self.geo,
                 self.Xc, need_tangent, entry_map, force, data_, self.status)
         else:
             energy, failed = assemble_serial(
-                self.model, self.order, X, x, self.ecells, lam, mu, self.geo, self.Xc,
+                self.model, self.order, X, x0, x, self.ecells, lam, mu, self.geo, self.Xc,
                 need_tangent, entry_map, force, data_, self.status[0])
         if failed:
-            self._raise(X, x)
+            self._raise(X, x, x0 if em else None)
         return energy
 
-    def _raise(self, X: NDArray, x: NDArray) -> None:
+    def _raise(self, X: NDArray, x: NDArray, x_start: NDArray | None) -> None:
         """Raise for the first inverted element (the lowest global index over the blocks)."""
         rows = np.flatnonzero(self.status[:, 1])
         bad = [int(self.order[self.status[t, 0]]) for t in rows]
         t = rows[int(np.argmin(bad))]
-        _raise_inverted(min(bad), int(self.status[t, 1]), X, x, self.cells)
+        configurations = [x] if x_start is None else [x_start, x, 2.0 * x - x_start]
+        _raise_inverted(min(bad), int(self.status[t, 1]), X, configurations, self.cells)
 
 
 #: The ``data`` argument of force-only calls (never written).
 _NO_DATA = np.empty(0)
+#: The ``x0`` argument of the plain kernel (no energy-momentum scheme).
+_NO_POSITIONS = np.empty((0, 2))
 
 
-def _raise_inverted(e: int, where: int, X: NDArray, x: NDArray, cells: NDArray) -> None:
-    """Raise :class:`InvertedElementError` for element e with its smallest determinant."""
-    X_e, x_e = X[cells[e]], x[cells[e]]
+def _raise_inverted(e: int, where: int, X: NDArray, configurations: list[NDArray],
+                    cells: NDArray) -> None:
+    """Raise :class:`InvertedElementError` for element e with its smallest determinant (over
+    the current ``configurations`` when where == 2)."""
+    X_e = X[cells[e]]
     J = np.einsum("gaj,ai->gij", _DN, X_e)
     det = J[:, 0, 0] * J[:, 1, 1] - J[:, 0, 1] * J[:, 1, 0]
     if where == 2:
         grad = np.einsum("gaj,gjI->gaI", _DN, np.linalg.inv(J))
-        F = np.einsum("ai,gaJ->giJ", x_e, grad)
-        det = F[:, 0, 0] * F[:, 1, 1] - F[:, 0, 1] * F[:, 1, 0]
+        F = np.stack([np.einsum("ai,gaJ->giJ", x[cells[e]], grad) for x in configurations])
+        det = F[..., 0, 0] * F[..., 1, 1] - F[..., 0, 1] * F[..., 1, 0]
     raise InvertedElementError(e, float(det.min()), _WHERE[where])

@@ -224,6 +224,7 @@ class AnalysisConfig(Strict):
     max_cutbacks: Annotated[int, Field(ge=0, le=20)] = 4
     newton: NewtonConfig = NewtonConfig()
     energy_conserving: bool = False
+    integrator: Literal["midpoint", "energy_momentum"] = "energy_momentum"
     max_steps: Annotated[int, Field(ge=1)] = MAX_STEPS
 
     @model_validator(mode="after")
