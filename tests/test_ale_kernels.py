@@ -1,32 +1,36 @@
-"""The compiled ALE kernels (``ale.kernels_numba``) against the NumPy code they replaced: the
-kernels repeat its operations in its order, so the ALE update's results did not change when they
-were introduced. Bit for bit where NumPy's results are fixed by IEEE arithmetic; where the NumPy
-code sums through ``np.sum`` or ``np.einsum``, the order of those sums is NumPy's implementation
-detail (blocking, unrolling, memory layout), which other NumPy versions may change: there the
-comparison allows the round-off of a reordered sum (:data:`REORDERED`)."""
+"""The compiled ALE kernels (in ``ale.surface``, ``ale.remap``, ``ale.motion``,
+``mesh.quality``, ``mesh_motion``) against the NumPy code they replaced, kept here as oracles,
+bit for bit: the kernels repeat its operations in its order (NumPy's pairwise summation
+included), so the ALE update's results did not change when they were introduced."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
+from test_ale_remap import XI, q4_shape
 
-from ntncontact.ale import kernels_numba as kernels
-from ntncontact.ale.remap import Remapper, _nearest_on_boundary, inverse_bilinear, q4_shape
-from ntncontact.ale.surface import local_slides
+from ntncontact import mesh_motion
+from ntncontact.ale import remap, surface
+from ntncontact.ale.motion import _DN, _SHAPE, _element_masses, _masses_after
+from ntncontact.ale.remap import Remapper, inverse_bilinear
+from ntncontact.ale.surface import SurfaceCurve, local_slides
+from ntncontact.mesh import quality
 from ntncontact.mesh.generators import rectangle
 
+
+def nearest_on_boundary(cell_xy, points):
+    """Closest point of each cell's boundary to each point: (distance, xi, local edge)."""
+    a, b = cell_xy, np.roll(cell_xy, -1, axis=-2)  # the 4 straight edges a -> b
+    d = b - a
+    t = np.einsum("...ei,...ei->...e", points[..., None, :] - a, d)
+    t = np.clip(t / np.maximum(np.einsum("...ei,...ei->...e", d, d), 1e-300), 0.0, 1.0)
+    dist = np.linalg.norm(a + t[..., None] * d - points[..., None, :], axis=-1)
+    edge = np.argmin(dist, axis=-1)
+    te = np.take_along_axis(t, edge[..., None], axis=-1)[..., 0]
+    start, end = XI[edge], XI[(edge + 1) % 4]  # the bilinear map is linear along an edge
+    return np.min(dist, axis=-1), start + te[..., None] * (end - start), edge
+
 SNAP = 1e-10
-#: Round-off of a sum of up to a few hundred terms taken in another order, relative to the
-#: largest result: at most ~log2(n) eps (2e-15 for n = 300) of the sum of magnitudes, which
-#: here is of the order of the results; 1e-13 leaves a margin of 50 and stays far below any
-#: change an algorithmic difference (another branch, another term) would make.
-REORDERED = 1e-13
-
-
-def assert_equal_up_to_reordering(got, want):
-    want = np.asarray(want, float)
-    scale = max(float(np.abs(want).max(initial=0.0)), 1.0)
-    np.testing.assert_allclose(got, want, rtol=0.0, atol=REORDERED * scale)
 
 
 def reference_local_slides(s, ref, idx, slide, tolerance):
@@ -112,7 +116,7 @@ def random_chain(rng, n):
 
 
 @pytest.mark.parametrize("seed", range(6))
-def test_local_slides_equal_the_numpy_loop(seed):
+def test_local_slides_equal_the_numpy_loop_bit_for_bit(seed):
     rng = np.random.default_rng(seed)
     for n in (3, 8, 12, 41, 300):  # runs above 8 and 128 segments: NumPy's pairwise sums
         s, ref = random_chain(rng, n)
@@ -129,7 +133,7 @@ def test_local_slides_equal_the_numpy_loop(seed):
             tolerance = rng.choice([0.2, 0.5, 0.9])
             got, resets = local_slides(s, ref, idx, slide, tolerance)
             want, want_resets = reference_local_slides(s, ref, idx, slide, tolerance)
-            assert_equal_up_to_reordering(got, want)  # the reference sums with np.sum
+            np.testing.assert_array_equal(got, want)
             assert resets == want_resets
 
 
@@ -144,28 +148,19 @@ def test_anchor_targets_equal_the_numpy_clamping_bit_for_bit(seed):
             pos = rng.choice(n, rng.integers(1, min(5, n) + 1), replace=False)
             wanted = s[pos] + rng.choice([1e-12, 0.1, 1.0, 5.0]) * rng.standard_normal(pos.size)
             ratio = rng.choice([0.1, 0.25, 0.6])
-            got = kernels.anchor_targets(s, breaks, pos, wanted, 1e-8, ratio, SNAP)
+            got = surface._anchor_targets(s, breaks, pos, wanted, 1e-8, ratio, SNAP)
             want = reference_anchor_targets(s, breaks, pos, wanted, 1e-8, ratio)
             for g, w in zip(got, want, strict=True):
                 np.testing.assert_array_equal(g, w)
 
 
 @pytest.mark.parametrize("n", [0, 1, 7, 8, 9, 100, 128, 129, 300, 1000, 4099])
-def test_pairwise_sum_is_accurate_like_numpys(n):
-    """Within the pairwise summation's error bound, (log2(n) + 1) eps sum |a|, of the exact sum
-    (math.fsum), as NumPy's sum is (whose exact order is NumPy's own business)."""
-    import math
-
+def test_pairwise_sum_is_numpys_sum(n):
     rng = np.random.default_rng(n)
     a = rng.standard_normal(n) * 10.0 ** rng.uniform(-6, 6, n)
-    for lo, size in ((0, n), (2, n - 5)):
-        if size <= 0:
-            continue
-        part = a[lo:lo + size]
-        bound = (np.log2(size) + 1.0) * np.finfo(float).eps * np.abs(part).sum()
-        exact = math.fsum(part)
-        assert abs(kernels._pairwise_sum(a, lo, size) - exact) <= bound
-        assert abs(part.sum() - exact) <= bound
+    assert surface._pairwise_sum(a, 0, n) == a.sum()
+    if n > 5:
+        assert surface._pairwise_sum(a, 2, n - 5) == a[2:n - 3].sum()
 
 
 def reference_try_hints(remapper, pts, hint, outside_tol):
@@ -180,7 +175,7 @@ def reference_try_hints(remapper, pts, hint, outside_tol):
     cell[idx[inside]], xi[idx[inside]] = h[inside], found[inside]
     rest, h = idx[~inside], h[~inside]
     if rest.size:
-        dist, bxi, edge = _nearest_on_boundary(cell_xy[h], pts[rest])
+        dist, bxi, edge = nearest_on_boundary(cell_xy[h], pts[rest])
         a, b = cell_xy[h, edge], cell_xy[h, (edge + 1) % 4]
         rel = pts[rest] - a
         outward = (b - a)[:, 0] * rel[:, 1] - (b - a)[:, 1] * rel[:, 0] < 0.0
@@ -209,7 +204,7 @@ def distorted_block(rng, nx=8, ny=5):
 
 
 @pytest.mark.parametrize("seed", range(4))
-def test_hinted_location_and_interpolation_equal_the_numpy_code(seed):
+def test_hinted_location_and_interpolation_equal_the_numpy_code_bit_for_bit(seed):
     rng = np.random.default_rng(200 + seed)
     nodes, cells = distorted_block(rng)
     remapper = Remapper(nodes, cells)
@@ -221,8 +216,8 @@ def test_hinted_location_and_interpolation_equal_the_numpy_code(seed):
         # moved nodes: inside their hint cell, in a neighbour, or pushed off the boundary
         pts = nodes[base] + rng.choice([1e-3, 0.05, 0.2]) * rng.standard_normal((p, 2))
         hint = np.where(rng.uniform(size=p) < 0.2, -1, node_cell[base])
-        got = kernels.locate_in_hints(remapper._cell_xy, remapper.cell_size,
-                                      remapper._outer_edge, pts, hint, 0.1, 1e-9, 12)
+        got = remap._locate_in_hints(remapper._cell_xy, remapper.cell_size,
+                                     remapper._outer_edge, pts, hint, 0.1, 1e-9, 12)
         for g, w in zip(got, reference_try_hints(remapper, pts, hint, 0.1), strict=True):
             np.testing.assert_array_equal(g, w)
         loc = remapper.locate(pts, 10.0, hint)
@@ -230,11 +225,10 @@ def test_hinted_location_and_interpolation_equal_the_numpy_code(seed):
         # order that depends on the operands' memory layout
         grads = np.ascontiguousarray(remapper.nodal_gradients(fields)[remapper.cells[loc.cell]])
         for g in (None, grads):
-            got = kernels.interpolate(remapper.nodes, remapper.cells, fields, loc.cell, loc.xi,
+            got = remap._interpolate(remapper.nodes, remapper.cells, fields, loc.cell, loc.xi,
                                       pts, np.zeros((p, 4, 6, 2)) if g is None else g,
                                       g is not None)
-            # the reference sums with np.einsum
-            assert_equal_up_to_reordering(got, reference_interpolation(remapper, fields, loc,
+            np.testing.assert_array_equal(got, reference_interpolation(remapper, fields, loc,
                                                                        pts, g))
 
 
@@ -256,12 +250,12 @@ def test_snapping_to_the_located_cells_corners_equals_the_node_tree_query(seed):
     loc = remapper.locate(pts, 10.0)
     g = np.ascontiguousarray(grads[remapper.cells[loc.cell]])
     for quadratic in (False, True):
-        want = kernels.interpolate(remapper.nodes, remapper.cells, fields, loc.cell, loc.xi, pts,
+        want = remap._interpolate(remapper.nodes, remapper.cells, fields, loc.cell, loc.xi, pts,
                                    g, quadratic)
         dist, node = cKDTree(nodes).query(pts)
         same = dist <= 1e-12 * remapper.cell_size[loc.cell]
         want[same] = fields[node[same]]
-        got = kernels.interpolate_at_nodes(remapper.nodes, remapper.cells, fields, loc.cell,
+        got = remap._interpolate_at_nodes(remapper.nodes, remapper.cells, fields, loc.cell,
                                            loc.xi, pts, g, quadratic, remapper.cell_size, 1e-12)
         assert same[:6].all() and not same[6:].any()
         np.testing.assert_array_equal(got, want)
@@ -269,33 +263,49 @@ def test_snapping_to_the_located_cells_corners_equals_the_node_tree_query(seed):
 
 @pytest.mark.parametrize("seed", range(4))
 def test_masses_after_equals_the_numpy_update_bit_for_bit(seed):
-    from ntncontact.ale.motion import _DN, _SHAPE
-
     rng = np.random.default_rng(400 + seed)
     X, cells = distorted_block(rng)
     density = rng.uniform(1.0, 3.0, len(cells))
-    old = kernels.element_masses(X, cells, np.arange(len(cells)), density, _DN, _SHAPE)
+    old = _element_masses(X, cells, np.arange(len(cells)), density, _DN, _SHAPE)
     masses = np.bincount(cells.ravel(), old.ravel(), len(X))
     idx = np.sort(rng.choice(len(cells), 7, replace=False))
     X_new = X + 0.01 * rng.standard_normal(X.shape)
-    change = kernels.element_masses(X_new, cells, idx, density[idx], _DN, _SHAPE)
+    change = _element_masses(X_new, cells, idx, density[idx], _DN, _SHAPE)
     change -= old[idx]
     want = masses + np.bincount(cells[idx].ravel(), change.ravel(), len(X))
-    got = kernels.masses_after(X_new, cells, idx, density, _DN, _SHAPE, old, masses)
+    got = _masses_after(X_new, cells, idx, density, _DN, _SHAPE, old, masses)
     np.testing.assert_array_equal(got, want)
 
 
-def test_acceptable_cells_is_acceptable_with_the_changed_cells():
+def reference_min_sines(nodes, cells):
+    """``mesh.quality.cell_min_sines`` as it was in NumPy."""
+    x = nodes[cells]
+    a, b = np.roll(x, -1, axis=1) - x, np.roll(x, 1, axis=1) - x
+    cross = a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]
+    scale = np.sqrt(np.einsum("...i,...i->...", a, a) * np.einsum("...i,...i->...", b, b))
+    sines = np.divide(cross, scale, out=np.full_like(cross, -1.0), where=scale > 0)
+    return sines.min(axis=1)
+
+
+def test_changed_cells_and_their_acceptance_equal_the_numpy_expressions():
     rng = np.random.default_rng(5)
     x, cells = distorted_block(rng)
-    reference = kernels.cell_min_sines(x, cells, np.arange(len(cells)))
-    for scale in (1e-3, 0.05, 0.3):
+    reference = reference_min_sines(x, cells)
+    np.testing.assert_array_equal(quality.cell_min_sines(x, cells), reference)
+    tn = reference_min_sines(x + 0.01 * rng.standard_normal(x.shape), cells)
+    for scale in (0.0, 1e-3, 0.05, 0.3):
         x_new = x.copy()
         x_new[[3, 17]] += scale * rng.standard_normal((2, 2))
-        _, which = kernels.changed_cells(x_new, x, cells)
-        for quality in (0.5, 0.9, 1.0):
-            assert kernels.acceptable_cells(x_new, cells, which, quality, reference, reference) \
-                == kernels.acceptable(x_new, x, cells, quality, reference, reference)
+        q = reference_min_sines(x_new, cells)
+        moved = np.any(x_new != x, axis=1)
+        touched = np.flatnonzero(moved[cells].any(axis=1))
+        for min_q in (0.5, 0.9, 1.0):
+            got = quality.changed_cells(x_new, x, cells, min_q, reference, tn, 0.3)
+            np.testing.assert_array_equal(got[0], moved)
+            np.testing.assert_array_equal(got[1], touched)
+            floor = np.minimum(min_q * reference, tn)[touched]
+            assert got[2] == bool(np.all(q[touched] >= floor))
+            assert got[3] == bool(np.any(q[touched] <= 0.3))
 
 
 def reference_body_pairs(pairs_list, lo, hi):
@@ -317,27 +327,49 @@ def test_body_pairs_and_first_occurrences_equal_the_numpy_selection(seed):
     rng = np.random.default_rng(500 + seed)
     lo, hi = 20, 40
     pairs_list = [rng.integers(0, 60, (rng.integers(0, 25), 2)) for _ in range(1 + seed % 3)]
-    found = [kernels.body_pairs(p, lo, hi) for p in pairs_list]
+    found = [mesh_motion._body_pairs(p, lo, hi) for p in pairs_list]
     own = np.concatenate([f[0] for f in found])
     partner = np.concatenate([f[1] for f in found])
-    first = kernels.first_occurrences(own)
+    first = mesh_motion._first_occurrences(own)
     want_own, want_partner = reference_body_pairs(pairs_list, lo, hi)
     np.testing.assert_array_equal(own[first], want_own)
     np.testing.assert_array_equal(partner[first], want_partner)
 
 
-def test_any_min_sine_below_is_the_numpy_test():
+def test_min_sines_below_is_the_numpy_test():
     rng = np.random.default_rng(9)
     x, cells = distorted_block(rng)
     which = np.arange(len(cells))
-    sines = kernels.cell_min_sines(x, cells, which)
+    sines = reference_min_sines(x, cells)
     for tol in (sines.min() - 1e-12, sines.min(), np.median(sines), 2.0):
-        assert kernels.any_min_sine_below(x, cells, which, tol) == bool(np.any(sines <= tol))
-    assert not kernels.any_min_sine_below(x, cells, which[:0], 1.0)
+        assert quality.min_sines_below(x, cells, which, tol) == bool(np.any(sines <= tol))
+    assert not quality.min_sines_below(x, cells, which[:0], 1.0)
+
+
+def reference_bulges(points, breaks):
+    """``SurfaceCurve``'s bulges as they were in NumPy."""
+    chord = np.diff(points, axis=0)
+    h = np.linalg.norm(chord, axis=1)
+    slope = chord / np.where(h > 0, h, 1.0)[:, None]
+    d2 = np.zeros_like(points)
+    d2[1:-1] = (slope[1:] - slope[:-1]) / np.maximum(h[1:] + h[:-1], np.finfo(float).tiny)[:, None]
+    smooth = ~breaks
+    left, right = smooth[:-1], smooth[1:]
+    total = d2[:-1] * left[:, None] + d2[1:] * right[:, None]
+    count = np.maximum(left.astype(int) + right, 1)
+    return (h**2 / count)[:, None] * total
+
+
+def reference_lengths(curve):
+    """Segment lengths by the 8-point Gauss rule on |dx/du|, as in NumPy."""
+    d = np.diff(curve.points, axis=0)
+    uu = surface.GAUSS_U[None, :, None]
+    dx = d[:, None, :] + (2.0 * uu - 1.0) * curve.bulge[:, None, :]
+    return np.linalg.norm(dx, axis=-1) @ surface.GAUSS_W
 
 
 def reference_tangents(curve):
-    """``SurfaceCurve._tangents`` as it was in NumPy."""
+    """``SurfaceCurve.tangents`` as it was in NumPy."""
     d = np.diff(curve.points, axis=0)
     start, end = d - curve.bulge, d + curve.bulge
     start /= np.linalg.norm(start, axis=1, keepdims=True)
@@ -351,9 +383,7 @@ def reference_tangents(curve):
 
 @pytest.mark.parametrize("seed", range(6))
 def test_curve_construction_kernels_equal_the_numpy_code_bit_for_bit(seed):
-    """Bulges, segment lengths (``_arc`` with u = 1) and end tangents of ``SurfaceCurve``."""
-    from ntncontact.ale.surface import SurfaceCurve, _bulges
-
+    """Bulges, segment lengths and end tangents of ``SurfaceCurve``."""
     rng = np.random.default_rng(600 + seed)
     n = int(rng.integers(2, 40))
     t = np.sort(rng.uniform(0.0, 3.0, n))
@@ -362,10 +392,9 @@ def test_curve_construction_kernels_equal_the_numpy_code_bit_for_bit(seed):
         xy[3] = xy[2]  # a zero-length segment
     corners = rng.uniform(size=n) < 0.2
     curve = SurfaceCurve.from_chain(xy, corners)
-    np.testing.assert_array_equal(curve.bulge, _bulges(curve.points, curve.breaks))
-    seg = np.arange(n - 1)
-    lengths = curve._arc(seg, np.ones(n - 1))
+    np.testing.assert_array_equal(curve.bulge, reference_bulges(curve.points, curve.breaks))
+    lengths = reference_lengths(curve)
     np.testing.assert_array_equal(curve.node_s, np.concatenate([[0.0], np.cumsum(lengths)]))
     if seed != 0:  # (a zero-length segment has no tangent)
-        for got, want in zip(curve._tangents, reference_tangents(curve), strict=True):
+        for got, want in zip(curve.tangents, reference_tangents(curve), strict=True):
             np.testing.assert_array_equal(got, want)

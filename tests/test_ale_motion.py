@@ -7,10 +7,9 @@ import pytest
 from ntncontact.ale.example_mesh_motion import layer_mesh
 from ntncontact.ale.motion import AleBody, lumped_masses, move_ale_body
 from ntncontact.ale.remap import momenta
-from ntncontact.ale.smoothing import cell_min_sines
 from ntncontact.mesh.generators import annulus, rectangle
 from ntncontact.mesh.quadmesh import MeshError
-from ntncontact.mesh.quality import corner_angles_deg, corner_jacobians
+from ntncontact.mesh.quality import cell_min_sines, corner_angles_deg, corner_jacobians
 
 DT = 0.01
 # coordinates and fields are O(1): round-off of a few interpolations and arc-length inversions

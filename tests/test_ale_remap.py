@@ -8,10 +8,16 @@ from ntncontact.ale.remap import (
     conservative_velocity_correction,
     inverse_bilinear,
     momenta,
-    q4_shape,
     remap_fields,
 )
 from ntncontact.mesh.quadmesh import MeshError
+
+XI = np.array([[-1.0, -1.0], [1.0, -1.0], [1.0, 1.0], [-1.0, 1.0]])
+
+
+def q4_shape(xi):
+    """Bilinear shape functions N_a(xi, eta) = (1 + xi_a xi)(1 + eta_a eta)/4, (p, 4)."""
+    return 0.25 * (1.0 + xi[..., None, 0] * XI[:, 0]) * (1.0 + xi[..., None, 1] * XI[:, 1])
 
 
 def perturbed_grid(nx: int, ny: int, amp: float = 0.2, seed: int = 0):

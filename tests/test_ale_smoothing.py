@@ -6,13 +6,12 @@ import pytest
 from ntncontact.ale.smoothing import (
     Smoother,
     boundary_node_mask,
-    cell_min_sines,
     harmonic_extension,
     node_adjacency,
     nodes_within_layers,
 )
 from ntncontact.mesh.quadmesh import MeshError
-from ntncontact.mesh.quality import corner_angles_deg, corner_jacobians
+from ntncontact.mesh.quality import cell_min_sines, corner_angles_deg, corner_jacobians
 
 METHODS = ["laplacian", "angle", "weighted_angle"]
 

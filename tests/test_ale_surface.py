@@ -1,14 +1,14 @@
-"""Surface curve, projection, relocation and respacing of ALE surface nodes."""
+"""Surface curve, normal feet, relocation and respacing of ALE surface nodes."""
 
 import numpy as np
 import pytest
 
 from ntncontact.ale.surface import (
+    GAUSS_U,
+    GAUSS_W,
     SurfaceCurve,
     local_slides,
     point_at,
-    project_to_surface,
-    relocate_surface_nodes,
     respace_surface,
 )
 
@@ -20,6 +20,37 @@ def arc_chain(n: int, radius: float = 1.0, span: float = np.pi / 2) -> np.ndarra
     t = np.linspace(0.0, 1.0, n)
     theta = span * (t + 0.08 * np.sin(np.pi * t) * t)
     return radius * np.column_stack([np.cos(theta), np.sin(theta)])
+
+
+def relocate(chain, active, targets_xy, spacing=None):
+    """Active chain nodes moved to the normal feet of their targets, the others respaced
+    between them (``respace_surface``); (new chain positions, the active nodes' arc lengths)."""
+    curve = SurfaceCurve.from_chain(chain)
+    s_active = curve.normal_foot(np.asarray(targets_xy, dtype=float))[0]
+    mask = np.zeros(len(chain), bool)
+    mask[active] = True
+    targets = np.zeros(len(chain))
+    targets[active] = s_active
+    return respace_surface(chain, mask, targets, spacing=spacing), s_active
+
+
+def closest_point(curve, p, segments):
+    """Arc length of the point of ``segments`` closest to p (Newton on d|x(u) - p|^2/du = 0
+    from the best of 9 samples, per segment)."""
+    best = (np.inf, 0.0)
+    for k in segments:
+        x0, d, q = curve.points[k], curve.points[k + 1] - curve.points[k], curve.bulge[k]
+        x = lambda u, x0=x0, d=d, q=q: x0 + u * d + u * (u - 1.0) * q  # noqa: E731
+        u = min(np.linspace(0.0, 1.0, 9), key=lambda v: np.linalg.norm(x(v) - p))
+        for _ in range(30):
+            r, dx = x(u) - p, d + (2.0 * u - 1.0) * q
+            u = float(np.clip(u - (r @ dx) / (dx @ dx + 2.0 * r @ q), 0.0, 1.0))
+        dist = np.linalg.norm(x(u) - p)
+        if dist < best[0]:
+            gauss = u * GAUSS_U
+            arc = u * np.linalg.norm(d + (2.0 * gauss[:, None] - 1.0) * q, axis=1) @ GAUSS_W
+            best = (dist, curve.node_s[k] + arc)
+    return best[1]
 
 
 def max_radial_error(n: int) -> float:
@@ -52,14 +83,14 @@ def test_projection_of_radial_points_lands_on_the_radius():
     chain = arc_chain(17)
     angles = np.array([0.1, 0.55, 1.2])
     points = 1.3 * np.column_stack([np.cos(angles), np.sin(angles)])
-    s = project_to_surface(chain, points)
+    s = SurfaceCurve.from_chain(chain).normal_foot(points)[0]
     foot = point_at(chain, s)
     foot_angle = np.arctan2(foot[:, 1], foot[:, 0])
     # the foot of the normal on a circle is on the radius, up to the O(h^3) curve error
     np.testing.assert_allclose(foot_angle, angles, atol=1e-4)
     # a node projects onto itself
     curve = SurfaceCurve.from_chain(chain)
-    assert curve.project(chain[5])[0] == pytest.approx(curve.node_s[5], abs=1e-10)
+    assert curve.normal_foot(chain[5])[0][0] == pytest.approx(curve.node_s[5], abs=1e-10)
 
 
 def test_corner_is_a_segment_break():
@@ -85,7 +116,7 @@ def test_respace_preserves_order_anchors_and_stays_on_curve():
     h = curve.length / 20
     targets[[8, 9]] = curve.node_s[[8, 9]] + 3.5 * h
     new = respace_surface(chain, anchors, targets)
-    s_new = curve.project(new)
+    s_new = curve.normal_foot(new)[0]
     assert np.all(np.diff(s_new) > 0)
     np.testing.assert_allclose(s_new[[8, 9]], targets[[8, 9]], atol=1e-9)
     np.testing.assert_allclose(new[[0, -1]], chain[[0, -1]], atol=ROUND)
@@ -109,7 +140,7 @@ def test_respace_rejects_anchor_passing_a_corner():
 
 def test_relocate_moves_active_node_to_projected_target_with_equal_spacing():
     chain = np.column_stack([np.linspace(0, 10, 11), np.zeros(11)])
-    new, s_active = relocate_surface_nodes(chain, [4], [[7.3, 0.2]], spacing=np.ones(10))
+    new, s_active = relocate(chain, [4], [[7.3, 0.2]], spacing=np.ones(10))
     assert s_active[0] == pytest.approx(7.3, abs=1e-12)
     np.testing.assert_allclose(new[:, 1], 0.0, atol=ROUND)
     np.testing.assert_allclose(new[:5, 0], np.linspace(0, 7.3, 5), atol=1e-12)
@@ -121,8 +152,7 @@ def test_relocated_nodes_stay_on_a_circle_to_third_order():
         chain = arc_chain(n)
         # the middle node chases a target 2.3 segments ahead, slightly off the circle
         theta = np.arctan2(chain[n // 2 + 2, 1], chain[n // 2 + 2, 0]) + 0.3 * (np.pi / 2) / n
-        new, _ = relocate_surface_nodes(chain, [n // 2], [[1.01 * np.cos(theta),
-                                                           1.01 * np.sin(theta)]])
+        new, _ = relocate(chain, [n // 2], [[1.01 * np.cos(theta), 1.01 * np.sin(theta)]])
         return np.max(np.abs(np.linalg.norm(new, axis=1) - 1.0))
 
     errors = np.array([radial_error(n) for n in (9, 17, 33)])
@@ -207,7 +237,9 @@ def test_node_tangents_average_the_one_sided_tangents_except_at_breaks():
     for curve in (SurfaceCurve.from_chain(chain), SurfaceCurve.from_chain(chain, corner)):
         nodes = np.arange(9)
         t = curve.node_tangents(nodes)
-        one_sided = curve.tangent_at(curve.node_s)  # of the segment starting at the node
+        d = np.diff(curve.points, axis=0)  # dx/du at u = 0 of each segment, u = 1 of the last
+        one_sided = np.vstack([d - curve.bulge, d[-1:] + curve.bulge[-1:]])
+        one_sided /= np.linalg.norm(one_sided, axis=1, keepdims=True)
         # the parabolas' tangent kinks at smooth nodes are O(h^2) (h ~ 0.2 here: up to 2e-3)
         np.testing.assert_allclose(t, one_sided, atol=5e-3)
         np.testing.assert_allclose(t[curve.breaks], one_sided[curve.breaks], atol=1e-12)
@@ -227,9 +259,9 @@ def test_normal_foot_is_well_defined_at_the_nodes_of_a_curved_chain():
     chain = np.column_stack([x, 0.05 * x**2 + 0.02 * x**4])  # symmetric, curved, non-uniform h''
     curve = SurfaceCurve.from_chain(chain)
     below = chain[4] - [0.0, 0.01]
-    s_close, _ = curve.closest(below)
+    s_close = closest_point(curve, below, (3, 4))
     s_foot, foot = curve.normal_foot(below)
-    assert abs(s_close[0] - curve.node_s[4]) > 1e-9  # the closest point is off the node
+    assert abs(s_close - curve.node_s[4]) > 1e-9  # the closest point is off the node
     assert s_foot[0] == pytest.approx(curve.node_s[4], abs=1e-15)
     np.testing.assert_allclose(foot[0], chain[4], atol=1e-15)
     # mirrored points get mirrored feet, and the foot moves smoothly through the node

@@ -14,9 +14,9 @@ from dataclasses import dataclass, replace
 import numpy as np
 from numpy.typing import NDArray
 
-from .ale import kernels_numba as _kernels
 from .ale.motion import AleUpdate, move_ale_body
 from .contact import PairState
+from .jit import njit
 from .model import AleSetup, Model
 from .problem import StepState
 
@@ -39,10 +39,10 @@ def _ale_nodes_and_partners(setup: AleSetup, contact: Sequence[PairState]):
     """Active global nodes of this ALE body and their partners, over all interfaces: per
     interface the pairs whose body-2 node is the body's first (the report moves the body-2
     node), then those whose body-1 node is; a node listed again keeps its first partner.
-    Compiled (``ale.kernels_numba.body_pairs``, ``first_occurrences``): called at every
-    augmentation with a few pairs, where NumPy's per-call overhead dominated."""
+    Compiled (``_body_pairs``, ``_first_occurrences``): called at every augmentation with a
+    few pairs, where NumPy's per-call overhead dominated."""
     lo, hi = setup.node_offset, setup.node_offset + setup.n_nodes
-    found = [_kernels.body_pairs(np.ascontiguousarray(state.pairs, dtype=np.int64), lo, hi)
+    found = [_body_pairs(np.ascontiguousarray(state.pairs, dtype=np.int64), lo, hi)
              for state in contact]
     if len(found) == 1:
         own, partner = found[0]
@@ -51,7 +51,7 @@ def _ale_nodes_and_partners(setup: AleSetup, contact: Sequence[PairState]):
     else:
         own = np.concatenate([f[0] for f in found])
         partner = np.concatenate([f[1] for f in found])
-    first = _kernels.first_occurrences(own)
+    first = _first_occurrences(own)
     return own[first], partner[first]
 
 
@@ -98,3 +98,35 @@ def _same_request(old, new, setup: AleSetup) -> bool:
         return False
     motion = setup.motion
     return float(np.abs(new[2] - old[2]).max()) <= motion.slide_tolerance * motion.min_spacing
+
+
+@njit(cache=True)
+def _body_pairs(pairs, lo, hi):
+    """(own node, partner) of the pairs (m, 2) with a node in [lo, hi): first the pairs whose
+    body-2 node (column 1) is there, then those whose body-1 node is, each in pair order."""
+    m = pairs.shape[0]
+    count = 0
+    for side in (1, 0):
+        for r in range(m):
+            count += lo <= pairs[r, side] < hi
+    own = np.empty(count, np.int64)
+    partner = np.empty(count, np.int64)
+    c = 0
+    for side in (1, 0):
+        for r in range(m):
+            if lo <= pairs[r, side] < hi:
+                own[c], partner[c] = pairs[r, side], pairs[r, 1 - side]
+                c += 1
+    return own, partner
+
+
+@njit(cache=True)
+def _first_occurrences(values):
+    """Indices (ascending) of the first occurrence of each value: ``np.sort(np.unique(values,
+    return_index=True)[1])``."""
+    order = np.argsort(values, kind="mergesort")  # stable: equal values in index order
+    keep = np.zeros(values.size, np.bool_)
+    for k in range(values.size):
+        if k == 0 or values[order[k]] != values[order[k - 1]]:
+            keep[order[k]] = True
+    return np.flatnonzero(keep)

@@ -16,8 +16,6 @@ from ntncontact.ale.smoothing import (
 from ntncontact.ale.surface import (
     SurfaceCurve,
     point_at,
-    project_to_surface,
-    relocate_surface_nodes,
     respace_surface,
 )
 from ntncontact.ale.velocity import convective_velocity, mesh_velocity
@@ -35,8 +33,6 @@ __all__ = [
     "momenta",
     "nodes_within_layers",
     "point_at",
-    "project_to_surface",
-    "relocate_surface_nodes",
     "remap_fields",
     "respace_surface",
 ]

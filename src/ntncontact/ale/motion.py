@@ -88,14 +88,13 @@ Cost: everything that depends only on the t_n state (the old surface curve, the 
 the recovered nodal gradients of the quadratic remap, the old masses and cell qualities) is
 built once per t_n state and reused by the following augmentations of the step (the body keeps
 the last state's data, recognised by its bytes); the gradients are recovered only at the nodes
-a move needs; topology-only structures (and the open chain's breaks) are built once. The
-loops are compiled (``ale.kernels_numba``): the surface slides (normal foot, clamping, the
-runs between anchors, the slide along the curve), the moved nodes and touched cells with
-their qualities, the remap's hinted point location and interpolation, and the element masses;
-they repeat the NumPy code's operations in its order, so results are the same bit for bit.
-What is left in NumPy per move is mostly the momentum correction (BLAS dot products, whose
-summation order a loop cannot reproduce) and, per t_n state, the surface curve's arc lengths
-and the gradient recovery's least-squares fits (LAPACK).
+a move needs; topology-only structures (and the open chain's breaks) are built once. A move
+is a few compiled calls, each beside the code it belongs to: the whole surface move
+(``ale.surface.slide_chain``), the changed cells and their acceptance
+(``mesh.quality.changed_cells``), the remap's hinted location and interpolation
+(``ale.remap``), the hints and the masses of the changed cells (here). What is left in NumPy
+per move is mostly the momentum correction (BLAS dot products) and, per t_n state, the surface
+curve's arc lengths and the gradient recovery's least-squares fits (LAPACK).
 """
 
 from __future__ import annotations
@@ -109,7 +108,6 @@ import numpy as np
 import scipy.sparse as sp
 from numpy.typing import ArrayLike, NDArray
 
-from ntncontact.ale import kernels_numba as _kernels
 from ntncontact.ale.remap import (
     LazyGradients,
     RemapMethod,
@@ -124,14 +122,20 @@ from ntncontact.ale.smoothing import (
     SmoothingMethod,
     SmoothingResult,
     boundary_node_mask,
-    cell_min_sines,
     harmonic_extension,
     node_adjacency,
 )
-from ntncontact.ale.surface import SurfaceCurve
+from ntncontact.ale.surface import SurfaceCurve, slide_chain
 from ntncontact.mesh.boundary import chain_edge_lengths, surface_chain
 from ntncontact.mesh.quadmesh import MeshError, QuadMesh
-from ntncontact.mesh.quality import check_elements
+from ntncontact.mesh.quality import (
+    cell_min_sines,
+    changed_cells,
+    check_elements,
+    min_sines_below,
+)
+
+from ..jit import njit
 
 __all__ = ["AleBody", "AleUpdate", "lumped_masses", "move_ale_body"]
 
@@ -147,6 +151,7 @@ _CONVECTION = ("remap", "convective_term")
 # evaluation, whose arc-length inversion is iterative, or of the sparse solve): such nodes keep
 # their old position exactly
 _SNAP = 1e-10
+_DEGENERATE = 1e-10  # a corner sine at most this: the cell is checked (``check_elements``)
 # 2 x 2 Gauss points (weights 1) and the Q4 corner signs
 _XI = np.array([[-1.0, -1.0], [1.0, -1.0], [1.0, 1.0], [-1.0, 1.0]])
 _GP = _XI / np.sqrt(3.0)
@@ -405,8 +410,8 @@ class _TnState:
     @cached_property
     def element_masses(self) -> NDArray[np.float64]:
         body = self.body
-        return _kernels.element_masses(self.X, body.cells, np.arange(len(body.cells)),
-                                       body.cell_density, _DN, _SHAPE)
+        return _element_masses(self.X, body.cells, np.arange(len(body.cells)),
+                               body.cell_density, _DN, _SHAPE)
 
     @cached_property
     def masses(self) -> NDArray[np.float64]:
@@ -416,8 +421,8 @@ class _TnState:
         """Lumped masses with the reference images of the cells ``idx`` replaced by those of
         X_new."""
         body = self.body
-        return _kernels.masses_after(X_new, body.cells, idx, body.cell_density, _DN, _SHAPE,
-                                     self.element_masses, self.masses)
+        return _masses_after(X_new, body.cells, idx, body.cell_density, _DN, _SHAPE,
+                             self.element_masses, self.masses)
 
     @cached_property
     def momenta(self) -> tuple[NDArray[np.float64], float]:
@@ -425,7 +430,7 @@ class _TnState:
 
     @cached_property
     def quality(self) -> NDArray[np.float64]:
-        return _min_sines(self.body, self.x, np.ones(len(self.body.cells), bool))
+        return cell_min_sines(self.x, self.body.cells)
 
     @cached_property
     def h_min(self) -> float:
@@ -475,21 +480,12 @@ def lumped_masses(X: ArrayLike, cells: ArrayLike, density: ArrayLike = 1.0) -> N
 
     2 x 2 Gauss is exact: N_a det J is at most quadratic in each reference coordinate.
     """
-    X = np.asarray(X, dtype=float)
-    cell_arr = np.asarray(cells, dtype=np.int64).reshape(-1, 4)
-    return np.bincount(cell_arr.ravel(), _element_masses(X, cell_arr, density).ravel(), len(X))
-
-
-def _element_masses(X: NDArray, cell_arr: NDArray, density: ArrayLike) -> NDArray:
-    """Per cell the 4 lumped nodal masses, (m, 4)."""
-    xe = X[cell_arr]
-    dn = 0.25 * np.stack([_XI[:, 0] * (1.0 + _XI[:, 1] * _GP[:, 1:2]),
-                          _XI[:, 1] * (1.0 + _XI[:, 0] * _GP[:, 0:1])], axis=-1)  # (g, a, k)
-    jac = np.einsum("gak,eai->egik", dn, xe)
-    det = jac[..., 0, 0] * jac[..., 1, 1] - jac[..., 0, 1] * jac[..., 1, 0]
-    shape = 0.25 * (1.0 + _GP[:, None, 0] * _XI[:, 0]) * (1.0 + _GP[:, None, 1] * _XI[:, 1])
-    rho = np.broadcast_to(np.asarray(density, dtype=float), (len(cell_arr),))
-    return np.einsum("eg,ga->ea", det * rho[:, None], shape)
+    X = np.ascontiguousarray(X, dtype=float)
+    cell_arr = np.ascontiguousarray(cells, dtype=np.int64).reshape(-1, 4)
+    rho = np.ascontiguousarray(np.broadcast_to(np.asarray(density, dtype=float),
+                                               (len(cell_arr),)))
+    masses = _element_masses(X, cell_arr, np.arange(len(cell_arr)), rho, _DN, _SHAPE)
+    return np.bincount(cell_arr.ravel(), masses.ravel(), len(X))
 
 
 @dataclass(frozen=True)
@@ -524,10 +520,11 @@ def _open_chain(body: AleBody, active: NDArray) -> _Chain:
     return _Chain(nodes, breaks, np.roll(body.reference_spacing, -start), (pos - start) % n)
 
 
-def _surface_slides(
-    body: AleBody, curve: SurfaceCurve, chain: _Chain, wanted_xy: NDArray
-) -> tuple[NDArray, NDArray, float, int]:
-    """Arc-length slide of every chain node; (slides, clamped mask per active, mismatch, resets).
+def _move_surface(
+    body: AleBody, tn: _TnState, chain: _Chain, wanted_xy: NDArray
+) -> tuple[NDArray, NDArray, NDArray, float, int]:
+    """The chain nodes slid along the t_n curve (``ale.surface.slide_chain``); (positions,
+    slides per chain node, clamped mask per active node, mismatch, resets).
 
     The wanted arc length of an active node is the foot of the normal through its wanted point
     (``SurfaceCurve.normal_foot``, the closest point up to O(h^2) kinks), continued past a break
@@ -535,98 +532,58 @@ def _surface_slides(
     break is seen (and clamped) instead of silently stopping at the break. Slides below the
     tolerance are not made (such nodes get exactly 0); targets are clamped so that the free
     nodes between a node and the breaks around it keep ``min_spacing_ratio`` times the
-    smallest segment of that stretch (breaks do not move). Compiled
-    (``kernels_numba.wanted_arc``, ``anchor_targets``, ``local_slides``).
+    smallest segment of that stretch (breaks do not move).
     """
-    node_s, pos = curve.node_s, chain.position
-    t_start, t_end = curve._tangents
-    wanted = _kernels.wanted_arc(curve.points, curve.bulge, node_s, t_start, t_end,
-                                 curve.breaks, wanted_xy, pos, _SNAP, _kernels.GAUSS_U,
-                                 _kernels.GAUSS_W)
-    targets, clamped, mismatch, idx, anchor_slide, bad = _kernels.anchor_targets(
-        node_s, chain.breaks, pos, wanted, body.slide_tolerance, body.min_spacing_ratio, _SNAP)
+    curve = tn.curve(chain)
+    t_start, t_end = curve.tangents
+    tol = body.spacing_tolerance
+    x, slides, clamped, mismatch, resets, idx, bad = slide_chain(
+        tn.x, chain.nodes, curve.points, curve.bulge, curve.node_s, t_start, t_end,
+        chain.breaks, chain.spacing, wanted_xy, chain.position, body.slide_tolerance,
+        body.min_spacing_ratio, _SNAP, 1.0 - tol, 1.0 / (1.0 - tol), body.respace == "local",
+        _SNAP * tn.h_min)
     if bad >= 0:
         a, b = chain.nodes[idx[bad]], chain.nodes[idx[bad + 1]]
         raise MeshError(f"body '{body.name}': surface nodes {a} and {b} would swap order (their "
                         "contact targets cross); cannot move the ALE mesh")
-    if body.respace == "local":
-        tol = body.spacing_tolerance
-        slides, resets = _kernels.local_slides(node_s, chain.spacing, idx, anchor_slide,
-                                               1.0 - tol, 1.0 / (1.0 - tol))
-        return slides, clamped, float(mismatch), int(resets)
-    ref = np.concatenate([[0.0], np.cumsum(chain.spacing)])
-    s_new = np.interp(ref, ref[idx], node_s[idx] + anchor_slide)
-    slides = s_new - node_s
-    slides[idx] = anchor_slide
-    return slides, clamped, float(mismatch), 0
+    return x, slides, clamped, float(mismatch), int(resets)
 
 
-def _move_surface(
-    tn: _TnState, curve: SurfaceCurve, chain: _Chain, slides: NDArray
-) -> NDArray[np.float64]:
-    """Node positions with the chain nodes slid along the t_n curve (others unchanged)."""
-    return _kernels.slid_positions(tn.x, chain.nodes, chain.breaks, curve.points, curve.bulge,
-                                   curve.node_s, slides, _SNAP * tn.h_min, _kernels.GAUSS_U,
-                                   _kernels.GAUSS_W)
-
-
-def _acceptable(body: AleBody, tn: _TnState, x_new: NDArray,
-                touched: NDArray[np.int64] | None = None) -> bool:
-    """Every cell changed by the move keeps min_quality of its original quality, or does not
-    get worse than at t_n. ``touched``: those cells if already known (``changed_cells``)."""
-    if touched is None:
-        return bool(_kernels.acceptable(x_new, tn.x, body.cells, body.min_quality,
-                                        body.reference_quality, tn.quality))
-    return bool(_kernels.acceptable_cells(x_new, body.cells, touched, body.min_quality,
-                                          body.reference_quality, tn.quality))
+def _changes(body: AleBody, tn: _TnState, x_new: NDArray) -> tuple[NDArray, NDArray, bool, bool]:
+    """(moved nodes, changed cells, acceptable, degenerate) of the move to ``x_new``: every
+    changed cell keeps min_quality of its original quality, or does not get worse than at t_n
+    (``mesh.quality.changed_cells``)."""
+    moved, touched, ok, degenerate = changed_cells(
+        x_new, tn.x, body.cells, body.min_quality, body.reference_quality, tn.quality,
+        _DEGENERATE)
+    return moved, touched, bool(ok), bool(degenerate)
 
 
 def _move_interior(
-    body: AleBody, tn: _TnState, x_surf: NDArray, seeds: NDArray[np.bool_],
-    touched: NDArray[np.int64],
-) -> tuple[NDArray, SmoothingResult | None, str]:
+    body: AleBody, tn: _TnState, x_surf: NDArray
+) -> tuple[NDArray, tuple[NDArray, NDArray, bool, bool], SmoothingResult | None, str]:
     """Interior nodes within ``smoothing_layers`` of the moved surface nodes follow them as far
-    as needed; (positions, position-smoothing result, stage used). ``seeds, touched``: the
-    nodes the surface move changed and their cells (``kernels_numba.changed_cells``); the
-    positions returned are ``x_surf`` itself when the interior does not move."""
+    as needed; (positions, their ``_changes``, position-smoothing result, stage used)."""
+    changes = _changes(body, tn, x_surf)
+    seeds = changes[0]
     if not seeds.any():
-        return x_surf, None, "none"
-    if body.interior == "minimal" and _acceptable(body, tn, x_surf, touched):
-        return x_surf, None, "surface"
+        return x_surf, changes, None, "none"
+    if body.interior == "minimal" and changes[2]:
+        return x_surf, changes, None, "surface"
     free = body.within_layers(seeds, body.smoothing_layers) & ~body.boundary
     if body.smoothing_layers <= 0 or not free.any():
-        return x_surf, None, "surface"
-    x_new = x_surf
+        return x_surf, changes, None, "surface"
     if body.interior != "position":
         u = harmonic_extension(body.adjacency, x_surf - tn.x, free)
         u[np.linalg.norm(u, axis=1) <= _SNAP * tn.h_min] = 0.0
         x_new = np.where(free[:, None], tn.x + u, x_surf)
-        if _acceptable(body, tn, x_new) or body.sweeps <= 0:
-            return x_new, None, "displacement"
+        moved = _changes(body, tn, x_new)
+        if moved[2] or body.sweeps <= 0:
+            return x_new, moved, None, "displacement"
     if body.sweeps <= 0:
-        return x_surf, None, "surface"
+        return x_surf, changes, None, "surface"
     result = body.smoother(free).run(x_surf, max_sweeps=body.sweeps, rel_tol=1e-6)
-    return result.nodes, result, "position"
-
-
-def _hints(body: AleBody, tn: _TnState, chain: _Chain, curve: SurfaceCurve, slides: NDArray,
-           moved: NDArray) -> NDArray[np.int64]:
-    """Likely old cell of every moved node: for a slid surface node the cell of the segment it
-    landed on, otherwise a cell around its old position."""
-    return _kernels.hint_cells(body._node_cell, chain.nodes, tn.segment_cells(chain),
-                               curve.node_s, slides, moved)
-
-
-def _check_cells(body: AleBody, x: NDArray, cells: NDArray[np.int64], label: str) -> None:
-    """MeshError (naming the element) if one of the cells ``cells`` is inverted or degenerate."""
-    if _kernels.any_min_sine_below(x, body.cells, cells, 1e-10):
-        check_elements(x, body.cells, label)
-
-
-def _min_sines(body: AleBody, x: NDArray, cells: NDArray[np.bool_]) -> NDArray[np.float64]:
-    """``cell_min_sines`` of the masked cells (compiled: no gathered copies)."""
-    return _kernels.cell_min_sines(np.ascontiguousarray(x, dtype=float), body.cells,
-                                   np.flatnonzero(cells))
+    return result.nodes, _changes(body, tn, result.nodes), result, "position"
 
 
 def _conserve_momentum(
@@ -698,25 +655,26 @@ def move_ale_body(
     start = x_old[active] if x_start is None else np.asarray(x_start, float).reshape(-1, 2)
     increment = np.asarray(x_pred, dtype=float).reshape(-1, 2) - start
     chain = _open_chain(body, active)
-    curve = tn.curve(chain)
     wanted_xy = np.asarray(x_target, dtype=float).reshape(-1, 2) - increment
-    slides, clamped, mismatch, resets = _surface_slides(body, curve, chain, wanted_xy)
-    x_surf = _move_surface(tn, curve, chain, slides)
-    moved, touched = _kernels.changed_cells(x_surf, x_old, body.cells)  # touched: cell indices
-    x_new, smoothing, stage = _move_interior(body, tn, x_surf, moved, touched)
-    if x_new is not x_surf:  # the interior moved too
-        moved, touched = _kernels.changed_cells(x_new, x_old, body.cells)
+    x_surf, slides, clamped, mismatch, resets = _move_surface(body, tn, chain, wanted_xy)
+    x_new, (moved, touched, _, degenerate), smoothing, stage = _move_interior(body, tn, x_surf)
     if not moved.any():
         return _unchanged(X, d, v, a, mismatch, active[clamped])
-    _check_cells(body, x_new, touched, body.name)
+    if degenerate:
+        check_elements(x_new, body.cells, body.name)
     gradients = tn.gradients if body.remap == "quadratic" else None
+    # likely old cell of every moved node: for a slid surface node the cell of the segment it
+    # landed on, otherwise a cell around its old position
+    hint = _hint_cells(body._node_cell, chain.nodes, tn.segment_cells(chain),
+                       tn.curve(chain).node_s, slides, moved)
     values = tn.remapper.remap(tn.fields, x_new[moved], body.remap, gradients=gradients,
-                               hint=_hints(body, tn, chain, curve, slides, moved))
+                               hint=hint)
     X_new, v_new, a_new = X.copy(), v.copy(), a.copy()
     X_new[moved], v_new[moved], a_new[moved] = values[:, :2], values[:, 2:4], values[:, 4:]
     if body.convection == "convective_term":  # the step's C v term convects v (item 6)
         v_new[moved], a_new[moved] = v[moved], a[moved]
-    _check_cells(body, X_new, touched, f"{body.name} (reference image)")
+    if min_sines_below(X_new, body.cells, touched, _DEGENERATE):
+        check_elements(X_new, body.cells, f"{body.name} (reference image)")
     mass_new = tn.masses_after(X_new, touched)
     v_fixed, change = _conserve_momentum(tn, mass_new, x_new, v_new, moved, touched)
     if body.conserve_momentum and body.convection == "remap":
@@ -727,3 +685,65 @@ def move_ale_body(
         moved=moved, momentum_change=change, smoothing=smoothing, interior=stage,
         resets=resets,
     )
+
+
+# --- compiled loops of a move: remap hints, masses of the changed cells ----------------------
+
+
+@njit(cache=True)
+def _hint_cells(node_cell, chain_nodes, owner, node_s, slides, moved):
+    """Per moved node (in node order) a likely old cell: for a slid chain node the cell owning
+    the segment it landed on, otherwise one around its position."""
+    hint = node_cell.copy()
+    for i in range(slides.size):
+        if slides[i] != 0.0:
+            seg = np.searchsorted(node_s, node_s[i] + slides[i], side="right") - 1
+            hint[chain_nodes[i]] = owner[min(max(seg, 0), owner.size - 1)]
+    return hint[np.flatnonzero(moved)]
+
+
+@njit(cache=True)
+def _element_masses(X, cells, which, density, dn, shape):
+    """Per cell of ``which`` its 4 lumped nodal masses (``lumped_masses``);
+    ``dn`` (g, a, k) natural gradients and ``shape`` (g, a) shape values at the Gauss points,
+    ``density`` per cell of ``which``."""
+    out = np.zeros((which.size, 4))
+    det = np.empty(4)
+    for k in range(which.size):
+        e = which[k]
+        for g in range(4):
+            j00 = j01 = j10 = j11 = 0.0  # J_ik = dx_i / dxi_k
+            for a in range(4):
+                n = cells[e, a]
+                j00 += dn[g, a, 0] * X[n, 0]
+                j01 += dn[g, a, 1] * X[n, 0]
+                j10 += dn[g, a, 0] * X[n, 1]
+                j11 += dn[g, a, 1] * X[n, 1]
+            det[g] = (j00 * j11 - j01 * j10) * density[k]
+        for a in range(4):
+            total = 0.0
+            for g in range(4):
+                total += det[g] * shape[g, a]
+            out[k, a] = total
+    return out
+
+
+@njit(cache=True)
+def _masses_after(X, cells, which, density, dn, shape, old_element_masses, masses):
+    """``_TnState.masses_after``: the lumped masses ``masses`` with the element masses of the
+    cells ``which`` (``old_element_masses`` per cell) replaced by those of X; ``density`` per
+    cell. The changes are accumulated as ``np.bincount`` does (from zero, in cell order) and
+    then added, so the result is the NumPy expression's bit for bit."""
+    dens = np.empty(which.size)
+    for k in range(which.size):
+        dens[k] = density[which[k]]
+    change = _element_masses(X, cells, which, dens, dn, shape)
+    add = np.zeros(masses.size)
+    for k in range(which.size):
+        e = which[k]
+        for a in range(4):
+            add[cells[e, a]] += change[k, a] - old_element_masses[e, a]
+    out = np.empty(masses.size)
+    for i in range(masses.size):
+        out[i] = masses[i] + add[i]
+    return out

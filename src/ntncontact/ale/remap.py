@@ -43,8 +43,9 @@ import numpy as np
 import scipy.sparse as sp
 from numpy.typing import ArrayLike, NDArray
 
-from ntncontact.ale import kernels_numba as _kernels
 from ntncontact.mesh.quadmesh import MeshError
+
+from ..jit import njit
 
 __all__ = [
     "LazyGradients",
@@ -53,7 +54,6 @@ __all__ = [
     "conservative_velocity_correction",
     "inverse_bilinear",
     "momenta",
-    "q4_shape",
     "remap_fields",
     "remap_topology",
     "two_ring_patches",
@@ -64,12 +64,6 @@ RemapMethod = Literal["linear", "quadratic"]
 _XI = np.array([[-1.0, -1.0], [1.0, -1.0], [1.0, 1.0], [-1.0, 1.0]])
 _INSIDE_TOL = 1e-9  # reference-coordinate slack for points on a shared edge (round-off)
 _SAME_NODE = 1e-12  # a point this close (times the cell size) to an old node takes its value
-
-
-def q4_shape(xi: ArrayLike) -> NDArray[np.float64]:
-    """Bilinear shape functions N_a(xi, eta) = (1 + xi_a xi)(1 + eta_a eta)/4, shape (p, 4)."""
-    xi = np.asarray(xi, dtype=float)
-    return 0.25 * (1.0 + xi[..., None, 0] * _XI[:, 0]) * (1.0 + xi[..., None, 1] * _XI[:, 1])
 
 
 def inverse_bilinear(
@@ -85,25 +79,8 @@ def inverse_bilinear(
     lead = np.broadcast_shapes(cell_xy.shape[:-2], points.shape[:-1])
     cells = np.ascontiguousarray(np.broadcast_to(cell_xy, (*lead, 4, 2))).reshape(-1, 4, 2)
     pts = np.ascontiguousarray(np.broadcast_to(points, (*lead, 2))).reshape(-1, 2)
-    # compiled Newton loop (``kernels_numba``), run until every point has converged
-    xi, res = _kernels.inverse_bilinear(cells, pts, iterations)
+    xi, res = _inverse_bilinear(cells, pts, iterations)  # until every point has converged
     return xi.reshape(*lead, 2), res.reshape(lead)
-
-
-def _nearest_on_boundary(
-    cell_xy: NDArray, points: NDArray
-) -> tuple[NDArray, NDArray, NDArray]:
-    """Closest point of each cell's boundary to each point: (distance, xi, local edge) over
-    leading axes; local edge k runs from corner k to corner k + 1."""
-    a, b = cell_xy, np.roll(cell_xy, -1, axis=-2)  # the 4 straight edges a -> b
-    d = b - a
-    t = np.einsum("...ei,...ei->...e", points[..., None, :] - a, d)
-    t = np.clip(t / np.maximum(np.einsum("...ei,...ei->...e", d, d), 1e-300), 0.0, 1.0)
-    dist = np.linalg.norm(a + t[..., None] * d - points[..., None, :], axis=-1)
-    edge = np.argmin(dist, axis=-1)
-    te = np.take_along_axis(t, edge[..., None], axis=-1)[..., 0]
-    start, end = _XI[edge], _XI[(edge + 1) % 4]  # the bilinear map is linear along an edge
-    return np.min(dist, axis=-1), start + te[..., None] * (end - start), edge
 
 
 class RemapTopology:
@@ -233,10 +210,9 @@ class Remapper:
     def _try_hints(self, pts: NDArray, hint: NDArray, outside_tol: float
                    ) -> tuple[NDArray, NDArray, NDArray]:
         """(cell or -1, xi, clamped) of the points found in (or just outside a boundary edge
-        of) their hint cell (compiled: ``kernels_numba.locate_in_hints``)."""
-        return _kernels.locate_in_hints(self._cell_xy, self.cell_size, self._outer_edge,
-                                        np.ascontiguousarray(pts), hint, outside_tol,
-                                        _INSIDE_TOL, 12)
+        of) their hint cell."""
+        return _locate_in_hints(self._cell_xy, self.cell_size, self._outer_edge,
+                                np.ascontiguousarray(pts), hint, outside_tol, _INSIDE_TOL, 12)
 
     def _clamp(
         self, pts: NDArray, todo: NDArray, cell: NDArray, xi: NDArray, outside_tol: float
@@ -244,7 +220,7 @@ class Remapper:
         """Fill cell and xi of outside points with the nearest boundary point of nearby cells."""
         _, cand = self._tree.query(pts[todo], k=self._k)
         cand = cand.reshape(len(todo), self._k)
-        dist, bxi, _ = _nearest_on_boundary(self._cell_xy[cand], pts[todo][:, None, :])
+        dist, bxi = _nearest_on_boundaries(self._cell_xy, cand, np.ascontiguousarray(pts[todo]))
         best = np.argmin(dist, axis=1)
         rows = np.arange(len(todo))
         far = dist[rows, best] > outside_tol * self.cell_size[cand[rows, best]]
@@ -292,7 +268,7 @@ class Remapper:
         # g_a . (p - x(xi)) (a clamped point lies off its cell: continue linearly to it)
         # ... and a point on an old node keeps that node's value exactly (no round-off of the
         # interpolation; the node is a corner of the located cell: no node search needed)
-        out = _kernels.interpolate_at_nodes(
+        out = _interpolate_at_nodes(
             self.nodes, self.cells, np.ascontiguousarray(f2), loc.cell,
             np.ascontiguousarray(loc.xi), np.ascontiguousarray(pts),
             np.ascontiguousarray(g, dtype=float), method == "quadratic", self.cell_size,
@@ -443,3 +419,182 @@ def conservative_velocity_correction(
     spin = omega * r[:, ::-1]
     spin[:, 0] = -spin[:, 0]
     return v + a + spin
+
+
+# --- compiled loops: Newton inversion, hinted location, interpolation ----------------------
+
+@njit(cache=True)
+def _inverse_bilinear(cell_xy, points, iterations):
+    """Reference coordinates (m, 2) and residual distances (m,) of points in Q4 cells
+    (``inverse_bilinear`` for (m, 4, 2) cells and (m, 2) points)."""
+    m = points.shape[0]
+    a = np.empty((m, 4, 2))  # a0 (minus the point), a1, a2, a3 of x = a0 + a1 xi + ...
+    for e in range(m):
+        for i in range(2):
+            x0, x1, x2, x3 = cell_xy[e, 0, i], cell_xy[e, 1, i], cell_xy[e, 2, i], cell_xy[e, 3, i]
+            a[e, 0, i] = 0.25 * (x0 + x1 + x2 + x3) - points[e, i]
+            a[e, 1, i] = 0.25 * (-x0 + x1 + x2 - x3)
+            a[e, 2, i] = 0.25 * (-x0 - x1 + x2 + x3)
+            a[e, 3, i] = 0.25 * (x0 - x1 + x2 - x3)
+    xi = np.zeros((m, 2))
+    for _ in range(iterations):
+        change = 0.0
+        for e in range(m):
+            x, y = xi[e, 0], xi[e, 1]
+            xy = x * y
+            r0 = a[e, 0, 0] + a[e, 1, 0] * x + a[e, 2, 0] * y + a[e, 3, 0] * xy
+            r1 = a[e, 0, 1] + a[e, 1, 1] * x + a[e, 2, 1] * y + a[e, 3, 1] * xy
+            g10, g11 = a[e, 1, 0] + a[e, 3, 0] * y, a[e, 1, 1] + a[e, 3, 1] * y
+            g20, g21 = a[e, 2, 0] + a[e, 3, 0] * x, a[e, 2, 1] + a[e, 3, 1] * x
+            det = g10 * g21 - g11 * g20
+            if not np.abs(det) > 0:
+                det = 1.0
+            nx = min(max(x - (g21 * r0 - g20 * r1) / det, -4.0), 4.0)
+            ny = min(max(y - (g10 * r1 - g11 * r0) / det, -4.0), 4.0)
+            change = max(change, np.abs(nx - x), np.abs(ny - y))
+            xi[e, 0], xi[e, 1] = nx, ny
+        if change <= 1e-15:  # converged to round-off of O(1) reference coordinates
+            break
+    res = np.empty(m)
+    for e in range(m):
+        x, y = xi[e, 0], xi[e, 1]
+        xy = x * y
+        r0 = a[e, 0, 0] + a[e, 1, 0] * x + a[e, 2, 0] * y + a[e, 3, 0] * xy
+        r1 = a[e, 0, 1] + a[e, 1, 1] * x + a[e, 2, 1] * y + a[e, 3, 1] * xy
+        res[e] = np.sqrt(r0 * r0 + r1 * r1)
+    return xi, res
+
+
+@njit(cache=True)
+def _nearest_on_cell_boundary(cell_xy, e, p0, p1):
+    """Closest point of cell e's straight edges to (p0, p1); (distance, xi0, xi1, local edge
+    k, which runs from corner k to corner k + 1: the bilinear map is linear along it)."""
+    best_dist, best_t, edge = np.inf, 0.0, 0
+    for k in range(4):
+        a0, a1 = cell_xy[e, k, 0], cell_xy[e, k, 1]
+        d0, d1 = cell_xy[e, (k + 1) % 4, 0] - a0, cell_xy[e, (k + 1) % 4, 1] - a1
+        t = (p0 - a0) * d0 + (p1 - a1) * d1
+        t = min(max(t / max(d0 * d0 + d1 * d1, 1e-300), 0.0), 1.0)
+        r0, r1 = a0 + t * d0 - p0, a1 + t * d1 - p1
+        dist = np.sqrt(r0 * r0 + r1 * r1)
+        if k == 0 or dist < best_dist:  # argmin: the first minimum
+            best_dist, best_t, edge = dist, t, k
+    s0, s1 = _XI[edge, 0], _XI[edge, 1]
+    e0, e1 = _XI[(edge + 1) % 4, 0], _XI[(edge + 1) % 4, 1]
+    return best_dist, s0 + best_t * (e0 - s0), s1 + best_t * (e1 - s1), edge
+
+
+@njit(cache=True)
+def _nearest_on_boundaries(cell_xy, cand, pts):
+    """Per point i and candidate cell cand[i, c]: the distance to that cell's boundary and the
+    reference coordinates of the closest boundary point; ((p, k), (p, k, 2))."""
+    p, k = cand.shape
+    dist = np.empty((p, k))
+    xi = np.empty((p, k, 2))
+    for i in range(p):
+        for c in range(k):
+            dist[i, c], xi[i, c, 0], xi[i, c, 1], _ = _nearest_on_cell_boundary(
+                cell_xy, cand[i, c], pts[i, 0], pts[i, 1])
+    return dist, xi
+
+
+@njit(cache=True)
+def _locate_in_hints(cell_xy, cell_size, outer_edge, pts, hint, outside_tol, inside_tol,
+                    iterations):
+    """``Remapper._try_hints``: (cell or -1, xi, clamped) of points found in their hint cell or
+    just outside one of its mesh-boundary edges (clamped onto it). The hinted points are
+    inverted as one batch (the Newton loop stops for the whole batch)."""
+    n = pts.shape[0]
+    cell = np.full(n, -1, np.int64)
+    xi = np.zeros((n, 2))
+    clamped = np.zeros(n, np.bool_)
+    which = np.flatnonzero(hint >= 0)
+    count = which.size
+    batch_xy = np.empty((count, 4, 2))
+    batch_pts = np.empty((count, 2))
+    for c in range(count):
+        batch_xy[c] = cell_xy[hint[which[c]]]
+        batch_pts[c] = pts[which[c]]
+    found, res = _inverse_bilinear(batch_xy, batch_pts, iterations)
+    for c in range(count):
+        i, h = which[c], hint[which[c]]
+        if (max(np.abs(found[c, 0]), np.abs(found[c, 1])) <= 1.0 + inside_tol
+                and res[c] <= 1e-9 * cell_size[h]):
+            cell[i], xi[i, 0], xi[i, 1] = h, found[c, 0], found[c, 1]
+            continue
+        p0, p1 = pts[i, 0], pts[i, 1]
+        dist, x0, x1, edge = _nearest_on_cell_boundary(cell_xy, h, p0, p1)
+        a0, a1 = cell_xy[h, edge, 0], cell_xy[h, edge, 1]
+        b0, b1 = cell_xy[h, (edge + 1) % 4, 0], cell_xy[h, (edge + 1) % 4, 1]
+        outward = (b0 - a0) * (p1 - a1) - (b1 - a1) * (p0 - a0) < 0.0  # right of a -> b
+        if outer_edge[h, edge] and outward and dist <= outside_tol * cell_size[h]:
+            cell[i], xi[i, 0], xi[i, 1], clamped[i] = h, x0, x1, True
+    return cell, xi, clamped
+
+
+@njit(cache=True)
+def _interpolate(nodes, cells, fields, cell, xi, pts, gradients, quadratic):
+    """``Remapper.remap``'s interpolant at located points: Q4 values (4.18) and, if
+    ``quadratic``, the gradient-enhanced terms with ``gradients`` (p, 4, k, 2) of the cells'
+    nodes. Summed per point over the corners (the order of the NumPy einsums it replaced;
+    the two gradient terms over the corners of per-corner sums over the two coordinates)."""
+    p, k = pts.shape[0], fields.shape[1]
+    out = np.zeros((p, k))
+    shape = np.empty(4)
+    for q in range(p):
+        e = cell[q]
+        for a in range(4):
+            shape[a] = 0.25 * (1.0 + xi[q, 0] * _XI[a, 0]) * (
+                1.0 + xi[q, 1] * _XI[a, 1])
+        for j in range(k):
+            total = 0.0
+            for a in range(4):
+                total += shape[a] * fields[cells[e, a], j]
+            out[q, j] = total
+        if not quadratic:
+            continue
+        off0, off1 = 0.0, 0.0  # p - x(xi): a clamped point lies off its cell
+        for a in range(4):
+            off0 += shape[a] * nodes[cells[e, a], 0]
+            off1 += shape[a] * nodes[cells[e, a], 1]
+        off0, off1 = pts[q, 0] - off0, pts[q, 1] - off1
+        for j in range(k):
+            near = 0.0
+            for a in range(4):
+                n = cells[e, a]
+                g0, g1 = gradients[q, a, j, 0], gradients[q, a, j, 1]
+                near += shape[a] * g0 * (pts[q, 0] - nodes[n, 0]) + shape[a] * g1 * (
+                    pts[q, 1] - nodes[n, 1])
+            out[q, j] = out[q, j] + 0.5 * near
+        for j in range(k):
+            far = 0.0
+            for a in range(4):
+                g0, g1 = gradients[q, a, j, 0], gradients[q, a, j, 1]
+                far += shape[a] * g0 * off0 + shape[a] * g1 * off1
+            out[q, j] = out[q, j] + 0.5 * far
+    return out
+
+
+@njit(cache=True)
+def _interpolate_at_nodes(nodes, cells, fields, cell, xi, pts, gradients, quadratic, cell_size,
+                         same_node):
+    """``interpolate``, except that a point within ``same_node`` times its cell's size of a
+    corner of its cell takes that node's values exactly (``Remapper.remap``: unmoved nodes keep
+    their fields). In a conforming mesh a point on an old node is located in a cell with that
+    node as a corner (inside, or clamped onto its boundary), so the corners are the only
+    candidates: this replaces a k-d tree query over all nodes, with the same distance
+    (sqrt(d0^2 + d1^2)) and the same test."""
+    out = _interpolate(nodes, cells, fields, cell, xi, pts, gradients, quadratic)
+    for q in range(pts.shape[0]):
+        e = cell[q]
+        best, near = np.inf, -1
+        for a in range(4):
+            n = cells[e, a]
+            d0, d1 = pts[q, 0] - nodes[n, 0], pts[q, 1] - nodes[n, 1]
+            dist = np.sqrt(d0 * d0 + d1 * d1)
+            if dist < best:
+                best, near = dist, n
+        if best <= same_node * cell_size[e]:
+            for j in range(fields.shape[1]):
+                out[q, j] = fields[near, j]
+    return out

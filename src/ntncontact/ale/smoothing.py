@@ -46,7 +46,6 @@ __all__ = [
     "SmoothingResult",
     "Smoother",
     "boundary_node_mask",
-    "cell_min_sines",
     "harmonic_extension",
     "node_adjacency",
     "nodes_within_layers",
@@ -135,17 +134,6 @@ def harmonic_extension(
                                shape=(idx.size, idx.size))
         u[idx] = spla.splu(system, permc_spec="MMD_AT_PLUS_A").solve(rhs)
     return u
-
-
-def cell_min_sines(nodes: ArrayLike, cells: ArrayLike) -> NDArray[np.float64]:
-    """Smallest corner sine (corner Jacobian over the two edge lengths) of every cell, (m,):
-    1 for a rectangle, <= 0 for an inverted or degenerate corner."""
-    x = np.asarray(nodes, dtype=float)[np.asarray(cells, dtype=np.int64).reshape(-1, 4)]
-    a, b = np.roll(x, -1, axis=1) - x, np.roll(x, 1, axis=1) - x
-    cross = a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]
-    scale = np.sqrt(np.einsum("...i,...i->...", a, a) * np.einsum("...i,...i->...", b, b))
-    sines = np.divide(cross, scale, out=np.full_like(cross, -1.0), where=scale > 0)
-    return sines.min(axis=1)
 
 
 def _ccw_angle(a: NDArray, b: NDArray) -> NDArray:

@@ -16,6 +16,12 @@ The error of the curve against a smooth surface is O(h^3).
 The chain is open: its end nodes are breaks and are never moved by ``respace_surface``. For a
 closed boundary with corners, start and end the chain at a corner.
 
+The loops are compiled (Numba; the arrays are tiny, a few points on a chain of tens of segments,
+so NumPy was dominated by per-call overhead): the curve's construction and evaluation, the
+normal foot, and the ALE update's whole surface move (``slide_chain``: wanted arc lengths,
+clamping, respacing, new positions). Sums over a run of segments follow NumPy's pairwise order
+(``_pairwise_sum``), so the results equal those of the NumPy code they replaced bit for bit.
+
 ``respace_surface`` places every free node between the anchors in given proportions, so nodes move
 whenever the current spacing differs from those proportions, slide or no slide. ``local_slides``
 is the incremental alternative used by the ALE update: it spreads each anchor's slide over as few
@@ -31,22 +37,15 @@ from functools import cached_property
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from ntncontact.ale import kernels_numba as _kernels
+from ..jit import njit
 
-__all__ = [
-    "SurfaceCurve",
-    "local_slides",
-    "point_at",
-    "project_to_surface",
-    "relocate_surface_nodes",
-    "respace_surface",
-]
+__all__ = ["SurfaceCurve", "local_slides", "point_at", "respace_surface", "slide_chain"]
 
 # 8-point Gauss-Legendre on [0, 1]: |x'(u)| is the root of a quadratic in u, smooth on a segment
-_GAUSS_X, _GAUSS_W = np.polynomial.legendre.leggauss(8)
-_GAUSS_U = 0.5 * (_GAUSS_X + 1.0)
-_GAUSS_W = 0.5 * _GAUSS_W
-_CONVERGED = 1e-14  # Newton updates of a local parameter u in [0, 1] below this: round-off
+_GX, _GW = np.polynomial.legendre.leggauss(8)
+GAUSS_U = 0.5 * (_GX + 1.0)
+GAUSS_W = 0.5 * _GW
+CONVERGED = 1e-14  # Newton updates of a local parameter u in [0, 1] below this: round-off
 
 
 def _break_mask(n: int, corner_mask: ArrayLike | None) -> NDArray[np.bool_]:
@@ -57,19 +56,244 @@ def _break_mask(n: int, corner_mask: ArrayLike | None) -> NDArray[np.bool_]:
     return brk
 
 
-def _bulges(points: NDArray, breaks: NDArray) -> NDArray:
-    """q_i of every segment: h_i^2 times the mean second divided difference at its smooth ends
-    (the NumPy form of ``kernels_numba.bulges``, which ``SurfaceCurve.from_chain`` uses)."""
-    chord = np.diff(points, axis=0)
-    h = np.linalg.norm(chord, axis=1)
-    slope = chord / np.where(h > 0, h, 1.0)[:, None]
-    d2 = np.zeros_like(points)
-    d2[1:-1] = (slope[1:] - slope[:-1]) / np.maximum(h[1:] + h[:-1], np.finfo(float).tiny)[:, None]
-    smooth = ~breaks
-    left, right = smooth[:-1], smooth[1:]
-    total = d2[:-1] * left[:, None] + d2[1:] * right[:, None]
-    count = np.maximum(left.astype(int) + right, 1)
-    return (h**2 / count)[:, None] * total
+@njit(cache=True, inline="always")
+def _eval(points, bulge, seg, u):
+    """Position and dx/du of segment ``seg`` at u: (x0, x1, dx0, dx1)."""
+    p0, p1 = points[seg, 0], points[seg, 1]
+    d0, d1 = points[seg + 1, 0] - p0, points[seg + 1, 1] - p1
+    q0, q1 = bulge[seg, 0], bulge[seg, 1]
+    w = u * (u - 1.0)
+    c = 2.0 * u - 1.0
+    return p0 + u * d0 + w * q0, p1 + u * d1 + w * q1, d0 + c * q0, d1 + c * q1
+
+
+@njit(cache=True)
+def _arc(points, bulge, seg, u, gauss_u, gauss_w):
+    """Arc length from the start of segment ``seg`` to u (8-point Gauss)."""
+    total = 0.0
+    for g in range(gauss_u.size):
+        _, _, dx0, dx1 = _eval(points, bulge, seg, u * gauss_u[g])
+        total += np.sqrt(dx0 * dx0 + dx1 * dx1) * gauss_w[g]
+    return u * total
+
+
+@njit(cache=True)
+def _bulges(points, breaks):
+    """q_i of every segment: h_i^2 times the mean second divided difference at its smooth ends."""
+    n = points.shape[0]
+    h = np.empty(n - 1)
+    slope = np.empty((n - 1, 2))
+    for i in range(n - 1):
+        c0, c1 = points[i + 1, 0] - points[i, 0], points[i + 1, 1] - points[i, 1]
+        h[i] = np.sqrt(c0 * c0 + c1 * c1)
+        w = h[i] if h[i] > 0 else 1.0
+        slope[i, 0], slope[i, 1] = c0 / w, c1 / w
+    d2 = np.zeros((n, 2))
+    tiny = np.finfo(np.float64).tiny
+    for i in range(1, n - 1):
+        span = h[i] + h[i - 1]
+        if not (span >= tiny or np.isnan(span)):  # np.maximum(span, tiny), NaN kept
+            span = tiny
+        d2[i, 0] = (slope[i, 0] - slope[i - 1, 0]) / span
+        d2[i, 1] = (slope[i, 1] - slope[i - 1, 1]) / span
+    out = np.empty((n - 1, 2))
+    for i in range(n - 1):
+        left, right = 0.0 if breaks[i] else 1.0, 0.0 if breaks[i + 1] else 1.0
+        count = max(int(left) + int(right), 1)
+        factor = h[i] * h[i] / count
+        for k in range(2):
+            out[i, k] = factor * (d2[i, k] * left + d2[i + 1, k] * right)
+    return out
+
+
+@njit(cache=True)
+def _segment_speeds(points, bulge, gauss_u):
+    """|dx/du| of every segment at the Gauss points u (n - 1, g): the integrand of the
+    segment lengths (the arc length of a whole segment before its quadrature sum)."""
+    out = np.empty((bulge.shape[0], gauss_u.size))
+    for i in range(bulge.shape[0]):
+        for g in range(gauss_u.size):
+            _, _, dx0, dx1 = _eval(points, bulge, i, 1.0 * gauss_u[g])
+            out[i, g] = np.sqrt(dx0 * dx0 + dx1 * dx1)
+    return out
+
+
+@njit(cache=True)
+def _end_tangents(points, bulge, breaks):
+    """Unit tangents at the start and end of every segment, the
+    normalized mean of the two one-sided tangents at a smooth node."""
+    m = bulge.shape[0]
+    start, end = np.empty((m, 2)), np.empty((m, 2))
+    for i in range(m):
+        d0, d1 = points[i + 1, 0] - points[i, 0], points[i + 1, 1] - points[i, 1]
+        s0, s1 = d0 - bulge[i, 0], d1 - bulge[i, 1]
+        e0, e1 = d0 + bulge[i, 0], d1 + bulge[i, 1]
+        ns, ne = np.sqrt(s0 * s0 + s1 * s1), np.sqrt(e0 * e0 + e1 * e1)
+        start[i, 0], start[i, 1] = s0 / ns, s1 / ns
+        end[i, 0], end[i, 1] = e0 / ne, e1 / ne
+    for i in range(m - 1):  # node i + 1 joins segments i and i + 1
+        if breaks[i + 1]:
+            continue
+        a0, a1 = end[i, 0] + start[i + 1, 0], end[i, 1] + start[i + 1, 1]
+        na = np.sqrt(a0 * a0 + a1 * a1)
+        a0, a1 = a0 / na, a1 / na
+        end[i, 0], end[i, 1] = a0, a1
+        start[i + 1, 0], start[i + 1, 1] = a0, a1
+    return start, end
+
+
+@njit(cache=True)
+def _segment_of(points, bulge, node_s, s, gauss_u, gauss_w):
+    """Segment and local u of arc-length positions s (clamped to the chain): Newton on
+    arc(u) = ds from the chord estimate."""
+    n_seg = bulge.shape[0]
+    length = node_s[-1]
+    p = s.size
+    seg = np.empty(p, np.int64)
+    u = np.empty(p)
+    ds = np.empty(p)
+    for i in range(p):
+        si = min(max(s[i], 0.0), length)
+        k = np.searchsorted(node_s, si, side="right") - 1
+        k = min(max(k, 0), n_seg - 1)
+        seg[i] = k
+        ds[i] = si - node_s[k]
+        seg_len = node_s[k + 1] - node_s[k]
+        u[i] = ds[i] / seg_len if seg_len > 0 else 0.0
+    for _ in range(6):  # Newton on arc(u) = ds, stopped when every step is round-off
+        moving = False
+        for i in range(p):
+            _, _, dx0, dx1 = _eval(points, bulge, seg[i], u[i])
+            speed = np.sqrt(dx0 * dx0 + dx1 * dx1)
+            step = 0.0
+            if speed > 0:
+                step = (_arc(points, bulge, seg[i], u[i], gauss_u, gauss_w) - ds[i]) / speed
+            u[i] = min(max(u[i] - step, 0.0), 1.0)
+            if np.abs(step) > CONVERGED:
+                moving = True
+        if not moving:
+            break
+    return seg, u
+
+
+@njit(cache=True)
+def _point_at(points, bulge, node_s, s, gauss_u, gauss_w):
+    """Positions (p, 2) at arc-length parameters s."""
+    seg, u = _segment_of(points, bulge, node_s, s, gauss_u, gauss_w)
+    out = np.empty((s.size, 2))
+    for i in range(s.size):
+        x0, x1, _, _ = _eval(points, bulge, seg[i], u[i])
+        out[i, 0], out[i, 1] = x0, x1
+    return out
+
+
+@njit(cache=True)
+def _nearest_segments(points, bulge, pts, keep):
+    """Per point the ``keep`` segments with the closest of 9 samples each (stable order)."""
+    n_seg = bulge.shape[0]
+    p = pts.shape[0]
+    out = np.empty((p, keep), np.int64)
+    nearest = np.empty(n_seg)
+    for i in range(p):
+        for k in range(n_seg):
+            best = np.inf
+            for j in range(9):
+                x0, x1, _, _ = _eval(points, bulge, k, j / 8.0)
+                r0, r1 = x0 - pts[i, 0], x1 - pts[i, 1]
+                best = min(best, np.sqrt(r0 * r0 + r1 * r1))
+            nearest[k] = best
+        taken = np.zeros(n_seg, np.bool_)
+        for c in range(keep):  # repeated minimum, ties to the lower index: a stable argsort
+            pick = -1
+            for k in range(n_seg):
+                if not taken[k] and (pick < 0 or nearest[k] < nearest[pick]):
+                    pick = k
+            taken[pick] = True
+            out[i, c] = pick
+    return out
+
+
+@njit(cache=True, inline="always")
+def _foot_residual(points, bulge, seg, u, t00, t01, t10, t11, p0, p1):
+    """f(u) = (p - x(u)) . t(u) and df/du (``SurfaceCurve.normal_foot``)."""
+    x0, x1, dx0, dx1 = _eval(points, bulge, seg, u)
+    e0, e1 = t10 - t00, t11 - t01
+    t0, t1 = t00 + u * e0, t01 + u * e1
+    r0, r1 = p0 - x0, p1 - x1
+    return r0 * t0 + r1 * t1, (r0 * e0 + r1 * e1) - (dx0 * t0 + dx1 * t1)
+
+
+@njit(cache=True)
+def _normal_foot(points, bulge, node_s, t_start, t_end, pts, gauss_u, gauss_w):
+    """Arc-length parameters and positions of the normal feet (``SurfaceCurve.normal_foot``)."""
+    p = pts.shape[0]
+    keep = min(3, bulge.shape[0])
+    seg = _nearest_segments(points, bulge, pts, keep)
+    f0 = np.empty((p, keep))
+    root = np.empty((p, keep), np.bool_)
+    u = np.empty((p, keep))
+    lo = np.zeros((p, keep))
+    hi = np.ones((p, keep))
+    for i in range(p):
+        for c in range(keep):
+            k = seg[i, c]
+            a, _ = _foot_residual(points, bulge, k, 0.0, t_start[k, 0], t_start[k, 1],
+                                  t_end[k, 0], t_end[k, 1], pts[i, 0], pts[i, 1])
+            b, _ = _foot_residual(points, bulge, k, 1.0, t_start[k, 0], t_start[k, 1],
+                                  t_end[k, 0], t_end[k, 1], pts[i, 0], pts[i, 1])
+            f0[i, c] = a
+            root[i, c] = (a >= 0.0) and (b <= 0.0)
+            if root[i, c]:
+                u[i, c] = a / ((a - b) if a > b else 1.0)
+            else:
+                u[i, c] = 0.0 if a < 0 else 1.0
+    for _ in range(30):  # Newton on the bracketed cubic, bisection when it leaves the bracket
+        moving = False
+        for i in range(p):
+            for c in range(keep):
+                k = seg[i, c]
+                uc = u[i, c]
+                f, df = _foot_residual(points, bulge, k, uc, t_start[k, 0], t_start[k, 1],
+                                       t_end[k, 0], t_end[k, 1], pts[i, 0], pts[i, 1])
+                if f > 0.0:
+                    lo[i, c] = uc
+                else:
+                    hi[i, c] = uc
+                step = f / df if df < 0.0 else np.inf
+                new = uc - step
+                if not (new >= lo[i, c] and new <= hi[i, c]):
+                    new = 0.5 * (lo[i, c] + hi[i, c])
+                if not (root[i, c] and f != 0.0):
+                    new = uc
+                if np.abs(new - uc) > CONVERGED:
+                    moving = True
+                u[i, c] = new
+        if not moving:
+            break
+    s = np.empty(p)
+    foot = np.empty((p, 2))
+    for i in range(p):
+        best, best_d, none = 0, np.inf, True
+        for c in range(keep):
+            if root[i, c]:
+                none = False
+                x0, x1, _, _ = _eval(points, bulge, seg[i, c], u[i, c])
+                r0, r1 = x0 - pts[i, 0], x1 - pts[i, 1]
+                dist = np.sqrt(r0 * r0 + r1 * r1)
+                if dist < best_d:
+                    best, best_d = c, dist
+        if none:  # beyond a break: the nearest candidate's nearer end
+            best_d = np.inf
+            for c in range(keep):
+                x0, x1, _, _ = _eval(points, bulge, seg[i, c], 0.0 if f0[i, c] < 0 else 1.0)
+                r0, r1 = x0 - pts[i, 0], x1 - pts[i, 1]
+                dist = np.sqrt(r0 * r0 + r1 * r1)
+                if dist < best_d:
+                    best, best_d = c, dist
+        k, uc = seg[i, best], u[i, best]
+        s[i] = node_s[k] + _arc(points, bulge, k, uc, gauss_u, gauss_w)
+        foot[i, 0], foot[i, 1], _, _ = _eval(points, bulge, k, uc)
+    return s, foot
 
 
 @dataclass(frozen=True)
@@ -88,106 +312,36 @@ class SurfaceCurve:
         if points.ndim != 2 or points.shape[1] != 2 or len(points) < 2:
             raise ValueError(f"a surface chain needs shape (n >= 2, 2), got {points.shape}")
         breaks = _break_mask(len(points), corner_mask)
-        # built once per t_n state of an ALE body: the elementwise parts compiled (the same
-        # operations as ``_bulges`` and ``_arc(seg, 1)``), the quadrature's sum left to NumPy
-        # (a BLAS product, whose summation order a loop cannot reproduce)
-        bulge = _kernels.bulges(points, breaks)
-        lengths = _kernels.segment_speeds(points, bulge, _GAUSS_U) @ _GAUSS_W
+        bulge = _bulges(points, breaks)
+        # the quadrature's sum is a BLAS product (its order is kept from the NumPy code)
+        lengths = _segment_speeds(points, bulge, GAUSS_U) @ GAUSS_W
         return cls(points, breaks, bulge, np.concatenate([[0.0], np.cumsum(lengths)]))
 
     @property
     def length(self) -> float:
         return float(self.node_s[-1])
 
-    def _eval(self, seg: NDArray, u: NDArray) -> tuple[NDArray, NDArray]:
-        """Position and derivative dx/du on segments ``seg`` at local parameters ``u``."""
-        x0, d, q = self.points[seg], self.points[seg + 1] - self.points[seg], self.bulge[seg]
-        uu = u[..., None]
-        return x0 + uu * d + uu * (uu - 1.0) * q, d + (2.0 * uu - 1.0) * q
-
-    def _arc(self, seg: NDArray, u: NDArray) -> NDArray:
-        """Arc length from the start of segment ``seg`` to local parameter ``u`` (Gauss)."""
-        uq = u[..., None] * _GAUSS_U
-        _, dx = self._eval(np.broadcast_to(seg[..., None], uq.shape), uq)
-        return u * (np.linalg.norm(dx, axis=-1) @ _GAUSS_W)
-
-    def _segment_of(self, s: NDArray) -> tuple[NDArray, NDArray]:
-        """Segment index and local parameter u of arc-length positions s (clamped to the chain):
-        Newton on arc(u) = ds from the chord estimate (compiled: ``kernels_numba``)."""
-        s_flat = np.ascontiguousarray(s, dtype=float).reshape(-1)
-        seg, u = _kernels.segment_of(self.points, self.bulge, self.node_s, s_flat, _GAUSS_U,
-                                     _GAUSS_W)
-        return seg.reshape(np.shape(s)), u.reshape(np.shape(s))
-
     def point_at(self, s: ArrayLike) -> NDArray[np.float64]:
         """Positions (p, 2) at arc-length parameters s (values outside [0, L] are clamped)."""
         s_arr = np.ascontiguousarray(np.atleast_1d(np.asarray(s, dtype=float)).reshape(-1))
-        return _kernels.point_at(self.points, self.bulge, self.node_s, s_arr, _GAUSS_U,
-                                 _GAUSS_W)
-
-    def tangent_at(self, s: ArrayLike) -> NDArray[np.float64]:
-        """Unit tangents (p, 2) in the chain direction at arc-length parameters s."""
-        seg, u = self._segment_of(np.atleast_1d(np.asarray(s, dtype=float)))
-        dx = self._eval(seg, u)[1]
-        return dx / np.linalg.norm(dx, axis=-1, keepdims=True)
+        return _point_at(self.points, self.bulge, self.node_s, s_arr, GAUSS_U, GAUSS_W)
 
     def node_tangents(self, nodes: ArrayLike) -> NDArray[np.float64]:
         """Unit tangents (p, 2) of the continuous tangent field at chain nodes: the mean of the
         two segments' one-sided tangents at a smooth node, the adjacent segment's at a break
         (see ``normal_foot``)."""
         i = np.asarray(nodes, dtype=np.int64).reshape(-1)
-        start, end = self._end_tangents()
+        start, end = self.tangents
         last = i == len(self.points) - 1
         return np.where(last[:, None], end[np.maximum(i - 1, 0)],
                         start[np.minimum(i, len(start) - 1)])
 
-    def project(self, points: ArrayLike) -> NDArray[np.float64]:
-        """Arc-length parameter of the closest point on the curve to each point (p,)."""
-        return self.closest(points)[0]
-
-    def closest(self, points: ArrayLike) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-        """Arc-length parameters (p,) and positions (p, 2) of the closest curve points."""
-        pts = np.atleast_2d(np.asarray(points, dtype=float))
-        n_seg = len(self.bulge)
-        # coarse sampling on every segment, then Newton on d|x(u) - p|^2/du = 0 on the few
-        # segments with the closest samples
-        samples = np.linspace(0.0, 1.0, 9)
-        all_seg = np.broadcast_to(np.arange(n_seg), (len(pts), n_seg))
-        xs, _ = self._eval(all_seg[..., None], np.broadcast_to(samples, (*all_seg.shape, 9)))
-        dist = np.linalg.norm(xs - pts[:, None, None, :], axis=-1)
-        nearest = dist.min(axis=-1)
-        keep = min(3, n_seg)
-        seg = np.argsort(nearest, axis=1, kind="stable")[:, :keep]
-        u = samples[np.take_along_axis(np.argmin(dist, axis=-1), seg, axis=1)]
-        for _ in range(5):
-            x, dx = self._eval(seg, u)
-            r = x - pts[:, None, :]
-            grad = np.einsum("psi,psi->ps", r, dx)
-            hess = np.einsum("psi,psi->ps", dx, dx) + 2.0 * np.einsum(
-                "psi,psi->ps", r, self.bulge[seg])
-            ok = hess > 0  # away from a convex well keep the sampled value
-            new = np.clip(np.where(ok, u - grad / np.where(ok, hess, 1.0), u), 0.0, 1.0)
-            done = not np.any(np.abs(new - u) > _CONVERGED)
-            u = new
-            if done:
-                break
-        foot = self._eval(seg, u)[0]
-        best = np.argmin(np.linalg.norm(foot - pts[:, None, :], axis=-1), axis=1)
-        rows = np.arange(len(pts))
-        best_seg, best_u = seg[rows, best], u[rows, best]
-        return self.node_s[best_seg] + self._arc(best_seg, best_u), foot[rows, best]
-
-    def _end_tangents(self) -> tuple[NDArray, NDArray]:
-        """``_tangents`` (kept per curve: they depend on the curve only)."""
-        return self._tangents
-
     @cached_property
-    def _tangents(self) -> tuple[NDArray, NDArray]:
+    def tangents(self) -> tuple[NDArray, NDArray]:
         """Unit tangents at the start and end of every segment from the continuous nodal
         tangent field: at a smooth node the normalized mean of the two segments' one-sided
-        tangents (so both segments share it), at a break the segment's own (compiled:
-        ``kernels_numba.end_tangents``, the same operations)."""
-        start, end = _kernels.end_tangents(self.points, self.bulge, self.breaks)
+        tangents (so both segments share it), at a break the segment's own."""
+        start, end = _end_tangents(self.points, self.bulge, self.breaks)
         start.setflags(write=False)
         end.setflags(write=False)
         return start, end
@@ -195,7 +349,7 @@ class SurfaceCurve:
     def normal_foot(self, points: ArrayLike) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         """Arc-length parameters (p,) and positions (p, 2) of the curve points whose normal
         passes through each point, the normal taken from the continuous tangent field that
-        interpolates linearly (in u) between the nodal tangents of ``_end_tangents``.
+        interpolates linearly (in u) between the nodal tangents of ``tangents``.
 
         Unlike the closest point this is well defined and smooth at the nodes: the averaged
         parabolas leave O(h^2) tangent kinks at the nodes, so a point at distance g straight
@@ -205,11 +359,11 @@ class SurfaceCurve:
         through it on the adjacent segment) gets the break.
         """
         pts = np.ascontiguousarray(np.atleast_2d(np.asarray(points, dtype=float)))
-        t_start, t_end = self._tangents
+        t_start, t_end = self.tangents
         # per point: the 3 segments with the closest samples, Newton on the bracketed
         # f(u) = (p - x(u)) . t(u) (bisection when it leaves the bracket), nearest root wins
-        return _kernels.normal_foot(self.points, self.bulge, self.node_s, t_start, t_end, pts,
-                                    _GAUSS_U, _GAUSS_W)
+        return _normal_foot(self.points, self.bulge, self.node_s, t_start, t_end, pts,
+                            GAUSS_U, GAUSS_W)
 
 
 def point_at(
@@ -217,13 +371,6 @@ def point_at(
 ) -> NDArray[np.float64]:
     """Positions on the chain's piecewise-quadratic surface at arc-length parameters s."""
     return SurfaceCurve.from_chain(chain_xy, corner_mask).point_at(s)
-
-
-def project_to_surface(
-    chain_xy: ArrayLike, points: ArrayLike, corner_mask: ArrayLike | None = None
-) -> NDArray[np.float64]:
-    """Arc-length parameter of the closest point on the chain's surface for each point."""
-    return SurfaceCurve.from_chain(chain_xy, corner_mask).project(points)
 
 
 def respace_surface(
@@ -260,29 +407,6 @@ def respace_surface(
     ref = curve.node_s if spacing is None else np.concatenate([[0.0], np.cumsum(spacing)])
     s_new = np.interp(ref, ref[idx], s_new_anchor[idx])
     return curve.point_at(s_new)
-
-
-def relocate_surface_nodes(
-    chain_xy: ArrayLike,
-    active: ArrayLike,
-    targets_xy: ArrayLike,
-    corner_mask: ArrayLike | None = None,
-    spacing: ArrayLike | None = None,
-) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """Move chain nodes ``active`` (indices) to the surface points closest to ``targets_xy``.
-
-    The other non-corner nodes are respaced between the anchors (``respace_surface``). Returns
-    the new chain positions and the arc-length parameters of the active nodes' new positions.
-    """
-    curve = SurfaceCurve.from_chain(chain_xy, corner_mask)
-    active_idx = np.asarray(active, dtype=np.int64).reshape(-1)
-    s_active = curve.project(np.asarray(targets_xy, dtype=float).reshape(-1, 2))
-    mask = np.zeros(len(curve.points), bool)
-    mask[active_idx] = True
-    targets = np.zeros(len(curve.points))
-    targets[active_idx] = s_active
-    new_xy = respace_surface(curve.points, mask, targets, curve.breaks, spacing)
-    return new_xy, s_active
 
 
 def local_slides(
@@ -324,8 +448,294 @@ def local_slides(
         raise ValueError("anchors must be increasing chain indices with one slide each and "
                          "reference_spacing must have one length per segment")
     lo, hi = 1.0 - tolerance, 1.0 / (1.0 - tolerance)
-    # compiled loop over the runs (``kernels_numba.local_slides``)
-    out, resets = _kernels.local_slides(np.ascontiguousarray(s), np.ascontiguousarray(ref),
-                                        np.ascontiguousarray(idx), np.ascontiguousarray(slide),
-                                        lo, hi)
+    out, resets = _local_slides(np.ascontiguousarray(s), np.ascontiguousarray(ref),
+                                np.ascontiguousarray(idx), np.ascontiguousarray(slide), lo, hi)
     return out, int(resets)
+
+
+# --- the surface move of an ALE update (``slide_chain``) -------------------------------------
+
+
+@njit(cache=True)
+def _block_sum(a, lo, n):
+    """NumPy's pairwise sum of a block of at most 128 values (eight accumulators)."""
+    if n < 8:
+        res = 0.0
+        for i in range(n):
+            res += a[lo + i]
+        return res
+    r = np.empty(8)
+    for j in range(8):
+        r[j] = a[lo + j]
+    i = 8
+    while i < n - (n % 8):
+        for j in range(8):
+            r[j] += a[lo + i + j]
+        i += 8
+    res = ((r[0] + r[1]) + (r[2] + r[3])) + ((r[4] + r[5]) + (r[6] + r[7]))
+    while i < n:
+        res += a[lo + i]
+        i += 1
+    return res
+
+
+@njit(cache=True)
+def _pairwise_sum(a, lo, n):
+    """Sum of a[lo:lo + n] in NumPy's order (``np.sum`` of a contiguous float64 array: blocks
+    of at most 128 summed by ``_block_sum``, halves (multiples of 8) added above that), kept
+    so that the slides equal those of the NumPy code this replaced, bit for bit. The halving
+    is unrolled with an explicit stack: a recursive function loaded from Numba's cache
+    crashed."""
+    if n <= 128:
+        return _block_sum(a, lo, n)
+    frame_lo = np.empty(64, np.int64)
+    frame_n = np.empty(64, np.int64)
+    frame_state = np.empty(64, np.int64)
+    values = np.empty(64)
+    depth, count = 1, 0
+    frame_lo[0], frame_n[0], frame_state[0] = lo, n, 0
+    while depth > 0:
+        top = depth - 1
+        start, size = frame_lo[top], frame_n[top]
+        if size <= 128:
+            values[count] = _block_sum(a, start, size)
+            count += 1
+            depth -= 1
+            continue
+        half = size // 2
+        half -= half % 8
+        if frame_state[top] < 2:  # push the left half, then the right one
+            right = frame_state[top] == 1
+            frame_state[top] += 1
+            frame_lo[depth] = start + half if right else start
+            frame_n[depth] = size - half if right else half
+            frame_state[depth] = 0
+            depth += 1
+        else:
+            values[count - 2] = values[count - 2] + values[count - 1]
+            count -= 1
+            depth -= 1
+    return values[0]
+
+
+@njit(cache=True)
+def _wanted_arc(points, bulge, node_s, t_start, t_end, breaks, pts, pos, snap, gauss_u,
+               gauss_w):
+    """Wanted arc length of each active node (chain index ``pos``): the normal foot of its
+    wanted point ``pts``, continued past a break along the node's tangent by the overshoot, so
+    that a target beyond a break is seen (and clamped) instead of stopping at the break."""
+    s, foot = _normal_foot(points, bulge, node_s, t_start, t_end, pts, gauss_u, gauss_w)
+    n = node_s.size
+    h_min = np.inf
+    for i in range(n - 1):
+        h_min = min(h_min, node_s[i + 1] - node_s[i])
+    out = np.empty(s.size)
+    for i in range(s.size):
+        gap = np.inf
+        for j in range(n):
+            if breaks[j]:
+                gap = min(gap, np.abs(s[i] - node_s[j]))
+        k = pos[i]
+        if k == n - 1:
+            t0, t1 = t_end[max(k - 1, 0), 0], t_end[max(k - 1, 0), 1]
+        else:
+            t0, t1 = t_start[min(k, n - 2), 0], t_start[min(k, n - 2), 1]
+        over = (pts[i, 0] - foot[i, 0]) * t0 + (pts[i, 1] - foot[i, 1]) * t1
+        out[i] = s[i] + (over if gap <= snap * h_min else 0.0)
+    return out
+
+
+@njit(cache=True)
+def _anchor_targets(node_s, breaks, pos, wanted, slide_tolerance, ratio, snap):
+    """Targets of the active nodes (the wanted arc lengths, slides below the tolerance dropped,
+    clamped so that the free nodes between a node and the breaks around it keep ``ratio`` times
+    the smallest segment of that stretch) and the anchors; (targets, clamped, mismatch, anchor
+    indices, anchor slides, first pair of anchors out of order or -1)."""
+    n, k = node_s.size, pos.size
+    brk = np.flatnonzero(breaks)
+    n_brk = brk.size
+    run_min = np.empty(max(n_brk - 1, 1))
+    for r in range(n_brk - 1):
+        low = node_s[brk[r] + 1] - node_s[brk[r]]
+        for i in range(brk[r] + 1, brk[r + 1]):
+            low = min(low, node_s[i + 1] - node_s[i])
+        run_min[r] = low
+    targets = np.empty(k)
+    clamped = np.zeros(k, np.bool_)
+    mismatch = 0.0
+    for i in range(k):
+        p = pos[i]
+        near = min(node_s[max(p - 1, 0) + 1] - node_s[max(p - 1, 0)],
+                   node_s[min(p, n - 2) + 1] - node_s[min(p, n - 2)])
+        w = wanted[i]
+        if np.abs(w - node_s[p]) <= slide_tolerance * near:
+            w = node_s[p]
+        j = np.searchsorted(brk, p)
+        run = min(max(j - 1, 0), n_brk - 2)
+        b0, b1 = brk[run], brk[run + 1]
+        h = ratio * run_min[run]
+        if brk[min(j, n_brk - 1)] == p:
+            t = node_s[p]
+        else:
+            lo = min(node_s[b0] + (p - b0) * h, node_s[p])
+            hi = max(node_s[b1] - (b1 - p) * h, node_s[p])
+            t = min(max(w, lo), hi)
+        targets[i] = t
+        clamped[i] = np.abs(t - w) > snap * run_min[run]
+        miss = np.abs(wanted[i] - t)
+        if not (miss <= mismatch) and not np.isnan(mismatch):
+            mismatch = miss
+    anchor = breaks.copy()
+    s = node_s.copy()
+    slide = np.zeros(n)
+    for i in range(k):
+        anchor[pos[i]] = True
+        s[pos[i]] = targets[i]
+        slide[pos[i]] = targets[i] - node_s[pos[i]]
+    idx = np.flatnonzero(anchor)
+    n_anchor = idx.size
+    bad = -1
+    for i in range(n_anchor - 1):
+        if s[idx[i + 1]] - s[idx[i]] <= 0.0:
+            bad = i
+            break
+    return targets, clamped, mismatch, idx, slide[idx], bad
+
+
+@njit(cache=True)
+def _buffer(cur, target, slide, lo, hi, reverse, out):
+    """The buffer of ``local_slides`` on cur (reversed if ``reverse``): fills out[:m] with the
+    length changes of the m leading segments and returns m, or -1 if the whole run cannot
+    absorb it."""
+    n = cur.size
+    change = -slide
+    total = 0.0
+    m = -1
+    for i in range(n):
+        j = n - 1 - i if reverse else i
+        room = cur[j] - lo * target[j] if change < 0.0 else hi * target[j] - cur[j]
+        out[i] = max(room, 0.0)
+        total += out[i]
+        if total >= np.abs(change):
+            m = i + 1
+            break
+    if m < 0:
+        return -1
+    for i in range(m):
+        out[i] = change * out[i] / total
+    return m
+
+
+@njit(cache=True)
+def _local_slides(s, ref, idx, slide, lo, hi):
+    """``local_slides`` (validated inputs, band [lo, hi]); (slides, resets)."""
+    out = np.zeros(s.size)
+    for k in range(idx.size):
+        out[idx[k]] = slide[k]
+    resets = 0
+    for k in range(idx.size - 1):
+        a, b, sa, sb = idx[k], idx[k + 1], slide[k], slide[k + 1]
+        if b - a < 2 or (sa == 0.0 and sb == 0.0):
+            continue
+        cur = np.empty(b - a)
+        for i in range(b - a):
+            cur[i] = s[a + i + 1] - s[a + i]
+        rseg = ref[a:b]
+        scale = _pairwise_sum(cur, 0, cur.size) / _pairwise_sum(rseg, 0, rseg.size)
+        target = rseg * scale
+        head, tail = np.empty(b - a), np.empty(b - a)
+        m_head = _buffer(cur, target, sa, lo, hi, False, head) if sa != 0.0 else 0
+        m_tail = _buffer(cur, target, -sb, lo, hi, True, tail) if sb != 0.0 else 0
+        if m_head >= 0 and m_tail >= 0 and m_head + m_tail <= b - a:
+            acc = 0.0
+            for i in range(m_head - 1):
+                acc += head[i]
+                out[a + 1 + i] = sa + acc
+            acc = 0.0
+            for i in range(m_tail - 1):
+                acc += tail[i]
+                out[b - 1 - i] = sb - acc
+            continue
+        change = sb - sa  # of the run's length
+        slack = np.empty(b - a)
+        for i in range(b - a):
+            room = cur[i] - lo * target[i] if change < 0.0 else hi * target[i] - cur[i]
+            slack[i] = max(room, 0.0)
+        total = _pairwise_sum(slack, 0, slack.size)
+        if change == 0.0:
+            out[a + 1:b] = sa
+        elif total >= np.abs(change):
+            acc = 0.0
+            for i in range(b - a - 1):
+                acc += slack[i]
+                out[a + 1 + i] = sa + change * acc / total
+        else:
+            resets += 1
+            cum = np.empty(b - a + 1)
+            cum[0] = 0.0
+            for i in range(b - a):
+                cum[i + 1] = cum[i] + rseg[i]
+            span = (s[b] - s[a]) + change
+            for i in range(1, b - a):
+                out[a + i] = sa + cum[i] / cum[b - a] * span - (s[a + i] - s[a])
+    return out, resets
+
+
+@njit(cache=True)
+def _slid_positions(x, chain_nodes, breaks, points, bulge, node_s, slides, snap_length,
+                   gauss_u, gauss_w):
+    """Node positions with the chain nodes slid along the curve: a move below ``snap_length``
+    keeps the old position exactly."""
+    n = slides.size
+    count = 0
+    for i in range(n):
+        count += slides[i] != 0.0 and not breaks[i]
+    which = np.empty(count, np.int64)
+    s = np.empty(count)
+    c = 0
+    for i in range(n):
+        if slides[i] != 0.0 and not breaks[i]:
+            which[c] = i
+            s[c] = node_s[i] + slides[i]
+            c += 1
+    out = x.copy()
+    if count == 0:
+        return out
+    new = _point_at(points, bulge, node_s, s, gauss_u, gauss_w)
+    for c in range(count):
+        i = which[c]
+        r0, r1 = new[c, 0] - points[i, 0], new[c, 1] - points[i, 1]
+        if np.sqrt(r0 * r0 + r1 * r1) > snap_length:
+            out[chain_nodes[i], 0], out[chain_nodes[i], 1] = new[c, 0], new[c, 1]
+    return out
+
+
+@njit(cache=True)
+def slide_chain(x, chain_nodes, points, bulge, node_s, t_start, t_end, breaks, spacing,
+                wanted_xy, pos, slide_tolerance, ratio, snap, band_lo, band_hi, local,
+                snap_length):
+    """The surface move of one ALE update (``ale.motion``, items 1-3) on the opened chain
+    ``chain_nodes`` (its t_n curve: points, bulge, node_s, tangents, breaks; ``spacing`` the
+    reference segment lengths): the active nodes (chain indices ``pos``) slide to the normal
+    feet of ``wanted_xy``, clamped before the breaks, and the other chain nodes follow
+    (``local``: ``local_slides`` in the band [band_lo, band_hi]; else respaced between the
+    anchors in the reference proportions). Returns (positions x with the chain nodes moved,
+    slides per chain node, clamped per active node, mismatch, resets, anchor chain indices,
+    first pair of anchors out of order or -1: then nothing was moved)."""
+    wanted = _wanted_arc(points, bulge, node_s, t_start, t_end, breaks, wanted_xy, pos, snap,
+                         GAUSS_U, GAUSS_W)
+    _, clamped, mismatch, idx, anchor_slide, bad = _anchor_targets(
+        node_s, breaks, pos, wanted, slide_tolerance, ratio, snap)
+    if bad >= 0:
+        return x.copy(), np.zeros(node_s.size), clamped, mismatch, 0, idx, bad
+    resets = 0
+    if local:
+        slides, resets = _local_slides(node_s, spacing, idx, anchor_slide, band_lo, band_hi)
+    else:
+        ref = np.zeros(node_s.size)
+        ref[1:] = np.cumsum(spacing)
+        slides = np.interp(ref, ref[idx], node_s[idx] + anchor_slide) - node_s
+        slides[idx] = anchor_slide
+    out = _slid_positions(x, chain_nodes, breaks, points, bulge, node_s, slides, snap_length,
+                          GAUSS_U, GAUSS_W)
+    return out, slides, clamped, mismatch, resets, idx, bad

@@ -1,6 +1,8 @@
 """Quality measures of Q4 meshes: edge lengths, corner angles, corner Jacobians (report 4.2).
 
-All measures are vectorized over cells. ``quality_statistics`` reproduces the quantities of the
+All measures are vectorized over cells; the smallest corner sines and the acceptance test of
+cells changed by a mesh move (the ALE update's, ``ale.motion``) are compiled loops, since they
+run on a few cells per move. ``quality_statistics`` reproduces the quantities of the
 report's Table 4.1 (minimum/maximum/average/variance of edge lengths and interior angles), with
 the population variance defined just below that table.
 """
@@ -12,10 +14,15 @@ from numpy.typing import ArrayLike, NDArray
 
 from ntncontact.mesh.quadmesh import MeshError, QuadMesh
 
+from ..jit import njit
+
 __all__ = [
+    "cell_min_sines",
+    "changed_cells",
     "check_elements",
     "corner_angles_deg",
     "corner_jacobians",
+    "min_sines_below",
     "edge_lengths",
     "quality_statistics",
     "unique_edges",
@@ -82,6 +89,69 @@ def corner_angles_deg(
     cross = a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]
     dot = np.einsum("...i,...i->...", a, b)
     return np.mod(np.degrees(np.arctan2(cross, dot)), 360.0)
+
+
+def cell_min_sines(nodes: ArrayLike, cells: ArrayLike) -> NDArray[np.float64]:
+    """Smallest corner sine (corner Jacobian over the two edge lengths) of every cell, (m,):
+    1 for a rectangle, <= 0 for an inverted or degenerate corner."""
+    cell_arr = np.ascontiguousarray(cells, dtype=np.int64).reshape(-1, 4)
+    return _min_sines(np.ascontiguousarray(nodes, dtype=float), cell_arr,
+                      np.arange(len(cell_arr)))
+
+
+@njit(cache=True)
+def _min_sines(nodes, cells, which):
+    """``cell_min_sines`` of the cells ``which`` (a zero-length edge counts as -1)."""
+    out = np.empty(which.size)
+    for k in range(which.size):
+        e = which[k]
+        low = np.inf
+        for c in range(4):
+            i, j, h = cells[e, c], cells[e, (c + 1) % 4], cells[e, (c + 3) % 4]
+            a0, a1 = nodes[j, 0] - nodes[i, 0], nodes[j, 1] - nodes[i, 1]
+            b0, b1 = nodes[h, 0] - nodes[i, 0], nodes[h, 1] - nodes[i, 1]
+            cross = a0 * b1 - a1 * b0
+            scale = np.sqrt((a0 * a0 + a1 * a1) * (b0 * b0 + b1 * b1))
+            low = min(low, cross / scale if scale > 0 else -1.0)
+        out[k] = low
+    return out
+
+
+@njit(cache=True)
+def min_sines_below(nodes, cells, which, tol):
+    """True if a cell of ``which`` has a corner sine at most ``tol`` (NaN: False)."""
+    q = _min_sines(nodes, cells, which)
+    for k in range(q.size):
+        if q[k] <= tol:
+            return True
+    return False
+
+
+@njit(cache=True)
+def changed_cells(x_new, x_old, cells, min_quality, reference_quality, old_quality, tol):
+    """The cells a move from ``x_old`` to ``x_new`` changes and whether it may be kept:
+    (moved nodes mask, changed cells, acceptable, degenerate). Acceptable: every changed cell
+    keeps ``min_quality`` of its ``reference_quality`` or does not get worse than its
+    ``old_quality`` (a move need not repair what it did not spoil); degenerate: one has a
+    corner sine at most ``tol``."""
+    n, m = x_new.shape[0], cells.shape[0]
+    moved = np.zeros(n, np.bool_)
+    for i in range(n):
+        moved[i] = x_new[i, 0] != x_old[i, 0] or x_new[i, 1] != x_old[i, 1]
+    touched = np.zeros(m, np.bool_)
+    for e in range(m):
+        for c in range(4):
+            touched[e] = touched[e] or moved[cells[e, c]]
+    which = np.flatnonzero(touched)
+    q = _min_sines(x_new, cells, which)
+    acceptable, degenerate = True, False
+    for k in range(which.size):
+        a, b = min_quality * reference_quality[which[k]], old_quality[which[k]]
+        # np.minimum propagates NaN: q >= NaN fails
+        if np.isnan(a) or np.isnan(b) or not q[k] >= min(a, b):
+            acceptable = False
+        degenerate = degenerate or q[k] <= tol
+    return moved, which, acceptable, degenerate
 
 
 def quality_statistics(
