@@ -1,16 +1,16 @@
 """Bad input ends fast with one clear line: issue 14 section 7.
 
-Every row of ``CASES`` runs the real command in a subprocess and asserts: exit code 1, one line
-on stderr that names the file and the key (and the value), no Python traceback and no warning,
-and that it ended fast. Add a row for every new class of bad input.
+Every row of ``CASES`` runs the real command in a subprocess and asserts: exit code 1, one line on
+stderr that names the file and the key (and the value), no Python traceback and no warning, and
+that it ended fast. Add a row for every new class of bad input.
 
 Fast: the bad input must be refused within 2 s of the command's start-up. The start-up (Python,
-NumPy, SciPy, Numba and the package's modules: ~2 s of CPU on the development machine, 6-9 s
-of wall time when it was shared by ~9 jobs) is measured on the same machine by importing what
+NumPy, SciPy, Numba and the package's modules: ~2 s of CPU on the development machine, 6-9 s of
+wall time when it was shared by ~9 jobs) is measured on the same machine by importing what
 ``ntncontact run`` imports before it reads the scenario. The machine running the tests may be
-shared, so both times are measured as CPU time (what the process itself spent: a refusal must not compute) and as wall time, where the allowance is
-widened by the time the start-up run spent waiting for a core. A hang is caught by the
-subprocess timeout.
+shared, so both times are measured as CPU time (what the process itself spent: a refusal must not
+compute) and as wall time, where the allowance is widened by the time the start-up run spent
+waiting for a core. A hang is caught by the subprocess timeout.
 """
 
 from __future__ import annotations

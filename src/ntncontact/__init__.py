@@ -1,4 +1,9 @@
-"""ntncontact: 2D finite-deformation contact and impact with the node-to-node ALE method."""
+"""ntncontact: 2D finite-deformation contact and impact with the node-to-node ALE method.
+
+The public Python API (docs/api.md): :func:`load_scenario`, :func:`scenario_from_dict`,
+:func:`run`, :func:`read_results`, :func:`sweep` and the :class:`Scenario` and
+:class:`Results` they pass around. Everything else is internal.
+"""
 
 import os
 import sys
@@ -29,3 +34,17 @@ def _use_kernel_cache_dir() -> None:
 
 
 _use_kernel_cache_dir()
+
+# the public API, after the kernel cache is set up (the kernel modules are imported by it)
+from .api import (  # noqa: E402
+    Results,
+    Scenario,
+    load_scenario,
+    read_results,
+    run,
+    scenario_from_dict,
+)
+from .studies.sweep import sweep  # noqa: E402
+
+__all__ = ["Results", "Scenario", "load_scenario", "read_results", "run", "scenario_from_dict",
+           "sweep", "__version__"]

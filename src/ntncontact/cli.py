@@ -223,6 +223,21 @@ def _validate(args: argparse.Namespace) -> int:
     return 1 if failed else 0  # a failed or crashed case fails the command (CI, scripts)
 
 
+def _sweep(args: argparse.Namespace) -> int:
+    """Run a sweep file's cases on Dask; write OUT/sweep.csv and the figures it asks for."""
+    from .studies.sweep import SWEEP_FILE, sweep
+
+    table = sweep(args.sweep, args.out, scheduler=args.scheduler, workers=args.workers,
+                  progress=not args.quiet)
+    failed = table[table["status"] != "completed"] if "status" in table else table.iloc[:0]
+    skipped = int(table["skipped"].fillna(False).astype(bool).sum()) if "skipped" in table else 0
+    print(f"{len(table)} cases ({skipped} already done, {len(failed)} not completed): "
+          f"{Path(args.out) / SWEEP_FILE}")
+    for _, row in failed.iterrows():
+        print(f"  {row['case']}: {row.get('status')}: {row.get('error')}", file=sys.stderr)
+    return 1 if len(failed) else 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="ntncontact", description=__doc__)
     parser.add_argument("--version", action="version", version=f"ntncontact {__version__}")
@@ -258,6 +273,14 @@ def build_parser() -> argparse.ArgumentParser:
                                            "(killed)")
     status.add_argument("directory")
     status.set_defaults(func=_status)
+    sw = sub.add_parser("sweep", help="run one scenario over a grid or list of overrides on Dask")
+    sw.add_argument("sweep", help="sweep TOML file (docs/api.md)")
+    sw.add_argument("--out", required=True, help="sweep folder (cases/, sweep.csv, figures)")
+    sw.add_argument("--scheduler", metavar="ADDRESS",
+                    help="a running Dask scheduler (default: a local cluster, one worker a core)")
+    sw.add_argument("--workers", type=int, help="local workers (default: one per core)")
+    sw.add_argument("--quiet", action="store_true", help="no progress bar")
+    sw.set_defaults(func=_sweep)
     quality = sub.add_parser("mesh-quality",
                              help="edge and angle statistics (report Table 4.1) of a scenario's "
                                   "meshes or of a VTU snapshot")

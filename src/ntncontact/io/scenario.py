@@ -366,15 +366,20 @@ def parse_scenario(data: dict[str, Any], path: Path) -> ScenarioConfig:
 def load_scenario(path: str | Path, overrides: list[str] | None = None) -> ScenarioConfig:
     """Read and validate a TOML scenario, applying ``--set key=value`` overrides first."""
     path = Path(path)
-    if not path.is_file():
-        raise ScenarioError(f"{path}: scenario file not found")
-    try:
-        data = tomllib.loads(read_text(path))
-    except tomllib.TOMLDecodeError as err:
-        raise ScenarioError(f"{path}: not valid TOML: {err}") from None
+    data = read_toml(path)
     for item in overrides or []:
         apply_override(data, item, path)
     return parse_scenario(data, path)
+
+
+def read_toml(path: Path) -> dict[str, Any]:
+    """The mapping of a TOML file; a missing or unreadable file raises a ScenarioError."""
+    if not path.is_file():
+        raise ScenarioError(f"{path}: scenario file not found")
+    try:
+        return tomllib.loads(read_text(path))
+    except tomllib.TOMLDecodeError as err:
+        raise ScenarioError(f"{path}: not valid TOML: {err}") from None
 
 
 def read_text(path: Path) -> str:

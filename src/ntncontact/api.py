@@ -1,0 +1,185 @@
+"""The public Python entry points: load a scenario, run it, read its results, sweep it.
+
+Documented with runnable examples in docs/api.md (the test suite runs them)::
+
+    import ntncontact as ntc
+
+    scenario = ntc.load_scenario("examples/spinning_block.toml", {"analysis.t_end": 0.1})
+    results = ntc.run(scenario, out="results/spin")
+    results.history[["time", "total_energy"]]
+"""
+
+from __future__ import annotations
+
+import copy
+import io
+import json
+import math
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import meshio
+import numpy as np
+import pandas as pd
+
+from .builder import build_model
+from .io.results import ResultWriter
+from .io.scenario import ScenarioConfig, ScenarioError, apply_override, parse_scenario, read_toml
+from .io.vtk import read_pvd
+from .io.writers import CONTACT_FILE, HISTORY_FILE, SUMMARY_FILE
+from .simulation import Simulation
+
+Overrides = Mapping[str, Any] | Sequence[str] | None
+
+
+@dataclass(frozen=True)
+class Scenario:
+    """A validated scenario: its configuration, the folder its relative paths (meshes) are
+    resolved against, where it came from, and the overrides applied (``key=value`` TOML)."""
+
+    config: ScenarioConfig
+    base_dir: Path
+    source: str
+    overrides: tuple[str, ...] = ()
+    data: Mapping[str, Any] = field(default_factory=dict, repr=False)
+
+    def with_overrides(self, overrides: Overrides) -> Scenario:
+        """The same scenario with more overrides applied (dotted keys, as ``--set``)."""
+        return _build(self.data, self.base_dir, self.source, self.overrides, overrides)
+
+
+def load_scenario(path: str | Path, overrides: Overrides = None) -> Scenario:
+    """Read and validate a TOML scenario; ``overrides`` maps dotted keys to values
+    (``{"contact.0.friction": 0.2}``) or lists ``"key=value"`` strings as ``--set`` takes."""
+    path = Path(path)
+    return _build(read_toml(path), path.parent, str(path), (), overrides)
+
+
+def scenario_from_dict(data: Mapping[str, Any], base_dir: str | Path = ".",
+                       overrides: Overrides = None) -> Scenario:
+    """A scenario from a plain mapping with the keys of a scenario file (docs/scenarios.md);
+    mesh files are looked up relative to ``base_dir``."""
+    return _build(copy.deepcopy(dict(data)), Path(base_dir), "<dict>", (), overrides)
+
+
+def _build(data: Mapping[str, Any], base_dir: Path, source: str, applied: tuple[str, ...],
+           overrides: Overrides) -> Scenario:
+    items = applied + override_strings(overrides)
+    working = copy.deepcopy(dict(data))
+    where = Path(source)
+    for item in items:
+        apply_override(working, item, where)
+    config = parse_scenario(working, where)
+    return Scenario(config, base_dir, source, items, copy.deepcopy(dict(data)))
+
+
+def override_strings(overrides: Overrides) -> tuple[str, ...]:
+    """``{"analysis.dt": 0.01}`` -> ``("analysis.dt=0.01",)``; strings pass unchanged."""
+    if overrides is None:
+        return ()
+    if isinstance(overrides, Mapping):
+        return tuple(f"{key}={toml_value(value)}" for key, value in overrides.items())
+    if isinstance(overrides, str):
+        raise TypeError("overrides: give a mapping or a list of 'key=value' strings")
+    return tuple(str(item) for item in overrides)
+
+
+def toml_value(value: Any) -> str:
+    """A Python value as a TOML value (the form ``--set key=value`` takes)."""
+    if isinstance(value, bool | np.bool_):
+        return "true" if value else "false"
+    if isinstance(value, int | np.integer):
+        return str(int(value))
+    if isinstance(value, float | np.floating):
+        value = float(value)
+        if math.isnan(value):
+            return "nan"
+        if math.isinf(value):
+            return "inf" if value > 0 else "-inf"
+        return repr(value)
+    if isinstance(value, str):
+        return json.dumps(value)  # a TOML basic string uses JSON's escapes
+    if isinstance(value, Mapping):
+        return "{" + ", ".join(f"{k} = {toml_value(v)}" for k, v in value.items()) + "}"
+    if isinstance(value, Sequence | np.ndarray):
+        return "[" + ", ".join(toml_value(v) for v in value) + "]"
+    raise TypeError(f"cannot give {value!r} ({type(value).__name__}) as a scenario value")
+
+
+@dataclass(frozen=True)
+class Results:
+    """A run's results: ``history`` and ``contact`` tables (pandas), the ``summary`` (dict),
+    and the field frames (``times``; :meth:`fields` gives one as a meshio Mesh)."""
+
+    history: pd.DataFrame
+    contact: pd.DataFrame
+    summary: dict[str, Any]
+    directory: Path | None = None
+    frames: tuple[tuple[float, Any], ...] = ()
+
+    @property
+    def times(self) -> list[float]:
+        """Times of the field frames, in order."""
+        return [t for t, _ in self.frames]
+
+    def fields(self, t: float) -> meshio.Mesh:
+        """The field frame at time ``t`` (within 1e-9 of the run's time scale): material
+        points X, Q4 cells, point data (displacement, velocity, ...) and cell data."""
+        if not self.frames:
+            raise ValueError("these results hold no field frames")
+        times = np.array(self.times)
+        k = int(np.argmin(np.abs(times - t)))
+        scale = max(abs(times[-1]), 1.0)
+        if abs(times[k] - t) > 1e-9 * scale:
+            raise ValueError(f"no field frame at t = {t:g}; frames at {_listing(times)}")
+        frame = self.frames[k][1]
+        return frame if isinstance(frame, meshio.Mesh) else meshio.read(frame)
+
+
+def _listing(times: np.ndarray, most: int = 8) -> str:
+    shown = ", ".join(f"{t:g}" for t in times[:most])
+    return shown + (f", ... ({len(times)} in all)" if len(times) > most else "")
+
+
+def read_results(directory: str | Path) -> Results:
+    """The results of a run folder (also of an interrupted or failed run: the rows written
+    so far; an unterminated last CSV line is dropped)."""
+    directory = Path(directory)
+    summary_path = directory / SUMMARY_FILE
+    if not summary_path.is_file():
+        raise FileNotFoundError(f"{directory}: not a results folder (no {SUMMARY_FILE})")
+    summary = json.loads(summary_path.read_text(encoding="utf-8"))
+    pvd = directory / "fields.pvd"
+    frames = tuple(read_pvd(pvd)) if pvd.is_file() else ()
+    return Results(read_table(directory / HISTORY_FILE), read_table(directory / CONTACT_FILE),
+                   summary, directory, frames)
+
+
+def read_table(path: Path) -> pd.DataFrame:
+    """A results CSV as a DataFrame; complete lines only (a killed run may cut the last)."""
+    if not path.is_file():
+        return pd.DataFrame()
+    text = path.read_text(encoding="utf-8")
+    complete = text[: text.rfind("\n") + 1]
+    if not complete.strip():
+        return pd.DataFrame()
+    return pd.read_csv(io.StringIO(complete), on_bad_lines="skip")
+
+
+def run(scenario: Scenario | str | Path, out: str | Path | None = None, *,
+        progress: Callable[[float], None] | None = None, overwrite: bool = False) -> Results:
+    """Run a scenario (a :class:`Scenario` or a TOML path) into the results folder ``out``
+    and return its :class:`Results`. A folder that already holds results is refused unless
+    ``overwrite`` (then a run's old files are removed first). A failed step raises
+    (``SimulationError``) after the folder's summary says ``failed``."""
+    if not isinstance(scenario, Scenario):
+        scenario = load_scenario(scenario)
+    if out is None:
+        raise ScenarioError("run: give a results folder (out=...)")
+    model = build_model(scenario.config, scenario.base_dir)
+    writer = ResultWriter(Path(out), model, overwrite=overwrite, scenario=scenario.source,
+                          title=scenario.config.title, overrides=list(scenario.overrides))
+    Simulation(model, [writer]).run(progress)
+    return read_results(out)

@@ -1,0 +1,1 @@
+"""Studies of many runs: parameter sweeps on Dask."""

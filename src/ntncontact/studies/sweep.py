@@ -1,0 +1,229 @@
+"""Parameter sweeps: one scenario over a grid or a list of overrides, each case a full run on a
+Dask worker, collected into ``sweep.csv`` and figures.
+
+A sweep file (TOML; docs/api.md)::
+
+    scenario = "../blocks_fast_sliding.toml"      # relative to the sweep file
+    [grid]                                         # every combination (or [[cases]] tables)
+    "contact.0.friction" = [0.0, 0.1, 0.2]
+    "analysis.mass" = ["consistent", "lumped"]
+    [reductions]                                   # extra sweep.csv columns from history.csv
+    dissipation = "frictional_dissipation:last"
+    [[figures]]
+    x = "contact.0.friction"
+    y = "dissipation"
+    by = "analysis.mass"
+
+Each case runs in ``OUT/cases/case-<hash of its overrides>/``: a rerun skips a case whose folder
+says ``completed`` for the same overrides, and a failing case is recorded with its error
+without stopping the others.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import itertools
+import json
+import sys
+import traceback
+from collections.abc import Callable, Mapping, Sequence
+from pathlib import Path
+from typing import Annotated, Any, Literal
+
+import numpy as np
+import pandas as pd
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
+
+from ..api import load_scenario, override_strings, read_results, run
+from ..io.scenario import ScenarioError, read_toml
+
+SWEEP_FILE = "sweep.csv"
+REDUCTIONS: dict[str, Callable[[np.ndarray], float]] = {
+    "last": lambda a: float(a[-1]),
+    "first": lambda a: float(a[0]),
+    "max": lambda a: float(np.max(a)),
+    "min": lambda a: float(np.min(a)),
+    "max_abs": lambda a: float(np.max(np.abs(a))),
+    "max_change": lambda a: float(np.max(np.abs(a - a[0]))),
+}
+#: summary.json values copied into every sweep.csv row (where the run has them)
+HEADLINE = ("status", "steps", "wall_time_s", "energy_initial", "energy_final",
+            "energy_max_relative_variation", "contact_start_time", "contact_end_time",
+            "max_penetration", "max_active_pairs")
+
+
+class _Strict(BaseModel):
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+
+class FigureSpec(_Strict):
+    x: str
+    y: str
+    by: str | None = None
+
+
+class SweepSpec(_Strict):
+    """A sweep file: the scenario, the cases (``grid`` or ``cases``), reductions, figures."""
+
+    scenario: str
+    grid: dict[str, Annotated[list[Any], Field(min_length=1)]] = Field(default_factory=dict)
+    cases: list[dict[str, Any]] = Field(default_factory=list)
+    reductions: dict[str, str] = Field(default_factory=dict)
+    figures: list[FigureSpec] = Field(default_factory=list)
+    on_error: Literal["record"] = "record"
+
+    @model_validator(mode="after")
+    def _some_cases(self) -> SweepSpec:
+        if not self.grid and not self.cases:
+            raise ValueError("give [grid] or [[cases]]")
+        for name, spec in self.reductions.items():
+            column, _, op = spec.partition(":")
+            if not column or op not in REDUCTIONS:
+                raise ValueError(f"reductions.{name} = '{spec}': expected 'COLUMN:OP' with OP "
+                                 f"one of {', '.join(REDUCTIONS)}")
+        return self
+
+    def case_overrides(self) -> list[dict[str, Any]]:
+        """The cases in order: the grid's combinations (last key fastest), then ``cases``."""
+        keys = list(self.grid)
+        combos = [dict(zip(keys, values, strict=True))
+                  for values in itertools.product(*self.grid.values())] if keys else []
+        return combos + [dict(c) for c in self.cases]
+
+
+def load_sweep(path: str | Path) -> tuple[SweepSpec, Path]:
+    """Read a sweep file: the spec and the scenario path (resolved against the file)."""
+    path = Path(path)
+    data = read_toml(path)
+    try:
+        spec = SweepSpec.model_validate(data)
+    except ValidationError as err:
+        problems = "; ".join(f"{'.'.join(map(str, e['loc'])) or '(top level)'}: {e['msg']}"
+                             for e in err.errors())
+        raise ScenarioError(f"{path}: invalid sweep file: {problems}") from None
+    return spec, (path.parent / spec.scenario)
+
+
+def case_name(overrides: Sequence[str]) -> str:
+    """A folder name that depends only on the case's overrides (stable across reruns)."""
+    digest = hashlib.sha1("\n".join(overrides).encode()).hexdigest()[:10]
+    return f"case-{digest}"
+
+
+def run_case(scenario_path: str, overrides: Mapping[str, Any], folder: str,
+             reductions: Mapping[str, str]) -> dict[str, Any]:
+    """One case, on a worker: run it unless its folder already completed the same overrides,
+    and return its sweep.csv row. Never raises: a failure becomes the row's ``error``."""
+    from threadpoolctl import threadpool_limits
+
+    items = override_strings(overrides)
+    row: dict[str, Any] = {"case": Path(folder).name, **overrides}
+    try:
+        done = _completed(Path(folder), items)
+        if not done:
+            with threadpool_limits(1):  # one single-threaded case per worker and core
+                run(load_scenario(scenario_path, list(items)), Path(folder), overwrite=True)
+        results = read_results(folder)
+        row |= {"skipped": done, "error": results.summary.get("error")}
+        row |= {k: results.summary.get(k) for k in HEADLINE if k in results.summary}
+        row |= _reduce(results.history, reductions)
+    except Exception as err:  # recorded, the other cases go on
+        row |= {"status": "failed", "skipped": False,
+                "error": f"{type(err).__name__}: {err}".strip()}
+        if not isinstance(err, ScenarioError | ValueError):
+            row["traceback"] = traceback.format_exc(limit=3)
+    return row
+
+
+def _completed(folder: Path, items: Sequence[str]) -> bool:
+    summary = folder / "summary.json"
+    if not summary.is_file():
+        return False
+    data = json.loads(summary.read_text(encoding="utf-8"))
+    return data.get("status") == "completed" and list(data.get("overrides", [])) == list(items)
+
+
+def _reduce(history: pd.DataFrame, reductions: Mapping[str, str]) -> dict[str, float | None]:
+    out: dict[str, float | None] = {}
+    for name, spec in reductions.items():
+        column, _, op = spec.partition(":")
+        values = history[column].to_numpy(float) if column in history else np.empty(0)
+        out[name] = REDUCTIONS[op](values) if values.size else None
+    return out
+
+
+def sweep(spec: str | Path, out: str | Path, *, scheduler: str | None = None,
+          workers: int | None = None, progress: bool = True) -> pd.DataFrame:
+    """Run every case of the sweep file ``spec`` on Dask into ``out`` and return the table
+    written to ``out/sweep.csv``. ``scheduler``: the address of a running Dask scheduler;
+    default a LocalCluster with ``workers`` single-threaded worker processes (one per core)."""
+    sweep_spec, scenario_path = load_sweep(spec)
+    load_scenario(scenario_path)  # a broken scenario fails here, once, not in every case
+    cases = sweep_spec.case_overrides()
+    for case in cases:  # every override must name a key of the scenario: check before running
+        load_scenario(scenario_path, case)
+    out = Path(out)
+    (out / "cases").mkdir(parents=True, exist_ok=True)
+    rows = _run_on_dask(sweep_spec, str(scenario_path), cases, out, scheduler, workers, progress)
+    table = pd.DataFrame(rows)
+    table.to_csv(out / SWEEP_FILE, index=False)
+    _draw_figures(table, sweep_spec.figures, out)
+    return table
+
+
+def _run_on_dask(spec: SweepSpec, scenario_path: str, cases: list[dict[str, Any]], out: Path,
+                 scheduler: str | None, workers: int | None, progress: bool) -> list[dict]:
+    from dask.distributed import Client, LocalCluster, as_completed
+    from tqdm import tqdm
+
+    folders = [str(out / "cases" / case_name(override_strings(c))) for c in cases]
+    if scheduler is None:
+        cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
+                               dashboard_address=None)
+    else:
+        cluster = None
+    try:
+        with Client(cluster if cluster is not None else scheduler) as client:
+            futures = [client.submit(run_case, scenario_path, case, folder, spec.reductions,
+                                     pure=False)
+                       for case, folder in zip(cases, folders, strict=True)]
+            order = {f.key: i for i, f in enumerate(futures)}
+            rows: list[dict | None] = [None] * len(futures)
+            with tqdm(total=len(futures), unit="case", disable=not progress or None,
+                      file=sys.stderr) as bar:
+                for future in as_completed(futures):
+                    rows[order[future.key]] = future.result()
+                    bar.update(1)
+    finally:
+        if cluster is not None:
+            cluster.close()
+    return [r for r in rows if r is not None]
+
+
+def _draw_figures(table: pd.DataFrame, figures: Sequence[FigureSpec], out: Path) -> None:
+    import matplotlib.pyplot as plt
+
+    for fig_spec in figures:
+        missing = [c for c in (fig_spec.x, fig_spec.y, fig_spec.by) if c and c not in table]
+        if missing:
+            raise ScenarioError(f"figure {fig_spec.y} against {fig_spec.x}: no column "
+                                f"{', '.join(missing)} in {SWEEP_FILE}")
+        fig, ax = plt.subplots(layout="constrained", figsize=(5, 3.5))
+        groups = table.groupby(fig_spec.by, sort=False) if fig_spec.by else [(None, table)]
+        for label, group in groups:
+            ok = group.sort_values(fig_spec.x)
+            ax.plot(ok[fig_spec.x], ok[fig_spec.y], "o-",
+                    label=f"{fig_spec.by} = {label}" if fig_spec.by else None)
+        ax.set_xlabel(fig_spec.x)
+        ax.set_ylabel(fig_spec.y)
+        if fig_spec.by:
+            ax.legend()
+        fig.savefig(out / f"sweep_{_slug(fig_spec.y)}_vs_{_slug(fig_spec.x)}.png", dpi=120)
+        plt.close(fig)
+
+
+def _slug(name: str) -> str:
+    return "".join(ch if ch.isalnum() else "_" for ch in name).strip("_")
+
+
+__all__ = ["SweepSpec", "load_sweep", "run_case", "sweep"]

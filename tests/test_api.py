@@ -1,0 +1,108 @@
+"""The public Python API (docs/api.md): scenarios from files and dicts, run, read_results."""
+
+from __future__ import annotations
+
+import math
+import sys
+from pathlib import Path
+
+import meshio
+import numpy as np
+import pandas as pd
+import pytest
+
+import ntncontact as ntc
+from ntncontact.api import toml_value
+from ntncontact.io.scenario import ScenarioError, read_toml
+from ntncontact.io.writers import CONTACT_COLUMNS, HISTORY_COLUMNS
+
+if sys.version_info >= (3, 11):
+    import tomllib
+else:  # pragma: no cover
+    import tomli as tomllib
+
+EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
+SPIN = EXAMPLES / "spinning_block.toml"
+SHORT = {"analysis.t_end": 0.1, "analysis.output_interval": 0.04}
+
+
+def test_dict_overrides_equal_the_set_strings_of_the_cli():
+    by_dict = ntc.load_scenario(SPIN, {"analysis.mass": "lumped", "analysis.dt": 0.01,
+                                       "bodies.0.initial.velocity": [2.0, -1]})
+    by_strings = ntc.load_scenario(SPIN, ['analysis.mass="lumped"', "analysis.dt=0.01",
+                                          "bodies.0.initial.velocity=[2.0, -1]"])
+    assert by_dict.config == by_strings.config
+    assert by_dict.config.analysis.mass == "lumped"
+    assert by_dict.config.bodies[0].initial.velocity == (2.0, -1.0)
+
+
+def test_a_scenario_from_a_plain_dict_is_the_same_as_from_its_file():
+    data = read_toml(SPIN)
+    assert ntc.scenario_from_dict(data, EXAMPLES).config == ntc.load_scenario(SPIN).config
+    more = ntc.scenario_from_dict(data, EXAMPLES).with_overrides({"analysis.t_end": 0.5})
+    assert more.config.analysis.t_end == 0.5 and more.overrides == ("analysis.t_end=0.5",)
+
+
+def test_a_wrong_key_in_the_overrides_names_it():
+    with pytest.raises(ScenarioError, match="analysis.no_such_key"):
+        ntc.load_scenario(SPIN, {"analysis.no_such_key": 1})
+
+
+@pytest.mark.parametrize("value", [True, 3, -2.5, 1e-300, "lumped", 'a "quoted" \\ word',
+                                   [1.0, 2], {"a": 1, "b": [True, "x"]}, math.inf])
+def test_python_values_become_toml_values_that_read_back_equal(value):
+    assert tomllib.loads(f"v = {toml_value(value)}")["v"] == value
+
+
+def test_a_value_toml_cannot_hold_is_refused():
+    with pytest.raises(TypeError, match="cannot give"):
+        toml_value(object())
+
+
+@pytest.fixture(scope="module")
+def spin_results(tmp_path_factory):
+    out = tmp_path_factory.mktemp("spin")
+    return ntc.run(ntc.load_scenario(SPIN, SHORT), out=out), out
+
+
+def test_run_returns_the_tables_summary_and_frames_of_the_folder(spin_results):
+    results, out = spin_results
+    assert isinstance(results.history, pd.DataFrame)
+    assert list(results.history.columns[: len(HISTORY_COLUMNS)]) == list(HISTORY_COLUMNS)
+    assert results.history["step"].tolist() == list(range(6))
+    assert results.summary["status"] == "completed"
+    assert results.times == pytest.approx([0.0, 0.04, 0.08, 0.1])
+    # a free body: the mid-point rule keeps linear momentum to round-off
+    p = results.history[["linear_momentum_x", "linear_momentum_y"]].to_numpy()
+    assert np.max(np.abs(p - p[0])) <= 1e-12 * np.max(np.abs(p[0]))
+    again = ntc.read_results(out)
+    pd.testing.assert_frame_equal(again.history, results.history)
+    assert again.summary == results.summary
+
+
+def test_fields_gives_a_meshio_mesh_at_a_frame_time_and_refuses_other_times(spin_results):
+    results, _ = spin_results
+    mesh = results.fields(0.08)
+    assert isinstance(mesh, meshio.Mesh)
+    d = mesh.point_data["displacement"][:, :2]
+    v = mesh.point_data["velocity"][:, :2]
+    assert d.shape == (91, 2) and np.abs(d).max() > 0.05  # the block has moved
+    assert v[:, 0].mean() == pytest.approx(1.0, rel=1e-9)  # mean velocity = initial (uniform mesh)
+    with pytest.raises(ValueError, match="no field frame at t = 0.05; frames at 0, 0.04"):
+        results.fields(0.05)
+
+
+def test_read_results_drops_a_cut_off_last_line(tmp_path, spin_results):
+    _, out = spin_results
+    for name in ("history.csv", "contact.csv", "summary.json"):
+        (tmp_path / name).write_bytes((out / name).read_bytes())
+    text = (tmp_path / "history.csv").read_text()
+    (tmp_path / "history.csv").write_text(text + "6,0.12,1.2")  # a killed run's half row
+    results = ntc.read_results(tmp_path)
+    assert len(results.history) == 6 and results.times == []
+    assert list(results.contact.columns) == list(CONTACT_COLUMNS)
+
+
+def test_read_results_of_a_folder_without_results_says_so(tmp_path):
+    with pytest.raises(FileNotFoundError, match="not a results folder"):
+        ntc.read_results(tmp_path)
