@@ -14,7 +14,7 @@ from helpers import model_from_dict, model_from_example
 
 from ntncontact import simulation
 from ntncontact.diagnostics import InvertedAtStepEnd, check_end_of_step
-from ntncontact.fem.q4 import InvertedElementError
+from ntncontact.fem.q4 import DN_GP, InvertedElementError
 from ntncontact.simulation import Simulation, SimulationError
 
 TWO_BLOCKS = {
@@ -43,6 +43,9 @@ def test_check_names_the_body_its_element_and_the_time():
     assert isinstance(err, InvertedElementError)  # so the step is cut back
     assert (err.body, err.local, err.element) == ("right", 5, right.cell_offset + 5)
     assert err.value < 0.0 and err.time == 0.25
+    # the same det J as the element's own Gauss-point Jacobian (an einsum oracle)
+    J = np.einsum("gaj,ai->gij", DN_GP, x[cell])
+    assert err.value == pytest.approx(np.linalg.det(J).min(), rel=1e-12)
     assert "element 5 of body 'right'" in str(err) and "t = 0.25" in str(err)
     x[model.body("left").nodes[0]] = np.nan  # a NaN position is no valid element either
     with pytest.raises(InvertedAtStepEnd, match="body 'left'"):
