@@ -52,3 +52,37 @@ def test_rebuilt_when_triplet_places_change():
     got = union.add(K, moved, cols, vals)
     want = K + sp.csr_matrix((vals, (moved, cols)), shape=K.shape)
     assert np.allclose(got.toarray(), want.toarray(), rtol=0, atol=1e-14)
+
+
+def test_pattern_kept_when_the_active_set_shrinks_and_returns():
+    """Triplets that leave keep their (zero) places and come back to them: the pattern, and so
+    the solver's analysis, stays; a triplet on a new place grows the union, keeping the old."""
+    from ntncontact.solvers.linear import LinearSolver
+
+    rng = np.random.default_rng(3)
+    n = 12
+    K = (sp.random(n, n, density=0.2, random_state=rng) + 4.0 * n * sp.eye(n)).tocsr()
+    rows, cols, vals = rng.integers(0, n, 20), rng.integers(0, n, 20), rng.normal(size=20)
+    union, solver = TripletUnion(), LinearSolver("superlu")
+    first = union.add(K, rows, cols, vals)
+    subsets = [np.arange(5), np.arange(10, 20), np.arange(20)[::-1], np.zeros(0, int)]
+    for keep in subsets:
+        got = union.add(K, rows[keep], cols[keep], vals[keep])
+        want = K + sp.csr_matrix((vals[keep], (rows[keep], cols[keep])), shape=K.shape)
+        assert np.allclose(got.toarray(), want.toarray(), rtol=0, atol=1e-14)
+        assert np.array_equal(got.indptr, first.indptr)
+        assert np.array_equal(got.indices, first.indices)
+        solver.solve(got, np.ones(n))
+    assert solver.stats.analyses == 1
+    new_place = np.flatnonzero(first.toarray() == 0)[0]  # an entry outside the union
+    r, c = divmod(int(new_place), n)
+    grown = union.add(K, np.append(rows[:3], r), np.append(cols[:3], c), np.ones(4))
+    assert grown.nnz == first.nnz + 1
+    assert np.allclose(grown.toarray(), (K + sp.csr_matrix(
+        (np.ones(4), (np.append(rows[:3], r), np.append(cols[:3], c))), shape=K.shape)).toarray())
+    again = union.add(K, rows, cols, vals)  # the first triplets: found in the grown union
+    assert np.array_equal(again.indices, grown.indices)
+    other_k = (K + sp.eye(n, k=1)).tocsr()  # a new K pattern starts afresh
+    fresh = union.add(other_k, rows, cols, vals)
+    assert np.allclose(fresh.toarray(), (other_k + sp.csr_matrix(
+        (vals, (rows, cols)), shape=K.shape)).toarray())

@@ -5,8 +5,11 @@ happen to sum to exactly zero, so the sparsity pattern changed from one Newton i
 the next and the sparse solver redid its ordering and symbolic analysis almost every time
 (468 analyses for 623 factorizations in the ring impact). :class:`TripletUnion` keeps the
 union pattern of K and the triplet positions, explicit zeros included, and reuses it for as
-long as K's pattern and the triplets' (row, col) arrays are unchanged (a whole contact phase
-with a steady active set).
+long as K's pattern holds and the triplets fall on places it already has.
+
+The union only grows while K's pattern holds: when the active set changes, pairs that leave
+keep their (zero) entries and pairs that come back find theirs, so the solver sees a new
+pattern, and redoes its analysis, only when a pair touches dofs that no earlier pair coupled.
 """
 
 from __future__ import annotations
@@ -20,36 +23,62 @@ class TripletUnion:
     """``add(K, rows, cols, vals)`` = K + COO(vals at rows, cols), in a stable CSR pattern."""
 
     def __init__(self) -> None:
-        self._key: tuple | None = None
+        self._k_key: tuple | None = None  # K's (indptr, indices) the union was built for
+        self._t_key: tuple | None = None  # the triplets' (rows, cols) that _t_map places
+        self._keys = np.zeros(0, dtype=np.int64)  # union entries as row * n_cols + col, sorted
         self._k_map = self._t_map = self._indptr = self._indices = None
 
     def add(self, K: sp.csr_matrix, rows: NDArray, cols: NDArray,
             vals: NDArray) -> sp.csr_matrix:
-        if not self._matches(K, rows, cols):
+        if not self._same_k(K):
+            self._keys = np.zeros(0, dtype=np.int64)  # a new K pattern: start afresh
             self._build(K, rows, cols)
+        elif not self._same_triplets(rows, cols):
+            self._place(K, rows, cols)
         data = np.zeros(self._indices.size)
         data[self._k_map] = K.data
         data += np.bincount(self._t_map, weights=vals, minlength=data.size)
         return sp.csr_matrix((data, self._indices, self._indptr), shape=K.shape)
 
-    def _matches(self, K: sp.csr_matrix, rows: NDArray, cols: NDArray) -> bool:
-        if self._key is None:
+    def _same_k(self, K: sp.csr_matrix) -> bool:
+        if self._k_key is None:
             return False
-        indptr, indices, r, c = self._key
-        return (np.array_equal(K.indptr, indptr) and np.array_equal(K.indices, indices)
-                and np.array_equal(rows, r) and np.array_equal(cols, c))
+        indptr, indices = self._k_key
+        return np.array_equal(K.indptr, indptr) and np.array_equal(K.indices, indices)
+
+    def _same_triplets(self, rows: NDArray, cols: NDArray) -> bool:
+        r, c = self._t_key
+        return np.array_equal(rows, r) and np.array_equal(cols, c)
+
+    def _place(self, K: sp.csr_matrix, rows: NDArray, cols: NDArray) -> None:
+        """New triplet places: found in the union (pattern kept), else the union grown."""
+        keys_t = _keys(rows, cols, K.shape[1])
+        at = np.searchsorted(self._keys, keys_t)
+        found = at < self._keys.size
+        found[found] = self._keys[at[found]] == keys_t[found]
+        if not found.all():
+            self._build(K, rows, cols)
+            return
+        self._t_map = at
+        self._t_key = (np.array(rows, copy=True), np.array(cols, copy=True))
 
     def _build(self, K: sp.csr_matrix, rows: NDArray, cols: NDArray) -> None:
-        """Union pattern (sorted, unique) and each K entry's and triplet's place in it."""
+        """Union pattern (sorted, unique) of K, the triplets and the union so far, and each K
+        entry's and triplet's place in it."""
         n_rows, n_cols = K.shape
         k_rows = np.repeat(np.arange(n_rows), np.diff(K.indptr))
         keys_k = k_rows.astype(np.int64) * n_cols + K.indices
-        keys_t = np.asarray(rows, np.int64) * n_cols + np.asarray(cols, np.int64)
-        union, inverse = np.unique(np.concatenate([keys_k, keys_t]), return_inverse=True)
+        keys_t = _keys(rows, cols, n_cols)
+        union = np.unique(np.concatenate([keys_k, keys_t, self._keys]))
         indptr = np.zeros(n_rows + 1, dtype=np.int64)
         np.add.at(indptr, union // n_cols + 1, 1)
         self._indptr = np.cumsum(indptr)
         self._indices = (union % n_cols).astype(K.indices.dtype)
-        self._k_map, self._t_map = inverse[: keys_k.size], inverse[keys_k.size:]
-        self._key = (K.indptr.copy(), K.indices.copy(), np.array(rows, copy=True),
-                     np.array(cols, copy=True))
+        self._keys = union
+        self._k_map, self._t_map = np.searchsorted(union, keys_k), np.searchsorted(union, keys_t)
+        self._k_key = (K.indptr.copy(), K.indices.copy())
+        self._t_key = (np.array(rows, copy=True), np.array(cols, copy=True))
+
+
+def _keys(rows: NDArray, cols: NDArray, n_cols: int) -> NDArray:
+    return np.asarray(rows, np.int64) * n_cols + np.asarray(cols, np.int64)
