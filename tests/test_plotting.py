@@ -222,6 +222,14 @@ def test_interpolation_steps_over_an_unreadable_frame(tmp_path):
     assert np.allclose(frame.cell_data["von_mises"], von_mises, rtol=0.0, atol=1e-12)
 
 
+def test_times_a_rounding_error_off_the_ends_draw_the_end_frames(results):
+    from ntncontact.plotting import frames_at
+
+    states = frames_at(results, [-1e-12, 0.4 + 1e-12])
+    assert [(frame.time, interpolated) for frame, interpolated in states] == \
+        [(0.0, False), (pytest.approx(0.4, abs=1e-15), False)]
+
+
 @pytest.mark.parametrize("times", [[0.5], [-0.1], [0.1, float("nan")], [100.0, -1.0]])
 def test_times_outside_the_frames_are_refused(results, tmp_path, times):
     with pytest.raises(ValueError, match=r"outside the frames of .*fields\.pvd \(t = 0 to 0\.4\)"):

@@ -160,10 +160,11 @@ def load_frames(directory: str | os.PathLike, max_frames: int = EVENLY_SPACED_PA
     return frames
 
 
-def check_times(times: Sequence[float], first: float, last: float, where: str) -> None:
-    """A one-line ValueError naming the times not within ``first``..``last`` (NaN included)
-    and ``where`` they were looked for."""
-    outside = [f"{t:g}" for t in times if not first <= t <= last]
+def check_times(times: Sequence[float], first: float, last: float, where: str,
+                tolerance: float = 0.0) -> None:
+    """A one-line ValueError naming the times not within ``first``..``last`` (give or take
+    ``tolerance``; NaN is outside) and ``where`` they were looked for."""
+    outside = [f"{t:g}" for t in times if not first - tolerance <= t <= last + tolerance]
     if outside:
         what = "time " + outside[0] + " is" if len(outside) == 1 else \
             "times " + ", ".join(outside) + " are"
@@ -178,7 +179,8 @@ def frames_at(directory: str | os.PathLike, times: Sequence[float]
     folder = Path(directory)
     series = _series(folder)
     written = np.array([t for t, _ in series])
-    check_times(times, written[0], written[-1], f"the frames of {folder / PVD_FILE}")
+    tolerance = 1e-9 * max(written[-1] - written[0], abs(written[-1]))
+    check_times(times, written[0], written[-1], f"the frames of {folder / PVD_FILE}", tolerance)
     read: dict[int, VtuFrame | None] = {}
 
     def frame(index: int) -> VtuFrame | None:
@@ -186,7 +188,6 @@ def frames_at(directory: str | os.PathLike, times: Sequence[float]
             read[index] = _read_or_warn(series[index][1], series[index][0])
         return read[index]
 
-    tolerance = 1e-9 * max(written[-1] - written[0], abs(written[-1]))
     states = []
     for time in times:
         first_after = int(np.searchsorted(written, time - tolerance))
