@@ -152,6 +152,7 @@ def test_a_killed_run_continued_from_its_checkpoint_matches_the_uninterrupted_on
             if int(p.stem.rsplit("_", 1)[-1]) <= resumed_from}
     assert run_cli(EXAMPLES / scenario, out, overrides, "--restart") == 0, context
     assert kept and all(p.stat().st_mtime_ns == t for p, t in kept.items()), context
+    assert not list(out.rglob("*.tmp")), f"{context}: temporary files left"
     ref = reference(name)
     assert history_steps(out) == list(range(len(history_steps(ref)))), context
     assert_same_table(ref / "history.csv", out / "history.csv", context)
@@ -218,3 +219,32 @@ def test_the_api_restarts_like_the_command(tmp_path):
     resumed = ntc.run(scenario, out, restart=True)
     assert resumed.history.equals(full.history)
     assert os.path.isdir(out / CHECKPOINT_DIR)
+
+
+@pytest.mark.parametrize("n", [60, 400, 2500])  # static LU, static LU, SuperLU
+def test_a_restored_linear_solver_factors_like_the_one_it_was_saved_from(n):
+    """The next matrix of the saved pattern is factored on the kept path (static LU or
+    SuperLU on the kept ordering, no new analysis): the same solution, bit for bit."""
+    import scipy.sparse as sp
+
+    from ntncontact.solvers.linear import LinearSolver
+
+    rng = np.random.default_rng(n)
+    pattern = sp.random(n, n, density=8.0 / n, random_state=rng) + sp.eye(n)
+    pattern = (pattern + pattern.T).tocsr()
+
+    def matrix() -> sp.csr_matrix:  # the pattern, new values, diagonally dominant, unsymmetric
+        values = pattern.copy()
+        values.data = rng.uniform(-1.0, 1.0, values.nnz)
+        return (values + sp.diags(np.abs(values).sum(axis=1).A1 + 1.0)).tocsr()
+
+    first, second, b = matrix(), matrix(), rng.standard_normal(n)
+    running = LinearSolver(backend="auto")
+    running.solve(first, b)
+    saved = running.analysis_state()
+    expected = running.solve(second, b)
+    restored = LinearSolver(backend="auto")
+    info, arrays = saved
+    restored.restore_analysis(json.loads(json.dumps(info)), arrays)  # as the header keeps it
+    assert np.array_equal(restored.solve(second, b), expected)
+    assert restored.stats.analyses == 0

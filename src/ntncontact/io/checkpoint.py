@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import hashlib
 import json
-import tomllib
+import sys
 import zipfile
 from collections.abc import Sequence
 from dataclasses import fields
@@ -21,6 +21,11 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+
+if sys.version_info >= (3, 11):
+    import tomllib
+else:  # pragma: no cover - Python 3.10
+    import tomli as tomllib
 
 from .. import __version__
 from ..contact import PairState
@@ -214,6 +219,8 @@ def attach(simulation: Simulation, writer: ResultWriter, directory: str | Path,
     checkpoints) and add the observer that writes checkpoints, after ``writer``."""
     if resume is not None:
         simulation.restore_state(resume["simulation"])
+        for leftover in checkpoint_folder(directory).glob(".checkpoint_*.tmp"):  # a kill
+            leftover.unlink(missing_ok=True)  # while one was written
     else:
         remove_checkpoints(directory)
     checkpointer = Checkpointer(directory, interval, identity, simulation, writer,

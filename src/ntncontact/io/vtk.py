@@ -110,6 +110,8 @@ class VtuSeriesWriter:
             number = frame.stem.rsplit("_", 1)[-1]
             if number.isdigit() and int(number) > step:
                 frame.unlink()
+        for leftover in self.vtu_directory.glob(f".{self.name}_*.tmp"):  # a kill mid-write
+            leftover.unlink()
         replace_atomically(self.pvd_path, self._write_pvd)
 
     @property

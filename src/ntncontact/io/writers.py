@@ -397,6 +397,10 @@ class ResultsDirectory:
             self.fields = VtuSeriesWriter(self.directory) if write_fields else None
             self.summary = SummaryWriter(self.directory, **summary_extra)
             if resume is not None:
+                for leftover in self.directory.glob(".*.tmp"):  # a kill mid-write
+                    if leftover.name.startswith((".summary.json.", ".fields.pvd.",
+                                                 ".history.csv.", ".contact.csv.")):
+                        leftover.unlink()
                 if self.fields is not None:
                     self.fields.resume(step, resume["pvd_entries"])
                 self.summary.restore(resume["summary"])
