@@ -31,16 +31,17 @@ EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
 TIMEOUT = 600.0  # a loaded machine (2 cores, many jobs) runs the children slowly
 SEED = random.SystemRandom().randrange(2**32)  # shown in every failure message
 
-# (scenario, overrides, checkpoint_interval, first and last step to kill at). Every kill step is
-# past the first checkpoint and before the last step, in the case's contact phase:
+# (scenario, overrides, checkpoint_interval, first and last step of the first kill). Every kill
+# step is past the first checkpoint, in the case's contact phase, and leaves room for a second
+# kill (of the restarted run) before the last step:
 # - the static frictional block (report 6.1), 8 load steps;
 # - the fast-sliding blocks with friction 0.2 (ALE lower block), contact from t = 0.048;
 # - the ring impact (ALE obstacle, Newton multiplier updates), contact from t = 0.065.
 CASES = {
-    "block_sliding": ("block_sliding.toml", [], 0.5, 3, 6),
+    "block_sliding": ("block_sliding.toml", [], 0.5, 3, 5),
     "blocks_fast_sliding": ("blocks_fast_sliding.toml",
-                            ["contact.0.friction=0.2", "analysis.t_end=0.09"], 0.012, 18, 27),
-    "ring_impact": ("ring_impact.toml", ["analysis.t_end=0.12"], 0.02, 14, 21),
+                            ["contact.0.friction=0.2", "analysis.t_end=0.09"], 0.012, 18, 25),
+    "ring_impact": ("ring_impact.toml", ["analysis.t_end=0.12"], 0.02, 14, 19),
 }
 
 
@@ -49,11 +50,12 @@ def run_cli(scenario: Path, out: Path, overrides: list[str], *extra: str) -> int
     return main(["run", str(scenario), "--out", str(out), "--quiet", *sets, *extra])
 
 
-def start_child(scenario: Path, out: Path, overrides: list[str]) -> subprocess.Popen:
+def start_child(scenario: Path, out: Path, overrides: list[str], *extra: str
+                ) -> subprocess.Popen:
     """``ntncontact run`` in a child process with this test's environment (kernel cache)."""
     sets = [item for o in overrides for item in ("--set", o)]
     command = [sys.executable, "-m", "ntncontact.cli", "run", str(scenario), "--out", str(out),
-               "--quiet", *sets]
+               "--quiet", *sets, *extra]
     return subprocess.Popen(command, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
                             text=True)
 
@@ -138,10 +140,15 @@ def test_a_killed_run_continued_from_its_checkpoint_matches_the_uninterrupted_on
         name, reference, tmp_path):
     scenario, overrides, interval, first, last = CASES[name]
     overrides = [*overrides, f"analysis.checkpoint_interval={interval}"]
-    kill_step = random.Random(f"{SEED}-{name}").randint(first, last)
-    context = f"{name} killed at step {kill_step} (seed {SEED})"
+    rng = random.Random(f"{SEED}-{name}")
+    kill_step = rng.randint(first, last)
     out = tmp_path / name
     kill_at_step(start_child(EXAMPLES / scenario, out, overrides), out, kill_step)
+    # the restarted run is killed too, at a step past the rows the first one left
+    steps = len(history_steps(reference(name))) - 1
+    again = min(history_steps(out)[-1] + rng.randint(1, 2), steps - 1)
+    context = f"{name} killed at steps {kill_step} and {again} (seed {SEED})"
+    kill_at_step(start_child(EXAMPLES / scenario, out, overrides, "--restart"), out, again)
     assert summary(out)["status"] == "running", context  # killed: no chance to say more
     checkpoints = checkpoint_files(out)
     assert 1 <= len(checkpoints) <= KEEP, context
