@@ -25,6 +25,7 @@ import numpy as np
 import pandas as pd
 
 from .builder import build_model
+from .io import checkpoint
 from .io.results import ResultWriter
 from .io.scenario import ScenarioConfig, ScenarioError, apply_override, parse_scenario, read_toml
 from .io.vtk import read_pvd
@@ -169,17 +170,29 @@ def read_table(path: Path) -> pd.DataFrame:
 
 
 def run(scenario: Scenario | str | Path, out: str | Path | None = None, *,
-        progress: Callable[[float], None] | None = None, overwrite: bool = False) -> Results:
+        progress: Callable[[float], None] | None = None, overwrite: bool = False,
+        restart: bool = False) -> Results:
     """Run a scenario (a :class:`Scenario` or a TOML path) into the results folder ``out``
     and return its :class:`Results`. A folder that already holds results is refused unless
-    ``overwrite`` (then a run's old files are removed first). A failed step raises
-    (``SimulationError``) after the folder's summary says ``failed``."""
+    ``overwrite`` (then a run's old files are removed first), or ``restart``: continue the
+    killed run in ``out`` from its last checkpoint (``analysis.checkpoint_interval``; the
+    scenario and overrides must be the run's). A failed step raises (``SimulationError``)
+    after the folder's summary says ``failed``."""
     if not isinstance(scenario, Scenario):
         scenario = load_scenario(scenario)
     if out is None:
         raise ScenarioError("run: give a results folder (out=...)")
+    if restart and overwrite:
+        raise ValueError("run: restart continues the run in out, overwrite replaces it: "
+                         "give one of them")
     model = build_model(scenario.config, scenario.base_dir)
-    writer = ResultWriter(Path(out), model, overwrite=overwrite, scenario=scenario.source,
+    identity = checkpoint.run_identity(scenario.config, scenario.overrides, model)
+    resume = checkpoint.load_latest(out, identity) if restart else None
+    writer = ResultWriter(Path(out), model, overwrite=overwrite,
+                          resume=resume and resume["writer"], scenario=scenario.source,
                           title=scenario.config.title, overrides=list(scenario.overrides))
-    Simulation(model, [writer]).run(progress)
+    simulation = Simulation(model, [writer])
+    checkpoint.attach(simulation, writer, out, scenario.config.analysis.checkpoint_interval,
+                      identity, resume)
+    simulation.run(progress)
     return read_results(out)

@@ -70,6 +70,7 @@ def _run_until_stopped(args: argparse.Namespace, stop: StopOnSignal) -> int:
     from tqdm import tqdm
 
     from .builder import build_model
+    from .io import checkpoint
     from .io.results import ResultWriter
     from .io.scenario import load_scenario
     from .simulation import RunInterrupted, Simulation
@@ -84,10 +85,18 @@ def _run_until_stopped(args: argparse.Namespace, stop: StopOnSignal) -> int:
 
         check_times(args.times, 0.0, model.analysis.t_end, f"the run of {scenario}")
     out = Path(args.out)
-    writer = ResultWriter(out, model, overwrite=args.overwrite, scenario=str(scenario),
+    identity = checkpoint.run_identity(config, args.set or [], model)
+    if args.restart and args.overwrite:
+        raise ValueError("--restart continues the run in --out, --overwrite replaces it: "
+                         "give one of them")
+    resume = checkpoint.load_latest(out, identity) if args.restart else None
+    writer = ResultWriter(out, model, overwrite=args.overwrite,
+                          resume=resume and resume["writer"], scenario=str(scenario),
                           title=config.title, overrides=list(args.set or []))
     with _finished_on_error(writer, stop):
         sim = Simulation(model, [writer])
+        checkpoint.attach(sim, writer, out, config.analysis.checkpoint_interval, identity,
+                          resume)
         t_end = model.analysis.t_end
         with tqdm(total=t_end, unit="t", disable=args.quiet or None, desc=scenario.stem,
                   bar_format="{l_bar}{bar}| t={n:.4g}/{total:.4g} [{elapsed}<{remaining}]") \
@@ -251,6 +260,9 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--overwrite", action="store_true",
                      help="replace the results already in the folder (only the files a run "
                           "writes: CSV, JSON, fields.pvd and fields/*.vtu, PNG and GIF figures)")
+    run.add_argument("--restart", action="store_true",
+                     help="continue the killed run in --out from its last checkpoint "
+                          "(analysis.checkpoint_interval); its files are cut back to it")
     run.add_argument("--plot", action="store_true",
                      help="then write the figures of `ntncontact plot`")
     _figure_options(run, "(implies --plot)")

@@ -154,6 +154,32 @@ class Simulation:
                              else model.analysis.newton_inexact_augmentations)
         self._union = TripletUnion()  # one stiffness pattern for all steps (fem.sparse)
         self._newton_updates = any(_newton_updated(ci) for ci in model.interfaces)
+        self._last_substep: float | None = None  # the last sub-step after cut-backs
+        self._resumed = False  # restored from a checkpoint: no initial record
+
+    def checkpoint_state(self) -> dict:
+        """Everything of the run that outlives a step (io.checkpoint saves it): the state
+        (X, d, v, a, the interfaces' pair states), the energy ledger, the energy multiplier
+        (kept by steps without contact) and the last sub-step after cut-backs. The rest of
+        this object is rebuilt identically from the model, or reset by every step."""
+        solver = getattr(self.solve, "__self__", None)
+        analysis = solver.analysis_state() if hasattr(solver, "analysis_state") else ({}, {})
+        return {"state": self.state, "ledger": dict(self.ledger),
+                "energy_multiplier": self._energy_multiplier, "last_substep": self._last_substep,
+                # the linear solver's orderings: the next factorization takes the same path
+                "linear_solver": analysis}
+
+    def restore_state(self, saved: dict) -> None:
+        """Continue from :meth:`checkpoint_state`'s values; :meth:`run` then goes on with
+        the step after ``saved["state"]`` (observers are restored by their owners)."""
+        self.state = saved["state"]
+        self.ledger = dict.fromkeys(LEDGER, 0.0) | dict(saved["ledger"])
+        self._energy_multiplier = float(saved["energy_multiplier"])
+        self._last_substep = saved.get("last_substep")
+        solver = getattr(self.solve, "__self__", None)
+        if hasattr(solver, "restore_analysis") and "linear_solver" in saved:
+            solver.restore_analysis(*saved["linear_solver"])
+        self._resumed = True
 
     def balance(self, state: StepState) -> Balance:
         _, _, energy = self.model.assembler.internal(state.X, state.x, need_tangent=False)
@@ -462,15 +488,16 @@ class Simulation:
         analysis = self.model.analysis
         n_steps = int(np.ceil(analysis.t_end / analysis.dt - 1e-9))
         try:
-            self._notify(StepRecord(self.state, self.balance(self.state), 0, 0.0))
-            for k in range(n_steps):
+            if not self._resumed:
+                self._notify(StepRecord(self.state, self.balance(self.state), 0, 0.0))
+            for k in range(self.state.step, n_steps):  # a restored run: from its step on
                 reason = stop_reason() if stop_reason is not None else None
                 if reason is not None:
                     raise RunInterrupted(reason)
                 # target times k dt (not accumulated sums) so output times are exact
                 t_next = min((k + 1) * analysis.dt, analysis.t_end)
                 dt = t_next - self.state.time
-                self.state, its, _ = self.step_with_cutback(dt)
+                self.state, its, self._last_substep = self.step_with_cutback(dt)
                 self.state = replace(self.state, time=t_next)
                 extra = self._ledger_extra() | self._contact_extra() | self._tie_extra()
                 self._notify(StepRecord(self.state, self.balance(self.state), its, dt, extra))

@@ -29,7 +29,10 @@ class ResultWriter:
     """Writes history.csv, summary.json and fields.pvd/VTU as the simulation advances."""
 
     def __init__(self, directory: str | Path, model: Model, extra_history: tuple[str, ...] = (),
-                 overwrite: bool = False, **summary_extra: object) -> None:
+                 overwrite: bool = False, resume: dict | None = None,
+                 **summary_extra: object) -> None:
+        """``resume``: a restart from a checkpoint (``checkpoint_state``'s values, with the
+        state it was taken at under "state"): the folder's files are cut back to it."""
         extra_history = ("external_work",) + extra_history
         if model.interfaces:
             extra_history = extra_history + CONTACT_HISTORY
@@ -42,13 +45,33 @@ class ResultWriter:
         summary_extra = dict.fromkeys(EnergyAudit.KEYS) | summary_extra  # energy balance
         self._energy = EnergyAudit()
         self.results = ResultsDirectory(directory, history_columns=extra_history,
-                                        overwrite=overwrite, **summary_extra)
+                                        overwrite=overwrite,
+                                        resume=None if resume is None else resume["files"],
+                                        **summary_extra)
         self.model = model
         self.extra_history = extra_history
         self.interval = model.analysis.output_interval
         self._next_output = 0.0
         self._body_id = model.body_of_cell().astype(float)
         self._last: StepRecord | None = None
+        if resume is not None:
+            self._resume(resume)
+
+    def checkpoint_state(self) -> dict:
+        """This writer's running values after the last step (JSON types): the output cursor,
+        the energy audit, and its files' (see ``ResultsDirectory.checkpoint_state``)."""
+        step = self._last.state.step if self._last is not None else 0
+        audit = self._energy
+        return {"next_output": self._next_output,
+                "energy_audit": [audit.initial, audit.scale, audit.max_error, audit.max_change],
+                "files": self.results.checkpoint_state(step)}
+
+    def _resume(self, saved: dict) -> None:
+        self._next_output = float(saved["next_output"])
+        audit = self._energy
+        audit.initial, audit.scale, audit.max_error, audit.max_change = saved["energy_audit"]
+        # the mesh-quality table at the end needs the last state (also with no step left)
+        self._last = StepRecord(saved["state"], None, 0, 0.0)  # type: ignore[arg-type]
 
     def on_step(self, model: Model, record: StepRecord) -> None:
         s, b = record.state, record.balance

@@ -221,6 +221,7 @@ class AnalysisConfig(Strict):
     t_end: Positive
     mass: Literal["consistent", "lumped"] = "consistent"
     output_interval: Positive | None = None
+    checkpoint_interval: Positive | None = None
     max_cutbacks: Annotated[int, Field(ge=0, le=20)] = 4
     newton: NewtonConfig = NewtonConfig()
     energy_conserving: bool = False

@@ -102,6 +102,18 @@ class VtuSeriesWriter:
         make_subfolder(self.vtu_directory)
         self._entries: list[tuple[float, str]] = []
 
+    def resume(self, step: int, entries: Sequence[Sequence]) -> None:
+        """A restart after output step ``step``: list ``entries`` (time, relative path, as
+        :attr:`entries` gave them at the checkpoint) and remove the frames of later steps."""
+        self._entries = [(float(time), str(relative)) for time, relative in entries]
+        for frame in self.vtu_directory.glob(f"{self.name}_*.vtu"):
+            number = frame.stem.rsplit("_", 1)[-1]
+            if number.isdigit() and int(number) > step:
+                frame.unlink()
+        for leftover in self.vtu_directory.glob(f".{self.name}_*.tmp"):  # a kill mid-write
+            leftover.unlink()
+        replace_atomically(self.pvd_path, self._write_pvd)
+
     @property
     def entries(self) -> list[tuple[float, str]]:
         """(time, path relative to the PVD) of every snapshot written so far."""

@@ -25,6 +25,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from ntncontact.io.run_folder import (
+    RunFolderError,
     RunLock,
     create_new_text,
     new_temporary,
@@ -109,12 +110,19 @@ def _check_keys(given: Sequence[str], expected: Sequence[str], what: str) -> Non
 
 class _CsvWriter:
     """A new CSV file opened for writing with its header written and flushed (refused if the
-    name is taken, by a file or a symbolic link)."""
+    name is taken, by a file or a symbolic link). With ``resume_step`` (a restart), the
+    existing file instead, cut back to its rows of steps up to ``resume_step`` (the first
+    column is the step) and opened for appending."""
 
-    def __init__(self, path: Path, columns: tuple[str, ...]) -> None:
+    def __init__(self, path: Path, columns: tuple[str, ...],
+                 resume_step: int | None = None) -> None:
         self.path = path
         self.columns = columns
         path.parent.mkdir(parents=True, exist_ok=True)
+        if resume_step is not None:
+            self._file = _truncated_to_step(path, columns, resume_step)
+            self._csv = csv.writer(self._file, lineterminator="\n")
+            return
         self._file = create_new_text(path)
         self._csv = csv.writer(self._file, lineterminator="\n")
         self._write_rows([list(columns)])
@@ -135,12 +143,47 @@ class _CsvWriter:
         self.close()
 
 
+def _truncated_to_step(path: Path, columns: tuple[str, ...], step: int) -> io.TextIOWrapper:
+    """``path`` rewritten with its header and the complete rows of steps <= ``step`` (a new
+    file renamed over it: a kill leaves the old or the new one), open for appending. The rows
+    are in step order, so the cut is at the first later step."""
+    try:
+        text = path.read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise RunFolderError(f"{path} is missing: cannot restart the run in its folder") from None
+    lines = text.split("\n")[:-1]  # complete lines only (a killed run may cut the last)
+    if not lines or next(csv.reader(lines[:1])) != list(columns):
+        raise RunFolderError(f"{path}: its columns are not this run's: cannot restart into it")
+    kept = lines[:1]
+    for line in lines[1:]:
+        if int(line.split(",", 1)[0]) > step:
+            break
+        kept.append(line)
+    fd, tmp = new_temporary(path)
+    handle = os.fdopen(fd, "w", newline="", encoding="utf-8")
+    try:
+        handle.write("\n".join(kept) + "\n")
+        handle.flush()
+        os.replace(tmp, path)
+    except BaseException:
+        handle.close()
+        tmp.unlink(missing_ok=True)
+        raise
+    return handle
+
+
 class HistoryWriter(_CsvWriter):
     """``history.csv``: one row per output step, the required columns then ``extra_columns``."""
 
-    def __init__(self, directory: str | os.PathLike, extra_columns: Sequence[str] = ()) -> None:
+    def __init__(self, directory: str | os.PathLike, extra_columns: Sequence[str] = (),
+                 resume_step: int | None = None) -> None:
         columns = _check_columns(extra_columns, HISTORY_COLUMNS)
-        super().__init__(Path(directory) / HISTORY_FILE, columns)
+        super().__init__(Path(directory) / HISTORY_FILE, columns, resume_step)
+
+    def last_step(self) -> int | None:
+        """The step of the last complete row (None: header only)."""
+        rows = read_csv_table(self.path)["step"]
+        return int(rows[-1]) if len(rows) else None
 
     def write(self, row: Mapping[str, Any]) -> None:
         """Append one row; ``row`` must hold exactly the writer's columns."""
@@ -151,9 +194,10 @@ class HistoryWriter(_CsvWriter):
 class ContactWriter(_CsvWriter):
     """``contact.csv``: one row per active node pair per output step."""
 
-    def __init__(self, directory: str | os.PathLike, extra_columns: Sequence[str] = ()) -> None:
+    def __init__(self, directory: str | os.PathLike, extra_columns: Sequence[str] = (),
+                 resume_step: int | None = None) -> None:
         columns = _check_columns(extra_columns, CONTACT_COLUMNS)
-        super().__init__(Path(directory) / CONTACT_FILE, columns)
+        super().__init__(Path(directory) / CONTACT_FILE, columns, resume_step)
 
     def write_step(self, step: int, time: float, pairs: Mapping[str, ArrayLike]) -> int:
         """Append the rows of one output step and return how many were written.
@@ -253,6 +297,18 @@ class SummaryWriter:
         """A copy of the current summary contents."""
         return dict(self._data)
 
+    def checkpoint_state(self) -> dict[str, Any]:
+        """The running values a restart needs (JSON types; see :meth:`restore`)."""
+        return {"data": to_jsonable(self._data), "max_variation": self._max_variation,
+                "wall_time_s": _time.perf_counter() - self._start}
+
+    def restore(self, saved: Mapping[str, Any]) -> None:
+        """Continue from :meth:`checkpoint_state`'s values (the wall time goes on from
+        the checkpoint's) and rewrite the file."""
+        self._max_variation = float(saved["max_variation"])
+        self._start = _time.perf_counter() - float(saved["wall_time_s"])
+        self.update(**(dict(saved["data"]) | {"status": "running", "error": None}))
+
     def record_energy(self, step: int, total_energy: float, time: float | None = None) -> None:
         """Track the total energy of an output step at ``time`` (does not write; call
         :meth:`update`)."""
@@ -324,18 +380,47 @@ class ResultsDirectory:
         contact_columns: Sequence[str] = (),
         write_fields: bool = True,
         overwrite: bool = False,
+        resume: Mapping[str, Any] | None = None,
         **summary_extra: Any,
     ) -> None:
         self.directory = Path(directory)
-        self._lock: RunLock | None = prepare(self.directory, overwrite)
+        # a restart keeps the folder's results (cut back to the checkpoint, below)
+        self._lock: RunLock | None = (prepare(self.directory, overwrite) if resume is None
+                                      else RunLock.acquire(self.directory))
+        step = None if resume is None else int(resume["step"])
         try:
-            self.history = HistoryWriter(self.directory, history_columns)
-            self.contact = ContactWriter(self.directory, contact_columns)
+            self.history = HistoryWriter(self.directory, history_columns, step)
+            if step is not None and self.history.last_step() != step:
+                raise RunFolderError(f"{self.history.path} does not reach the checkpoint's "
+                                     f"step {step}: it is not the checkpointed run's")
+            self.contact = ContactWriter(self.directory, contact_columns, step)
             self.fields = VtuSeriesWriter(self.directory) if write_fields else None
             self.summary = SummaryWriter(self.directory, **summary_extra)
+            if resume is not None:
+                for leftover in self.directory.glob(".*.tmp"):  # a kill mid-write
+                    if leftover.name.startswith((".summary.json.", ".fields.pvd.",
+                                                 ".history.csv.", ".contact.csv.")):
+                        leftover.unlink()
+                if self.fields is not None:
+                    self.fields.resume(step, resume["pvd_entries"])
+                self.summary.restore(resume["summary"])
         except BaseException:
+            self._close_csv()
             self._lock.release()
             raise
+
+    def checkpoint_state(self, step: int) -> dict[str, Any]:
+        """What :class:`ResultsDirectory` needs as ``resume`` to continue after ``step``:
+        the step, the PVD entries (the output cursor of the frames) and the summary."""
+        entries = self.fields.entries if self.fields is not None else []
+        return {"step": int(step), "pvd_entries": [list(e) for e in entries],
+                "summary": self.summary.checkpoint_state()}
+
+    def _close_csv(self) -> None:
+        for name in ("history", "contact"):
+            writer = getattr(self, name, None)
+            if writer is not None:
+                writer.close()
 
     @property
     def closed(self) -> bool:

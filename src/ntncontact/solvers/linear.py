@@ -262,6 +262,44 @@ class LinearSolver:
         return Factorization(self, A.shape[0], impl.solver(),
                              self._generation if backend == "pardiso" else None)
 
+    def analysis_state(self) -> tuple[dict, dict[str, NDArray]]:
+        """What decides how the next matrix is factored, for a restart checkpoint (JSON
+        values, arrays): the last pattern and, per SuperLU/static-LU mode, its ordering and
+        the static LU's fallback record. Without it a restarted run would factor its first
+        matrix by SuperLU where the uninterrupted run reuses the static LU: other round-off.
+        PARDISO analyses are structural and simply redone."""
+        if self._pattern is None:
+            return {}, {}
+        modes, arrays = [], {"indptr": self._pattern.indptr, "indices": self._pattern.indices}
+        for key, impl in self._impls.items():
+            if isinstance(impl, _SuperLUBackend) and impl.perm is not None:
+                arrays[f"perm_{len(modes)}"] = impl.perm
+                modes.append({"symmetric": key, "static": isinstance(impl, _StaticLUBackend),
+                              "usable": getattr(impl, "usable", True),
+                              "fallbacks_in_a_row": getattr(impl, "fallbacks_in_a_row", 0)})
+        return {"n": self._pattern.n, "modes": modes}, arrays
+
+    def restore_analysis(self, info: dict, arrays: dict[str, NDArray]) -> None:
+        """Take up :meth:`analysis_state`'s values (the orderings are not recomputed)."""
+        self._release()
+        self._pattern = None
+        if not info:
+            return
+        n, indices = int(info["n"]), arrays["indices"]
+        self._pattern = _Pattern(sp.csr_matrix((np.zeros(indices.size), indices,
+                                                arrays["indptr"]), shape=(n, n)))
+        for index, mode in enumerate(info["modes"]):
+            kind = _StaticLUBackend if mode["static"] else _SuperLUBackend
+            impl = kind(self._pattern, mode["symmetric"], self.stats)
+            impl.perm = np.asarray(arrays[f"perm_{index}"])
+            impl.permuted = impl._permutation_map()
+            if isinstance(impl, _StaticLUBackend):
+                p = self._pattern
+                impl.symbolic = static_lu.analyse(p.indptr, p.indices, impl.perm)
+                impl.usable = bool(mode["usable"]) and impl.symbolic is not None
+                impl.fallbacks_in_a_row = int(mode["fallbacks_in_a_row"])
+            self._impls[mode["symmetric"]] = impl
+
     def _backend_for(self, n: int) -> str:
         if not self._auto:
             return self.backend

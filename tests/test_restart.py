@@ -1,0 +1,257 @@
+"""Checkpoint and restart (issue 19 §2): a run killed by SIGKILL at a random step and continued
+with ``--restart`` writes what the uninterrupted run writes, number for number."""
+
+from __future__ import annotations
+
+import json
+import os
+import random
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import ntncontact as ntc
+from ntncontact.cli import main
+from ntncontact.io.checkpoint import (
+    CHECKPOINT_DIR,
+    KEEP,
+    CheckpointError,
+    checkpoint_files,
+    read_checkpoint,
+)
+from ntncontact.io.vtk import read_pvd, read_vtu
+from ntncontact.io.writers import read_csv_table
+
+EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
+TIMEOUT = 600.0  # a loaded machine (2 cores, many jobs) runs the children slowly
+SEED = random.SystemRandom().randrange(2**32)  # shown in every failure message
+
+# (scenario, overrides, checkpoint_interval, first and last step of the first kill). Every kill
+# step is past the first checkpoint, in the case's contact phase, and leaves room for a second
+# kill (of the restarted run) before the last step:
+# - the static frictional block (report 6.1), 8 load steps;
+# - the fast-sliding blocks with friction 0.2 (ALE lower block), contact from t = 0.048;
+# - the ring impact (ALE obstacle, Newton multiplier updates), contact from t = 0.065.
+CASES = {
+    "block_sliding": ("block_sliding.toml", [], 0.5, 3, 5),
+    "blocks_fast_sliding": ("blocks_fast_sliding.toml",
+                            ["contact.0.friction=0.2", "analysis.t_end=0.09"], 0.012, 18, 25),
+    "ring_impact": ("ring_impact.toml", ["analysis.t_end=0.12"], 0.02, 14, 19),
+}
+
+
+def run_cli(scenario: Path, out: Path, overrides: list[str], *extra: str) -> int:
+    sets = [item for o in overrides for item in ("--set", o)]
+    return main(["run", str(scenario), "--out", str(out), "--quiet", *sets, *extra])
+
+
+def start_child(scenario: Path, out: Path, overrides: list[str], *extra: str
+                ) -> subprocess.Popen:
+    """``ntncontact run`` in a child process with this test's environment (kernel cache)."""
+    sets = [item for o in overrides for item in ("--set", o)]
+    command = [sys.executable, "-m", "ntncontact.cli", "run", str(scenario), "--out", str(out),
+               "--quiet", *sets, *extra]
+    return subprocess.Popen(command, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
+                            text=True)
+
+
+def history_steps(out: Path) -> list[int]:
+    try:
+        return [int(s) for s in read_csv_table(out / "history.csv")["step"]]
+    except (FileNotFoundError, ValueError):  # not created yet, or the header not written yet
+        return []
+
+
+def kill_at_step(child: subprocess.Popen, out: Path, step: int) -> None:
+    """SIGKILL the child as soon as history.csv holds the row of ``step``."""
+    end = time.monotonic() + TIMEOUT
+    while not (history_steps(out) and history_steps(out)[-1] >= step):
+        if child.poll() is not None:
+            raise AssertionError(f"the run ended (rc {child.returncode}) before step {step} "
+                                 f"(seed {SEED}): {child.stderr.read()}")
+        if time.monotonic() > end:
+            child.kill()
+            raise AssertionError(f"timed out waiting for step {step}")
+        time.sleep(0.002)
+    child.send_signal(signal.SIGKILL)
+    child.communicate(timeout=TIMEOUT)
+    assert child.returncode == -signal.SIGKILL
+
+
+def assert_same_table(path_a: Path, path_b: Path, context: str) -> None:
+    """Equal columns, numbers compared exactly (floats parsed from repr, NaN equal to NaN)."""
+    a, b = read_csv_table(path_a), read_csv_table(path_b)
+    assert list(a) == list(b), context
+    for name in a:
+        assert a[name].shape == b[name].shape, f"{context}: {path_a.name} {name} rows"
+        same = (np.array_equal(a[name], b[name], equal_nan=True) if a[name].dtype.kind == "f"
+                else np.array_equal(a[name], b[name]))
+        assert same, f"{context}: {path_a.name} column {name} differs"
+
+
+def assert_same_frames(out_a: Path, out_b: Path, context: str) -> None:
+    """The same frames at the same times, with exactly the same points, cells and data."""
+    frames_a, frames_b = read_pvd(out_a / "fields.pvd"), read_pvd(out_b / "fields.pvd")
+    assert [t for t, _ in frames_a] == [t for t, _ in frames_b], context
+    assert [p.name for _, p in frames_a] == [p.name for _, p in frames_b], context
+    assert sorted(p.name for p in (out_b / "fields").glob("*.vtu")) == \
+        sorted(p.name for _, p in frames_b), f"{context}: frames not in the PVD"
+    for (_, path_a), (_, path_b) in zip(frames_a, frames_b, strict=True):
+        fa, fb = read_vtu(path_a), read_vtu(path_b)
+        assert np.array_equal(fa.points, fb.points), f"{context}: {path_a.name} points"
+        assert np.array_equal(fa.cells, fb.cells), f"{context}: {path_a.name} cells"
+        for kind in ("point_data", "cell_data"):
+            da, db = getattr(fa, kind), getattr(fb, kind)
+            assert sorted(da) == sorted(db), f"{context}: {path_a.name} {kind}"
+            for name in da:
+                assert np.array_equal(da[name], db[name]), f"{context}: {path_a.name} {name}"
+
+
+def summary(out: Path) -> dict:
+    data = json.loads((out / "summary.json").read_text())
+    data.pop("wall_time_s")
+    return data
+
+
+@pytest.fixture(scope="module")
+def reference(tmp_path_factory):
+    """Uninterrupted runs (without checkpoints: writing them must not change a number)."""
+    done: dict[str, Path] = {}
+
+    def get(name: str) -> Path:
+        if name not in done:
+            scenario, overrides, *_ = CASES[name]
+            out = tmp_path_factory.mktemp("reference") / name
+            assert run_cli(EXAMPLES / scenario, out, overrides) == 0
+            done[name] = out
+        return done[name]
+
+    return get
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name", list(CASES))
+def test_a_killed_run_continued_from_its_checkpoint_matches_the_uninterrupted_one(
+        name, reference, tmp_path):
+    scenario, overrides, interval, first, last = CASES[name]
+    overrides = [*overrides, f"analysis.checkpoint_interval={interval}"]
+    rng = random.Random(f"{SEED}-{name}")
+    kill_step = rng.randint(first, last)
+    out = tmp_path / name
+    kill_at_step(start_child(EXAMPLES / scenario, out, overrides), out, kill_step)
+    # the restarted run is killed too, at a step past the rows the first one left
+    steps = len(history_steps(reference(name))) - 1
+    again = min(history_steps(out)[-1] + rng.randint(1, 2), steps - 1)
+    context = f"{name} killed at steps {kill_step} and {again} (seed {SEED})"
+    kill_at_step(start_child(EXAMPLES / scenario, out, overrides, "--restart"), out, again)
+    assert summary(out)["status"] == "running", context  # killed: no chance to say more
+    checkpoints = checkpoint_files(out)
+    assert 1 <= len(checkpoints) <= KEEP, context
+    resumed_from = read_checkpoint(checkpoints[0])[0]["step"]
+    assert history_steps(out)[-1] >= resumed_from, context
+    # the frames up to the checkpoint are kept as they are, later ones are written again
+    kept = {p: p.stat().st_mtime_ns for p in (out / "fields").glob("*.vtu")
+            if int(p.stem.rsplit("_", 1)[-1]) <= resumed_from}
+    assert run_cli(EXAMPLES / scenario, out, overrides, "--restart") == 0, context
+    assert kept and all(p.stat().st_mtime_ns == t for p, t in kept.items()), context
+    assert not list(out.rglob("*.tmp")), f"{context}: temporary files left"
+    ref = reference(name)
+    assert history_steps(out) == list(range(len(history_steps(ref)))), context
+    assert_same_table(ref / "history.csv", out / "history.csv", context)
+    assert_same_table(ref / "contact.csv", out / "contact.csv", context)
+    assert len(read_csv_table(out / "contact.csv")["step"]) > 0, f"{context}: no contact"
+    assert_same_frames(ref, out, context)
+    assert summary(out) == summary(ref) | {"overrides": overrides}, context
+
+
+def test_a_restart_is_refused_for_another_scenario_overrides_or_version(tmp_path, capsys,
+                                                                        monkeypatch):
+    spin = EXAMPLES / "spinning_block.toml"
+    base = ["analysis.t_end=0.06", "analysis.checkpoint_interval=0.02"]
+    out = tmp_path / "spin"
+    assert run_cli(spin, out, base) == 0
+    assert len(checkpoint_files(out)) == KEEP
+    capsys.readouterr()
+    refusals = {
+        "other overrides": (spin, [*base, "analysis.mass=\"lumped\""]),
+        "another scenario": (EXAMPLES / "ring_impact.toml", base),
+    }
+    for why, (scenario, overrides) in refusals.items():
+        assert run_cli(scenario, out, overrides, "--restart") == 1
+        err = capsys.readouterr().err
+        assert why in err and "belongs to another run" in err, err
+        assert len(err.strip().splitlines()) == 1 and "Traceback" not in err
+    monkeypatch.setattr("ntncontact.io.checkpoint.__version__", "0.0.0-other")
+    assert run_cli(spin, out, base, "--restart") == 1
+    assert "ntncontact 0.1" in capsys.readouterr().err
+    monkeypatch.undo()
+    # the refused restarts changed nothing: the run's own restart still works
+    assert run_cli(spin, out, base, "--restart") == 0
+
+
+def test_restart_needs_a_readable_checkpoint_and_skips_a_corrupt_newest(tmp_path, capsys):
+    spin = EXAMPLES / "spinning_block.toml"
+    base = ["analysis.t_end=0.08", "analysis.checkpoint_interval=0.02"]
+    out = tmp_path / "spin"
+    assert run_cli(spin, out, ["analysis.t_end=0.08"]) == 0  # no checkpoint_interval: none
+    assert not checkpoint_files(out)
+    assert run_cli(spin, out, ["analysis.t_end=0.08"], "--restart") == 1
+    assert "no checkpoint to restart from" in capsys.readouterr().err
+    assert run_cli(spin, out, base, "--overwrite") == 0
+    reference = read_csv_table(out / "history.csv")
+    newest, older = checkpoint_files(out)
+    newest.write_bytes(newest.read_bytes()[:100])  # a kill while it was written
+    with pytest.raises(CheckpointError):
+        read_checkpoint(newest)
+    assert run_cli(spin, out, base, "--restart") == 0
+    restarted = read_csv_table(out / "history.csv")
+    for column in reference:
+        assert np.array_equal(reference[column], restarted[column], equal_nan=True), column
+    assert run_cli(spin, out, base, "--restart", "--overwrite") == 1
+    assert "give one of them" in capsys.readouterr().err
+
+
+def test_the_api_restarts_like_the_command(tmp_path):
+    scenario = ntc.load_scenario(EXAMPLES / "spinning_block.toml",
+                                 {"analysis.t_end": 0.08, "analysis.checkpoint_interval": 0.02})
+    full = ntc.run(scenario, tmp_path / "full")
+    out = tmp_path / "cut"
+    ntc.run(scenario, out)
+    checkpoint_files(out)[0].unlink()  # as if killed between the last two checkpoints
+    resumed = ntc.run(scenario, out, restart=True)
+    assert resumed.history.equals(full.history)
+    assert os.path.isdir(out / CHECKPOINT_DIR)
+
+
+@pytest.mark.parametrize("n", [60, 400, 2500])  # static LU, static LU, SuperLU
+def test_a_restored_linear_solver_factors_like_the_one_it_was_saved_from(n):
+    """The next matrix of the saved pattern is factored on the kept path (static LU or
+    SuperLU on the kept ordering, no new analysis): the same solution, bit for bit."""
+    import scipy.sparse as sp
+
+    from ntncontact.solvers.linear import LinearSolver
+
+    rng = np.random.default_rng(n)
+    pattern = sp.random(n, n, density=8.0 / n, random_state=rng) + sp.eye(n)
+    pattern = (pattern + pattern.T).tocsr()
+
+    def matrix() -> sp.csr_matrix:  # the pattern, new values, diagonally dominant, unsymmetric
+        values = pattern.copy()
+        values.data = rng.uniform(-1.0, 1.0, values.nnz)
+        return (values + sp.diags(np.abs(values).sum(axis=1).A1 + 1.0)).tocsr()
+
+    first, second, b = matrix(), matrix(), rng.standard_normal(n)
+    running = LinearSolver(backend="auto")
+    running.solve(first, b)
+    saved = running.analysis_state()
+    expected = running.solve(second, b)
+    restored = LinearSolver(backend="auto")
+    info, arrays = saved
+    restored.restore_analysis(json.loads(json.dumps(info)), arrays)  # as the header keeps it
+    assert np.array_equal(restored.solve(second, b), expected)
+    assert restored.stats.analyses == 0
