@@ -4,6 +4,8 @@ Dask worker, collected into ``sweep.csv`` and figures.
 A sweep file (TOML; docs/api.md)::
 
     scenario = "../blocks_fast_sliding.toml"      # relative to the sweep file
+    [set]                                          # overrides of every case (optional)
+    "analysis.t_end" = 0.5
     [grid]                                         # every combination (or [[cases]] tables)
     "contact.0.friction" = [0.0, 0.1, 0.2]
     "analysis.mass" = ["consistent", "lumped"]
@@ -66,6 +68,7 @@ class SweepSpec(_Strict):
     """A sweep file: the scenario, the cases (``grid`` or ``cases``), reductions, figures."""
 
     scenario: str
+    set: dict[str, Any] = Field(default_factory=dict)  # overrides applied to every case
     grid: dict[str, Annotated[list[Any], Field(min_length=1)]] = Field(default_factory=dict)
     cases: list[dict[str, Any]] = Field(default_factory=list)
     reductions: dict[str, str] = Field(default_factory=dict)
@@ -84,11 +87,12 @@ class SweepSpec(_Strict):
         return self
 
     def case_overrides(self) -> list[dict[str, Any]]:
-        """The cases in order: the grid's combinations (last key fastest), then ``cases``."""
+        """The cases in order: the grid's combinations (last key fastest), then ``cases``;
+        each after the overrides of ``set``."""
         keys = list(self.grid)
         combos = [dict(zip(keys, values, strict=True))
                   for values in itertools.product(*self.grid.values())] if keys else []
-        return combos + [dict(c) for c in self.cases]
+        return [self.set | case for case in combos + [dict(c) for c in self.cases]]
 
 
 def load_sweep(path: str | Path) -> tuple[SweepSpec, Path]:
@@ -126,6 +130,8 @@ def run_case(scenario_path: str, overrides: Mapping[str, Any], folder: str,
         results = read_results(folder)
         row |= {"skipped": done, "error": results.summary.get("error")}
         row |= {k: results.summary.get(k) for k in HEADLINE if k in results.summary}
+        if row.get("contact_end_time") is not None and row.get("contact_start_time") is not None:
+            row["contact_duration"] = row["contact_end_time"] - row["contact_start_time"]
         row |= _reduce(results.history, reductions)
     except Exception as err:  # recorded, the other cases go on
         row |= {"status": "failed", "skipped": False,
