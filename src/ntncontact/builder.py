@@ -228,7 +228,7 @@ def _interface(cfg: ContactConfig, index: int, bodies: tuple[Body, ...],
     # moment-free pair forces conserve angular momentum under the mid-point rule (theory.md)
     moment_free = cfg.moment_free if cfg.moment_free is not None else kind == "dynamic"
     law = ContactLaw(cfg.method, cfg.penalty_normal, cfg.penalty_tangential, cfg.friction,
-                     moment_free)
+                     moment_free, cfg.gap_restoring)
     persistency = (cfg.law or ("persistency" if kind == "dynamic" else "gap")) == "persistency"
     aug = cfg.augmentation
     tol = AugmentationTolerances(aug.gap_tolerance, aug.slip_tolerance, aug.traction_tolerance)

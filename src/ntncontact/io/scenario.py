@@ -234,6 +234,7 @@ class ContactConfig(Strict):
     release_steps: Annotated[int, Field(ge=1)] = 2
     detection: Literal["penetration", "predicted"] | None = None
     moment_free: bool | None = None  # default: true for dynamic analyses (ContactLaw)
+    gap_restoring: bool = False  # persistency law: a pair's first step closes its gap
     augmentation: AugmentationConfig = AugmentationConfig()
 
     @model_validator(mode="after")
