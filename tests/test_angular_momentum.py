@@ -1,6 +1,7 @@
 """Angular momentum of free bodies in contact under the mid-point rule (issue 16, item 1).
 
-The moment-free pair forces (ContactLaw.moment_free, the default of dynamic runs) are the
+The moment-free pair forces (ContactLaw.moment_free, the default of dynamic runs between
+Lagrangian bodies) are the
 gradients of the rotation-invariant gap g and offset s, evaluated at x_{n+1/2}, so their net
 moment vanishes there and the mid-point rule keeps L = sum_ab M_ab x_a x v_b to round-off
 (docs/theory.md, "Moment-free pair forces").
@@ -100,7 +101,7 @@ def test_report_pair_forces_drift():
     assert drift > 1e3 * TOL
 
 
-def test_static_runs_keep_the_report_forces_by_default():
+def test_defaults_static_and_ale_keep_the_report_forces():
     static = model_from_dict({
         "analysis": {"kind": "static", "dt": 1.0, "t_end": 1.0},
         "bodies": [{"name": "a", "mesh": {"type": "rectangle", "width": 1.0, "height": 1.0,
@@ -116,6 +117,10 @@ def test_static_runs_keep_the_report_forces_by_default():
     })
     assert not static.interfaces[0].law.moment_free
     assert blocks().interfaces[0].law.moment_free
+    ale = model_from_example("tilted_blocks.toml")  # an ALE lower block
+    assert not ale.interfaces[0].law.moment_free
+    assert model_from_example("tilted_blocks.toml",
+                              ["contact.0.moment_free=true"]).interfaces[0].law.moment_free
 
 
 @pytest.mark.parametrize("method", ["penalty", "augmented_lagrangian", "lagrange"])
