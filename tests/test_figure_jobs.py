@@ -60,9 +60,12 @@ def test_snapshots_are_drawn_once_their_frames_exist_and_before_the_run_ends(tmp
 
 def test_failed_run_with_plot_stops_its_workers_and_keeps_the_folder(tmp_path, capsys):
     out = tmp_path / "o"
+    # one Newton iteration fails at step 10 only narrowly (|R| 1.4e-8 against 4.0e-9) with the
+    # report's pair forces; the moment-free ones converge there in one iteration
     code = main(["run", str(EXAMPLES / "rod_impact.toml"), "--out", str(out), "--quiet", "--gif",
                  "--set", "analysis.t_end=0.5", "--set", "analysis.max_cutbacks=0",
-                 "--set", "analysis.newton.max_iterations=1"])
+                 "--set", "analysis.newton.max_iterations=1",
+                 "--set", "contact.0.moment_free=false"])
     assert code == 1 and "error" in capsys.readouterr().err
     assert json.loads((out / "summary.json").read_text())["status"] == "failed"
     assert not list(out.glob("*.png")) and not list(out.glob("*.gif"))  # nothing drawn
