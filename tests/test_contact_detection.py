@@ -118,3 +118,43 @@ def test_invalid_arguments_and_lagrange_release():
     np.testing.assert_array_equal(tensile, [False, True, False])
     np.testing.assert_array_equal(kept.pairs[:, 0], [0, 2])
     np.testing.assert_array_equal(kept.lambda_N, [0.5, 1e-14])
+
+
+def test_gap_restoring_rate_acts_on_new_pairs_only():
+    """contact.N.gap_restoring: a pair's first step (no committed gap rate) constrains
+    gdot + g_n/dt, g_n its gap at the step start; a committed pair keeps gdot."""
+    from ntncontact.contact import ContactLaw, evaluate_contact
+
+    x_start, interface = blocks(-0.03)  # penetration 0.03 at the step start
+    x = x_start + velocities(-0.5) * 0.01
+    pairs = np.column_stack((np.arange(4), np.arange(7, 3, -1)))
+    fresh = PairState.from_pairs(pairs)
+    committed = replace(fresh, gap_rate=np.zeros(4))
+    dt = 0.02
+    results = {}
+    for restoring in (False, True):
+        law = ContactLaw("penalty", eps_N=100.0, moment_free=True, gap_restoring=restoring)
+        for name, state in (("fresh", fresh), ("committed", committed)):
+            results[restoring, name] = evaluate_contact(x, velocities(-0.5), 2.0 / dt,
+                                                        interface, state, law, x_start=x_start)
+    plain = results[False, "fresh"]
+    np.testing.assert_allclose(plain.normal_measure, 0.5, rtol=1e-14)  # approach at 0.5
+    np.testing.assert_allclose(results[True, "fresh"].normal_measure, 0.5 + 0.03 / dt,
+                               rtol=1e-13)
+    np.testing.assert_array_equal(results[True, "committed"].normal_measure,
+                                  results[False, "committed"].normal_measure)
+    assert np.all(results[True, "fresh"].t_N > plain.t_N)
+    # the offset is a constant of the step: the tangent is still d force/d x (central
+    # differences, h = 1e-6 on O(1) coordinates: error ~1e-10 relative, tolerance 1e-6)
+    law = ContactLaw("penalty", eps_N=100.0, moment_free=True, gap_restoring=True)
+    v0 = velocities(-0.5)
+
+    def force(xx):
+        return evaluate_contact(xx, v0 + 2.0 / dt * (xx - x), 2.0 / dt, interface, fresh, law,
+                                x_start=x_start).force
+
+    h = 1e-6
+    fd = np.column_stack([(force(x + h * e.reshape(-1, 2)) - force(x - h * e.reshape(-1, 2)))
+                          / (2 * h) for e in np.eye(x.size)])
+    tangent = results[True, "fresh"].tangent_matrix().toarray()
+    assert np.abs(tangent - fd).max() < 1e-6 * np.abs(fd).max()

@@ -47,10 +47,11 @@ OK, NOT_ON_SURFACE, ZERO_CHORD = 0, 1, 2
 #: moment-free couple on the two chord nodes).
 ENTRIES_PER_PAIR = 48
 #: Rows of the per-pair scalar output (OFFSET: s = (x_i - x_j).e, 0 unless moment-free; CHORD:
-#: the normal's chord length l; FRICTION_SLOPE: d t_T / d t_N).
-(GAP, GAP_RATE, SLIP_MEASURE, T_N, T_T, TRIAL_T, LENGTH, OFFSET, CHORD,
- FRICTION_SLOPE) = range(10)
-N_SCALARS = 10
+#: the normal's chord length l; FRICTION_SLOPE: d t_T / d t_N; RATE_OFFSET: g_n/dt added to the
+#: rate of a gap-restoring pair).
+(GAP, GAP_RATE, SLIP_MEASURE, T_N, T_T, TRIAL_T, LENGTH, OFFSET, CHORD, FRICTION_SLOPE,
+ RATE_OFFSET) = range(11)
+N_SCALARS = 11
 _STICK, _SLIP = 0, 1
 
 
@@ -256,10 +257,28 @@ def _moment_free_couple(t_n, t_t, gap, offset, e0, e1, chord, length, d_tn, d_tt
     return coef * n0, coef * n1
 
 
+@njit(cache=True, inline="always")
+def _restoring_rate(x_start, slots, i, j, rate_factor):
+    """g_n/dt, g_n = (x_i - x_j).n at the step start (a constant of the step): with it the
+    persistency law asks gdot = -g_n/dt, i.e. g_{n+1} = g_n + dt gdot = 0, so that a pair
+    detected after it penetrated (or, detected at the predicted positions, before it touched)
+    ends its first step touching instead of keeping the detection's gap for the whole impact."""
+    c0 = x_start[slots[3], 0] - x_start[slots[2], 0]
+    c1 = x_start[slots[3], 1] - x_start[slots[2], 1]
+    chord = np.sqrt(c0 * c0 + c1 * c1)
+    if chord == 0.0:
+        return 0.0
+    w0, w1 = x_start[i, 0] - x_start[j, 0], x_start[i, 1] - x_start[j, 1]
+    return (w0 * c1 - w1 * c0) / chord * (0.5 * rate_factor)
+
+
 @njit(cache=True)
-def evaluate_pairs(x, v, x_start, table1, table2, pairs, lambda_N, dlambda_T, t_prev, params,
-                   flags):
+def evaluate_pairs(x, v, x_start, table1, table2, pairs, lambda_N, dlambda_T, t_prev, restoring,
+                   params, flags):
     """Force, COO tangent and per-pair results of the active pairs.
+
+    restoring: per pair, non-zero where the persistency law gets the gap-restoring rate
+    g_n/dt (:func:`_restoring_rate`), g_n the gap at ``x_start``.
 
     params: (eps_N, eps_T, mu, rate_factor, dissipation time factor).
     flags: (method code, rate law, v given, x_start given, frictional, moment free).
@@ -328,6 +347,10 @@ def evaluate_pairs(x, v, x_start, table1, table2, pairs, lambda_N, dlambda_T, t_
                     slip += _add_chord_rate(-1.0, gap, d_gap, chord, e0, e1, dv0, dv1, dn,
                                             rate_factor, d_slip)
         measure, d_measure = (gap_rate, d_rate) if rate_law else (gap, d_gap)
+        rate_offset = 0.0
+        if rate_law and has_start and restoring[p] != 0.0:
+            rate_offset = _restoring_rate(x_start, slots, i, j, rate_factor)
+            measure += rate_offset
         t_n, dt_dm = _normal_traction(method, lambda_N[p], eps_N, measure, frictional)
         t_t, trial, stat, ds_coef, dn_coef = 0.0, 0.0, _SLIP, 0.0, 0.0
         if frictional:
@@ -347,7 +370,7 @@ def evaluate_pairs(x, v, x_start, table1, table2, pairs, lambda_N, dlambda_T, t_
         scalars[GAP, p], scalars[GAP_RATE, p], scalars[SLIP_MEASURE, p] = gap, gap_rate, slip
         scalars[T_N, p], scalars[T_T, p], scalars[TRIAL_T, p] = t_n, t_t, trial
         scalars[LENGTH, p], scalars[OFFSET, p], scalars[CHORD, p] = length, offset, chord
-        scalars[FRICTION_SLOPE, p] = dn_coef
+        scalars[FRICTION_SLOPE, p], scalars[RATE_OFFSET, p] = dn_coef, rate_offset
         all_slots[p] = slots
         grads[p, 0], grads[p, 1] = d_measure, d_length
         normal[p, 0], normal[p, 1], tangent[p, 0], tangent[p, 1] = n0, n1, e0, e1
@@ -395,6 +418,9 @@ class ContactResult:
     offset: NDArray[np.float64] | None = None
     chord: NDArray[np.float64] | None = None
     friction_slope: NDArray[np.float64] | None = None
+    #: g_n/dt of the gap-restoring pairs (0 for the others); the rate law constrains
+    #: gdot + rate_offset. None from the tests' oracle
+    rate_offset: NDArray[np.float64] | None = None
 
     @property
     def normal_force(self) -> NDArray[np.float64]:
@@ -406,8 +432,11 @@ class ContactResult:
 
     @property
     def normal_measure(self) -> NDArray[np.float64]:
-        """The quantity the normal law constrains: gdot (rate law) or g (gap law)."""
-        return self.gap_rate if self.rate_law else self.gap
+        """The quantity the normal law constrains: gdot (+ g_n/dt for a gap-restoring pair,
+        rate law) or g (gap law)."""
+        if not self.rate_law:
+            return self.gap
+        return self.gap_rate if self.rate_offset is None else self.gap_rate + self.rate_offset
 
     def tangent_matrix(self) -> sp.csr_matrix:
         """The COO triplets as a square CSR matrix (duplicates summed)."""
@@ -459,6 +488,9 @@ def _evaluate_compiled(
     flags = np.array([METHOD_CODES[law.method], rate_law, v_eval is not None,
                       x_start is not None, law.frictional, law.moment_free], dtype=np.int64)
     pairs = state.pairs
+    # the pairs' first step (no committed gap rate yet) under law.gap_restoring
+    restoring = (np.isnan(state.gap_rate) if law.gap_restoring
+                 else np.zeros(len(state), bool)).astype(np.float64)
 
     def c_float(a: NDArray | None) -> NDArray:  # one compiled signature: C-contiguous float64
         return _NO_ARRAY if a is None else np.ascontiguousarray(a, dtype=np.float64)
@@ -467,7 +499,8 @@ def _evaluate_compiled(
      gradients) = evaluate_pairs(
             c_float(x_eval), c_float(v_eval), c_float(x_start), interface.surface1.kernel_table,
             interface.surface2.kernel_table, np.ascontiguousarray(pairs, dtype=np.int64),
-            c_float(state.lambda_N), c_float(state.dlambda_T), c_float(state.t_T), params,
+            c_float(state.lambda_N), c_float(state.dlambda_T), c_float(state.t_T), restoring,
+            params,
             flags)
     if code == NOT_ON_SURFACE:
         interface.surface1.index_of(pairs[:, 0])  # raises, naming the nodes
@@ -481,6 +514,7 @@ def _evaluate_compiled(
         length=scalars[LENGTH], normal=normal, tangent=tangent,
         dissipation=float(dissipation), rate_law=rate_law, slots=slots, gradients=gradients,
         offset=scalars[OFFSET], chord=scalars[CHORD], friction_slope=scalars[FRICTION_SLOPE],
+        rate_offset=scalars[RATE_OFFSET],
     )
 
 

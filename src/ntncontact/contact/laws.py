@@ -27,6 +27,9 @@ class ContactLaw:
         nodes of the normal's chord that cancels the pair's moment (x_i - x_j) x F, so contact
         conserves angular momentum exactly under the mid-point rule (docs/theory.md,
         "Moment-free pair forces").
+    gap_restoring: under the persistency law, a pair's first step constrains gdot + g_n/dt
+        instead of gdot (g_n its gap at the step start), so that it ends that step touching:
+        the gap of a pair detected one step late (or early) is not frozen for the impact.
     """
 
     method: Method = "augmented_lagrangian"
@@ -34,6 +37,7 @@ class ContactLaw:
     eps_T: float = 0.0
     mu: float = 0.0
     moment_free: bool = False
+    gap_restoring: bool = False
 
     def __post_init__(self) -> None:
         if self.method not in _METHODS:

@@ -271,7 +271,8 @@ class ContactConfig(Strict):
     corners: list[str] = []
     release_steps: Annotated[int, Field(ge=1)] = 2
     detection: Literal["penetration", "predicted"] | None = None
-    moment_free: bool | None = None  # default: true for dynamic analyses (ContactLaw)
+    moment_free: bool | None = None  # default: dynamic and no ALE body (ContactLaw)
+    gap_restoring: bool = False  # persistency law: a pair's first step closes its gap
     augmentation: AugmentationConfig = AugmentationConfig()
 
     @model_validator(mode="after")
