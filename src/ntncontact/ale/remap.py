@@ -1,8 +1,10 @@
 """Remapping nodal fields from the old mesh onto moved nodes (report 4.3, eqs. 4.18-4.19).
 
 Point location tries a hinted cell per point first (the ALE update knows where a moved node
-came from) and otherwise uses a k-d tree over old cell centroids; the candidate cells of every
-point are tested at once with a vectorized Newton inversion of the bilinear map. Points
+came from) and otherwise uses a k-d tree over old cell centroids (the nearest few, then every
+cell whose centroid is close enough for the point to lie in it: in a strongly sheared cell the
+point can be farther from its cell's centroid than from dozens of others); the candidate cells
+of every point are tested at once with a Newton inversion of the bilinear map. Points
 slightly outside the old mesh (a surface node moved along the curved surface of
 ``ale.surface`` bulges out of the old polygonal boundary by O(h^2 curvature)) are clamped to
 the nearest point of the nearest cell.
