@@ -66,6 +66,41 @@ def test_locate_finds_containing_cells():
     assert not loc.clamped.any()
 
 
+@pytest.mark.parametrize("shear", [4.0, 12.0, 30.0])
+def test_locate_finds_points_in_strongly_sheared_cells(shear):
+    """A point inside a strongly sheared cell is farther from that cell's centroid than from
+    dozens of other centroids (the refined fast-sliding blocks of issue 17 failed so, with
+    "lies outside the old mesh"): every point inside the mesh is located, in its cell, and a
+    point just outside the sheared boundary is clamped onto it."""
+    nodes, cells = perturbed_grid(40, 12, amp=0.0)
+    nodes[:, 0] += shear * nodes[:, 1]  # row j shifted by shear * j cell widths
+    remapper = Remapper(nodes, cells)
+    pts, cell, xi = random_points(nodes, cells, 200, seed=3)
+    # corners of cells of the middle rows: near a corner, far from the centroid
+    corner_xi = np.array([[-0.97, 0.97], [0.97, -0.97]])[np.arange(40) % 2]
+    corner_cells = np.arange(40) + 40 * (np.arange(40) % 10 + 1)
+    corner_pts = np.einsum("pa,pai->pi", q4_shape(corner_xi), nodes[cells[corner_cells]])
+    pts, cell = np.vstack([pts, corner_pts]), np.concatenate([cell, corner_cells])
+    xi = np.vstack([xi, corner_xi])
+    centroid = nodes[cells].mean(axis=1)
+    rank = np.array([np.sum(np.linalg.norm(centroid - p, axis=1) < np.linalg.norm(
+        centroid[c] - p)) for p, c in zip(pts, cell, strict=True)])
+    if shear >= 12.0:  # the case: beyond the 4 x 8 nearest centroids searched before
+        assert rank.max() >= 32
+    loc = remapper.locate(pts)
+    np.testing.assert_array_equal(loc.cell, cell)
+    np.testing.assert_allclose(loc.xi, xi, atol=1e-9)
+    assert not loc.clamped.any()
+    # just above the top edge of a sheared top-row cell: clamped onto that edge
+    top = 40 * 11 + 20
+    edge_mid = 0.5 * (nodes[cells[top, 2]] + nodes[cells[top, 3]])
+    loc = remapper.locate(edge_mid + [0.0, 0.02])
+    assert loc.clamped[0] and loc.cell[0] == top
+    np.testing.assert_allclose(loc.xi[0], [0.0, 1.0], atol=1e-9)
+    with pytest.raises(MeshError, match="outside the old mesh"):
+        remapper.locate(edge_mid + [0.0, 0.5])
+
+
 @pytest.mark.parametrize("method", ["linear", "quadratic"])
 def test_linear_fields_are_reproduced_exactly(method):
     nodes, cells = perturbed_grid(6, 4)

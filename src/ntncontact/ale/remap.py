@@ -1,8 +1,10 @@
 """Remapping nodal fields from the old mesh onto moved nodes (report 4.3, eqs. 4.18-4.19).
 
 Point location tries a hinted cell per point first (the ALE update knows where a moved node
-came from) and otherwise uses a k-d tree over old cell centroids; the candidate cells of every
-point are tested at once with a vectorized Newton inversion of the bilinear map. Points
+came from) and otherwise uses a k-d tree over old cell centroids (the nearest few, then every
+cell whose centroid is close enough for the point to lie in it: in a strongly sheared cell the
+point can be farther from its cell's centroid than from dozens of others); the candidate cells
+of every point are tested at once with a Newton inversion of the bilinear map. Points
 slightly outside the old mesh (a surface node moved along the curved surface of
 ``ale.surface`` bulges out of the old polygonal boundary by O(h^2 curvature)) are clamped to
 the nearest point of the nearest cell.
@@ -145,14 +147,40 @@ class Remapper:
     def _box_hi(self) -> NDArray[np.float64]:
         return self._cell_xy.max(axis=1)
 
-    def _search(self, points: NDArray, k: int) -> tuple[NDArray, NDArray]:
-        """Containing cell (or -1) and its xi for each point among its k nearest centroids.
+    @cached_property
+    def _reach(self) -> float:
+        """The largest distance from a cell's centroid to one of its corners: a point inside a
+        cell lies within this distance of that cell's centroid (the distance to the centroid
+        is convex, so its maximum over the cell is at a corner)."""
+        xc = self._cell_xy
+        return float(np.max(np.linalg.norm(xc - xc.mean(axis=1)[:, None, :], axis=-1)))
+
+    def _nearest(self, points: NDArray, k: int) -> NDArray[np.int64]:
+        """The k cells with the nearest centroids of each point, nearest first, (p, k)."""
+        return self._tree.query(points, k=k)[1].reshape(len(points), k)
+
+    def _within(self, points: NDArray, radius: float) -> NDArray[np.int64]:
+        """Every cell whose centroid lies within ``radius`` of each point, nearest first (at
+        least the nearest cell; rows padded by repeating their farthest cell), (p, width)."""
+        found = self._tree.query_ball_point(points, radius)
+        centroid = self._cell_xy.mean(axis=1)
+        rows = []
+        for p, near in zip(points, found, strict=True):
+            near = np.asarray(near, dtype=np.int64)
+            if near.size == 0:
+                near = self._nearest(p[None, :], 1)[0]
+            dist = np.linalg.norm(centroid[near] - p, axis=1)
+            rows.append(near[np.argsort(dist, kind="stable")])
+        width = max(row.size for row in rows)
+        return np.array([np.pad(row, (0, width - row.size), mode="edge") for row in rows])
+
+    def _search(self, points: NDArray, cand: NDArray[np.int64]) -> tuple[NDArray, NDArray]:
+        """Containing cell (or -1) and its xi for each point among its candidate cells
+        ``cand`` (p, k), nearest centroids first.
 
         Only candidates whose bounding box holds the point are inverted; among containing
         cells the one with the nearest centroid wins.
         """
-        _, cand = self._tree.query(points, k=k)
-        cand = cand.reshape(len(points), k)
         slack = (_INSIDE_TOL * self.cell_size[cand])[..., None]
         p = points[:, None, :]
         inbox = np.all((p >= self._box_lo[cand] - slack) & (p <= self._box_hi[cand] + slack),
@@ -193,11 +221,15 @@ class Remapper:
         todo = np.flatnonzero(cell < 0)
         if todo.size == 0:  # every hint held (the ALE update's usual case)
             return PointLocation(cell, xi, clamped)
-        # nearest few centroids first, then a wider search for the rest
-        for k in (min(4, self._k), min(4 * self._k, len(self.cells))):
+        # nearest few centroids first, then a wider search, then every cell that can hold the
+        # point: a strongly sheared cell's centroid can lie farther from a point inside it than
+        # dozens of other cells' centroids
+        for rule in (min(4, self._k), min(4 * self._k, len(self.cells)), None):
             if todo.size == 0:
                 break
-            found, found_xi = self._search(pts[todo], k)
+            cand = (self._within(pts[todo], self._reach) if rule is None
+                    else self._nearest(pts[todo], rule))
+            found, found_xi = self._search(pts[todo], cand)
             hit = found >= 0
             cell[todo[hit]] = found[hit]
             xi[todo[hit]] = found_xi[hit]
@@ -217,21 +249,34 @@ class Remapper:
     def _clamp(
         self, pts: NDArray, todo: NDArray, cell: NDArray, xi: NDArray, outside_tol: float
     ) -> None:
-        """Fill cell and xi of outside points with the nearest boundary point of nearby cells."""
-        _, cand = self._tree.query(pts[todo], k=self._k)
-        cand = cand.reshape(len(todo), self._k)
-        dist, bxi = _nearest_on_boundaries(self._cell_xy, cand, np.ascontiguousarray(pts[todo]))
-        best = np.argmin(dist, axis=1)
-        rows = np.arange(len(todo))
-        far = dist[rows, best] > outside_tol * self.cell_size[cand[rows, best]]
+        """Fill cell and xi of outside points with the nearest boundary point of nearby cells:
+        the cells with the nearest centroids, else every cell within the reach of the point
+        (its boundary can be that close only if its centroid is within ``_reach`` plus the
+        tolerance)."""
+        cand = self._nearest(pts[todo], self._k)
+        best_cell, best_xi, dist = self._nearest_boundary(pts[todo], cand)
+        far = dist > outside_tol * self.cell_size[best_cell]
+        if far.any():
+            radius = self._reach + outside_tol * float(self.cell_size.max())
+            again = self._nearest_boundary(pts[todo[far]], self._within(pts[todo[far]], radius))
+            best_cell[far], best_xi[far], dist[far] = again
+            far = dist > outside_tol * self.cell_size[best_cell]
         if far.any():
             i = int(np.flatnonzero(far)[0])
             raise MeshError(
-                f"point {pts[todo[i]].tolist()} lies {dist[i, best[i]]:.3g} outside the old "
-                f"mesh (nearest cell {int(cand[i, best[i]])}); cannot remap it"
+                f"point {pts[todo[i]].tolist()} lies {dist[i]:.3g} outside the old mesh "
+                f"(nearest cell {int(best_cell[i])}); cannot remap it"
             )
-        cell[todo] = cand[rows, best]
-        xi[todo] = bxi[rows, best]
+        cell[todo] = best_cell
+        xi[todo] = best_xi
+
+    def _nearest_boundary(self, pts: NDArray, cand: NDArray[np.int64]
+                          ) -> tuple[NDArray, NDArray, NDArray]:
+        """Per point the candidate cell with the nearest boundary point: (cell, xi, distance)."""
+        dist, bxi = _nearest_on_boundaries(self._cell_xy, cand, np.ascontiguousarray(pts))
+        best = np.argmin(dist, axis=1)
+        rows = np.arange(len(pts))
+        return cand[rows, best], bxi[rows, best], dist[rows, best]
 
     def remap(
         self,
