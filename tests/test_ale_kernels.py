@@ -1,7 +1,10 @@
 """The compiled ALE kernels (in ``ale.surface``, ``ale.remap``, ``ale.motion``,
 ``mesh.quality``, ``mesh_motion``) against the NumPy code they replaced, kept here as oracles,
-bit for bit: the kernels repeat its operations in its order (NumPy's pairwise summation
-included), so the ALE update's results did not change when they were introduced."""
+bit for bit where NumPy's results are fixed by IEEE arithmetic: the kernels repeat its
+operations in its order, so the ALE update's results did not change when they were introduced.
+Where the NumPy code sums through ``np.sum`` or ``np.einsum``, the order of those sums is NumPy's
+implementation detail (blocking, unrolling, memory layout), which other NumPy versions may
+change: there the comparison allows the round-off of a reordered sum (:data:`REORDERED`)."""
 
 from __future__ import annotations
 
@@ -31,6 +34,17 @@ def nearest_on_boundary(cell_xy, points):
     return np.min(dist, axis=-1), start + te[..., None] * (end - start), edge
 
 SNAP = 1e-10
+#: Round-off of a sum of up to a few hundred terms taken in another order, relative to the
+#: largest result: at most ~log2(n) eps (2e-15 for n = 300) of the sum of magnitudes, which
+#: here is of the order of the results; 1e-13 leaves a margin of 50 and stays far below any
+#: change an algorithmic difference (another branch, another term) would make.
+REORDERED = 1e-13
+
+
+def assert_equal_up_to_reordering(got, want):
+    want = np.asarray(want, float)
+    scale = max(float(np.abs(want).max(initial=0.0)), 1.0)
+    np.testing.assert_allclose(got, want, rtol=0.0, atol=REORDERED * scale)
 
 
 def reference_local_slides(s, ref, idx, slide, tolerance):
@@ -116,7 +130,7 @@ def random_chain(rng, n):
 
 
 @pytest.mark.parametrize("seed", range(6))
-def test_local_slides_equal_the_numpy_loop_bit_for_bit(seed):
+def test_local_slides_equal_the_numpy_loop_up_to_the_order_of_sums(seed):
     rng = np.random.default_rng(seed)
     for n in (3, 8, 12, 41, 300):  # runs above 8 and 128 segments: NumPy's pairwise sums
         s, ref = random_chain(rng, n)
@@ -133,7 +147,7 @@ def test_local_slides_equal_the_numpy_loop_bit_for_bit(seed):
             tolerance = rng.choice([0.2, 0.5, 0.9])
             got, resets = local_slides(s, ref, idx, slide, tolerance)
             want, want_resets = reference_local_slides(s, ref, idx, slide, tolerance)
-            np.testing.assert_array_equal(got, want)
+            assert_equal_up_to_reordering(got, want)  # np.cumsum / np.sum in the oracle
             assert resets == want_resets
 
 
@@ -155,12 +169,21 @@ def test_anchor_targets_equal_the_numpy_clamping_bit_for_bit(seed):
 
 
 @pytest.mark.parametrize("n", [0, 1, 7, 8, 9, 100, 128, 129, 300, 1000, 4099])
-def test_pairwise_sum_is_numpys_sum(n):
+def test_pairwise_sum_is_accurate_like_numpys(n):
+    """Within the pairwise summation's error bound, (log2(n) + 1) eps sum |a|, of the exact sum
+    (math.fsum), as NumPy's sum is (whose exact order is NumPy's own business)."""
+    import math
+
     rng = np.random.default_rng(n)
     a = rng.standard_normal(n) * 10.0 ** rng.uniform(-6, 6, n)
-    assert surface._pairwise_sum(a, 0, n) == a.sum()
-    if n > 5:
-        assert surface._pairwise_sum(a, 2, n - 5) == a[2:n - 3].sum()
+    for lo, size in ((0, n), (2, n - 5)):
+        if size <= 0:
+            continue
+        part = a[lo:lo + size]
+        bound = (np.log2(max(size, 1)) + 1.0) * np.finfo(float).eps * np.abs(part).sum()
+        exact = math.fsum(part)
+        assert abs(surface._pairwise_sum(a, lo, size) - exact) <= bound
+        assert abs(part.sum() - exact) <= bound
 
 
 def reference_try_hints(remapper, pts, hint, outside_tol):
@@ -204,7 +227,7 @@ def distorted_block(rng, nx=8, ny=5):
 
 
 @pytest.mark.parametrize("seed", range(4))
-def test_hinted_location_and_interpolation_equal_the_numpy_code_bit_for_bit(seed):
+def test_hinted_location_and_interpolation_equal_the_numpy_code(seed):
     rng = np.random.default_rng(200 + seed)
     nodes, cells = distorted_block(rng)
     remapper = Remapper(nodes, cells)
@@ -228,7 +251,8 @@ def test_hinted_location_and_interpolation_equal_the_numpy_code_bit_for_bit(seed
             got = remap._interpolate(remapper.nodes, remapper.cells, fields, loc.cell, loc.xi,
                                       pts, np.zeros((p, 4, 6, 2)) if g is None else g,
                                       g is not None)
-            np.testing.assert_array_equal(got, reference_interpolation(remapper, fields, loc,
+            # the oracle sums through np.einsum, in an order of NumPy's choosing
+            assert_equal_up_to_reordering(got, reference_interpolation(remapper, fields, loc,
                                                                        pts, g))
 
 
