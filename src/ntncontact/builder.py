@@ -96,7 +96,7 @@ def _body_supports(body: Body, cfg: BodyConfig) -> list[Prescribed]:
         for comp, value in ((0, sup.x), (1, sup.y)):
             if value is not None:
                 out.append(Prescribed(2 * nodes + comp, np.full(len(nodes), value),
-                                      time_function(sup.function)))
+                                      time_function(sup.function), f"{body.name}_{sup.set}"))
     return out
 
 

@@ -14,6 +14,7 @@ from ..postprocess import (
     nodal_deformation_gradient,
     stress_fields,
 )
+from ..reactions import reaction_columns
 from ..simulation import StepRecord
 from .writers import ResultsDirectory
 
@@ -41,6 +42,7 @@ class ResultWriter:
             summary_extra = {"contact_start_time": None, "contact_end_time": None,
                              "max_penetration": 0.0, "max_active_pairs": 0,
                              "unconverged_steps": 0} | summary_extra
+        extra_history = extra_history + reaction_columns(model)
         if model.ties:
             extra_history = extra_history + tie_history(model)
             summary_extra = {"max_tie_violation": 0.0} | summary_extra
