@@ -155,3 +155,38 @@ def test_contact_node_fields_match_the_contact_rows_of_the_same_step(tmp_path):
         checked += 1
     assert checked == 3
     assert isinstance(contact, pd.DataFrame)
+
+
+def test_xdmf_series_holds_the_frames_of_the_vtu_series(tmp_path):
+    from ntncontact.io.vtk import read_xdmf
+
+    overrides = {"analysis.t_end": 1.25, "analysis.output_interval": 0.5}
+    for fmt in ("vtu", "xdmf"):
+        scenario = api.load_scenario(EXAMPLES / "block_sliding.toml",
+                                     overrides | {"analysis.field_format": fmt})
+        api.run(scenario, out=tmp_path / fmt)
+    vtu = [read_vtu(path, t) for t, path in read_pvd(tmp_path / "vtu" / "fields.pvd")]
+    assert not (tmp_path / "xdmf" / "fields.pvd").exists()
+    xdmf = read_xdmf(tmp_path / "xdmf" / "fields.xdmf")
+    assert [f.time for f in xdmf] == pytest.approx([f.time for f in vtu], abs=1e-12)
+    assert len(xdmf) == 4  # t = 0, 0.5, 1.0 and the end
+    for a, b in zip(vtu, xdmf, strict=True):
+        assert np.array_equal(a.cells, b.cells)
+        assert set(a.point_data) | {"node_displacement"} == set(b.point_data)
+        assert set(a.cell_data) == set(b.cell_data)
+        for name, value in a.point_data.items():
+            assert np.array_equal(value, b.point_data[name], equal_nan=True), name
+        for name, value in a.cell_data.items():
+            assert np.array_equal(value, b.cell_data[name]), name
+        # the stored mesh is the first frame's; the offset puts every node where it is
+        current = b.points + b.point_data["node_displacement"]
+        assert np.allclose(current, a.deformed_points, rtol=0, atol=1e-12)
+    moved = np.abs(vtu[-1].points - vtu[0].points).max()
+    assert moved > 1e-6  # the ALE foundation's material positions did move
+
+
+def test_an_unknown_field_format_is_refused_naming_the_key():
+    data = _block("linear_elastic")
+    data["analysis"]["field_format"] = "hdf5"
+    with pytest.raises(api.ScenarioError, match="field_format"):
+        api.scenario_from_dict(data)

@@ -49,7 +49,9 @@ class ResultWriter:
         summary_extra = dict.fromkeys(EnergyAudit.KEYS) | summary_extra  # energy balance
         self._energy = EnergyAudit()
         self.results = ResultsDirectory(directory, history_columns=extra_history,
-                                        overwrite=overwrite, **summary_extra)
+                                        overwrite=overwrite,
+                                        field_format=model.analysis.field_format,
+                                        **summary_extra)
         self.model = model
         self.extra_history = extra_history
         self.interval = model.analysis.output_interval

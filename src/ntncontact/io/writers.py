@@ -31,7 +31,7 @@ from ntncontact.io.run_folder import (
     prepare,
     replace_atomically,
 )
-from ntncontact.io.vtk import VtuSeriesWriter
+from ntncontact.io.vtk import VtuSeriesWriter, XdmfSeriesWriter
 
 HISTORY_FILE = "history.csv"
 CONTACT_FILE = "contact.csv"
@@ -324,6 +324,7 @@ class ResultsDirectory:
         contact_columns: Sequence[str] = (),
         write_fields: bool = True,
         overwrite: bool = False,
+        field_format: str = "vtu",
         **summary_extra: Any,
     ) -> None:
         self.directory = Path(directory)
@@ -331,7 +332,8 @@ class ResultsDirectory:
         try:
             self.history = HistoryWriter(self.directory, history_columns)
             self.contact = ContactWriter(self.directory, contact_columns)
-            self.fields = VtuSeriesWriter(self.directory) if write_fields else None
+            series = XdmfSeriesWriter if field_format == "xdmf" else VtuSeriesWriter
+            self.fields = series(self.directory) if write_fields else None
             self.summary = SummaryWriter(self.directory, **summary_extra)
         except BaseException:
             self._lock.release()
@@ -360,6 +362,8 @@ class ResultsDirectory:
         try:
             self.history.close()
             self.contact.close()
+            if isinstance(self.fields, XdmfSeriesWriter):
+                self.fields.close()
         finally:
             try:
                 self.summary.finish(status, error, **summary_fields)
