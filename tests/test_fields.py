@@ -190,3 +190,24 @@ def test_an_unknown_field_format_is_refused_naming_the_key():
     data["analysis"]["field_format"] = "hdf5"
     with pytest.raises(api.ScenarioError, match="field_format"):
         api.scenario_from_dict(data)
+
+
+def test_the_docs_figure_script_plots_the_contact_pressure_of_the_frames(tmp_path, monkeypatch):
+    import importlib.util
+    import sys
+
+    script = EXAMPLES.parent / "docs" / "contact_pressure_figure.py"
+    spec = importlib.util.spec_from_file_location("contact_pressure_figure", script)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    scenario = api.load_scenario(EXAMPLES / "block_sliding.toml", {"analysis.t_end": 0.5})
+    results = api.run(scenario, out=tmp_path / "out")
+    time, path = read_pvd(tmp_path / "out" / "fields.pvd")[-1]
+    x, p = module.pressure_along_surface(read_vtu(path, time))
+    rows = results.contact[np.isclose(results.contact["time"], time, rtol=0, atol=1e-12)]
+    assert np.all(np.diff(x) > 0) and len(x) == len(rows)
+    assert np.allclose(np.sort(p), np.sort(rows["normal_traction"]), rtol=1e-12)
+    figure = tmp_path / "figure.png"
+    monkeypatch.setattr(sys, "argv", ["x", str(tmp_path / "out"), str(figure), "--frames", "2"])
+    module.main()
+    assert figure.stat().st_size > 10_000
