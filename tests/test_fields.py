@@ -211,3 +211,14 @@ def test_the_docs_figure_script_plots_the_contact_pressure_of_the_frames(tmp_pat
     monkeypatch.setattr(sys, "argv", ["x", str(tmp_path / "out"), str(figure), "--frames", "2"])
     module.main()
     assert figure.stat().st_size > 10_000
+
+
+def test_xdmf_without_h5py_stops_before_writing_any_file(tmp_path, monkeypatch):
+    import sys
+
+    monkeypatch.setitem(sys.modules, "h5py", None)  # import h5py raises ImportError
+    data = _block("linear_elastic")
+    data["analysis"]["field_format"] = "xdmf"
+    with pytest.raises(RuntimeError, match=r"needs h5py: pip install 'ntncontact\[xdmf\]'"):
+        api.run(api.scenario_from_dict(data), out=tmp_path / "out")
+    assert not [p.name for p in (tmp_path / "out").iterdir() if p.suffix in (".csv", ".json")]

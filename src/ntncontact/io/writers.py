@@ -330,10 +330,11 @@ class ResultsDirectory:
         self.directory = Path(directory)
         self._lock: RunLock | None = prepare(self.directory, overwrite)
         try:
-            self.history = HistoryWriter(self.directory, history_columns)
-            self.contact = ContactWriter(self.directory, contact_columns)
+            # the fields first: without h5py the xdmf writer stops before any file exists
             series = XdmfSeriesWriter if field_format == "xdmf" else VtuSeriesWriter
             self.fields = series(self.directory) if write_fields else None
+            self.history = HistoryWriter(self.directory, history_columns)
+            self.contact = ContactWriter(self.directory, contact_columns)
             self.summary = SummaryWriter(self.directory, **summary_extra)
         except BaseException:
             self._lock.release()
