@@ -96,7 +96,7 @@ def _body_supports(body: Body, cfg: BodyConfig) -> list[Prescribed]:
         for comp, value in ((0, sup.x), (1, sup.y)):
             if value is not None:
                 out.append(Prescribed(2 * nodes + comp, np.full(len(nodes), value),
-                                      time_function(sup.function)))
+                                      time_function(sup.function), f"{body.name}_{sup.set}"))
     return out
 
 
@@ -140,7 +140,7 @@ def build_model(config: ScenarioConfig, base_dir: str | Path = ".") -> Model:
                                 a.max_cutbacks, a.newton.rtol, a.newton.max_iterations,
                                 a.newton.inexact_augmentations,
                                 energy_conserving=a.energy_conserving,
-                                integrator=a.integrator)
+                                integrator=a.integrator, field_format=a.field_format)
     fixed = np.unique(np.concatenate([p.dofs for p in prescribed] or [np.zeros(0, int)]))
     ties = tuple(_tie(t, i, bodies, fixed) for i, t in enumerate(config.tie))
     _check_ale_ties(ties, ale_bodies, bodies)

@@ -70,6 +70,8 @@ class AnalysisSettings:
     #: dynamic runs: "energy_momentum" (Neo-Hookean internal force by a discrete gradient,
     #: docs/theory.md) or "midpoint" (the report's mid-point rule)
     integrator: Literal["midpoint", "energy_momentum"] = "energy_momentum"
+    #: field frames: "vtu" (PVD + VTU files) or "xdmf" (one XDMF + HDF5 time series)
+    field_format: Literal["vtu", "xdmf"] = "vtu"
 
     def __post_init__(self) -> None:
         # the scenario validation says the same with the file and key; this guards the API

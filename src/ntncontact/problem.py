@@ -211,9 +211,16 @@ class StepProblem:
         # Newton step)
         R, K = self._evaluate(y, need_tangent=self.scale_floor is None)
         self._cache = {"y": y.copy(), "K": K, "blocks": self._blocks,
-                       "C": getattr(self, "_multiplier_block", None)}
+                       "C": getattr(self, "_multiplier_block", None), "R": R}
         h = self._blocks[0]
         return np.concatenate([R[self.free_dofs], h]), self._scale
+
+    def full_residual(self, y: NDArray) -> NDArray:
+        """R on all dofs, the prescribed ones included (there: the support reactions), from
+        the last residual call when it was at y."""
+        if "R" in self._cache and np.array_equal(self._cache["y"], y):
+            return self._cache["R"]
+        return self._evaluate(y, need_tangent=False)[0]
 
     def jacobian(self, y: NDArray) -> sp.csr_matrix:
         if ("y" not in self._cache or not np.array_equal(self._cache["y"], y)

@@ -33,6 +33,7 @@ from .interfaces import (
 from .mesh_motion import move_meshes
 from .model import Model
 from .problem import StepProblem, StepState
+from .reactions import support_reactions, support_sets
 from .solvers.linear import LinearSolverError
 from .solvers.newton import FactorCache, NewtonError, NewtonSettings, newton
 from .ties import tie_forces, tie_terms, tie_violation
@@ -82,6 +83,7 @@ class SolvedStep:
     iterations: int
     mismatch: float
     tie_forces: dict = field(default_factory=dict)  # per tie: force on its body-1 nodes
+    reactions: dict = field(default_factory=dict)  # history columns of the support reactions
 
 
 class Observer(Protocol):
@@ -148,6 +150,8 @@ class Simulation:
         self._last_mismatch = 0.0
         self._augmentations_converged = True  # False: a sub-step accepted its last augmentation
         self._last_tie_forces: dict = {}
+        self._supports = support_sets(model)
+        self._last_reactions: dict = {}
         self._energy_multiplier = 0.0
         # the energy-conserving solve (report 5.5) starts from each augmentation's exact one
         self._early_ratio = (0.0 if model.analysis.energy_conserving
@@ -215,6 +219,7 @@ class Simulation:
         self._last_contact = (results if interfaces else (), solved.augmentations)
         self._last_mismatch = solved.mismatch
         self._last_tie_forces = solved.tie_forces
+        self._last_reactions = solved.reactions
         self._accumulate_work(s, d1, results, dt)
         new = StepState(s.step + 1, s.time + dt, s.X, d1, v1, a1, committed)
         return new, iterations
@@ -286,7 +291,10 @@ class Simulation:
         mismatch = motion.mismatch if motion is not None else 0.0
         ties = tie_forces(problem.constraints, problem.multipliers(result.y)) \
             if self.model.ties else {}
-        return SolvedStep(state, d, used, results, augmentation, iterations, mismatch, ties)
+        reactions = support_reactions(self._supports, problem.full_residual(result.y),
+                                      state.X + d) if self._supports else {}
+        return SolvedStep(state, d, used, results, augmentation, iterations, mismatch, ties,
+                          reactions)
 
     @staticmethod
     def _require_accepted(augmentations: int, failed: list) -> None:
@@ -499,7 +507,8 @@ class Simulation:
                 dt = t_next - self.state.time
                 self.state, its, self._last_substep = self.step_with_cutback(dt)
                 self.state = replace(self.state, time=t_next)
-                extra = self._ledger_extra() | self._contact_extra() | self._tie_extra()
+                extra = (self._ledger_extra() | self._contact_extra() | self._tie_extra()
+                         | self._last_reactions)
                 self._notify(StepRecord(self.state, self.balance(self.state), its, dt, extra))
                 if progress is not None:
                     progress(self.state.time)

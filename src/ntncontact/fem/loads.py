@@ -94,6 +94,8 @@ class Prescribed:
     dofs: NDArray
     values: NDArray
     function: TimeFunction
+    #: the support set it comes from, ``<body>_<set>`` (history.csv's reaction columns)
+    label: str = "prescribed"
 
     def at(self, t: float) -> NDArray:
         return self.values * self.function(t)

@@ -8,7 +8,13 @@ import numpy as np
 
 from ..diagnostics import EnergyAudit
 from ..model import Model
-from ..postprocess import element_von_mises
+from ..postprocess import (
+    contact_node_fields,
+    mesh_velocity,
+    nodal_deformation_gradient,
+    stress_fields,
+)
+from ..reactions import reaction_columns
 from ..simulation import StepRecord
 from .writers import ResultsDirectory
 
@@ -39,6 +45,7 @@ class ResultWriter:
             summary_extra = {"contact_start_time": None, "contact_end_time": None,
                              "max_penetration": 0.0, "max_active_pairs": 0,
                              "unconverged_steps": 0} | summary_extra
+        extra_history = extra_history + reaction_columns(model)
         if model.ties:
             extra_history = extra_history + tie_history(model)
             summary_extra = {"max_tie_violation": 0.0} | summary_extra
@@ -47,6 +54,7 @@ class ResultWriter:
         self.results = ResultsDirectory(directory, history_columns=extra_history,
                                         overwrite=overwrite,
                                         resume=None if resume is None else resume["files"],
+                                        field_format=model.analysis.field_format,
                                         **summary_extra)
         self.model = model
         self.extra_history = extra_history
@@ -98,9 +106,9 @@ class ResultWriter:
             self.results.contact.write_step(s.step, s.time, rows)
             fields |= self._contact_summary(s.time, record.dt, rows, summary)
         self.results.write_history(row, **fields)
-        self._last = record
+        before, self._last = self._last, record
         if self._due(s.time, model):
-            self._write_fields(model, record)
+            self._write_fields(model, record, before)
 
     @staticmethod
     def _contact_summary(time: float, dt: float, rows: dict, summary: dict) -> dict:
@@ -124,16 +132,28 @@ class ResultWriter:
             return True
         return False
 
-    def _write_fields(self, model: Model, record: StepRecord) -> None:
+    def _write_fields(self, model: Model, record: StepRecord,
+                      before: StepRecord | None = None) -> None:
+        """One frame: kinematics, stress and strain (cells and nodes), contact-node fields and
+        the mesh velocity (``before``: the previous step's record, for the ALE remap rate)."""
         if self.results.fields is None:
             return
         s = record.state
-        vm = element_von_mises(model, s.X, s.x)
-        self.results.fields.write(
-            s.step, s.time, s.X, model.cells,
-            point_data={"displacement": s.d, "velocity": s.v, "acceleration": s.a},
-            cell_data={"von_mises": vm, "body_id": self._body_id},
-        )
+        cell, nodal = stress_fields(model, s.X, s.x)
+        point = {"displacement": s.d, "velocity": s.v, "acceleration": s.a,
+                 "mesh_velocity": self._mesh_velocity(model, record, before),
+                 "material_position": s.X}
+        point |= nodal | contact_node_fields(record.extra.get("contact_rows"), len(s.X))
+        self.results.fields.write(s.step, s.time, s.X, model.cells, point_data=point,
+                                  cell_data=cell | {"body_id": self._body_id})
+
+    @staticmethod
+    def _mesh_velocity(model: Model, record: StepRecord, before: StepRecord | None):
+        s = record.state
+        if not model.ale_bodies or before is None:
+            return s.v.copy()  # Lagrangian meshes move with the material
+        F = nodal_deformation_gradient(model, s.X, s.x)
+        return mesh_velocity(s.v, s.X, before.state.X, record.dt, F)
 
     def on_finish(self, status: str, error: str | None) -> None:
         """Close the files, write the final summary and release the folder (once: later calls,

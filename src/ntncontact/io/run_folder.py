@@ -31,7 +31,8 @@ from typing import IO, Any
 
 LOCK_FILE = "ntncontact.lock"
 #: Files a run (or ``plot`` / ``compare`` on its folder) writes at the folder's top level.
-RESULT_FILES = ("summary.json", "history.csv", "contact.csv", "fields.pvd", "comparison.csv")
+RESULT_FILES = ("summary.json", "history.csv", "contact.csv", "fields.pvd", "comparison.csv",
+                "fields.xdmf", "fields.h5")
 #: The folder of the VTU frames, and the suffixes of the figures (their names vary by scenario).
 FIELDS_DIR = "fields"
 FIGURE_SUFFIXES = (".png", ".gif")

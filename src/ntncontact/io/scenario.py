@@ -227,6 +227,8 @@ class AnalysisConfig(Strict):
     energy_conserving: bool = False
     integrator: Literal["midpoint", "energy_momentum"] = "energy_momentum"
     max_steps: Annotated[int, Field(ge=1)] = MAX_STEPS
+    #: "vtu" (fields.pvd + a VTU a frame) or "xdmf" (fields.xdmf + fields.h5, needs h5py)
+    field_format: Literal["vtu", "xdmf"] = "vtu"
 
     @model_validator(mode="after")
     def _step_count(self) -> AnalysisConfig:

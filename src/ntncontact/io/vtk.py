@@ -10,6 +10,7 @@ it newly lists is complete, so every file a PVD names exists and parses.
 from __future__ import annotations
 
 import os
+import time as _time
 import xml.etree.ElementTree as ET
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
@@ -204,3 +205,91 @@ def _drop_z(values: NDArray, count: int) -> NDArray:
     if array.ndim == 2 and array.shape == (count, 3) and not np.any(array[:, 2]):
         return array[:, :2]
     return array
+
+
+class XdmfSeriesWriter:
+    """The frames of a run as one XDMF + HDF5 time series (``DIR/<name>.xdmf`` and
+    ``DIR/<name>.h5``), written with meshio's TimeSeriesWriter: for runs with thousands of
+    frames or 10^5 elements, where a VTU per frame is slow and large (benchmarks/README.md).
+
+    Same :meth:`write` as :class:`VtuSeriesWriter`. The mesh is stored once, at the points of
+    the first frame; since ALE bodies' points (material positions) move, every frame adds
+    ``node_displacement``, the node's current position minus that stored point ("Warp By
+    Vector" with it shows the deformed mesh). The XDMF index (XML, ~2 kB a frame) is rewritten
+    atomically, with the HDF5 file flushed, at most every ``INDEX_INTERVAL`` seconds and at
+    :meth:`close` (which every end of a run calls): rewriting it after every frame would cost
+    O(frames^2) over a run of thousands; a killed run (SIGKILL) loses at most the frames of
+    the last interval from the index, never the readability of the files.
+    """
+
+    INDEX_INTERVAL = 2.0
+
+    def __init__(self, directory: str | os.PathLike, name: str = "fields") -> None:
+        try:
+            import h5py
+        except ImportError:
+            raise RuntimeError("analysis.field_format = \"xdmf\" needs h5py: pip install "
+                               "'ntncontact[xdmf]' (or h5py)") from None
+        self.directory = Path(directory)
+        self.directory.mkdir(parents=True, exist_ok=True)
+        self.path = self.directory / f"{name}.xdmf"
+        self._series = meshio.xdmf.TimeSeriesWriter(self.path)
+        # meshio opens its HDF5 file in the working folder; ours goes beside the XDMF
+        self._series.h5_filename = os.fspath(self.directory / f"{name}.h5")
+        self._series.h5_file = h5py.File(self._series.h5_filename, "w")
+        self._first: tuple[NDArray, NDArray] | None = None
+        self._entries: list[tuple[float, str]] = []
+        self._indexed = -np.inf  # monotonic time of the last index written
+
+    @property
+    def entries(self) -> list[tuple[float, str]]:
+        """(time, XDMF file name) of every frame written so far."""
+        return list(self._entries)
+
+    def write(self, step: int, time: float, points: ArrayLike, cells: ArrayLike,
+              point_data: Mapping[str, ArrayLike], cell_data: Mapping[str, ArrayLike]) -> Path:
+        """Append output step ``step`` at ``time``; returns the XDMF path."""
+        mesh = VtuSeriesWriter._mesh(points, cells, point_data, cell_data)
+        if self._first is None:
+            self._first = (mesh.points, mesh.cells[0].data)
+            self._series.write_points_cells(mesh.points, [("quad", mesh.cells[0].data)])
+        elif not np.array_equal(self._first[1], mesh.cells[0].data):
+            raise ValueError("an XDMF series keeps one mesh: the cells changed")
+        offset = mesh.points + mesh.point_data["displacement"] - self._first[0]
+        self._series.write_data(float(time),
+                                point_data=mesh.point_data | {"node_displacement": offset},
+                                cell_data=dict(mesh.cell_data))
+        self._entries.append((float(time), self.path.name))
+        if _time.monotonic() - self._indexed >= self.INDEX_INTERVAL:
+            self._write_index()
+        return self.path
+
+    def _write_index(self) -> None:
+        self._series.h5_file.flush()
+        replace_atomically(self.path, ET.ElementTree(self._series.xdmf_file).write)
+        self._indexed = _time.monotonic()
+
+    def close(self) -> None:
+        """Write the complete XDMF index and close the HDF5 file (once)."""
+        if self._series.h5_file:
+            self._write_index()
+            self._series.h5_file.close()
+
+
+def read_xdmf(path: str | os.PathLike) -> list[VtuFrame]:
+    """Every frame of an XDMF series written by :class:`XdmfSeriesWriter`, in time order
+    (points: the stored mesh; ``deformed_points`` are not meaningful on ALE bodies there, use
+    points + ``node_displacement``)."""
+    frames = []
+    with meshio.xdmf.TimeSeriesReader(os.fspath(path)) as reader:
+        points, blocks = reader.read_points_cells()
+        quads = np.vstack([b.data for b in blocks]).astype(np.int64)
+        for k in range(reader.num_steps):
+            time, point_data, cell_data = reader.read_data(k)
+            frames.append(VtuFrame(
+                time=float(time), path=Path(path), points=np.asarray(points[:, :2], float),
+                cells=quads,
+                point_data={n: _drop_z(v, len(points)) for n, v in point_data.items()},
+                cell_data={n: _drop_z(np.concatenate([np.asarray(b) for b in v], axis=0),
+                                      len(quads)) for n, v in cell_data.items()}))
+    return frames

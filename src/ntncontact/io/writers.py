@@ -32,7 +32,7 @@ from ntncontact.io.run_folder import (
     prepare,
     replace_atomically,
 )
-from ntncontact.io.vtk import VtuSeriesWriter
+from ntncontact.io.vtk import VtuSeriesWriter, XdmfSeriesWriter
 
 HISTORY_FILE = "history.csv"
 CONTACT_FILE = "contact.csv"
@@ -381,6 +381,7 @@ class ResultsDirectory:
         write_fields: bool = True,
         overwrite: bool = False,
         resume: Mapping[str, Any] | None = None,
+        field_format: str = "vtu",
         **summary_extra: Any,
     ) -> None:
         self.directory = Path(directory)
@@ -389,12 +390,17 @@ class ResultsDirectory:
                                       else RunLock.acquire(self.directory))
         step = None if resume is None else int(resume["step"])
         try:
+            # the fields first: without h5py the xdmf writer stops before any file exists
+            series = XdmfSeriesWriter if field_format == "xdmf" else VtuSeriesWriter
+            if step is not None and series is not VtuSeriesWriter:
+                raise RunFolderError("a restart continues VTU field series only "
+                                     "(analysis.field_format = \"vtu\")")
+            self.fields = series(self.directory) if write_fields else None
             self.history = HistoryWriter(self.directory, history_columns, step)
             if step is not None and self.history.last_step() != step:
                 raise RunFolderError(f"{self.history.path} does not reach the checkpoint's "
                                      f"step {step}: it is not the checkpointed run's")
             self.contact = ContactWriter(self.directory, contact_columns, step)
-            self.fields = VtuSeriesWriter(self.directory) if write_fields else None
             self.summary = SummaryWriter(self.directory, **summary_extra)
             if resume is not None:
                 for leftover in self.directory.glob(".*.tmp"):  # a kill mid-write
@@ -445,6 +451,8 @@ class ResultsDirectory:
         try:
             self.history.close()
             self.contact.close()
+            if isinstance(self.fields, XdmfSeriesWriter):
+                self.fields.close()
         finally:
             try:
                 self.summary.finish(status, error, **summary_fields)

@@ -1,0 +1,224 @@
+"""Fields of a VTU frame (issue 20 §1): stress and strain per cell and node, contact-node fields,
+mesh velocity and material positions."""
+
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+import pytest
+from helpers import EXAMPLES, model_from_dict
+
+from ntncontact import api
+from ntncontact.io.vtk import read_pvd, read_vtu
+from ntncontact.postprocess import mesh_velocity, stress_fields
+
+P = 7.0  # applied pressure
+
+
+def _block(kind: str, grading: float = 1.0, plane_stress: bool = False) -> dict:
+    """A 2 x 1 block on rollers (bottom y, left x) under a uniform pressure on top: a uniform
+    uniaxial stress state, exact for any mesh of the block."""
+    return {
+        "analysis": {"kind": "static", "dt": 0.5, "t_end": 1.0},
+        "bodies": [{
+            "name": "block",
+            "mesh": {"type": "rectangle", "width": 2.0, "height": 1.0, "nx": 5, "ny": 4,
+                     "grading_x": grading, "grading_y": 1.0 / grading},
+            "material": {"model": kind, "E": 100.0, "nu": 0.3, "density": 1.0,
+                         "plane_stress": plane_stress},
+            "supports": [{"set": "bottom", "y": 0.0}, {"set": "left", "x": 0.0}],
+            "loads": [{"type": "pressure", "set": "top", "value": P,
+                       "function": {"times": [0.0, 1.0], "values": [0.0, 1.0]}}],
+        }],
+    }
+
+
+def _last_frame(folder):
+    (time, path), = read_pvd(folder / "fields.pvd")[-1:]
+    return read_vtu(path, time)
+
+
+def _run(tmp_path, data: dict):
+    return api.run(api.scenario_from_dict(data), out=tmp_path / "out")
+
+
+@pytest.mark.parametrize("grading", [1.0, 3.0])
+def test_uniform_pressure_gives_the_exact_stress_in_every_cell_and_node(tmp_path, grading):
+    _run(tmp_path, _block("linear_elastic", grading))
+    frame = _last_frame(tmp_path / "out")
+    nu = 0.3
+    # plane strain: sigma_zz = nu (sigma_xx + sigma_yy)
+    exact = np.array([0.0, -P, -nu * P, 0.0, 0.0, 0.0])
+    scale = 1e-9 * P
+    for stress in (frame.cell_data["stress"], frame.point_data["stress_nodal"]):
+        assert np.abs(stress - exact).max() < scale
+    pressure = -(exact[0] + exact[1] + exact[2]) / 3.0
+    s = exact
+    vm = np.sqrt(0.5 * ((s[0] - s[1]) ** 2 + (s[1] - s[2]) ** 2 + (s[2] - s[0]) ** 2))
+    for name in ("pressure", "von_mises"):
+        value = pressure if name == "pressure" else vm
+        assert np.abs(frame.cell_data[name] - value).max() < scale
+        assert np.abs(frame.point_data[f"{name}_nodal"] - value).max() < scale
+    # the Green-Lagrange strain of the uniform displacement field, from the displacements
+    u = frame.point_data["displacement"]
+    X = frame.points
+    exx = np.polyfit(X[:, 0], u[:, 0], 1)[0]
+    eyy = np.polyfit(X[:, 1], u[:, 1], 1)[0]
+    strain = frame.cell_data["strain"]
+    assert np.allclose(strain[:, 0], exx + 0.5 * exx**2, rtol=1e-9, atol=0)
+    assert np.allclose(strain[:, 1], eyy + 0.5 * eyy**2, rtol=1e-9, atol=0)
+    assert np.abs(strain[:, 2]).max() == 0.0  # plane strain: E_zz = 0
+    assert np.abs(strain[:, 3:]).max() < 1e-12 * abs(eyy)
+    assert np.allclose(frame.point_data["strain_nodal"], strain[0], rtol=1e-9, atol=1e-15)
+    assert np.array_equal(frame.point_data["material_position"], frame.points)
+
+
+def test_neo_hookean_block_carries_the_pressure_over_its_current_width(tmp_path):
+    _run(tmp_path, _block("neo_hookean", grading=2.0))
+    frame = _last_frame(tmp_path / "out")
+    x = frame.deformed_points
+    width = np.ptp(x[:, 0])  # the dead load P on the reference width 2: force 2 P
+    sigma_yy = -P * 2.0 / width
+    stress = frame.cell_data["stress"]
+    assert width > 2.0 + 1e-3  # the block widens: a case that tells Cauchy from nominal stress
+    assert np.allclose(stress[:, 1], sigma_yy, rtol=1e-9, atol=0)
+    assert np.abs(stress[:, [0, 3]]).max() < 1e-9 * P
+    assert np.allclose(frame.point_data["stress_nodal"][:, 1], sigma_yy, rtol=1e-9, atol=0)
+
+
+@pytest.mark.parametrize("kind", ["neo_hookean", "linear_elastic"])
+def test_rigid_rotation_gives_zero_strain_and_neo_hookean_zero_stress(kind):
+    model = model_from_dict(_block(kind, grading=2.0))
+    X = model.X0
+    angle = 1.1
+    R = np.array([[np.cos(angle), -np.sin(angle)], [np.sin(angle), np.cos(angle)]])
+    x = X @ R.T + np.array([3.0, -2.0])
+    cell, nodal = stress_fields(model, X, x)
+    assert np.abs(cell["strain"]).max() < 1e-14
+    assert np.abs(nodal["strain_nodal"]).max() < 1e-14
+    if kind == "neo_hookean":  # linear elasticity is not objective (docs/outputs.md)
+        E = 100.0
+        for data in (cell, nodal):
+            for name, value in data.items():
+                assert np.abs(value).max() < 1e-12 * E, name
+    else:
+        assert np.abs(cell["stress"]).max() > 1.0  # the small-strain stress of a rotation
+
+
+def test_plane_stress_has_no_out_of_plane_stress_and_its_strain():
+    model = model_from_dict(_block("linear_elastic", plane_stress=True))
+    X = model.X0
+    x = X * np.array([1.0 + 1e-3, 1.0 - 2e-3])
+    cell, _ = stress_fields(model, X, x)
+    assert np.abs(cell["stress"][:, 2]).max() == 0.0
+    nu = 0.3
+    exx, eyy = cell["strain"][0, 0], cell["strain"][0, 1]
+    assert np.allclose(cell["strain"][:, 2], -nu / (1.0 - nu) * (exx + eyy), rtol=1e-12)
+
+
+def test_mesh_velocity_of_a_node_that_changes_particle():
+    v = np.array([[1.0, 2.0]])
+    F = np.array([[[2.0, 0.0], [0.5, 1.0]]])
+    X, X_before = np.array([[0.3, 0.0]]), np.array([[0.1, 0.0]])
+    # x_node = phi(X(t), t): w = v + F dX/dt = (1, 2) + F (2, 0)
+    assert np.allclose(mesh_velocity(v, X, X_before, 0.1, F), [[5.0, 3.0]], rtol=1e-14)
+    assert np.array_equal(mesh_velocity(v, X, X, 0.1, F), v)
+
+
+def test_contact_node_fields_match_the_contact_rows_of_the_same_step(tmp_path):
+    scenario = api.load_scenario(EXAMPLES / "block_sliding.toml",
+                                 {"analysis.t_end": 1.5, "analysis.output_interval": 0.5})
+    results = api.run(scenario, out=tmp_path / "out")
+    contact = results.contact
+    checked = 0
+    for time, path in read_pvd(tmp_path / "out" / "fields.pvd")[1:]:
+        frame = read_vtu(path, time)
+        rows = contact[np.isclose(contact["time"], time, rtol=0, atol=1e-12)]
+        assert len(rows)
+        p = frame.point_data
+        nodes = rows["node_1"].to_numpy()
+        assert np.allclose(p["contact_pressure"][nodes], rows["normal_traction"], rtol=1e-12)
+        assert np.allclose(p["contact_tangential_traction"][nodes], rows["tangential_traction"],
+                           rtol=1e-12, atol=1e-12 * P)
+        assert np.allclose(p["contact_gap"][nodes], rows["gap"], rtol=1e-12, atol=1e-300)
+        assert np.allclose(p["contact_gap_rate"][nodes], rows["gap_rate"], rtol=1e-12,
+                           atol=1e-300, equal_nan=True)  # NaN: quasi-static
+        status = np.where(rows["status"] == "slip", 2, 1)
+        assert np.array_equal(p["contact_status"][nodes], status)
+        assert np.array_equal(p["contact_partner"][nodes], rows["node_2"])
+        others = np.setdiff1d(np.arange(len(frame.points)), nodes)
+        assert np.all(p["contact_partner"][others] == -1)
+        assert np.all(p["contact_status"][others] == 0)
+        assert not np.any(p["contact_pressure"][others])
+        # the mesh points are the material positions, which move on the ALE foundation
+        assert np.array_equal(p["material_position"], frame.points)
+        checked += 1
+    assert checked == 3
+    assert isinstance(contact, pd.DataFrame)
+
+
+def test_xdmf_series_holds_the_frames_of_the_vtu_series(tmp_path):
+    from ntncontact.io.vtk import read_xdmf
+
+    overrides = {"analysis.t_end": 1.25, "analysis.output_interval": 0.5}
+    for fmt in ("vtu", "xdmf"):
+        scenario = api.load_scenario(EXAMPLES / "block_sliding.toml",
+                                     overrides | {"analysis.field_format": fmt})
+        api.run(scenario, out=tmp_path / fmt)
+    vtu = [read_vtu(path, t) for t, path in read_pvd(tmp_path / "vtu" / "fields.pvd")]
+    assert not (tmp_path / "xdmf" / "fields.pvd").exists()
+    xdmf = read_xdmf(tmp_path / "xdmf" / "fields.xdmf")
+    assert [f.time for f in xdmf] == pytest.approx([f.time for f in vtu], abs=1e-12)
+    assert len(xdmf) == 4  # t = 0, 0.5, 1.0 and the end
+    for a, b in zip(vtu, xdmf, strict=True):
+        assert np.array_equal(a.cells, b.cells)
+        assert set(a.point_data) | {"node_displacement"} == set(b.point_data)
+        assert set(a.cell_data) == set(b.cell_data)
+        for name, value in a.point_data.items():
+            assert np.array_equal(value, b.point_data[name], equal_nan=True), name
+        for name, value in a.cell_data.items():
+            assert np.array_equal(value, b.cell_data[name]), name
+        # the stored mesh is the first frame's; the offset puts every node where it is
+        current = b.points + b.point_data["node_displacement"]
+        assert np.allclose(current, a.deformed_points, rtol=0, atol=1e-12)
+    moved = np.abs(vtu[-1].points - vtu[0].points).max()
+    assert moved > 1e-6  # the ALE foundation's material positions did move
+
+
+def test_an_unknown_field_format_is_refused_naming_the_key():
+    data = _block("linear_elastic")
+    data["analysis"]["field_format"] = "hdf5"
+    with pytest.raises(api.ScenarioError, match="field_format"):
+        api.scenario_from_dict(data)
+
+
+def test_the_docs_figure_script_plots_the_contact_pressure_of_the_frames(tmp_path, monkeypatch):
+    import importlib.util
+    import sys
+
+    script = EXAMPLES.parent / "docs" / "contact_pressure_figure.py"
+    spec = importlib.util.spec_from_file_location("contact_pressure_figure", script)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    scenario = api.load_scenario(EXAMPLES / "block_sliding.toml", {"analysis.t_end": 0.5})
+    results = api.run(scenario, out=tmp_path / "out")
+    time, path = read_pvd(tmp_path / "out" / "fields.pvd")[-1]
+    x, p = module.pressure_along_surface(read_vtu(path, time))
+    rows = results.contact[np.isclose(results.contact["time"], time, rtol=0, atol=1e-12)]
+    assert np.all(np.diff(x) > 0) and len(x) == len(rows)
+    assert np.allclose(np.sort(p), np.sort(rows["normal_traction"]), rtol=1e-12)
+    figure = tmp_path / "figure.png"
+    monkeypatch.setattr(sys, "argv", ["x", str(tmp_path / "out"), str(figure), "--frames", "2"])
+    module.main()
+    assert figure.stat().st_size > 10_000
+
+
+def test_xdmf_without_h5py_stops_before_writing_any_file(tmp_path, monkeypatch):
+    import sys
+
+    monkeypatch.setitem(sys.modules, "h5py", None)  # import h5py raises ImportError
+    data = _block("linear_elastic")
+    data["analysis"]["field_format"] = "xdmf"
+    with pytest.raises(RuntimeError, match=r"needs h5py: pip install 'ntncontact\[xdmf\]'"):
+        api.run(api.scenario_from_dict(data), out=tmp_path / "out")
+    assert not [p.name for p in (tmp_path / "out").iterdir() if p.suffix in (".csv", ".json")]
