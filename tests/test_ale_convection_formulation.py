@@ -155,7 +155,12 @@ def fast_sliding():
     for key, mode in (("remap", "remap"), ("term", "convective_term"),
                       ("dropped", "convective_term")):
         rec = Recorder()
-        model = model_from_example("blocks_fast_sliding.toml", coarse_fast_sliding(mode, 0.006))
+        # the report's mid-point rule: with the energy-momentum integrator some coarse contact
+        # steps are halved (a Newton trial inverts a thin element at t_{n+1}), and the halved
+        # steps move the ALE mesh differently in the two formulations (docs/theory.md)
+        model = model_from_example("blocks_fast_sliding.toml",
+                                   [*coarse_fast_sliding(mode, 0.006),
+                                    'analysis.integrator="midpoint"'])
         sim = Simulation(model, [rec])
         if key == "dropped":
             with pytest.MonkeyPatch.context() as mp:

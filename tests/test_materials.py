@@ -1,16 +1,13 @@
-"""Constitutive models: derivatives by finite differences, closed-form stresses, bad input."""
+"""Constitutive models: derivatives by finite differences, closed-form stresses, bad input.
+
+P, A and W come from the NumPy oracle (tests/element_oracle.py) that the compiled kernel is
+compared with in test_kernels_numba.py; cauchy_stress and von_mises are the package's."""
 
 import numpy as np
 import pytest
+from element_oracle import linear_elastic, neo_hookean
 
-from ntncontact.materials.models import (
-    Material,
-    MaterialError,
-    cauchy_stress,
-    linear_elastic,
-    neo_hookean,
-    von_mises,
-)
+from ntncontact.materials.models import Material, MaterialError, cauchy_stress, von_mises
 
 RNG = np.random.default_rng(0)
 F_SAMPLES = np.eye(2) + 0.3 * RNG.standard_normal((5, 2, 2))
@@ -89,18 +86,21 @@ def test_lame_round_trip():
         Material("neo_hookean", 1.0, 0.0, 1.0)
 
 
-def test_cauchy_stress_is_p_f_transpose_over_j_without_the_tangent():
-    """cauchy_stress takes the Neo-Hookean P without computing its tangent: the same bits as
-    sigma = P F^T / J from neo_hookean, and the closed form (mu (F F^T - I) + lam ln J I) / J."""
+@pytest.mark.parametrize("kind", ["neo_hookean", "linear_elastic"])
+def test_cauchy_stress_is_p_f_transpose_over_j(kind):
+    """cauchy_stress's closed forms against sigma = P F^T / J from the oracle's P (the same law
+    in another order of operations: round-off of the O(1) stresses), and sigma_33."""
     lam, mu = 2.0, 1.3
-    P, _, _ = neo_hookean(F_SAMPLES, lam, mu)
+    P, _, _ = (neo_hookean if kind == "neo_hookean" else linear_elastic)(F_SAMPLES, lam, mu)
     J = np.linalg.det(F_SAMPLES)
     assert np.all(J > 0.0)
-    sigma, s33 = cauchy_stress("neo_hookean", F_SAMPLES, lam, mu)
-    np.testing.assert_array_equal(sigma, np.einsum("...iJ,...kJ->...ik", P, F_SAMPLES)
-                                  / (F_SAMPLES[:, 0, 0] * F_SAMPLES[:, 1, 1]
-                                     - F_SAMPLES[:, 0, 1] * F_SAMPLES[:, 1, 0])[:, None, None])
-    B = np.einsum("...iJ,...kJ->...ik", F_SAMPLES, F_SAMPLES)
-    closed = (mu * (B - np.eye(2)) + lam * np.log(J)[:, None, None] * np.eye(2)) / J[:, None, None]
-    np.testing.assert_allclose(sigma, closed, rtol=1e-13, atol=1e-13)
+    sigma, s33 = cauchy_stress(kind, F_SAMPLES, lam, mu)
+    if kind == "linear_elastic":  # small strain: sigma = P, sigma_33 = lam tr(eps)
+        np.testing.assert_array_equal(sigma, P)
+        np.testing.assert_allclose(s33, lam * (np.trace(F_SAMPLES, axis1=1, axis2=2) - 2.0),
+                                   rtol=1e-14)
+        assert np.all(cauchy_stress(kind, F_SAMPLES, lam, mu, plane_stress=True)[1] == 0.0)
+        return
+    expected = np.einsum("...iJ,...kJ->...ik", P, F_SAMPLES) / J[:, None, None]
+    np.testing.assert_allclose(sigma, expected, rtol=0, atol=1e-14 * np.abs(expected).max())
     np.testing.assert_allclose(s33, lam * np.log(J) / J, rtol=1e-14)

@@ -10,17 +10,8 @@ import scipy.sparse as sp
 from numpy.typing import NDArray
 
 from ..materials.models import MaterialKind
-from .element import element_force_tangent, element_mass, renumbered
-from .q4 import InvertedElementError
-
-try:
-    from .kernels_numba import NumbaAssembly
-except ImportError:  # pragma: no cover - Numba missing: the NumPy kernel still works
-    NumbaAssembly = None
-
-#: Element kernel of :meth:`Assembler.internal`: "numba" (compiled, ~50x faster, the default when
-#: Numba imports) or "numpy" (vectorized reference). Read at every call.
-KERNEL: str = "numba" if NumbaAssembly is not None else "numpy"
+from .element import element_mass
+from .kernels_numba import NumbaAssembly
 
 
 def element_dofs(cells: NDArray) -> NDArray:
@@ -94,50 +85,11 @@ class Assembler:
     def internal(
         self, X: NDArray, x: NDArray, need_tangent: bool = True, x_start: NDArray | None = None
     ) -> tuple[NDArray, sp.csr_matrix | None, float]:
-        """Internal force vector, tangent stiffness (CSR) and total strain energy.
+        """Internal force vector, tangent stiffness (CSR) and total strain energy at x, from
+        the compiled kernel adding straight into the CSR data.
 
         ``x_start`` = x_n with x = x_{n+1/2}: the energy-momentum scheme's force of the
-        Neo-Hookean elements and its tangent with respect to x (compiled kernel only)."""
-        if KERNEL == "numba":
-            return self._internal_numba(X, x, need_tangent, x_start)
-        if x_start is not None:
-            raise NotImplementedError("the energy-momentum scheme needs the Numba kernel")
-        ne = len(self.cells)
-        fe = np.empty((ne, 8))
-        Ke = np.empty((ne, 8, 8)) if need_tangent else None
-        energy = 0.0
-        for group in self.groups:
-            idx = group.elements
-            cells = self.cells[idx]
-            try:
-                f, K, W = element_force_tangent(
-                    group.kind, X[cells], x[cells], self.lam[idx], self.mu[idx], need_tangent
-                )
-            except InvertedElementError as err:  # name the element by its global index
-                raise renumbered(err, int(idx[err.element])) from None
-            fe[idx] = f
-            if Ke is not None:
-                Ke[idx] = K
-            energy += float(W.sum())
-        force = np.bincount(self.edofs.ravel(), weights=fe.ravel(), minlength=self.ndof)
-        stiffness = self.pattern.matrix(Ke) if Ke is not None else None
-        return force, stiffness, energy
-
-    @cached_property
-    def _numba_groups(self) -> list:
-        return [NumbaAssembly(g.kind, self.cells, g.elements) for g in self.groups]
-
-    @cached_property
-    def _csr_indptr(self) -> NDArray:
-        """``pattern.indptr`` in the index type of ``pattern.indices``: SciPy then builds the
-        CSR matrix without converting it (int64 indptr + int32 indices: 33 us, same: 14 us on
-        the ring's 890 rows). The matrix gets the same arrays either way."""
-        return self.pattern.indptr.astype(self.pattern.indices.dtype)
-
-    def _internal_numba(
-        self, X: NDArray, x: NDArray, need_tangent: bool, x_start: NDArray | None = None
-    ) -> tuple[NDArray, sp.csr_matrix | None, float]:
-        """As :meth:`internal`, with the compiled kernel adding straight into the CSR data."""
+        Neo-Hookean elements and its tangent with respect to x."""
         X = np.ascontiguousarray(X, dtype=float)
         x = np.ascontiguousarray(x, dtype=float)
         force = np.zeros(self.ndof)
@@ -150,17 +102,16 @@ class Assembler:
             return force, None, energy
         return force, self.pattern_matrix(data), energy
 
-    def element_energies(self, X: NDArray, x: NDArray) -> NDArray:
-        """Strain energy of each element."""
-        out = np.empty(len(self.cells))
-        for group in self.groups:
-            idx = group.elements
-            cells = self.cells[idx]
-            _, _, W = element_force_tangent(
-                group.kind, X[cells], x[cells], self.lam[idx], self.mu[idx], False
-            )
-            out[idx] = W
-        return out
+    @cached_property
+    def _numba_groups(self) -> list:
+        return [NumbaAssembly(g.kind, self.cells, g.elements) for g in self.groups]
+
+    @cached_property
+    def _csr_indptr(self) -> NDArray:
+        """``pattern.indptr`` in the index type of ``pattern.indices``: SciPy then builds the
+        CSR matrix without converting it (int64 indptr + int32 indices: 33 us, same: 14 us on
+        the ring's 890 rows). The matrix gets the same arrays either way."""
+        return self.pattern.indptr.astype(self.pattern.indices.dtype)
 
     def nodal_mass(self, X: NDArray, lumped: bool) -> sp.csr_matrix:
         """Scalar (per node) mass matrix: consistent (5.8) or lumped by row sums (5.13)."""

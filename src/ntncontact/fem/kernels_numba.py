@@ -1,8 +1,11 @@
 """Numba Q4 kernel: internal force, strain energy and tangent scattered straight into CSR data.
 
-Same mathematics as :func:`ntncontact.fem.element.element_force_tangent` (the NumPy reference),
-but each element's 8x8 tangent is added to the global CSR ``data`` through the precomputed
-``entry_map`` of :class:`ntncontact.fem.assembly.CsrPattern` and its force to the global vector,
+The package's one implementation of the element force and of the constitutive laws in it
+(report (5.10); Neo-Hookean and linear elastic in :func:`_material`, the energy-momentum
+integrator's algorithmic stress in :func:`_element_em`); tests/element_oracle.py is an
+independent NumPy version that the tests compare it with. Each element's 8x8 tangent is added
+to the global CSR ``data`` through the precomputed ``entry_map`` of
+:class:`ntncontact.fem.assembly.CsrPattern` and its force to the global vector,
 so no (ne, 8, 8) temporary exists. Elements are processed one at a time in a compiled loop.
 
 With ``parallel=True`` the elements are split into one contiguous block per thread; an element

@@ -1,0 +1,103 @@
+"""NumPy oracle of the compiled element kernel (``ntncontact.fem.kernels_numba``), for tests
+only: the constitutive laws as vectorized P, A = dP/dF and W of F, and the Q4 internal force,
+tangent and energy built from them with einsum. The package has one implementation (the Numba
+kernel); this independent one checks it (issue 15: oracles live in tests/)."""
+
+from __future__ import annotations
+
+import numpy as np
+from numpy.typing import NDArray
+
+from ntncontact.fem.q4 import check_current_jacobian, kinematics
+
+_I2 = np.eye(2)
+
+
+def _inv_det(F: NDArray) -> tuple[NDArray, NDArray]:
+    det = F[..., 0, 0] * F[..., 1, 1] - F[..., 0, 1] * F[..., 1, 0]
+    inv = np.empty_like(F)
+    inv[..., 0, 0] = F[..., 1, 1] / det
+    inv[..., 1, 1] = F[..., 0, 0] / det
+    inv[..., 0, 1] = -F[..., 0, 1] / det
+    inv[..., 1, 0] = -F[..., 1, 0] / det
+    return inv, det
+
+
+def neo_hookean(F: NDArray, lam, mu) -> tuple[NDArray, NDArray, NDArray]:
+    """Compressible Neo-Hookean, W = mu/2 (I1 - 3) - mu ln J + lam/2 (ln J)^2 (report 6.4).
+
+    P = mu (F - F^-T) + lam ln J F^-T;
+    A_iJkL = mu d_ik d_JL + (mu - lam ln J) Fi_Li Fi_Jk + lam Fi_Ji Fi_Lk with Fi = F^-1.
+    """
+    lam = np.asarray(lam, dtype=float)[..., None, None]
+    mu = np.asarray(mu, dtype=float)[..., None, None]
+    Finv, J = _inv_det(F)
+    lnJ = np.log(J)[..., None, None]
+    FinvT = np.swapaxes(Finv, -1, -2)
+    P = mu * (F - FinvT) + lam * lnJ * FinvT
+    I1_minus_3 = np.einsum("...iJ,...iJ->...", F, F) - 2.0  # F_33 = 1 in plane strain
+    W = 0.5 * mu[..., 0, 0] * I1_minus_3 - mu[..., 0, 0] * lnJ[..., 0, 0]
+    W = W + 0.5 * lam[..., 0, 0] * lnJ[..., 0, 0] ** 2
+    c1 = (mu - lam * lnJ)[..., None, None]
+    A = mu[..., None, None] * np.einsum("ik,JL->iJkL", _I2, _I2)
+    A = A + c1 * np.einsum("...Li,...Jk->...iJkL", Finv, Finv)
+    A = A + lam[..., None, None] * np.einsum("...Ji,...Lk->...iJkL", Finv, Finv)
+    return P, A, W
+
+
+def linear_elastic(F: NDArray, lam, mu) -> tuple[NDArray, NDArray, NDArray]:
+    """Small-strain isotropic elasticity: P = sigma(eps), eps = sym(F - I)."""
+    lam = np.asarray(lam, dtype=float)
+    mu = np.asarray(mu, dtype=float)
+    H = F - _I2
+    eps = 0.5 * (H + np.swapaxes(H, -1, -2))
+    tr = eps[..., 0, 0] + eps[..., 1, 1]
+    P = lam[..., None, None] * tr[..., None, None] * _I2 + 2.0 * mu[..., None, None] * eps
+    W = 0.5 * np.einsum("...ij,...ij->...", P, eps)
+    iso = np.einsum("ij,kl->ijkl", _I2, _I2)
+    sym = np.einsum("ik,jl->ijkl", _I2, _I2) + np.einsum("il,jk->ijkl", _I2, _I2)
+    A = lam[..., None, None, None, None] * iso + mu[..., None, None, None, None] * sym
+    A = np.broadcast_to(A, F.shape + (2, 2)).copy()
+    return P, A, W
+
+
+MODELS = {"neo_hookean": neo_hookean, "linear_elastic": linear_elastic}
+
+
+def stress_and_tangent(kind: str, F: NDArray, lam, mu) -> tuple[NDArray, NDArray, NDArray]:
+    """(P, A, W) of the model ``kind``."""
+    return MODELS[kind](F, lam, mu)
+
+
+def element_force_tangent(kind: str, X_e: NDArray, x_e: NDArray, lam: NDArray, mu: NDArray,
+                          need_tangent: bool = True):
+    """Internal force f_e (ne, 8), tangent K_e (ne, 8, 8) and strain energy (ne,) of Q4
+    elements (report (5.10)); dof order (a, i) -> 2 a + i."""
+    kin = kinematics(X_e, x_e)
+    if kind == "neo_hookean":
+        check_current_jacobian(kin.F)
+    P, A, Wd = stress_and_tangent(kind, kin.F, lam[:, None], mu[:, None])
+    gw = kin.grad * kin.weight[..., None, None]
+    f = np.einsum("egiJ,egaJ->eai", P, gw).reshape(-1, 8)
+    W = np.einsum("eg,eg->e", Wd, kin.weight)
+    if not need_tangent:
+        return f, None, W
+    AG = np.einsum("egiJkL,egbL->egiJbk", A, kin.grad)
+    return f, np.einsum("egaJ,egiJbk->eaibk", gw, AG).reshape(-1, 8, 8), W
+
+
+def oracle_internal(asm, X: NDArray, x: NDArray, need_tangent: bool = True):
+    """What ``Assembler.internal`` returns (force, CSR tangent, energy), from the oracle."""
+    ne = len(asm.cells)
+    fe, Ke, energy = np.empty((ne, 8)), np.empty((ne, 8, 8)), 0.0
+    for group in asm.groups:
+        idx = group.elements
+        cells = asm.cells[idx]
+        f, K, W = element_force_tangent(group.kind, X[cells], x[cells], asm.lam[idx],
+                                        asm.mu[idx], need_tangent)
+        fe[idx] = f
+        if need_tangent:
+            Ke[idx] = K
+        energy += float(W.sum())
+    force = np.bincount(asm.edofs.ravel(), weights=fe.ravel(), minlength=asm.ndof)
+    return force, asm.pattern.matrix(Ke) if need_tangent else None, energy
