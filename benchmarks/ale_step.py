@@ -16,8 +16,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ntncontact import mesh_motion, simulation
-from ntncontact.builder import build_model
+from ntncontact.engine import mesh_motion, simulation
+from ntncontact.engine.builder import build_model
 from ntncontact.io.scenario import load_scenario
 
 EXAMPLES = Path(__file__).resolve().parents[1] / "examples"

@@ -70,7 +70,7 @@ def worker() -> None:
     sys.path.insert(0, str(ROOT / "benchmarks"))
     from run import GRIDS, deformed, distorted_grid, neo_hookean_assembler
 
-    from ntncontact.builder import build_model
+    from ntncontact.engine.builder import build_model
     from ntncontact.io.scenario import load_scenario
 
     model = build_model(load_scenario(EXAMPLE), EXAMPLE.parent)

@@ -21,10 +21,10 @@ from pathlib import Path
 
 import numpy as np
 
-from ntncontact.builder import build_model
+from ntncontact.engine.builder import build_model
+from ntncontact.engine.postprocess import contact_node_fields, stress_fields
 from ntncontact.io.scenario import load_scenario
 from ntncontact.io.vtk import VtuSeriesWriter, XdmfSeriesWriter
-from ntncontact.postprocess import contact_node_fields, stress_fields
 
 EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
 DISTINCT = 5  # distinct frames, written in turn

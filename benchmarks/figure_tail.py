@@ -4,7 +4,7 @@
 
 Runs the ``make demo`` command (``ntncontact run examples/ring_impact.toml --gif --times ...
 --compare``) ``N`` times with this checkout's figure code and command line and ``N`` times with
-those of ``DIR`` (the plotting.py, figure_jobs.py if any, and cli.py of another checkout's
+those of ``DIR`` (the report/plotting.py, figure_jobs.py if any, and cli.py of another checkout's
 ``src/ntncontact``, e.g. ``git show`` of an earlier commit's files into a folder),
 alternately; everything else is this checkout's. Each run ends through its ``console_main``.
 Prints the tail (end of ``Simulation.run`` to the exit of the process), the whole wall time,

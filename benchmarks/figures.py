@@ -21,7 +21,7 @@ TIMES = (0.075, 0.145, 0.285, 0.425, 0.565, 0.805)  # the demo's snapshots
 
 
 def _figures(results: Path, out: Path) -> dict:
-    from ntncontact import plotting as p
+    from ntncontact.report import plotting as p
 
     return {
         "snapshots": lambda: p.plot_deformed(results, TIMES, path=out / "snapshots.png"),
@@ -41,7 +41,7 @@ def main() -> None:
     parser.add_argument("--repeat", type=int, default=5)
     args = parser.parse_args()
     args.out.mkdir(parents=True, exist_ok=True)
-    from ntncontact import plotting
+    from ntncontact.report import plotting
 
     best: dict[str, tuple[float, float]] = {}
     for _ in range(args.repeat):

@@ -90,8 +90,8 @@ class PartTimer:
 
 def instrument(timer: PartTimer) -> None:
     """Wrap the functions of each part where the step engine looks them up."""
-    from ntncontact import interfaces, problem, simulation
     from ntncontact.dynamics.mass import MovingMass
+    from ntncontact.engine import interfaces, problem, simulation
     from ntncontact.fem.assembly import Assembler
     from ntncontact.io.results import ResultWriter
     from ntncontact.solvers.linear import Factorization, LinearSolver
@@ -139,10 +139,10 @@ def resident_kb() -> int:
 
 def child(case: str, k: int, out: Path) -> dict:
     """One run in this process; returns its figures."""
-    from ntncontact.builder import build_model
+    from ntncontact.engine.builder import build_model
+    from ntncontact.engine.simulation import Simulation
     from ntncontact.io.results import ResultWriter
     from ntncontact.io.scenario import load_scenario
-    from ntncontact.simulation import Simulation
     from ntncontact.solvers.linear import LinearSolver
 
     if os.environ.get("SCALING_THREADED_BLAS"):  # the A/B variant of --threads

@@ -35,9 +35,9 @@ os.environ.setdefault("MPLBACKEND", "Agg")
 import numpy as np  # noqa: E402
 import scipy.sparse as sp  # noqa: E402
 
-from ntncontact.builder import build_model  # noqa: E402
+from ntncontact.engine.builder import build_model  # noqa: E402
+from ntncontact.engine.simulation import Simulation  # noqa: E402
 from ntncontact.io.scenario import load_scenario  # noqa: E402
-from ntncontact.simulation import Simulation  # noqa: E402
 from ntncontact.solvers.linear import LinearSolver, pardiso_available  # noqa: E402
 
 EXAMPLE = ROOT / "examples" / "ring_impact.toml"

@@ -4,9 +4,9 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from ntncontact.builder import build_model
+from ntncontact.engine.builder import build_model
+from ntncontact.engine.model import Model
 from ntncontact.io.scenario import load_scenario, parse_scenario
-from ntncontact.model import Model
 
 EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
 
@@ -36,7 +36,7 @@ class Recorder:
 
 def recorded_ring_impact(*overrides: str) -> Recorder:
     """The ring impact example's first 0.2 s (27 contact steps), every step recorded."""
-    from ntncontact.simulation import Simulation
+    from ntncontact.engine.simulation import Simulation
 
     recorder = Recorder()
     model = model_from_example("ring_impact.toml", ["analysis.t_end=0.2", *overrides])

@@ -3,7 +3,7 @@
 import numpy as np
 from helpers import Recorder, model_from_dict
 
-from ntncontact.simulation import Simulation
+from ntncontact.engine.simulation import Simulation
 
 
 def two_blocks(nx_top=5, nx_base=5, motion="ale", pressure=2.0, kind="static", extra=None):

@@ -7,13 +7,13 @@ import numpy as np
 import pytest
 from helpers import Recorder, model_from_dict, model_from_example
 
-import ntncontact.simulation as simulation_module
+import ntncontact.engine.simulation as simulation_module
 from ntncontact.contact import PairState
-from ntncontact.convection import convective_terms
 from ntncontact.dynamics.midpoint import end_of_step
-from ntncontact.mesh_motion import move_meshes
-from ntncontact.problem import StepProblem
-from ntncontact.simulation import Simulation, default_linear_solve
+from ntncontact.engine.convection import convective_terms
+from ntncontact.engine.mesh_motion import move_meshes
+from ntncontact.engine.problem import StepProblem
+from ntncontact.engine.simulation import Simulation, default_linear_solve
 from ntncontact.solvers.newton import NewtonSettings, newton
 
 MODES = ["remap", "convective_term"]

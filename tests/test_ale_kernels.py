@@ -12,11 +12,11 @@ import numpy as np
 import pytest
 from test_ale_remap import XI, q4_shape
 
-from ntncontact import mesh_motion
 from ntncontact.ale import remap, surface
 from ntncontact.ale.motion import _DN, _SHAPE, _element_masses, _masses_after
 from ntncontact.ale.remap import Remapper, inverse_bilinear
 from ntncontact.ale.surface import SurfaceCurve, local_slides
+from ntncontact.engine import mesh_motion
 from ntncontact.mesh import quality
 from ntncontact.mesh.generators import rectangle
 

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 from helpers import Recorder, model_from_example
 
-from ntncontact.simulation import Simulation
+from ntncontact.engine.simulation import Simulation
 
 pytestmark = pytest.mark.slow
 

@@ -22,7 +22,7 @@ import pytest
 from helpers import Recorder, model_from_dict, model_from_example
 
 from ntncontact.contact import ContactLaw, ContactSurface, Interface, PairState, evaluate_contact
-from ntncontact.simulation import Simulation
+from ntncontact.engine.simulation import Simulation
 
 TOL = 1e-10
 

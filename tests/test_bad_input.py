@@ -62,7 +62,7 @@ penalty_normal = 100.0
 """
 
 #: What `ntncontact run` imports before it reads the scenario (the start-up measured).
-STARTUP = ("import tqdm, ntncontact.cli, ntncontact.builder, ntncontact.simulation, "
+STARTUP = ("import tqdm, ntncontact.cli, ntncontact.engine.builder, ntncontact.engine.simulation, "
            "ntncontact.io.results, ntncontact.io.scenario")
 
 
@@ -236,7 +236,7 @@ def test_bad_input_is_refused_fast_with_one_clear_line(case: Case, tmp_path, sta
 
 def test_the_base_scenario_is_good(tmp_path):
     """The table's base scenario itself runs (so each row fails for its own edit only)."""
-    from ntncontact.builder import build_model
+    from ntncontact.engine.builder import build_model
     from ntncontact.io.scenario import load_scenario
 
     path = _write_case(Case("good", ()), tmp_path)

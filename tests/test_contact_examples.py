@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 from helpers import Recorder, model_from_dict, model_from_example
 
-from ntncontact.simulation import Simulation, SimulationError
+from ntncontact.engine.simulation import Simulation, SimulationError
 
 
 def body_mean_velocity(model, state, body):

@@ -7,9 +7,9 @@ import numpy as np
 import pytest
 from helpers import Recorder
 
-from ntncontact.builder import build_model
+from ntncontact.engine.builder import build_model
+from ntncontact.engine.simulation import Simulation
 from ntncontact.io.scenario import parse_scenario
-from ntncontact.simulation import Simulation
 
 try:
     import tomllib

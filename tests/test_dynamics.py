@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 from helpers import Recorder, model_from_dict, model_from_example
 
-from ntncontact.simulation import Simulation
+from ntncontact.engine.simulation import Simulation
 
 
 def history(recorder):
@@ -74,7 +74,7 @@ def test_mid_point_free_vibration_period_matches_modal_analysis():
     w2, modes = sla.eigh(K[free][:, free].toarray(), M[free][:, free].toarray())
     omega = np.sqrt(w2[0])
     # Start in the first mode: v = 0, d = small amplitude * mode; compare the period.
-    from ntncontact.problem import StepState
+    from ntncontact.engine.problem import StepState
 
     d = np.zeros(model.ndof)
     d[free] = 1e-3 * modes[:, 0] / np.abs(modes[:, 0]).max()

@@ -105,7 +105,7 @@ def test_mass_matrices_carry_the_total_mass_and_lumping_keeps_it():
 def test_balance_takes_the_nodal_or_the_dof_mass():
     """The dof mass is the nodal one times the 2 x 2 identity: the same energies and momenta
     (the time loop passes the dof mass of an ALE body's current mesh)."""
-    from ntncontact.diagnostics import balance
+    from ntncontact.engine.diagnostics import balance
 
     nodes, cells = distorted_grid(3, 2)
     asm = make_assembler(nodes, cells, "linear_elastic")

@@ -15,9 +15,9 @@ import numpy as np
 import pytest
 
 from ntncontact.cli import main
-from ntncontact.diagnostics import EnergyAudit, energy_balance
+from ntncontact.engine.diagnostics import EnergyAudit, energy_balance
 from ntncontact.io.writers import read_csv_table
-from ntncontact.plotting import plot_energies
+from ntncontact.report.plotting import plot_energies
 
 COLUMN = """
 [analysis]
@@ -106,7 +106,7 @@ def test_audit_matches_the_history_function_and_scales_by_the_largest_energy():
 
 
 def test_energies_figure_draws_the_external_work_and_the_balance(runs, monkeypatch):
-    from ntncontact import plotting
+    from ntncontact.report import plotting
 
     drawn = {}
     save = plotting._save

@@ -7,9 +7,9 @@ from helpers import Recorder, model_from_example
 from ntncontact.contact import PairState
 from ntncontact.dynamics.energy import EndEnergy, EnergyConsistentContact
 from ntncontact.dynamics.midpoint import end_of_step
-from ntncontact.interfaces import contact_terms, lagrange_terms
-from ntncontact.problem import StepProblem, StepState
-from ntncontact.simulation import Simulation
+from ntncontact.engine.interfaces import contact_terms, lagrange_terms
+from ntncontact.engine.problem import StepProblem, StepState
+from ntncontact.engine.simulation import Simulation
 
 LAGRANGE_GAP = ['contact.0.method="lagrange"', 'contact.0.law="gap"']
 

@@ -5,9 +5,9 @@ import numpy as np
 import pytest
 from helpers import Recorder, model_from_dict, model_from_example
 
+from ntncontact.engine.simulation import Simulation
 from ntncontact.fem.assembly import Assembler, MaterialGroup
 from ntncontact.fem.kernels_numba import _SERIES_Z, _log_quotient
-from ntncontact.simulation import Simulation
 
 EPS = np.finfo(float).eps
 

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 from helpers import Recorder, model_from_example
 
-from ntncontact.simulation import Simulation
+from ntncontact.engine.simulation import Simulation
 
 pytestmark = pytest.mark.slow
 
@@ -109,7 +109,7 @@ def test_tilted_blocks_friction_dissipation_is_steep_around_mu_0_2():
     dissipated what the bodies lost), but the loss falls steeply from mu = 0.15 to 0.3 (8.6,
     5.8, 2.3 %) as the sliding gives way to sticking; our mu = 0.15 run follows the report's
     mu = 0.2 energy history within the table's rounding (docs/validation.md, 6.6)."""
-    from ntncontact.reference import table
+    from ntncontact.report.reference import table
 
     ref = table("tilted_blocks_table_6_10")
     losses = {}

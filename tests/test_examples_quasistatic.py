@@ -13,15 +13,15 @@ import pytest
 from helpers import EXAMPLES, Recorder, model_from_example
 
 from ntncontact.ale.example_mesh_motion import STAGES, mesh_motion_example
+from ntncontact.engine.simulation import Simulation
+from ntncontact.engine.ties import tie_violation
 from ntncontact.materials.models import Material
 from ntncontact.mesh.boundary import nodal_tributary_lengths, surface_chain
 from ntncontact.mesh.quality import corner_jacobians
-from ntncontact.reference import fit_hertz_ellipse as fit_ellipse
-from ntncontact.reference import fit_hertz_nodal_forces, hertz_nodal_forces, table
-from ntncontact.reference import hertz_plane_strain as hertz
-from ntncontact.reference import smoother_ranking as ranking
-from ntncontact.simulation import Simulation
-from ntncontact.ties import tie_violation
+from ntncontact.report.reference import fit_hertz_ellipse as fit_ellipse
+from ntncontact.report.reference import fit_hertz_nodal_forces, hertz_nodal_forces, table
+from ntncontact.report.reference import hertz_plane_strain as hertz
+from ntncontact.report.reference import smoother_ranking as ranking
 
 sys.path.insert(0, str(EXAMPLES / "meshes"))
 import make_meshes  # noqa: E402  (the example meshes' writer, examples/meshes)

@@ -9,8 +9,8 @@ import pytest
 from helpers import EXAMPLES, model_from_dict
 
 from ntncontact import api
+from ntncontact.engine.postprocess import mesh_velocity, stress_fields
 from ntncontact.io.vtk import read_pvd, read_vtu
-from ntncontact.postprocess import mesh_velocity, stress_fields
 
 P = 7.0  # applied pressure
 

@@ -5,7 +5,7 @@ run gives the exact-solve results to within the augmentation tolerance, with few
 import numpy as np
 from helpers import Recorder, recorded_ring_impact
 
-from ntncontact.simulation import Simulation
+from ntncontact.engine.simulation import Simulation
 
 
 def ring_impact(ratio: float) -> Recorder:
@@ -31,7 +31,7 @@ def test_ring_impact_with_inexact_augmentations_matches_exact_solves():
 def test_every_step_ends_with_a_solve_to_the_tolerances(monkeypatch):
     """Whichever augmentation meets the test, its solve is finished to rtol before the step
     is accepted (an early stop is only allowed for augmentations that are followed by more)."""
-    import ntncontact.simulation as simulation
+    import ntncontact.engine.simulation as simulation
 
     log: list = []
     newton, advance = simulation.newton, Simulation.advance

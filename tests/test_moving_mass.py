@@ -4,8 +4,8 @@ import numpy as np
 import pytest
 from helpers import EXAMPLES
 
-from ntncontact.builder import build_model
 from ntncontact.dynamics.mass import MovingMass
+from ntncontact.engine.builder import build_model
 from ntncontact.io.scenario import load_scenario
 
 

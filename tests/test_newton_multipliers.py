@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from helpers import Recorder, model_from_example, recorded_ring_impact
 
-from ntncontact.simulation import _newton_updated
+from ntncontact.engine.simulation import _newton_updated
 
 
 def ring_impact(update: str) -> Recorder:
@@ -47,7 +47,7 @@ def test_sensitivity_is_one_solve_with_a_column_per_pressed_pair(monkeypatch):
     """Simulation._sensitivity: a single multi-right-hand-side solve per call, whatever the
     number of pressed pairs (its cost is pairs x one solve, no Python loop of solves), and
     S = G A^-1 B agrees with the solve of each column alone."""
-    from ntncontact.simulation import Simulation
+    from ntncontact.engine.simulation import Simulation
     from ntncontact.solvers.linear import Factorization
 
     real_sensitivity, real_call = Simulation._sensitivity, Factorization.__call__

@@ -10,7 +10,7 @@ import pytest
 
 from ntncontact.io.vtk import stack_bodies
 from ntncontact.io.writers import HISTORY_COLUMNS, ResultsDirectory
-from ntncontact.plotting import (
+from ntncontact.report.plotting import (
     DPI,
     ResultsNotFoundError,
     animate,
@@ -189,7 +189,7 @@ def _expected_state(step: float, folder: Path):
 
 
 def test_frames_between_outputs_are_interpolated_linearly(results):
-    from ntncontact.plotting import frames_at
+    from ntncontact.report.plotting import frames_at
 
     (frame, interpolated), = frames_at(results, [0.25])
     assert interpolated and frame.time == 0.25
@@ -201,7 +201,7 @@ def test_frames_between_outputs_are_interpolated_linearly(results):
 
 def test_a_time_with_a_frame_draws_that_frame(results):
     from ntncontact.io.vtk import read_vtu
-    from ntncontact.plotting import frames_at
+    from ntncontact.report.plotting import frames_at
 
     (frame, interpolated), = frames_at(results, [0.3])
     written = read_vtu(results / "fields" / "fields_00003.vtu")
@@ -210,7 +210,7 @@ def test_a_time_with_a_frame_draws_that_frame(results):
 
 
 def test_interpolation_steps_over_an_unreadable_frame(tmp_path):
-    from ntncontact.plotting import frames_at
+    from ntncontact.report.plotting import frames_at
 
     write_run(tmp_path)
     (tmp_path / "fields" / "fields_00003.vtu").write_text("<VTKFile")  # half-written
@@ -223,7 +223,7 @@ def test_interpolation_steps_over_an_unreadable_frame(tmp_path):
 
 
 def test_times_a_rounding_error_off_the_ends_draw_the_end_frames(results):
-    from ntncontact.plotting import frames_at
+    from ntncontact.report.plotting import frames_at
 
     states = frames_at(results, [-1e-12, 0.4 + 1e-12])
     assert [(frame.time, interpolated) for frame, interpolated in states] == \
@@ -240,7 +240,7 @@ def test_times_outside_the_frames_are_refused(results, tmp_path, times):
 def test_every_time_asked_for_is_drawn_under_its_own_title(results, tmp_path, monkeypatch):
     """Seven times (more than the six evenly spaced panels), in the order given, each panel
     titled with the time it shows."""
-    from ntncontact import plotting
+    from ntncontact.report import plotting
 
     drawn = []
     save = plotting._save

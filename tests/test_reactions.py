@@ -8,7 +8,7 @@ import pytest
 from helpers import EXAMPLES, model_from_dict
 
 from ntncontact import api
-from ntncontact.builder import build_model
+from ntncontact.engine.builder import build_model
 from ntncontact.io.vtk import read_pvd, read_vtu
 from ntncontact.reactions import reaction_columns
 

@@ -8,7 +8,7 @@ import pytest
 
 from ntncontact.cli import main
 from ntncontact.io.writers import HistoryWriter
-from ntncontact.reference import (
+from ntncontact.report.reference import (
     HERTZ_LOAD,
     Comparison,
     compare,
@@ -25,7 +25,7 @@ from ntncontact.reference import (
     table_6_1_first_slip_node,
     write_comparison_csv,
 )
-from ntncontact.validation_cases import impact_tolerance
+from ntncontact.report.validation_cases import impact_tolerance
 
 
 def test_reference_tables_ship_with_the_package():
@@ -200,7 +200,7 @@ def test_a_reference_value_of_zero_shows_the_absolute_difference(tmp_path):
 
 
 def test_an_example_without_a_tolerance_is_shown_only(tmp_path, monkeypatch):
-    from ntncontact import validation_cases
+    from ntncontact.report import validation_cases
 
     _ring_run(tmp_path)
     monkeypatch.setattr(validation_cases, "CASES", ())

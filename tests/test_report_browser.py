@@ -7,7 +7,7 @@ import subprocess
 
 import pytest
 
-from ntncontact.validation import Case, validate
+from ntncontact.report.validation import Case, validate
 
 
 def chromium() -> str:

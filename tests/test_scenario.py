@@ -3,7 +3,7 @@
 import pytest
 from helpers import EXAMPLES
 
-from ntncontact.builder import build_model
+from ntncontact.engine.builder import build_model
 from ntncontact.io.scenario import ScenarioError, load_scenario
 
 GOOD = """
@@ -201,7 +201,7 @@ def test_touching_or_separate_bodies_are_not_an_overlap(tmp_path, lift):
 def test_analysis_settings_built_in_python_are_checked_too(dt, t_end):
     """The Python API (no scenario file) refuses the same steps, instead of an OverflowError
     in the step count or a run of no step."""
-    from ntncontact.model import AnalysisSettings
+    from ntncontact.engine.model import AnalysisSettings
 
     with pytest.raises(ValueError, match="analysis"):
         AnalysisSettings(dt=dt, t_end=t_end)

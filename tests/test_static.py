@@ -4,9 +4,9 @@ import numpy as np
 import pytest
 from helpers import model_from_dict
 
+from ntncontact.engine.problem import StepProblem
+from ntncontact.engine.simulation import Simulation, initial_state
 from ntncontact.mesh.generators import rectangle
-from ntncontact.problem import StepProblem
-from ntncontact.simulation import Simulation, initial_state
 from ntncontact.solvers.newton import NewtonSettings, newton
 
 
@@ -83,9 +83,9 @@ PS = True
 
 def cook_tip_displacement(n):
     """Linear plane-stress Cook's membrane, E = 1, nu = 1/3, unit shear load on the right."""
+    from ntncontact.engine.model import AnalysisSettings, Body, Model, stack_bodies
     from ntncontact.fem.loads import LoadCase, TimeFunction, edge_traction_vector
     from ntncontact.materials.models import Material
-    from ntncontact.model import AnalysisSettings, Body, Model, stack_bodies
 
     mesh = cook_membrane(n)
     mat = Material.from_young("linear_elastic", 1.0, 1.0 / 3.0, 1.0, plane_stress=PS)

@@ -12,10 +12,10 @@ import numpy as np
 import pytest
 from helpers import model_from_dict, model_from_example
 
-from ntncontact import simulation
-from ntncontact.diagnostics import InvertedAtStepEnd, check_end_of_step
+from ntncontact.engine import simulation
+from ntncontact.engine.diagnostics import InvertedAtStepEnd, check_end_of_step
+from ntncontact.engine.simulation import Simulation, SimulationError
 from ntncontact.fem.q4 import DN_GP, InvertedElementError
-from ntncontact.simulation import Simulation, SimulationError
 
 TWO_BLOCKS = {
     "analysis": {"kind": "dynamic", "dt": 0.1, "t_end": 1.0},

@@ -1,4 +1,4 @@
-"""Tie constraints between bodies ([[tie]], ntncontact.ties)."""
+"""Tie constraints between bodies ([[tie]], ntncontact.engine.ties)."""
 
 from __future__ import annotations
 
@@ -9,11 +9,11 @@ import pytest
 from helpers import EXAMPLES, Recorder, model_from_dict
 from scipy.spatial import cKDTree
 
+from ntncontact.engine.problem import StepProblem
+from ntncontact.engine.simulation import Simulation, default_linear_solve, initial_state
+from ntncontact.engine.ties import tie_forces, tie_terms, tie_violation
 from ntncontact.io.scenario import ScenarioError, load_scenario
-from ntncontact.problem import StepProblem
-from ntncontact.simulation import Simulation, default_linear_solve, initial_state
 from ntncontact.solvers.newton import NewtonSettings, newton
-from ntncontact.ties import tie_forces, tie_terms, tie_violation
 
 WIDTH, H_LOW, H_UP, P = 2.0, 0.5, 0.75, 30.0
 

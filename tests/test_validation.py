@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from ntncontact.reference import (
+from ntncontact.report.reference import (
     HERTZ_LOAD,
     TABLE_4_1_STAGES,
     Comparison,
@@ -17,9 +17,9 @@ from ntncontact.reference import (
     table,
     table_4_1,
 )
-from ntncontact.validation import link_results, validate
-from ntncontact.validation_cases import CASES, EXAMPLES, KINDS, Case, parse_cases
-from ntncontact.validation_checks import (
+from ntncontact.report.validation import link_results, validate
+from ntncontact.report.validation_cases import CASES, EXAMPLES, KINDS, Case, parse_cases
+from ntncontact.report.validation_checks import (
     HERTZ_BETA,
     HERTZ_CONVERGENCE_FRACTION,
     CaseResult,
@@ -32,7 +32,7 @@ from ntncontact.validation_checks import (
     hertz_rows,
     mesh_motion_rows,
 )
-from ntncontact.validation_measure import DELAMINATION_POSITIONS
+from ntncontact.report.validation_measure import DELAMINATION_POSITIONS
 
 
 def failed(rows):
@@ -348,8 +348,8 @@ def test_validate_command_exits_non_zero_when_a_case_fails(tmp_path, monkeypatch
                                                           outcomes, code):
     """`ntncontact validate` exits 1 when any case fails or errors, 0 when all pass (the cases'
     results stand in for runs: validate itself is tested above)."""
-    from ntncontact import validation
     from ntncontact.cli import main
+    from ntncontact.report import validation
 
     def fake_validate(out, quick=False, progress=None, **_):
         results = []
@@ -377,7 +377,7 @@ def test_validation_does_not_import_the_command_line():
     import ntncontact
 
     source = Path(ntncontact.__file__).parent
-    for path in sorted(source.glob("validation*.py")) + [source / "reference.py"]:
+    for path in sorted(source.glob("validation*.py")) + [source / "report/reference.py"]:
         for node in ast.walk(ast.parse(path.read_text())):
             if isinstance(node, ast.ImportFrom):
                 names = [node.module or ""] + [a.name for a in node.names]

@@ -146,8 +146,8 @@ def test_an_interrupted_run_keeps_every_frame_it_wrote(tmp_path):
     listed, the summary says interrupted, and no temporary file is left."""
     from helpers import model_from_example
 
+    from ntncontact.engine.simulation import Simulation
     from ntncontact.io.results import ResultWriter
-    from ntncontact.simulation import Simulation
 
     class Interrupt:
         def on_step(self, model, record) -> None:

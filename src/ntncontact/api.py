@@ -24,13 +24,13 @@ import meshio
 import numpy as np
 import pandas as pd
 
-from .builder import build_model
+from .engine.builder import build_model
+from .engine.simulation import Simulation
 from .io import checkpoint
 from .io.results import ResultWriter
 from .io.scenario import ScenarioConfig, ScenarioError, apply_override, parse_scenario, read_toml
 from .io.vtk import read_pvd
 from .io.writers import CONTACT_FILE, HISTORY_FILE, SUMMARY_FILE
-from .simulation import Simulation
 
 Overrides = Mapping[str, Any] | Sequence[str] | None
 

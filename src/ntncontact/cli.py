@@ -69,11 +69,11 @@ def _run(args: argparse.Namespace) -> int:
 def _run_until_stopped(args: argparse.Namespace, stop: StopOnSignal) -> int:
     from tqdm import tqdm
 
-    from .builder import build_model
+    from .engine.builder import build_model
+    from .engine.simulation import RunInterrupted, Simulation
     from .io import checkpoint
     from .io.results import ResultWriter
     from .io.scenario import load_scenario
-    from .simulation import RunInterrupted, Simulation
 
     scenario = Path(args.scenario)
     config = load_scenario(scenario, args.set)
@@ -81,7 +81,7 @@ def _run_until_stopped(args: argparse.Namespace, stop: StopOnSignal) -> int:
     if stop.signum is not None:  # before any file is written
         raise RunInterrupted(stop.reason())
     if args.times:  # refused before the run, not after it
-        from .plotting import check_times
+        from .report.plotting import check_times
 
         check_times(args.times, 0.0, model.analysis.t_end, f"the run of {scenario}")
     out = Path(args.out)
@@ -144,7 +144,7 @@ def _status(args: argparse.Namespace) -> int:
 
 
 def _draw_figures(directory: Path, args: argparse.Namespace) -> list[Path]:
-    from .plotting import plot_all
+    from .report.plotting import plot_all
 
     return plot_all(directory, times=args.times, gif=args.gif)
 
@@ -178,7 +178,7 @@ def _mesh_quality(args: argparse.Namespace) -> int:
 
         tables = {path.name: quality_statistics(read_msh(path, name=path.stem))}
     elif path.suffix == ".toml":
-        from .builder import build_model
+        from .engine.builder import build_model
         from .io.scenario import load_scenario
 
         model = build_model(load_scenario(path, args.set), path.parent)
@@ -200,7 +200,7 @@ def _print_comparison(directory: Path) -> int:
     """The run's headline numbers beside the report's, each with its verdict, tolerance and
     reason (as `validate` checks them); also DIR/comparison.csv. A folder that is not a run's
     results is an error naming what was expected."""
-    from .reference import compare, format_comparison, write_comparison_csv
+    from .report.reference import compare, format_comparison, write_comparison_csv
 
     label, rows = compare(directory)
     print(format_comparison(label, rows))
@@ -212,8 +212,8 @@ def _validate(args: argparse.Namespace) -> int:
     """Run every example of the report and write DIR/report.html and report.md."""
     from tqdm import tqdm
 
-    from .validation import validate
-    from .validation_cases import CASES
+    from .report.validation import validate
+    from .report.validation_cases import CASES
 
     out = Path(args.out)
     started: list[str] = []

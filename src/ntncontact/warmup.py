@@ -23,9 +23,9 @@ import time
 from pathlib import Path
 
 from . import jit, kernel_cache_dir
-from .builder import build_model
+from .engine.builder import build_model
+from .engine.simulation import Simulation
 from .io.scenario import parse_scenario
-from .simulation import Simulation
 
 #: Steps to run: contact starts at step 3 (initial gap 0.01, speed 1, dt 0.005); the ring is
 #: off-centre by a third of an obstacle element so that its nodes land between the obstacle's

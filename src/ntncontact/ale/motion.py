@@ -74,7 +74,7 @@ velocity over the step is v + (x~_n - x_n)/dt and the report's c = v - v_hat equ
    geometry (X, hence d: which particle sits at the node) and leaves v and a at their old nodal
    values (no momentum correction either); the step then adds the report's C(c) v_{n+1/2} with
    c = ``AleUpdate.convective`` held constant (``ale.convective``, wired by
-   ``ntncontact.convection``). Remapping v as well would count the convection twice.
+   ``ntncontact.engine.convection``). Remapping v as well would count the convection twice.
 
 Calling it from the time loop (augmentation k): pass the ORIGINAL t_n state of the body every
 time (no repeated remapping, hence no accumulated diffusion), ``x_pred`` = the active nodes'

@@ -527,7 +527,7 @@ ContactTerm = Callable[
 def contact_term(
     interface: Interface, state: PairState, law: ContactLaw, dt: float | None = None
 ) -> ContactTerm:
-    """Adapter to the ``extra`` term signature of :class:`ntncontact.problem.StepProblem`:
+    """Adapter to the ``extra`` term signature of :class:`ntncontact.engine.problem.StepProblem`:
     (x_eval, v_eval, rate_factor, x_start) -> (force, (rows, cols, vals)), multipliers fixed."""
 
     def term(

@@ -29,9 +29,9 @@ else:  # pragma: no cover - Python 3.10
 
 from .. import __version__
 from ..contact import PairState
-from ..model import Model
-from ..problem import StepState
-from ..simulation import Simulation, StepRecord
+from ..engine.model import Model
+from ..engine.problem import StepState
+from ..engine.simulation import Simulation, StepRecord
 from .results import ResultWriter
 from .run_folder import make_subfolder, replace_atomically
 from .scenario import ScenarioConfig

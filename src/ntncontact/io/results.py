@@ -6,16 +6,16 @@ from pathlib import Path
 
 import numpy as np
 
-from ..diagnostics import EnergyAudit
-from ..model import Model
-from ..postprocess import (
+from ..engine.diagnostics import EnergyAudit
+from ..engine.model import Model
+from ..engine.postprocess import (
     contact_node_fields,
     mesh_velocity,
     nodal_deformation_gradient,
     stress_fields,
 )
+from ..engine.simulation import StepRecord
 from ..reactions import reaction_columns
-from ..simulation import StepRecord
 from .writers import ResultsDirectory
 
 CONTACT_HISTORY = ("active_pairs", "frictional_dissipation", "contact_work", "augmentations",

@@ -13,7 +13,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from .contact import (
+from ..contact import (
     ContactResult,
     PairState,
     augment,

@@ -9,14 +9,14 @@ from typing import Literal
 import numpy as np
 from numpy.typing import NDArray
 
-from .ale.motion import AleBody
-from .contact.augmentation import AugmentationTolerances
-from .contact.laws import ContactLaw
-from .contact.surfaces import Interface
-from .fem.assembly import Assembler, MaterialGroup
-from .fem.loads import LoadCase, Prescribed
-from .materials.models import Material
-from .mesh.quadmesh import QuadMesh
+from ..ale.motion import AleBody
+from ..contact.augmentation import AugmentationTolerances
+from ..contact.laws import ContactLaw
+from ..contact.surfaces import Interface
+from ..fem.assembly import Assembler, MaterialGroup
+from ..fem.loads import LoadCase, Prescribed
+from ..materials.models import Material
+from ..mesh.quadmesh import QuadMesh
 from .ties import Tie
 
 MeshMotion = Literal["lagrangian", "ale"]
@@ -96,7 +96,7 @@ class Model:
     assembler: Assembler = field(repr=False)
     interfaces: tuple[ContactInterface, ...] = ()
     ale_bodies: tuple[AleSetup, ...] = ()  # one per body with mesh_motion = "ale"
-    ties: tuple[Tie, ...] = ()  # [[tie]] constraints between bodies (ntncontact.ties)
+    ties: tuple[Tie, ...] = ()  # [[tie]] constraints between bodies (ntncontact.engine.ties)
 
     @property
     def n_nodes(self) -> int:

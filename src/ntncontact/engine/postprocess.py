@@ -13,8 +13,8 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import NDArray
 
-from .fem.q4 import kinematics
-from .materials.models import cauchy_stress, von_mises
+from ..fem.q4 import kinematics
+from ..materials.models import cauchy_stress, von_mises
 from .model import Model
 
 #: status codes of the contact-node field ``contact_status``

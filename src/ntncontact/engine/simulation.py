@@ -10,14 +10,17 @@ import numpy as np
 import scipy.sparse as sp
 from numpy.typing import NDArray
 
-from .contact import PairState, lagrange_blocks, newton_update
+from ..contact import PairState, lagrange_blocks, newton_update
+from ..dynamics.energy import EndEnergy, EnergyConsistentContact
+from ..dynamics.mass import MovingMass
+from ..dynamics.midpoint import end_of_step, midpoint_velocity, velocity_factor
+from ..fem.q4 import InvertedElementError
+from ..fem.sparse import TripletUnion
+from ..reactions import support_reactions, support_sets
+from ..solvers.linear import LinearSolverError
+from ..solvers.newton import FactorCache, NewtonError, NewtonSettings, newton
 from .convection import convective_terms
 from .diagnostics import Balance, balance, check_end_of_step, named_failure
-from .dynamics.energy import EndEnergy, EnergyConsistentContact
-from .dynamics.mass import MovingMass
-from .dynamics.midpoint import end_of_step, midpoint_velocity, velocity_factor
-from .fem.q4 import InvertedElementError
-from .fem.sparse import TripletUnion
 from .interfaces import (
     LagrangeTerm,
     augment_all,
@@ -33,9 +36,6 @@ from .interfaces import (
 from .mesh_motion import move_meshes
 from .model import Model
 from .problem import StepProblem, StepState
-from .reactions import support_reactions, support_sets
-from .solvers.linear import LinearSolverError
-from .solvers.newton import FactorCache, NewtonError, NewtonSettings, newton
 from .ties import tie_forces, tie_terms, tie_violation
 
 
@@ -95,7 +95,7 @@ class Observer(Protocol):
 def default_linear_solve() -> Callable[[sp.spmatrix, NDArray], NDArray]:
     """The project's sparse solver, or SuperLU (never spsolve: it may switch to UMFPACK)."""
     try:
-        from .solvers.linear import LinearSolver
+        from ..solvers.linear import LinearSolver
     except ImportError:  # pragma: no cover - only while the solver module is absent
         import scipy.sparse.linalg as spla
 

@@ -2,7 +2,7 @@
 
 A tie pairs each node of one surface (node set) with the coincident node of another, at build
 time, and enters the step as Lagrange multipliers of the bordered Newton system
-(:class:`ntncontact.problem.ConstraintTerm`): per tied component k the constraint
+(:class:`ntncontact.engine.problem.ConstraintTerm`): per tied component k the constraint
 h_k = x[a_k] - x[b_k] = 0 and the force lam_k on node a, -lam_k on node b (B = G^T). The
 multiplier is therefore minus the force the tie exerts on the body-1 node. The constraint is
 linear, so its tangent is zero and it adds no stiffness; its forces are equal and opposite, so
@@ -92,7 +92,7 @@ def make_tie(name: str, body_1: str, body_2: str, nodes_1: NDArray, nodes_2: NDA
 
 @dataclass(frozen=True)
 class TieTerm:
-    """One tie as a bordered-system constraint term (see :mod:`ntncontact.problem`)."""
+    """One tie as a bordered-system constraint term (see :mod:`ntncontact.engine.problem`)."""
 
     tie: Tie
     # Sorted after every Lagrange contact interface (simulation._lagrange_multipliers sorts the

@@ -1,12 +1,12 @@
 """``ntncontact validate``: run every example of the report and write a side-by-side report.
 
 The cases are a table (``data/validation_cases.toml``, read by
-:mod:`ntncontact.validation_cases`); ``quick`` adds the overrides that make each case cheap.
+:mod:`ntncontact.report.validation_cases`); ``quick`` adds the overrides that make each case cheap.
 Every case runs in its own results folder (two at a time on a machine with two cores) and is
-then measured (:mod:`ntncontact.validation_measure`, whose checks are in
-:mod:`ntncontact.validation_checks`); a failing case is reported with its error and the others
-still run. :func:`link_results` adds the comparisons between cases, and the reports are written
-by :mod:`ntncontact.validation_report`.
+then measured (:mod:`ntncontact.report.validation_measure`, whose checks are in
+:mod:`ntncontact.report.validation_checks`); a failing case is reported with its error and the
+others still run. :func:`link_results` adds the comparisons between cases, and the reports are
+written by :mod:`ntncontact.report.validation_report`.
 """
 
 from __future__ import annotations
@@ -36,10 +36,10 @@ from .validation_report import RunInfo, write_html, write_markdown
 def _run_scenario(case: Case, directory: Path, quick: bool) -> None:
     """Run the case's scenario into ``directory`` (results as ``ntncontact run`` writes them);
     raises if the run does not complete."""
-    from .builder import build_model
-    from .io.results import ResultWriter
-    from .io.scenario import load_scenario
-    from .simulation import Simulation
+    from ..engine.builder import build_model
+    from ..engine.simulation import Simulation
+    from ..io.results import ResultWriter
+    from ..io.scenario import load_scenario
 
     scenario = EXAMPLES / case.example
     items = overrides(case, quick)

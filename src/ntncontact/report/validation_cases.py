@@ -18,7 +18,7 @@ if sys.version_info >= (3, 11):
 else:  # pragma: no cover
     import tomli as tomllib
 
-EXAMPLES = Path(__file__).resolve().parents[2] / "examples"
+EXAMPLES = Path(__file__).resolve().parents[3] / "examples"
 KINDS = ("impact", "mesh_motion", "block_sliding", "hertz", "delamination")
 TABLE = "validation_cases.toml"
 

@@ -2,9 +2,10 @@
 
 Each function turns the measurements of one case (impact histories, Table 4.1 statistics,
 Table 6.1 stresses, Hertz load levels, delamination load positions) into
-:class:`~ntncontact.reference.Comparison` rows: ours, the report's value and the tolerance it is
-checked against, with the reason in its note. They are pure functions of arrays, tested on
-synthetic inputs (``tests/test_validation.py``); ``docs/validation.md`` explains each tolerance.
+:class:`~ntncontact.report.reference.Comparison` rows: ours, the report's value and the
+tolerance it is checked against, with the reason in its note. They are pure functions of
+arrays, tested on synthetic inputs (``tests/test_validation.py``); ``docs/validation.md``
+explains each tolerance.
 A :class:`CaseResult` holds one case's rows: it passes when the case ran and every checked row
 passes.
 """
@@ -202,7 +203,7 @@ def hertz_rows(snap: HertzSnapshot, h: float) -> list[Comparison]:
     configuration). Half-width within one contact element h (the pressed zone ends at a node);
     peaks within (h/a)^2 (a nodal value is the tributary average of the pressure, p0 (1 - h^2 /
     (12 a^2)) at the centre, plus the model's finite size). The work-equivalent fit
-    (:func:`~ntncontact.reference.fit_hertz_nodal_forces`) reads an exact Hertz profile back
+    (:func:`~ntncontact.report.reference.fit_hertz_nodal_forces`) reads an exact Hertz profile back
     exactly, so only its rows converge with the mesh (also within (h/a)^2)."""
     a, p0 = hertz_plane_strain(snap.load)
     a_fit, p0_fit = snap.fit()

@@ -20,11 +20,11 @@ import numpy as np
 import scipy.sparse as sp
 from numpy.typing import NDArray
 
-from .dynamics.midpoint import inertia_factor, midpoint_acceleration, midpoint_velocity
-from .fem.loads import dirichlet_values
-from .fem.sparse import TripletUnion
+from ..dynamics.midpoint import inertia_factor, midpoint_acceleration, midpoint_velocity
+from ..fem.loads import dirichlet_values
+from ..fem.sparse import TripletUnion
+from ..solvers.newton import norm2
 from .model import Model
-from .solvers.newton import norm2
 
 ExtraTerm = Callable[
     [NDArray, NDArray | None, float | None, NDArray],

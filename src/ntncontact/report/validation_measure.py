@@ -2,8 +2,9 @@
 
 One function per kind of case (:data:`MEASURES`): it reads contact.csv, history.csv,
 summary.json and the VTU snapshots of the case's run, hands the arrays to the checks of
-:mod:`ntncontact.validation_checks`, and draws the case's figures
-(:mod:`ntncontact.validation_figures`). The mesh-motion example has no run: it is computed here.
+:mod:`ntncontact.report.validation_checks`, and draws the case's figures
+(:mod:`ntncontact.report.validation_figures`). The mesh-motion example has no run: it is
+computed here.
 """
 
 from __future__ import annotations
@@ -41,8 +42,8 @@ def overrides(case: Case, quick: bool) -> list[str]:
 
 def _model(case: Case, quick: bool):
     """The case's model (reference coordinates, bodies, surfaces), not run."""
-    from .builder import build_model
-    from .io.scenario import load_scenario
+    from ..engine.builder import build_model
+    from ..io.scenario import load_scenario
 
     return build_model(load_scenario(EXAMPLES / case.example, overrides(case, quick)),
                        EXAMPLES)
@@ -52,8 +53,8 @@ class _Results:
     """contact.csv rows and VTU positions of a results folder at chosen times."""
 
     def __init__(self, directory: Path) -> None:
-        from .io.vtk import read_pvd
-        from .io.writers import read_csv_table
+        from ..io.vtk import read_pvd
+        from ..io.writers import read_csv_table
 
         self.contact = read_csv_table(directory / "contact.csv")
         self.series = read_pvd(directory / "fields.pvd")
@@ -74,7 +75,7 @@ class _Results:
         return {k: v[keep][order] for k, v in self.contact.items()}
 
     def positions(self, t: float) -> np.ndarray:
-        from .io.vtk import read_vtu
+        from ..io.vtk import read_vtu
 
         times = np.array([s for s, _ in self.series])
         i = int(np.argmin(np.abs(times - t)))
@@ -84,7 +85,7 @@ class _Results:
 
 
 def _measure_impact(case: Case, directory: Path, quick: bool, result: CaseResult) -> None:
-    from .io.writers import read_csv_table
+    from ..io.writers import read_csv_table
 
     result.label, result.rows = compare(directory, case.tolerance)
     t = read_csv_table(directory / "history.csv")["time"]
@@ -138,7 +139,7 @@ HERTZ_SNAPSHOTS = {5.0: 4.0 / 15.0, 11.0: 9.0 / 15.0, 18.0: 1.0}  # examples/her
 
 def hertz_snapshots(case: Case, directory: Path, quick: bool) -> list[HertzSnapshot]:
     """The report's load levels (26.7, 60, 100 %) that the run reached."""
-    from .mesh.boundary import nodal_tributary_lengths, surface_chain
+    from ..mesh.boundary import nodal_tributary_lengths, surface_chain
 
     model = _model(case, quick)
     res = _Results(directory)
@@ -236,8 +237,8 @@ def _quasi_static_plots(directory: Path, quick: bool) -> list[Path]:
 
 
 def run_mesh_motion(case: Case, directory: Path, quick: bool, result: CaseResult) -> None:
-    from .ale.example_mesh_motion import mesh_motion_example
-    from .mesh.quality import corner_jacobians
+    from ..ale.example_mesh_motion import mesh_motion_example
+    from ..mesh.quality import corner_jacobians
 
     directory.mkdir(parents=True, exist_ok=True)
     out = mesh_motion_example()

@@ -12,7 +12,7 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import NDArray
 
-from .ale.convective import convective_force
+from ..ale.convective import convective_force
 from .mesh_motion import MeshMotion
 from .model import AleSetup, Model
 from .problem import ExtraTerm

@@ -16,7 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .io.writers import read_csv_table
+from ..io.writers import read_csv_table
 from .validation_cases import TABLE, impact_tolerance
 
 #: Values the report states in its text (section in the comment).

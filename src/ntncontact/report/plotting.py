@@ -48,7 +48,7 @@ def panels_shape(count: int) -> tuple[int, int, tuple[float, float]]:
 
 def _new_figure(nrows: int = 1, ncols: int = 1, size: tuple[float, float] = (7.0, 4.5),
                 layout: str = "constrained") -> tuple[Figure, NDArray]:
-    """A figure and its grid of axes (validation.py's figures too). ``layout="compressed"``
+    """A figure and its grid of axes (report/validation.py's figures too). ``layout="compressed"``
     for a grid of equal-aspect axes: no white bands between them."""
     from matplotlib.figure import Figure
 
@@ -79,7 +79,7 @@ def plot_energies(directory: str | os.PathLike, path: str | os.PathLike | None =
     below, the energy balance error (E - E0 - W_ext - W_contact) / S, S the largest energy of
     the ledger (``diagnostics.energy_balance``): it stays small with loads, where E - E0 does
     not."""
-    from ntncontact.diagnostics import energy_balance
+    from ntncontact.engine.diagnostics import energy_balance
 
     folder = Path(directory)
     history = _load_table(folder, HISTORY_FILE)

@@ -6,9 +6,9 @@ from pathlib import Path
 
 import numpy as np
 
-from .ale.motion import AleBody
-from .contact import AugmentationTolerances, ContactLaw, ContactSurface, Interface, corner_mask
-from .fem.loads import (
+from ..ale.motion import AleBody
+from ..contact import AugmentationTolerances, ContactLaw, ContactSurface, Interface, corner_mask
+from ..fem.loads import (
     LoadCase,
     Prescribed,
     TimeFunction,
@@ -16,7 +16,7 @@ from .fem.loads import (
     edge_traction_vector,
     point_load_vector,
 )
-from .io.scenario import (
+from ..io.scenario import (
     BodyConfig,
     ContactConfig,
     MaterialConfig,
@@ -26,12 +26,12 @@ from .io.scenario import (
     TieConfig,
     TimeFunctionConfig,
 )
-from .materials.models import Material, MaterialError
-from .mesh import generators
-from .mesh.boundary import surface_chain
-from .mesh.overlap import deepest_overlap
-from .mesh.quadmesh import MeshError, QuadMesh
-from .mesh.quality import check_elements
+from ..materials.models import Material, MaterialError
+from ..mesh import generators
+from ..mesh.boundary import surface_chain
+from ..mesh.overlap import deepest_overlap
+from ..mesh.quadmesh import MeshError, QuadMesh
+from ..mesh.quality import check_elements
 from .model import AleSetup, AnalysisSettings, Body, ContactInterface, Model, stack_bodies
 from .ties import Tie, TieError, make_tie, pair_tie
 
@@ -48,7 +48,7 @@ def build_mesh(cfg: MeshConfig, name: str, base_dir: Path) -> QuadMesh:
         mesh = generators.half_disk(cfg.radius, cfg.n_arc, cfg.n_radial, cfg.bottom_size,
                                     cfg.center, name=name)
     else:
-        from .mesh.gmsh_io import read_msh
+        from ..mesh.gmsh_io import read_msh
 
         path = (base_dir / cfg.file).resolve()
         if not path.is_file():

@@ -9,7 +9,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 from numpy.typing import NDArray
 
-from .fem.q4 import DN_GP, InvertedElementError
+from ..fem.q4 import DN_GP, InvertedElementError
 
 if TYPE_CHECKING:
     import scipy.sparse as sp

@@ -14,9 +14,9 @@ from dataclasses import dataclass, replace
 import numpy as np
 from numpy.typing import NDArray
 
-from .ale.motion import AleUpdate, move_ale_body
-from .contact import PairState
-from .jit import njit
+from ..ale.motion import AleUpdate, move_ale_body
+from ..contact import PairState
+from ..jit import njit
 from .model import AleSetup, Model
 from .problem import StepState
 

@@ -32,7 +32,7 @@ def _energy_column(case: Case) -> tuple[str, str, str] | None:
 
 def plot_report_overlay(directory: Path, case: Case) -> Path | None:
     """Our total energy history over the report's tabulated one."""
-    from .io.writers import read_csv_table
+    from ..io.writers import read_csv_table
     from .plotting import _new_figure, _save
 
     spec = _energy_column(case)

@@ -1,0 +1,2 @@
+"""Reporting: the report's reference tables, validation cases and
+runner, figures."""
