@@ -106,3 +106,38 @@ def test_read_results_drops_a_cut_off_last_line(tmp_path, spin_results):
 def test_read_results_of_a_folder_without_results_says_so(tmp_path):
     with pytest.raises(FileNotFoundError, match="not a results folder"):
         ntc.read_results(tmp_path)
+
+
+def test_a_run_without_a_folder_keeps_the_same_results_in_memory_and_writes_nothing(
+        spin_results, tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    on_disk, _ = spin_results
+    kept = ntc.run(ntc.load_scenario(SPIN, SHORT))  # out=None
+    assert list(tmp_path.iterdir()) == []  # nothing written, not even here
+    assert kept.directory is None
+    pd.testing.assert_frame_equal(kept.history, on_disk.history, check_dtype=False)
+    assert list(kept.contact.columns) == list(CONTACT_COLUMNS) and kept.contact.empty
+    ignore = {"wall_time_s"}
+    assert {k: v for k, v in kept.summary.items() if k not in ignore} == \
+        {k: v for k, v in on_disk.summary.items() if k not in ignore}
+    assert kept.times == on_disk.times
+    for t in kept.times:
+        a, b = kept.fields(t), on_disk.fields(t)
+        np.testing.assert_array_equal(a.points, b.points)
+        assert sorted(a.point_data) == sorted(b.point_data)
+        for name in a.point_data:
+            np.testing.assert_array_equal(a.point_data[name], b.point_data[name])
+
+
+def test_a_run_in_memory_keeps_contact_rows_like_contact_csv(tmp_path):
+    rod = EXAMPLES / "rod_impact.toml"
+    overrides = {"analysis.t_end": 0.15}
+    on_disk = ntc.run(ntc.load_scenario(rod, overrides), out=tmp_path / "rod")
+    kept = ntc.run(ntc.load_scenario(rod, overrides))
+    assert len(kept.contact) == len(on_disk.contact) > 0
+    pd.testing.assert_frame_equal(kept.contact, on_disk.contact, check_dtype=False)
+
+
+def test_checkpoints_need_a_folder(tmp_path):
+    with pytest.raises(ScenarioError, match="need a results folder"):
+        ntc.run(ntc.load_scenario(SPIN, SHORT | {"analysis.checkpoint_interval": 0.05}))

@@ -9,8 +9,8 @@ from helpers import EXAMPLES, model_from_dict
 
 from ntncontact import api
 from ntncontact.engine.builder import build_model
+from ntncontact.engine.reactions import reaction_columns
 from ntncontact.io.vtk import read_pvd, read_vtu
-from ntncontact.reactions import reaction_columns
 
 BALANCE = 1e-8  # relative; Newton converges to 1e-10 of the force scale
 

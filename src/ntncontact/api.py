@@ -30,7 +30,7 @@ from .io import checkpoint
 from .io.results import ResultWriter
 from .io.scenario import ScenarioConfig, ScenarioError, apply_override, parse_scenario, read_toml
 from .io.vtk import read_pvd
-from .io.writers import CONTACT_FILE, HISTORY_FILE, SUMMARY_FILE
+from .io.writers import CONTACT_FILE, HISTORY_FILE, SUMMARY_FILE, MemoryResults, to_jsonable
 
 Overrides = Mapping[str, Any] | Sequence[str] | None
 
@@ -173,15 +173,16 @@ def run(scenario: Scenario | str | Path, out: str | Path | None = None, *,
         progress: Callable[[float], None] | None = None, overwrite: bool = False,
         restart: bool = False) -> Results:
     """Run a scenario (a :class:`Scenario` or a TOML path) into the results folder ``out``
-    and return its :class:`Results`. A folder that already holds results is refused unless
-    ``overwrite`` (then a run's old files are removed first), or ``restart``: continue the
-    killed run in ``out`` from its last checkpoint (``analysis.checkpoint_interval``; the
-    scenario and overrides must be the run's). A failed step raises (``SimulationError``)
-    after the folder's summary says ``failed``."""
+    and return its :class:`Results`; with ``out=None`` nothing is written and the results
+    are kept in memory (the same tables, summary and frames). A folder that already holds
+    results is refused unless ``overwrite`` (then a run's old files are removed first), or
+    ``restart``: continue the killed run in ``out`` from its last checkpoint
+    (``analysis.checkpoint_interval``; the scenario and overrides must be the run's). A
+    failed step raises (``SimulationError``) after the folder's summary says ``failed``."""
     if not isinstance(scenario, Scenario):
         scenario = load_scenario(scenario)
     if out is None:
-        raise ScenarioError("run: give a results folder (out=...)")
+        return _run_in_memory(scenario, progress, restart)
     if restart and overwrite:
         raise ValueError("run: restart continues the run in out, overwrite replaces it: "
                          "give one of them")
@@ -196,3 +197,25 @@ def run(scenario: Scenario | str | Path, out: str | Path | None = None, *,
                       identity, resume)
     simulation.run(progress)
     return read_results(out)
+
+
+def _run_in_memory(scenario: Scenario, progress: Callable[[float], None] | None,
+                   restart: bool) -> Results:
+    """:func:`run` with ``out=None``: the writer keeps everything in memory."""
+    if restart or scenario.config.analysis.checkpoint_interval is not None:
+        raise ScenarioError(f"{scenario.source}: checkpoints and restarts need a results "
+                            "folder: give out=...")
+    model = build_model(scenario.config, scenario.base_dir)
+    writer = ResultWriter(None, model, scenario=scenario.source,
+                          title=scenario.config.title, overrides=list(scenario.overrides))
+    Simulation(model, [writer]).run(progress)  # a failed step raises, as with a folder
+    return _results_of(writer.results)
+
+
+def _results_of(kept: MemoryResults) -> Results:
+    """Results from a memory writer, with the types the files would give (JSON summary)."""
+    summary = json.loads(json.dumps(to_jsonable(kept.summary.data), allow_nan=False))
+    history = pd.DataFrame(kept.history.rows, columns=list(kept.history.columns))
+    contact = pd.DataFrame(kept.contact.rows, columns=list(kept.contact.columns))
+    frames = tuple(kept.fields.frames) if kept.fields is not None else ()
+    return Results(history, contact, summary, None, frames)

@@ -16,7 +16,6 @@ from ..dynamics.mass import MovingMass
 from ..dynamics.midpoint import end_of_step, midpoint_velocity, velocity_factor
 from ..fem.q4 import InvertedElementError
 from ..fem.sparse import TripletUnion
-from ..reactions import support_reactions, support_sets
 from ..solvers.linear import LinearSolverError
 from ..solvers.newton import FactorCache, NewtonError, NewtonSettings, newton
 from .convection import convective_terms
@@ -36,6 +35,7 @@ from .interfaces import (
 from .mesh_motion import move_meshes
 from .model import Model
 from .problem import StepProblem, StepState
+from .reactions import support_reactions, support_sets
 from .ties import tie_forces, tie_terms, tie_violation
 
 

@@ -14,9 +14,9 @@ from ..engine.postprocess import (
     nodal_deformation_gradient,
     stress_fields,
 )
+from ..engine.reactions import reaction_columns
 from ..engine.simulation import StepRecord
-from ..reactions import reaction_columns
-from .writers import ResultsDirectory
+from .writers import MemoryResults, ResultsDirectory
 
 CONTACT_HISTORY = ("active_pairs", "frictional_dissipation", "contact_work", "augmentations",
                    "ale_mismatch", "energy_multiplier", "augmentations_converged")
@@ -32,9 +32,11 @@ def tie_history(model: Model) -> tuple[str, ...]:
 
 
 class ResultWriter:
-    """Writes history.csv, summary.json and fields.pvd/VTU as the simulation advances."""
+    """Writes history.csv, summary.json and fields.pvd/VTU as the simulation advances (or,
+    with ``directory`` None, keeps the same results in memory: :class:`MemoryResults`)."""
 
-    def __init__(self, directory: str | Path, model: Model, extra_history: tuple[str, ...] = (),
+    def __init__(self, directory: str | Path | None, model: Model,
+                 extra_history: tuple[str, ...] = (),
                  overwrite: bool = False, resume: dict | None = None,
                  **summary_extra: object) -> None:
         """``resume``: a restart from a checkpoint (``checkpoint_state``'s values, with the
@@ -51,11 +53,15 @@ class ResultWriter:
             summary_extra = {"max_tie_violation": 0.0} | summary_extra
         summary_extra = dict.fromkeys(EnergyAudit.KEYS) | summary_extra  # energy balance
         self._energy = EnergyAudit()
-        self.results = ResultsDirectory(directory, history_columns=extra_history,
-                                        overwrite=overwrite,
-                                        resume=None if resume is None else resume["files"],
-                                        field_format=model.analysis.field_format,
-                                        **summary_extra)
+        self.results: ResultsDirectory | MemoryResults
+        if directory is None:  # ntncontact.run(out=None): nothing written
+            self.results = MemoryResults(history_columns=extra_history, **summary_extra)
+        else:
+            self.results = ResultsDirectory(directory, history_columns=extra_history,
+                                            overwrite=overwrite,
+                                            resume=None if resume is None else resume["files"],
+                                            field_format=model.analysis.field_format,
+                                            **summary_extra)
         self.model = model
         self.extra_history = extra_history
         self.interval = model.analysis.output_interval

@@ -85,6 +85,25 @@ def _check_data(kind: str, data: Mapping[str, ArrayLike], count: int, required: 
     return arrays
 
 
+def frame_mesh(points: ArrayLike, cells: ArrayLike, point_data: Mapping[str, ArrayLike],
+           cell_data: Mapping[str, ArrayLike]) -> meshio.Mesh:
+    """One output frame as a meshio Mesh: 2D points and vectors padded to 3D (ParaView's
+    form), Q4 cells, the required point and cell data checked."""
+    xy = np.asarray(points, dtype=float)
+    quads = np.asarray(cells, dtype=np.int64)
+    if xy.ndim != 2 or xy.shape[1] != 2:
+        raise ValueError(f"points must have shape (n, 2), got {xy.shape}")
+    if quads.ndim != 2 or quads.shape[1] != 4:
+        raise ValueError(f"cells must have shape (m, 4), got {quads.shape}")
+    if quads.size and (quads.min() < 0 or quads.max() >= len(xy)):
+        raise ValueError("cells refer to points that do not exist")
+    pdata = _check_data("point", point_data, len(xy), REQUIRED_POINT_DATA)
+    cdata = _check_data("cell", cell_data, len(quads), REQUIRED_CELL_DATA)
+    return meshio.Mesh(pad_to_3d(xy), [("quad", quads)],
+                       point_data={name: pad_to_3d(v) for name, v in pdata.items()},
+                       cell_data={name: [pad_to_3d(v)] for name, v in cdata.items()})
+
+
 class VtuSeriesWriter:
     """Write one VTU per output step and keep a PVD collection listing the finished ones.
 
@@ -130,28 +149,12 @@ class VtuSeriesWriter:
         cell_data: Mapping[str, ArrayLike],
     ) -> Path:
         """Write output step ``step`` as a VTU, list it in the PVD and return the VTU path."""
-        mesh = self._mesh(points, cells, point_data, cell_data)
+        mesh = frame_mesh(points, cells, point_data, cell_data)
         vtu_path = self.vtu_directory / f"{self.name}_{int(step):05d}.vtu"
         replace_atomically(vtu_path, lambda tmp: meshio.write(tmp, mesh, file_format="vtu"))
         self._entries.append((float(time), f"{self.name}/{vtu_path.name}"))
         replace_atomically(self.pvd_path, self._write_pvd)
         return vtu_path
-
-    @staticmethod
-    def _mesh(points, cells, point_data, cell_data) -> meshio.Mesh:
-        xy = np.asarray(points, dtype=float)
-        quads = np.asarray(cells, dtype=np.int64)
-        if xy.ndim != 2 or xy.shape[1] != 2:
-            raise ValueError(f"points must have shape (n, 2), got {xy.shape}")
-        if quads.ndim != 2 or quads.shape[1] != 4:
-            raise ValueError(f"cells must have shape (m, 4), got {quads.shape}")
-        if quads.size and (quads.min() < 0 or quads.max() >= len(xy)):
-            raise ValueError("cells refer to points that do not exist")
-        pdata = _check_data("point", point_data, len(xy), REQUIRED_POINT_DATA)
-        cdata = _check_data("cell", cell_data, len(quads), REQUIRED_CELL_DATA)
-        return meshio.Mesh(pad_to_3d(xy), [("quad", quads)],
-                           point_data={name: pad_to_3d(v) for name, v in pdata.items()},
-                           cell_data={name: [pad_to_3d(v)] for name, v in cdata.items()})
 
     def _write_pvd(self, path: Path) -> None:
         datasets = "".join(
@@ -249,7 +252,7 @@ class XdmfSeriesWriter:
     def write(self, step: int, time: float, points: ArrayLike, cells: ArrayLike,
               point_data: Mapping[str, ArrayLike], cell_data: Mapping[str, ArrayLike]) -> Path:
         """Append output step ``step`` at ``time``; returns the XDMF path."""
-        mesh = VtuSeriesWriter._mesh(points, cells, point_data, cell_data)
+        mesh = frame_mesh(points, cells, point_data, cell_data)
         if self._first is None:
             self._first = (mesh.points, mesh.cells[0].data)
             self._series.write_points_cells(mesh.points, [("quad", mesh.cells[0].data)])

@@ -32,7 +32,7 @@ from ntncontact.io.run_folder import (
     prepare,
     replace_atomically,
 )
-from ntncontact.io.vtk import VtuSeriesWriter, XdmfSeriesWriter
+from ntncontact.io.vtk import VtuSeriesWriter, XdmfSeriesWriter, frame_mesh
 
 HISTORY_FILE = "history.csv"
 CONTACT_FILE = "contact.csv"
@@ -273,9 +273,11 @@ class SummaryWriter:
     replace the file atomically, synced to disk.
     """
 
-    def __init__(self, directory: str | os.PathLike, **extra: Any) -> None:
-        self.path = Path(directory) / SUMMARY_FILE
-        self.path.parent.mkdir(parents=True, exist_ok=True)
+    def __init__(self, directory: str | os.PathLike | None, **extra: Any) -> None:
+        """``directory`` None: the summary is kept in memory only (``ntncontact.run(out=None)``)."""
+        self.path = None if directory is None else Path(directory) / SUMMARY_FILE
+        if self.path is not None:
+            self.path.parent.mkdir(parents=True, exist_ok=True)
         self._start = _time.perf_counter()
         self._max_variation = 0.0
         self._file: io.RawIOBase | None = None  # summary.json, while rewritten in place
@@ -334,7 +336,9 @@ class SummaryWriter:
         merged = self._data | fields
         # formatted first: a value JSON cannot hold leaves the file and the state unchanged
         text = _json_text(merged) + "\n"
-        if status == "running":
+        if self.path is None:
+            pass
+        elif status == "running":
             self._write_in_place(text.encode())
         else:
             self.close()
@@ -476,6 +480,74 @@ class ResultsDirectory:
             self.close("interrupted", str(exc) or "interrupted by the user")
         else:
             self.close("failed", f"{exc_type.__name__}: {exc}")
+
+
+class MemoryResults:
+    """A run's results kept in memory (``ntncontact.run(out=None)``): what
+    :class:`ResultsDirectory` writes, received through the same methods, nothing on disk. The
+    history rows, the contact rows of each step, the summary and the field frames (meshio
+    meshes, the VTU files' content) are read back as tables by ``ntncontact.api``."""
+
+    def __init__(self, history_columns: Sequence[str] = (),
+                 contact_columns: Sequence[str] = (), write_fields: bool = True,
+                 **summary_extra: Any) -> None:
+        self.history = _MemoryTable(_check_columns(history_columns, HISTORY_COLUMNS))
+        self.contact = _MemoryTable(_check_columns(contact_columns, CONTACT_COLUMNS))
+        self.fields = _MemoryFrames() if write_fields else None
+        self.summary = SummaryWriter(None, **summary_extra)
+        self.closed = False
+
+    def write_history(self, row: Mapping[str, Any], **summary_fields: Any) -> None:
+        """As :meth:`ResultsDirectory.write_history`."""
+        self.history.write(row)
+        self.summary.record_energy(row["step"], row["total_energy"], row.get("time"))
+        self.summary.update(**summary_fields)
+
+    def close(self, status: str = "completed", error: str | None = None,
+              **summary_fields: Any) -> None:
+        if not self.closed:
+            self.closed = True
+            self.summary.finish(status, error, **summary_fields)
+
+    def checkpoint_state(self, step: int) -> dict[str, Any]:
+        raise RunFolderError("checkpoints need a results folder (out=...)")
+
+
+class _MemoryTable:
+    """Rows of history.csv or contact.csv kept as values: ``write`` takes a history row,
+    ``write_step`` a step's contact pairs (as :class:`ContactWriter.write_step`)."""
+
+    def __init__(self, columns: tuple[str, ...]) -> None:
+        self.columns = columns
+        self.rows: list[dict[str, Any]] = []
+
+    def write(self, row: Mapping[str, Any]) -> None:
+        _check_keys(list(row), self.columns, "history")
+        self.rows.append({c: row[c] for c in self.columns})
+
+    def write_step(self, step: int, time: float, pairs: Mapping[str, ArrayLike]) -> int:
+        _check_keys(list(pairs), self.columns[2:], "contact")
+        count = max(np.asarray(v).shape[0] for v in pairs.values() if np.ndim(v) > 0)
+        columns = {name: np.broadcast_to(np.asarray(pairs[name]), (count,))
+                   for name in self.columns[2:]}
+        self.rows += [{"step": step, "time": time} | {n: c[i].item() for n, c in columns.items()}
+                      for i in range(count)]
+        return count
+
+
+class _MemoryFrames:
+    """Field frames kept as meshio meshes, as the VTU series would write them."""
+
+    def __init__(self) -> None:
+        self.frames: list[tuple[float, Any]] = []
+
+    @property
+    def entries(self) -> list[tuple[float, str]]:
+        return [(t, "") for t, _ in self.frames]
+
+    def write(self, step: int, time: float, points: ArrayLike, cells: ArrayLike,
+              point_data: Mapping[str, ArrayLike], cell_data: Mapping[str, ArrayLike]) -> None:
+        self.frames.append((float(time), frame_mesh(points, cells, point_data, cell_data)))
 
 
 def read_csv_table(path: str | os.PathLike) -> dict[str, NDArray]:

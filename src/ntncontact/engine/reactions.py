@@ -11,7 +11,7 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import NDArray
 
-from .engine.model import Model
+from .model import Model
 
 
 def support_sets(model: Model) -> dict[str, NDArray]:
