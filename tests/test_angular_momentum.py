@@ -1,7 +1,6 @@
 """Angular momentum of free bodies in contact under the mid-point rule (issue 16, item 1).
 
-The moment-free pair forces (ContactLaw.moment_free, the default of dynamic runs between
-Lagrangian bodies) are the
+The moment-free pair forces (ContactLaw.moment_free, opt-in: these cases turn them on) are the
 gradients of the rotation-invariant gap g and offset s, evaluated at x_{n+1/2}, so their net
 moment vanishes there and the mid-point rule keeps L = sum_ab M_ab x_a x v_b to round-off
 (docs/theory.md, "Moment-free pair forces").
@@ -28,7 +27,7 @@ TOL = 1e-10
 
 
 def blocks(angle_deg=0.0, speed=2.0, method="augmented_lagrangian", friction=0.0,
-           moment_free=None, spin=0.0, t_end=0.1):
+           moment_free=True, spin=0.0, t_end=0.1):
     """An upper block (0.4 x 0.3, 4 x 3) falling obliquely onto a free lower block
     (1.2 x 0.2, 8 x 2), the whole scene rotated by angle_deg about the origin."""
     a = np.radians(angle_deg)
@@ -101,7 +100,7 @@ def test_report_pair_forces_drift():
     assert drift > 1e3 * TOL
 
 
-def test_defaults_static_and_ale_keep_the_report_forces():
+def test_the_report_forces_are_the_default_and_moment_free_ones_opt_in():
     static = model_from_dict({
         "analysis": {"kind": "static", "dt": 1.0, "t_end": 1.0},
         "bodies": [{"name": "a", "mesh": {"type": "rectangle", "width": 1.0, "height": 1.0,
@@ -116,6 +115,7 @@ def test_defaults_static_and_ale_keep_the_report_forces():
                      "penalty_normal": 10.0}],
     })
     assert not static.interfaces[0].law.moment_free
+    assert not blocks(moment_free=None).interfaces[0].law.moment_free  # opt-in
     assert blocks().interfaces[0].law.moment_free
     ale = model_from_example("tilted_blocks.toml")  # an ALE lower block
     assert not ale.interfaces[0].law.moment_free
@@ -164,11 +164,13 @@ def test_pair_forces_have_no_net_moment(method, rate_law):
 
 
 @pytest.mark.parametrize(("example", "overrides"), [
-    ("rod_impact.toml", ["analysis.t_end=2.5"]),
-    ("tilted_blocks.toml", ["bodies.1.mesh_motion=\"lagrangian\"", "analysis.t_end=0.12"]),
+    ("rod_impact.toml", ["analysis.t_end=2.5", "contact.0.moment_free=true"]),
+    ("tilted_blocks.toml", ["bodies.1.mesh_motion=\"lagrangian\"", "analysis.t_end=0.12",
+                            "contact.0.moment_free=true"]),
     pytest.param("blocks_fast_sliding.toml",
                  ["bodies.1.mesh_motion=\"lagrangian\"", "analysis.t_end=0.1",
-                  "contact.0.friction=0.2"], marks=pytest.mark.slow),
+                  "contact.0.friction=0.2", "contact.0.moment_free=true"],
+                 marks=pytest.mark.slow),
 ])
 def test_free_examples_with_lagrangian_bodies_keep_angular_momentum(example, overrides):
     """The report's free examples, their ALE bodies made Lagrangian (an ALE remap changes L by

@@ -273,7 +273,7 @@ class ContactConfig(Strict):
     corners: list[str] = []
     release_steps: Annotated[int, Field(ge=1)] = 2
     detection: Literal["penetration", "predicted"] | None = None
-    moment_free: bool | None = None  # default: dynamic and no ALE body (ContactLaw)
+    moment_free: bool = False  # opt-in: docs/theory.md, "Moment-free pair forces"
     gap_restoring: bool = False  # persistency law: a pair's first step closes its gap
     augmentation: AugmentationConfig = AugmentationConfig()
 
