@@ -2,11 +2,14 @@
 
 from __future__ import annotations
 
+import subprocess
+import time
 from pathlib import Path
 
 from ntncontact.engine.builder import build_model
 from ntncontact.engine.model import Model
 from ntncontact.io.scenario import load_scenario, parse_scenario
+from ntncontact.io.writers import read_csv_table
 
 EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
 
@@ -42,3 +45,27 @@ def recorded_ring_impact(*overrides: str) -> Recorder:
     model = model_from_example("ring_impact.toml", ["analysis.t_end=0.2", *overrides])
     Simulation(model, [recorder]).run()
     return recorder
+
+
+def history_steps(out: Path) -> list[int]:
+    """Steps of the complete rows of a run folder's history.csv (a row being written is not
+    counted); empty before the file or its header exists."""
+    try:
+        return [int(s) for s in read_csv_table(out / "history.csv")["step"]]
+    except (FileNotFoundError, ValueError):  # not created yet, or its header not written yet
+        return []
+
+
+def wait_until(condition, child: subprocess.Popen, what: str, timeout: float,
+               poll: float = 0.005) -> None:
+    """Poll ``condition`` while the child run goes on; fail (killing it on a time-out) if the
+    run ends or ``timeout`` seconds pass first."""
+    end = time.monotonic() + timeout
+    while not condition():
+        if child.poll() is not None:
+            raise AssertionError(f"the run ended (rc {child.returncode}) before {what}: "
+                                 f"{child.stderr.read()}")
+        if time.monotonic() > end:
+            child.kill()
+            raise AssertionError(f"timed out waiting for {what}")
+        time.sleep(poll)

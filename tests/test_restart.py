@@ -9,11 +9,11 @@ import random
 import signal
 import subprocess
 import sys
-import time
 from pathlib import Path
 
 import numpy as np
 import pytest
+from helpers import history_steps, wait_until
 
 import ntncontact as ntc
 from ntncontact.cli import main
@@ -60,24 +60,10 @@ def start_child(scenario: Path, out: Path, overrides: list[str], *extra: str
                             text=True)
 
 
-def history_steps(out: Path) -> list[int]:
-    try:
-        return [int(s) for s in read_csv_table(out / "history.csv")["step"]]
-    except (FileNotFoundError, ValueError):  # not created yet, or the header not written yet
-        return []
-
-
 def kill_at_step(child: subprocess.Popen, out: Path, step: int) -> None:
     """SIGKILL the child as soon as history.csv holds the row of ``step``."""
-    end = time.monotonic() + TIMEOUT
-    while not (history_steps(out) and history_steps(out)[-1] >= step):
-        if child.poll() is not None:
-            raise AssertionError(f"the run ended (rc {child.returncode}) before step {step} "
-                                 f"(seed {SEED}): {child.stderr.read()}")
-        if time.monotonic() > end:
-            child.kill()
-            raise AssertionError(f"timed out waiting for step {step}")
-        time.sleep(0.002)
+    wait_until(lambda: bool(history_steps(out)) and history_steps(out)[-1] >= step, child,
+               f"step {step} (seed {SEED})", TIMEOUT, poll=0.002)
     child.send_signal(signal.SIGKILL)
     child.communicate(timeout=TIMEOUT)
     assert child.returncode == -signal.SIGKILL

@@ -15,7 +15,7 @@ import time
 from pathlib import Path
 
 import pytest
-from helpers import EXAMPLES
+from helpers import EXAMPLES, history_steps, wait_until
 
 from ntncontact.cli import main
 from ntncontact.io.run_folder import (
@@ -170,26 +170,6 @@ def start_run(out: Path, scenario: Path = SPIN, *extra: str) -> subprocess.Popen
     return subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
 
 
-def wait_until(condition, child: subprocess.Popen, what: str, timeout: float = TIMEOUT):
-    end = time.monotonic() + timeout
-    while not condition():
-        if child.poll() is not None:
-            raise AssertionError(f"the run ended (rc {child.returncode}) before {what}: "
-                                 f"{child.stderr.read()}")
-        if time.monotonic() > end:
-            child.kill()
-            raise AssertionError(f"timed out waiting for {what}")
-        time.sleep(0.005)
-
-
-def history_steps(out: Path) -> list[int]:
-    """Steps of the complete rows of history.csv (a row being written is not counted)."""
-    try:
-        return [int(s) for s in read_csv_table(out / "history.csv")["step"]]
-    except (FileNotFoundError, ValueError):  # not created yet, or its header not written yet
-        return []
-
-
 def finish(child: subprocess.Popen) -> tuple[int, str]:
     _, err = child.communicate(timeout=TIMEOUT)
     return child.returncode, err
@@ -216,7 +196,7 @@ def assert_stopped_cleanly(out: Path, rc: int, err: str, code: int, name: str) -
 def test_a_signal_mid_run_ends_it_as_interrupted_with_files_closed(tmp_path, signum, code):
     out = tmp_path / "spin"
     child = start_run(out, SPIN, *LONG)
-    wait_until(lambda: len(history_steps(out)) > 30, child, "30 steps")
+    wait_until(lambda: len(history_steps(out)) > 30, child, "30 steps", TIMEOUT)
     child.send_signal(signum)
     rc, err = finish(child)
     data = assert_stopped_cleanly(out, rc, err, code, signal.Signals(signum).name)
@@ -229,7 +209,7 @@ def test_a_sigint_during_start_up_leaves_status_interrupted(tmp_path):
     for attempt in range(3):
         out = tmp_path / f"spin{attempt}"
         child = start_run(out, SPIN, *LONG)
-        wait_until((out / "summary.json").exists, child, "summary.json", )
+        wait_until((out / "summary.json").exists, child, "summary.json", TIMEOUT)
         child.send_signal(signal.SIGSTOP)
         before_first_step = history_steps(out) in ([], [0])
         child.send_signal(signal.SIGINT)
@@ -246,7 +226,7 @@ def test_a_sigint_during_start_up_leaves_status_interrupted(tmp_path):
 def test_two_runs_into_one_folder_cannot_happen(tmp_path, capsys):
     out = tmp_path / "spin"
     first = start_run(out, SPIN, *LONG)
-    wait_until(lambda: len(history_steps(out)) > 5, first, "5 steps")
+    wait_until(lambda: len(history_steps(out)) > 5, first, "5 steps", TIMEOUT)
     assert run_spin(out, "--overwrite") == 1
     err = capsys.readouterr().err
     assert f"PID {first.pid}" in err and str(out) in err
@@ -259,7 +239,7 @@ def test_after_sigkill_the_run_reads_as_stale_and_the_summary_lags_one_step_at_m
                                                                                    capsys):
     out = tmp_path / "spin"
     child = start_run(out, SPIN, *LONG)
-    wait_until(lambda: len(history_steps(out)) > 40, child, "40 steps")
+    wait_until(lambda: len(history_steps(out)) > 40, child, "40 steps", TIMEOUT)
     assert run_status(out).state == "running"
     child.send_signal(signal.SIGKILL)
     child.communicate(timeout=TIMEOUT)
@@ -284,14 +264,14 @@ def test_signals_landing_in_compiled_kernels_give_interrupted(tmp_path, delay):
     is: still interrupted, with no traceback."""
     out = tmp_path / "ring"
     child = start_run(out, EXAMPLES / "ring_impact.toml")
-    wait_until(lambda: len(history_steps(out)) > 1, child, "the first step")
+    wait_until(lambda: len(history_steps(out)) > 1, child, "the first step", TIMEOUT)
     time.sleep(delay)
     child.send_signal(signal.SIGINT)
     rc, err = finish(child)
     assert_stopped_cleanly(out, rc, err, 130, "SIGINT")
     again = tmp_path / "again"
     child = start_run(again, EXAMPLES / "ring_impact.toml")
-    wait_until(lambda: len(history_steps(again)) > 1, child, "the first step")
+    wait_until(lambda: len(history_steps(again)) > 1, child, "the first step", TIMEOUT)
     time.sleep(delay)
     child.send_signal(signal.SIGINT)
     child.send_signal(signal.SIGINT)
