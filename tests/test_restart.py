@@ -102,6 +102,7 @@ def assert_same_frames(out_a: Path, out_b: Path, context: str) -> None:
 def summary(out: Path) -> dict:
     data = json.loads((out / "summary.json").read_text())
     data.pop("wall_time_s")
+    data.pop("cpu_time_s")
     return data
 
 

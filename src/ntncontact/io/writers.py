@@ -258,7 +258,8 @@ class SummaryWriter:
     """``summary.json``: run status, step count, simulated time, wall time and energy
     conservation.
 
-    ``wall_time_s`` is measured from construction unless given. The energy statistics come from
+    ``wall_time_s`` is measured from construction unless given, and ``cpu_time_s`` (the
+    process's CPU time over the same span, all threads) with it. The energy statistics come from
     :meth:`record_energy`: ``energy_max_relative_variation`` is max |E - E0| / |E0| (null when
     E0 is zero). :meth:`update` checks every value at once and rewrites the file every time,
     so that it never lags history.csv by more than the step being written.
@@ -279,6 +280,7 @@ class SummaryWriter:
         if self.path is not None:
             self.path.parent.mkdir(parents=True, exist_ok=True)
         self._start = _time.perf_counter()
+        self._cpu_start = _time.process_time()
         self._max_variation = 0.0
         self._file: io.RawIOBase | None = None  # summary.json, while rewritten in place
         self._size = 0  # its length
@@ -286,6 +288,7 @@ class SummaryWriter:
             "steps": 0,
             "time": 0.0,
             "wall_time_s": 0.0,
+            "cpu_time_s": 0.0,
             "energy_initial": None,
             "energy_final": None,
             "energy_max_relative_variation": None,
@@ -302,13 +305,15 @@ class SummaryWriter:
     def checkpoint_state(self) -> dict[str, Any]:
         """The running values a restart needs (JSON types; see :meth:`restore`)."""
         return {"data": to_jsonable(self._data), "max_variation": self._max_variation,
-                "wall_time_s": _time.perf_counter() - self._start}
+                "wall_time_s": _time.perf_counter() - self._start,
+                "cpu_time_s": _time.process_time() - self._cpu_start}
 
     def restore(self, saved: Mapping[str, Any]) -> None:
         """Continue from :meth:`checkpoint_state`'s values (the wall time goes on from
         the checkpoint's) and rewrite the file."""
         self._max_variation = float(saved["max_variation"])
         self._start = _time.perf_counter() - float(saved["wall_time_s"])
+        self._cpu_start = _time.process_time() - float(saved.get("cpu_time_s", 0.0))
         self.update(**(dict(saved["data"]) | {"status": "running", "error": None}))
 
     def record_energy(self, step: int, total_energy: float, time: float | None = None) -> None:
@@ -333,6 +338,7 @@ class SummaryWriter:
             raise ValueError(f"summary status must be one of {SUMMARY_STATUSES}, got {status!r}")
         if "wall_time_s" not in fields:
             fields["wall_time_s"] = _time.perf_counter() - self._start
+            fields["cpu_time_s"] = _time.process_time() - self._cpu_start
         merged = self._data | fields
         # formatted first: a value JSON cannot hold leaves the file and the state unchanged
         text = _json_text(merged) + "\n"

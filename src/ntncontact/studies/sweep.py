@@ -49,7 +49,7 @@ REDUCTIONS: dict[str, Callable[[np.ndarray], float]] = {
     "max_change": lambda a: float(np.max(np.abs(a - a[0]))),
 }
 #: summary.json values copied into every sweep.csv row (where the run has them)
-HEADLINE = ("status", "steps", "wall_time_s", "energy_initial", "energy_final",
+HEADLINE = ("status", "steps", "wall_time_s", "cpu_time_s", "energy_initial", "energy_final",
             "energy_max_relative_variation", "contact_start_time", "contact_end_time",
             "max_penetration", "max_active_pairs")
 
@@ -124,10 +124,12 @@ def run_case(scenario_path: str, overrides: Mapping[str, Any], folder: str,
     row: dict[str, Any] = {"case": Path(folder).name, **overrides}
     try:
         done = _completed(Path(folder), items)
-        if not done:
+        if done:
+            results = read_results(folder)
+        else:
             with threadpool_limits(1):  # one single-threaded case per worker and core
-                run(load_scenario(scenario_path, list(items)), Path(folder), overwrite=True)
-        results = read_results(folder)
+                results = run(load_scenario(scenario_path, list(items)), Path(folder),
+                              overwrite=True)  # read back from the folder it wrote
         row |= {"skipped": done, "error": results.summary.get("error")}
         row |= {k: results.summary.get(k) for k in HEADLINE if k in results.summary}
         if row.get("contact_end_time") is not None and row.get("contact_start_time") is not None:
