@@ -10,6 +10,7 @@ from ..ale.motion import AleBody
 from ..contact import AugmentationTolerances, ContactLaw, ContactSurface, Interface, corner_mask
 from ..fem.loads import (
     LoadCase,
+    MeshBodyForce,
     Prescribed,
     TimeFunction,
     body_force_vector,
@@ -47,6 +48,9 @@ def build_mesh(cfg: MeshConfig, name: str, base_dir: Path) -> QuadMesh:
     elif cfg.type == "half_disk":
         mesh = generators.half_disk(cfg.radius, cfg.n_arc, cfg.n_radial, cfg.bottom_size,
                                     cfg.center, name=name)
+    elif cfg.type == "disk":
+        mesh = generators.disk(cfg.radius, cfg.n_circ, cfg.n_radial, cfg.surface_size,
+                               cfg.center, name=name)
     else:
         from ..mesh.gmsh_io import read_msh
 
@@ -74,9 +78,19 @@ def time_function(cfg: TimeFunctionConfig | None) -> TimeFunction:
 
 
 def _body_loads(body: Body, cfg: BodyConfig, ndof: int, X0: np.ndarray):
-    patterns, functions = [], []
+    """Fixed nodal patterns with their time functions, and the body forces that follow an ALE
+    body's moving reference mesh (gravity there)."""
+    patterns, functions, on_mesh = [], [], []
     for load in cfg.loads:
-        if load.type in ("pressure", "traction"):
+        if load.type == "gravity":
+            cells = body.mesh.cells + body.node_offset
+            force = body.material.density * np.asarray(load.vector, dtype=float)
+            gravity = MeshBodyForce(cells, force, time_function(load.function))
+            if body.mesh_motion == "ale":
+                on_mesh.append(gravity)
+                continue
+            f = gravity.vector(X0, ndof)
+        elif load.type in ("pressure", "traction"):
             edges = body.global_edges(load.set)
             f = edge_traction_vector(X0, edges, load.vector, load.value, ndof)
         elif load.type == "point":
@@ -86,7 +100,7 @@ def _body_loads(body: Body, cfg: BodyConfig, ndof: int, X0: np.ndarray):
             f = body_force_vector(X0, cells, load.vector, ndof)
         patterns.append(f)
         functions.append(time_function(load.function))
-    return patterns, functions
+    return patterns, functions, on_mesh
 
 
 def _body_supports(body: Body, cfg: BodyConfig) -> list[Prescribed]:
@@ -118,15 +132,16 @@ def build_model(config: ScenarioConfig, base_dir: str | Path = ".") -> Model:
         for (name, mesh, mat, noff, coff), bc in zip(placed, config.bodies, strict=True)
     )
     ndof = 2 * len(X0)
-    patterns, functions, prescribed = [], [], []
+    patterns, functions, on_mesh, prescribed = [], [], [], []
     for i, (body, bc) in enumerate(zip(bodies, config.bodies, strict=True)):
         try:
-            p, f = _body_loads(body, bc, ndof, X0)
+            p, f, m = _body_loads(body, bc, ndof, X0)
             prescribed += _body_supports(body, bc)
         except MeshError as err:
             raise ScenarioError(f"bodies.{i} ('{body.name}'): {err}") from None
         patterns += p
         functions += f
+        on_mesh += m
     a = config.analysis
     interfaces = tuple(_interface(c, i, bodies, a.kind) for i, c in enumerate(config.contact))
     for i, (c, ci) in enumerate(zip(config.contact, interfaces, strict=True)):
@@ -144,7 +159,8 @@ def build_model(config: ScenarioConfig, base_dir: str | Path = ".") -> Model:
     fixed = np.unique(np.concatenate([p.dofs for p in prescribed] or [np.zeros(0, int)]))
     ties = tuple(_tie(t, i, bodies, fixed) for i, t in enumerate(config.tie))
     _check_ale_ties(ties, ale_bodies, bodies)
-    return Model(bodies, analysis, LoadCase(tuple(patterns), tuple(functions)),
+    loads = LoadCase(tuple(patterns), tuple(functions), tuple(on_mesh), X0)
+    return Model(bodies, analysis, loads,
                  tuple(prescribed), X0, cells, assembler, interfaces, ale_bodies, ties)
 
 
