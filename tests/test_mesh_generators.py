@@ -1,4 +1,4 @@
-"""Tests of the structured mesh generators (rectangle, annulus, disk, half disk / Hertz cylinder)."""
+"""Tests of the structured mesh generators: rectangle, annulus, disk, half disk (Hertz)."""
 
 from __future__ import annotations
 

@@ -7,6 +7,7 @@ from pathlib import Path
 import numpy as np
 
 from ..ale.motion import AleBody
+from ..ale.multisurface import check_surfaces
 from ..contact import AugmentationTolerances, ContactLaw, ContactSurface, Interface, corner_mask
 from ..fem.loads import (
     LoadCase,
@@ -189,12 +190,13 @@ def _check_ale_ties(ties: tuple[Tie, ...], ale_bodies: tuple[AleSetup, ...],
     """A tied node of an ALE body must be one the mesh motion never moves (a boundary node
     off its contact surface, or an end or corner of it): the tie holds material points."""
     for setup in ale_bodies:
-        motion = setup.motion
-        sliding = np.zeros(motion.n_nodes, bool)
-        sliding[motion.surface] = ~motion.corner
-        if not motion.closed:
-            sliding[motion.surface[[0, -1]]] = False
-        movable = sliding | ~motion.boundary
+        sliding = np.zeros(setup.n_nodes, bool)
+        for motion in setup.motions:
+            sliding[motion.surface] |= ~motion.corner
+        for motion in setup.motions:  # ends of open chains (corners shared by two) are fixed
+            if not motion.closed:
+                sliding[motion.surface[[0, -1]]] = False
+        movable = sliding | ~setup.motion.boundary
         for tie in ties:
             for nodes in (tie.nodes_1, tie.nodes_2):
                 local = nodes - setup.node_offset
@@ -208,22 +210,28 @@ def _check_ale_ties(ties: tuple[Tie, ...], ale_bodies: tuple[AleSetup, ...],
 
 
 def _ale_setup(index: int, body: Body, cfg: BodyConfig, config: ScenarioConfig) -> AleSetup:
-    """The ALE body's contact surface is the one it has in the scenario's interfaces."""
-    surfaces = {c.surface_1 for c in config.contact if c.body_1 == body.name}
-    surfaces |= {c.surface_2 for c in config.contact if c.body_2 == body.name}
+    """The ALE body's contact surfaces are the ones it has in the scenario's interfaces; each
+    follows its own partners (``ale.multisurface``)."""
+    surfaces = [c.surface_1 for c in config.contact if c.body_1 == body.name]
+    surfaces += [c.surface_2 for c in config.contact if c.body_2 == body.name]
+    surfaces = list(dict.fromkeys(surfaces))  # in scenario order, each once
     where = f"bodies.{index} ('{body.name}').mesh_motion"
-    if len(surfaces) != 1:
-        raise ScenarioError(f"{where}: an ALE body needs exactly one contact surface, "
-                            f"found {sorted(surfaces) or 'none'}")
+    if not surfaces:
+        raise ScenarioError(f"{where}: an ALE body needs a contact surface, found none")
     opts = cfg.ale
-    motion = AleBody.from_mesh(body.mesh, surfaces.pop(), smoothing=opts.smoothing,
-                               smoothing_layers=opts.smoothing_layers, sweeps=opts.sweeps,
-                               remap=opts.remap, conserve_momentum=opts.conserve_momentum,
-                               respace=opts.respace, interior=opts.interior,
-                               slide_tolerance=opts.slide_tolerance,
-                               convection=opts.convection,
-                               density=body.material.density, name=body.name)
-    return AleSetup(index, body.node_offset, body.mesh.n_nodes, motion)
+    motions = tuple(
+        AleBody.from_mesh(body.mesh, surface, smoothing=opts.smoothing,
+                          smoothing_layers=opts.smoothing_layers, sweeps=opts.sweeps,
+                          remap=opts.remap, conserve_momentum=opts.conserve_momentum,
+                          respace=opts.respace, interior=opts.interior,
+                          slide_tolerance=opts.slide_tolerance, convection=opts.convection,
+                          density=body.material.density, name=body.name)
+        for surface in surfaces)
+    try:
+        check_surfaces(motions, surfaces)
+    except ValueError as err:
+        raise ScenarioError(f"{where}: {err}") from None
+    return AleSetup(index, body.node_offset, body.mesh.n_nodes, motions[0], motions[1:])
 
 
 def _interface(cfg: ContactConfig, index: int, bodies: tuple[Body, ...],
