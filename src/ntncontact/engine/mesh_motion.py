@@ -151,12 +151,12 @@ def _targets(masses: _AleMasses, nodes: NDArray, partners: NDArray, x_pred: NDAr
     targets = targets.copy()
     tangents = _surface_tangents(setup, nodes[both], x_pred)  # at the predicted step end
     for k, key, t in zip(both, keys, tangents, strict=True):
-        targets[k] = _aim(masses.meetings, int(nodes[k]), masses.meetings[key],
+        targets[k] = _aim(masses.meetings, (int(nodes[k]), key), masses.meetings[key],
                           x_pred[nodes[k]], t)
     return targets
 
 
-def _aim(meetings: dict, node: int, point: NDArray, landing: NDArray, tangent: NDArray
+def _aim(meetings: dict, node: tuple, point: NDArray, landing: NDArray, tangent: NDArray
          ) -> NDArray:
     """Where a node of a pair between two ALE bodies aims so that its particle lands on the
     meeting point: the point itself at first, then the last aim corrected by the last miss
@@ -164,7 +164,7 @@ def _aim(meetings: dict, node: int, point: NDArray, landing: NDArray, tangent: N
     foot of its own normal, so on a curved surface it lands off a point that lies off that
     surface (by the gap and the partner's curvature), by a miss proportional to the slide; the
     correction removes it in a few augmentations. (The normal part of the miss is the gap,
-    which contact closes.)"""
+    which contact closes.) ``node``: (the node, its pair's key)."""
     key = ("aim", node)
     if key not in meetings:
         aim = point.copy()
