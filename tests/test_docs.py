@@ -31,8 +31,16 @@ def run(data):
     return rec.records[-1].extra["contact_rows"]
 
 
-def test_tutorial_has_three_steps():
-    assert len(tutorial_scenarios()) == 3
+def test_tutorial_has_four_steps():
+    assert len(tutorial_scenarios()) == 4
+
+
+def test_tutorial_dynamic_step_is_the_disk_drop_example():
+    """Step 4 is examples/disk_drop.toml word for word (tests/test_disk_drop.py runs it)."""
+    example = Path(__file__).resolve().parents[1] / "examples" / "disk_drop.toml"
+    assert tutorial_scenarios()[3] == tomllib.loads(example.read_text())
+    text = (DOCS / "tutorial.md").read_text()
+    assert example.read_text() in text
 
 
 @pytest.mark.parametrize("step", [0, 2])

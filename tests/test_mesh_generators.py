@@ -1,4 +1,4 @@
-"""Tests of the structured mesh generators (rectangle, annulus, half disk / Hertz cylinder)."""
+"""Tests of the structured mesh generators: rectangle, annulus, disk, half disk (Hertz)."""
 
 from __future__ import annotations
 
@@ -8,12 +8,14 @@ import pytest
 from ntncontact.mesh.boundary import boundary_edges, surface_chain
 from ntncontact.mesh.generators import (
     annulus,
+    disk,
     geometric_breaks,
     half_disk,
     hertz_cylinder_mesh,
     rectangle,
 )
 from ntncontact.mesh.quadmesh import MeshError, QuadMesh
+from ntncontact.mesh.quality import corner_jacobians
 
 EPS = np.finfo(float).eps
 
@@ -245,3 +247,74 @@ def test_half_disk_errors():
         half_disk(1.0, 16, 3, bottom_size=0.01, fine_half_width=0.5)
     with pytest.raises(MeshError, match="core_fraction"):
         half_disk(1.0, 16, 3, core_fraction=0.9)
+
+
+# ---------------------------------------------------------------------------------- disk
+@pytest.mark.parametrize("n_circ, n_radial, surface_size", [(8, 1, None), (32, 4, None),
+                                                             (64, 6, 0.02), (128, 12, 0.01)])
+def test_disk_tiles_the_inscribed_polygon_with_good_quads(n_circ, n_radial, surface_size):
+    center = (0.3, -2.0)
+    m = disk(0.5, n_circ, n_radial, surface_size, center=center)
+    areas = cell_areas(m)
+    assert np.all(areas > 0)
+    # the boundary is the inscribed n-gon, tiled exactly: its area to round-off
+    exact = 0.5 * n_circ * 0.25 * np.sin(2 * np.pi / n_circ)
+    assert areas.sum() == pytest.approx(exact, rel=100 * EPS)
+    assert m.n_cells == (n_circ // 4) ** 2 + n_circ * n_radial
+    # every corner Jacobian positive (not only the shoelace area)
+    assert corner_jacobians(m.nodes, m.cells).min() > 0
+    # the O-grid's worst corners are at the core's corners, 270/2 = 135 degrees wide, so the
+    # opposite ones go down towards 45; nothing is worse than that
+    angles = interior_angles_deg(m)
+    assert angles.min() > 45.0 and angles.max() < 135.0 + 1e-9
+    assert_edge_sets_on_boundary(m)
+    assert_normals_point_away(m)
+    assert len(boundary_edges(m)) == n_circ == len(m.edge_sets["outer"])
+
+
+def test_disk_sets_lowest_node_and_center():
+    center = np.array([1.0, 2.0])
+    m = disk(0.5, 48, 3, center=center)
+    outer = surface_chain(m, "outer")
+    assert outer.closed and list(outer.nodes) == list(m.node_sets["outer"])
+    radii = np.linalg.norm(m.nodes[outer.nodes] - center, axis=1)
+    assert np.all(np.abs(radii - 0.5) < 10 * EPS)
+    assert np.linalg.norm(m.nodes - center, axis=1).max() <= 0.5 + 10 * EPS
+    xy = m.nodes[outer.nodes] - center  # counter-clockwise: positive shoelace area
+    assert np.sum(xy[:, 0] * np.roll(xy[:, 1], -1) - np.roll(xy[:, 0], -1) * xy[:, 1]) > 0
+    bottom, top = m.node_sets["bottom"][0], m.node_sets["top"][0]
+    assert bottom == outer.nodes[0] and m.nodes[bottom, 1] == m.nodes[:, 1].min()
+    assert np.array_equal(m.nodes[bottom], center + [0.0, -0.5])
+    assert np.array_equal(m.nodes[top], center + [0.0, 0.5])
+    assert np.array_equal(m.nodes[m.node_sets["center"][0]], center)
+    assert m.node_sets["all"].size == m.n_nodes
+
+
+def test_disk_area_converges_at_second_order():
+    n = np.array([16, 32, 64, 128])
+    errors = np.array([abs(cell_areas(disk(1.0, k, 3)).sum() - np.pi) for k in n])
+    rate = -np.polyfit(np.log(n), np.log(errors), 1)[0]
+    # n circular segments of area (2 pi / n)^3 / 12 each: rate 2 asymptotically
+    assert rate == pytest.approx(2.0, abs=0.05)
+
+
+def test_disk_grading_sets_the_surface_layer():
+    m = disk(1.0, 64, 8, surface_size=0.02)
+    below = np.sort(m.nodes[np.abs(m.nodes[:, 0]) < 1e-12, 1])
+    layers = np.diff(below[:9])  # from the lowest node up through the ring layers
+    assert layers[0] == pytest.approx(0.02, rel=1e-10)
+    assert np.all(np.diff(layers[:8]) > 0)  # thicker inward
+    uniform = disk(1.0, 64, 8)
+    below = np.sort(uniform.nodes[np.abs(uniform.nodes[:, 0]) < 1e-12, 1])
+    assert np.allclose(np.diff(below[:9]), 0.5 / 8, rtol=1e-12)  # (1 - core 0.5) / 8 layers
+
+
+def test_disk_errors():
+    with pytest.raises(MeshError, match="multiple of 8"):
+        disk(1.0, 12, 2)
+    with pytest.raises(MeshError, match="radius > 0"):
+        disk(-1.0, 16, 2)
+    with pytest.raises(MeshError, match="core_fraction"):
+        disk(1.0, 16, 2, core_fraction=0.8)
+    with pytest.raises(MeshError, match="too large"):
+        disk(1.0, 16, 2, surface_size=0.6)

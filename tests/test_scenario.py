@@ -206,3 +206,27 @@ def test_analysis_settings_built_in_python_are_checked_too(dt, t_end):
     with pytest.raises(ValueError, match="analysis"):
         AnalysisSettings(dt=dt, t_end=t_end)
     assert AnalysisSettings(dt=0.5, t_end=0.5).dt == 0.5
+
+
+DISK = GOOD.replace('{ type = "rectangle", width = 1.0, height = 1.0, nx = 2, ny = 2 }',
+                    '{ type = "disk", radius = 0.5, n_circ = 16, n_radial = 2, '
+                    'surface_size = 0.1, center = [1.0, 2.0] }')
+
+
+def test_a_disk_mesh_builds_with_its_sets(tmp_path):
+    model = build_model(load_scenario(write(tmp_path, DISK)), tmp_path)
+    mesh = model.bodies[0].mesh
+    assert mesh.n_cells == 16 + 2 * 16
+    assert {"outer", "bottom", "top", "center", "all"} <= set(mesh.node_sets)
+    assert mesh.nodes[mesh.node_sets["bottom"][0]].tolist() == [1.0, 1.5]
+
+
+@pytest.mark.parametrize("replace, expected", [
+    (("n_circ = 16", "n_circ = 12"), "bodies.0.mesh.n_circ = 12: .*multiple of 8"),
+    (("surface_size = 0.1", "surface_size = 0.0"), "bodies.0.mesh.surface_size"),
+    (("radius = 0.5", "radius = 0.5, nx = 3"), "bodies.0.mesh.nx: unknown key"),
+    (("surface_size = 0.1", "surface_size = 0.3"), "bodies.0 .*too large"),
+])
+def test_bad_disk_keys_are_clear_errors(tmp_path, replace, expected):
+    with pytest.raises(ScenarioError, match=expected):
+        build_model(load_scenario(write(tmp_path, DISK.replace(*replace))), tmp_path)

@@ -7,9 +7,11 @@ from pathlib import Path
 import numpy as np
 
 from ..ale.motion import AleBody
+from ..ale.multisurface import check_surfaces
 from ..contact import AugmentationTolerances, ContactLaw, ContactSurface, Interface, corner_mask
 from ..fem.loads import (
     LoadCase,
+    MeshBodyForce,
     Prescribed,
     TimeFunction,
     body_force_vector,
@@ -47,6 +49,9 @@ def build_mesh(cfg: MeshConfig, name: str, base_dir: Path) -> QuadMesh:
     elif cfg.type == "half_disk":
         mesh = generators.half_disk(cfg.radius, cfg.n_arc, cfg.n_radial, cfg.bottom_size,
                                     cfg.center, name=name)
+    elif cfg.type == "disk":
+        mesh = generators.disk(cfg.radius, cfg.n_circ, cfg.n_radial, cfg.surface_size,
+                               cfg.center, name=name)
     else:
         from ..mesh.gmsh_io import read_msh
 
@@ -74,9 +79,19 @@ def time_function(cfg: TimeFunctionConfig | None) -> TimeFunction:
 
 
 def _body_loads(body: Body, cfg: BodyConfig, ndof: int, X0: np.ndarray):
-    patterns, functions = [], []
+    """Fixed nodal patterns with their time functions, and the body forces that follow an ALE
+    body's moving reference mesh (gravity there)."""
+    patterns, functions, on_mesh = [], [], []
     for load in cfg.loads:
-        if load.type in ("pressure", "traction"):
+        if load.type == "gravity":
+            cells = body.mesh.cells + body.node_offset
+            force = body.material.density * np.asarray(load.vector, dtype=float)
+            gravity = MeshBodyForce(cells, force, time_function(load.function))
+            if body.mesh_motion == "ale":
+                on_mesh.append(gravity)
+                continue
+            f = gravity.vector(X0, ndof)
+        elif load.type in ("pressure", "traction"):
             edges = body.global_edges(load.set)
             f = edge_traction_vector(X0, edges, load.vector, load.value, ndof)
         elif load.type == "point":
@@ -86,7 +101,7 @@ def _body_loads(body: Body, cfg: BodyConfig, ndof: int, X0: np.ndarray):
             f = body_force_vector(X0, cells, load.vector, ndof)
         patterns.append(f)
         functions.append(time_function(load.function))
-    return patterns, functions
+    return patterns, functions, on_mesh
 
 
 def _body_supports(body: Body, cfg: BodyConfig) -> list[Prescribed]:
@@ -118,15 +133,16 @@ def build_model(config: ScenarioConfig, base_dir: str | Path = ".") -> Model:
         for (name, mesh, mat, noff, coff), bc in zip(placed, config.bodies, strict=True)
     )
     ndof = 2 * len(X0)
-    patterns, functions, prescribed = [], [], []
+    patterns, functions, on_mesh, prescribed = [], [], [], []
     for i, (body, bc) in enumerate(zip(bodies, config.bodies, strict=True)):
         try:
-            p, f = _body_loads(body, bc, ndof, X0)
+            p, f, m = _body_loads(body, bc, ndof, X0)
             prescribed += _body_supports(body, bc)
         except MeshError as err:
             raise ScenarioError(f"bodies.{i} ('{body.name}'): {err}") from None
         patterns += p
         functions += f
+        on_mesh += m
     a = config.analysis
     interfaces = tuple(_interface(c, i, bodies, a.kind) for i, c in enumerate(config.contact))
     for i, (c, ci) in enumerate(zip(config.contact, interfaces, strict=True)):
@@ -144,7 +160,8 @@ def build_model(config: ScenarioConfig, base_dir: str | Path = ".") -> Model:
     fixed = np.unique(np.concatenate([p.dofs for p in prescribed] or [np.zeros(0, int)]))
     ties = tuple(_tie(t, i, bodies, fixed) for i, t in enumerate(config.tie))
     _check_ale_ties(ties, ale_bodies, bodies)
-    return Model(bodies, analysis, LoadCase(tuple(patterns), tuple(functions)),
+    loads = LoadCase(tuple(patterns), tuple(functions), tuple(on_mesh), X0)
+    return Model(bodies, analysis, loads,
                  tuple(prescribed), X0, cells, assembler, interfaces, ale_bodies, ties)
 
 
@@ -173,12 +190,13 @@ def _check_ale_ties(ties: tuple[Tie, ...], ale_bodies: tuple[AleSetup, ...],
     """A tied node of an ALE body must be one the mesh motion never moves (a boundary node
     off its contact surface, or an end or corner of it): the tie holds material points."""
     for setup in ale_bodies:
-        motion = setup.motion
-        sliding = np.zeros(motion.n_nodes, bool)
-        sliding[motion.surface] = ~motion.corner
-        if not motion.closed:
-            sliding[motion.surface[[0, -1]]] = False
-        movable = sliding | ~motion.boundary
+        sliding = np.zeros(setup.n_nodes, bool)
+        for motion in setup.motions:
+            sliding[motion.surface] |= ~motion.corner
+        for motion in setup.motions:  # ends of open chains (corners shared by two) are fixed
+            if not motion.closed:
+                sliding[motion.surface[[0, -1]]] = False
+        movable = sliding | ~setup.motion.boundary
         for tie in ties:
             for nodes in (tie.nodes_1, tie.nodes_2):
                 local = nodes - setup.node_offset
@@ -192,22 +210,28 @@ def _check_ale_ties(ties: tuple[Tie, ...], ale_bodies: tuple[AleSetup, ...],
 
 
 def _ale_setup(index: int, body: Body, cfg: BodyConfig, config: ScenarioConfig) -> AleSetup:
-    """The ALE body's contact surface is the one it has in the scenario's interfaces."""
-    surfaces = {c.surface_1 for c in config.contact if c.body_1 == body.name}
-    surfaces |= {c.surface_2 for c in config.contact if c.body_2 == body.name}
+    """The ALE body's contact surfaces are the ones it has in the scenario's interfaces; each
+    follows its own partners (``ale.multisurface``)."""
+    surfaces = [c.surface_1 for c in config.contact if c.body_1 == body.name]
+    surfaces += [c.surface_2 for c in config.contact if c.body_2 == body.name]
+    surfaces = list(dict.fromkeys(surfaces))  # in scenario order, each once
     where = f"bodies.{index} ('{body.name}').mesh_motion"
-    if len(surfaces) != 1:
-        raise ScenarioError(f"{where}: an ALE body needs exactly one contact surface, "
-                            f"found {sorted(surfaces) or 'none'}")
+    if not surfaces:
+        raise ScenarioError(f"{where}: an ALE body needs a contact surface, found none")
     opts = cfg.ale
-    motion = AleBody.from_mesh(body.mesh, surfaces.pop(), smoothing=opts.smoothing,
-                               smoothing_layers=opts.smoothing_layers, sweeps=opts.sweeps,
-                               remap=opts.remap, conserve_momentum=opts.conserve_momentum,
-                               respace=opts.respace, interior=opts.interior,
-                               slide_tolerance=opts.slide_tolerance,
-                               convection=opts.convection,
-                               density=body.material.density, name=body.name)
-    return AleSetup(index, body.node_offset, body.mesh.n_nodes, motion)
+    motions = tuple(
+        AleBody.from_mesh(body.mesh, surface, smoothing=opts.smoothing,
+                          smoothing_layers=opts.smoothing_layers, sweeps=opts.sweeps,
+                          remap=opts.remap, conserve_momentum=opts.conserve_momentum,
+                          respace=opts.respace, interior=opts.interior,
+                          slide_tolerance=opts.slide_tolerance, convection=opts.convection,
+                          density=body.material.density, name=body.name)
+        for surface in surfaces)
+    try:
+        check_surfaces(motions, surfaces)
+    except ValueError as err:
+        raise ScenarioError(f"{where}: {err}") from None
+    return AleSetup(index, body.node_offset, body.mesh.n_nodes, motions[0], motions[1:])
 
 
 def _interface(cfg: ContactConfig, index: int, bodies: tuple[Body, ...],

@@ -9,12 +9,13 @@ Lagrangian step, hence no convective term).
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 from numpy.typing import NDArray
 
 from ..ale.motion import AleUpdate, move_ale_body
+from ..ale.multisurface import meeting_points, move_ale_surfaces, nodal_masses
 from ..contact import PairState
 from ..jit import njit
 from .model import AleSetup, Model
@@ -29,6 +30,8 @@ class MeshMotion:
     updates: tuple[AleUpdate | None, ...]
     # per ALE body: (active nodes, partners, wanted positions) the update was made for
     requests: tuple = ()
+    #: meeting points of the step's pairs between two ALE bodies, (node, node) -> (2,) array
+    meetings: dict = field(default_factory=dict)
 
     @property
     def mismatch(self) -> float:
@@ -66,6 +69,7 @@ def move_meshes(
     """
     X, d, v, a = (arr.copy() for arr in (base.X, base.d, base.v, base.a))
     updates, requests = [], []
+    masses = _AleMasses(model, base, dict(previous.meetings) if previous is not None else {})
     for i, setup in enumerate(model.ale_bodies):
         nodes, partners = _ale_nodes_and_partners(setup, contact)
         if nodes.size == 0:
@@ -75,19 +79,118 @@ def move_meshes(
         rows = slice(setup.node_offset, setup.node_offset + setup.n_nodes)
         prev = previous.updates[i] if previous is not None else None
         x_start = prev.x_mesh[nodes - setup.node_offset] if prev is not None else base.x[nodes]
+        targets = _targets(masses, nodes, partners, x_pred, setup)
         # where the active node must sit at t_n so that its particle ends on the partner
-        wanted = x_pred[partners] - (x_pred[nodes] - x_start)
+        wanted = targets - (x_pred[nodes] - x_start)
         request = (nodes, partners, wanted)
         if prev is not None and _same_request(previous.requests[i], request, setup):
             up, request = prev, previous.requests[i]  # the move would be below its tolerance
+        elif setup.more_motions:
+            up = move_ale_surfaces(setup.motions, base.X[rows], base.d[rows], base.v[rows],
+                                   base.a[rows], nodes - setup.node_offset, targets,
+                                   x_pred[nodes], dt, x_start)
         else:
             up = move_ale_body(setup.motion, base.X[rows], base.d[rows], base.v[rows],
-                               base.a[rows], nodes - setup.node_offset, x_pred[partners],
+                               base.a[rows], nodes - setup.node_offset, targets,
                                x_pred[nodes], dt, x_start)
         X[rows], d[rows], v[rows], a[rows] = up.X, up.d, up.v, up.a
         updates.append(up)
         requests.append(request)
-    return MeshMotion(replace(base, X=X, d=d, v=v, a=a), tuple(updates), tuple(requests))
+    return MeshMotion(replace(base, X=X, d=d, v=v, a=a), tuple(updates), tuple(requests),
+                      masses.meetings)
+
+
+class _AleMasses:
+    """Which global nodes belong to an ALE body, (built when first asked) the lumped masses
+    of the ALE bodies' nodes on the t_n reference coordinates, and the step's meeting points
+    of pairs between two ALE bodies."""
+
+    def __init__(self, model: Model, base: StepState, meetings: dict) -> None:
+        self.model, self.base, self.meetings = model, base, meetings
+        self.is_ale = np.zeros(len(base.X), bool)
+        for setup in model.ale_bodies:
+            self.is_ale[setup.node_offset: setup.node_offset + setup.n_nodes] = True
+        self._mass: NDArray | None = None
+
+    @property
+    def mass(self) -> NDArray:
+        if self._mass is None:
+            self._mass = np.zeros(len(self.base.X))
+            for setup in self.model.ale_bodies:
+                rows = slice(setup.node_offset, setup.node_offset + setup.n_nodes)
+                self._mass[rows] = nodal_masses(self.base.X[rows], setup.motion)
+        return self._mass
+
+
+def _targets(masses: _AleMasses, nodes: NDArray, partners: NDArray, x_pred: NDArray,
+             setup: AleSetup) -> NDArray:
+    """Where each active node's particle must end: on its partner's predicted position, or,
+    when the partner is on an ALE body too, at the two particles' mass-weighted mid-point
+    (``ale.multisurface``; both bodies' nodes then meet there)."""
+    targets = x_pred[partners]
+    both = np.flatnonzero(masses.is_ale[partners])
+    if both.size == 0:
+        return targets
+    # The meeting point is fixed for the step when the pair first appears (from that
+    # augmentation's predictions): each body then converges to it like a single ALE body to
+    # a Lagrangian partner. Recomputed from every iterate it drifted by the two bodies'
+    # landing errors (each slides along its own surface's normals) at every augmentation,
+    # and the augmentations did not converge (docs/theory.md, "Several surfaces, both bodies
+    # ALE").
+    keys = [(int(min(a, b)), int(max(a, b)))
+            for a, b in zip(nodes[both], partners[both], strict=True)]
+    new = [k for k, key in zip(both, keys, strict=True) if key not in masses.meetings]
+    if new:
+        m = masses.mass
+        new = np.array(new)
+        points = meeting_points(x_pred[nodes[new]], x_pred[partners[new]], m[nodes[new]],
+                                m[partners[new]])
+        for k, point in zip(new, points, strict=True):
+            masses.meetings[(int(min(nodes[k], partners[k])),
+                             int(max(nodes[k], partners[k])))] = point
+    targets = targets.copy()
+    tangents = _surface_tangents(setup, nodes[both], x_pred)  # at the predicted step end
+    for k, key, t in zip(both, keys, tangents, strict=True):
+        targets[k] = _aim(masses.meetings, (int(nodes[k]), key), masses.meetings[key],
+                          x_pred[nodes[k]], t)
+    return targets
+
+
+def _aim(meetings: dict, node: tuple, point: NDArray, landing: NDArray, tangent: NDArray
+         ) -> NDArray:
+    """Where a node of a pair between two ALE bodies aims so that its particle lands on the
+    meeting point: the point itself at first, then the last aim corrected by the last miss
+    along the node's surface tangent. Each body slides its node along its own surface to the
+    foot of its own normal, so on a curved surface it lands off a point that lies off that
+    surface (by the gap and the partner's curvature), by a miss proportional to the slide; the
+    correction removes it in a few augmentations. (The normal part of the miss is the gap,
+    which contact closes.) ``node``: (the node, its pair's key)."""
+    key = ("aim", node)
+    if key not in meetings:
+        aim = point.copy()
+    else:
+        aim = meetings[key] + np.dot(point - landing, tangent) * tangent
+    meetings[key] = aim
+    return aim
+
+
+def _surface_tangents(setup: AleSetup, nodes: NDArray, x: NDArray) -> NDArray:
+    """Unit tangents (k, 2) of the ALE body's contact surface at the global ``nodes``, by the
+    chord between the node's neighbours on its surface chain at the positions ``x``."""
+    out = np.zeros((nodes.size, 2))
+    for i, node in enumerate(nodes - setup.node_offset):
+        for motion in setup.motions:
+            k = int(motion._surface_index[node])
+            if k < 0:
+                continue
+            n = motion.surface.size
+            ahead = (k + 1) % n if motion.closed else min(k + 1, n - 1)
+            behind = (k - 1) % n if motion.closed else max(k - 1, 0)
+            chord = (x[motion.surface[ahead] + setup.node_offset]
+                     - x[motion.surface[behind] + setup.node_offset])
+            out[i] = chord / np.linalg.norm(chord)
+            break
+    return out
 
 
 def _same_request(old, new, setup: AleSetup) -> bool:
@@ -97,7 +200,8 @@ def _same_request(old, new, setup: AleSetup) -> bool:
     if old is None or not (np.array_equal(old[0], new[0]) and np.array_equal(old[1], new[1])):
         return False
     motion = setup.motion
-    return float(np.abs(new[2] - old[2]).max()) <= motion.slide_tolerance * motion.min_spacing
+    spacing = min(m.min_spacing for m in setup.motions)
+    return float(np.abs(new[2] - old[2]).max()) <= motion.slide_tolerance * spacing
 
 
 @njit(cache=True)

@@ -170,4 +170,10 @@ class AleSetup:
     body_index: int
     node_offset: int
     n_nodes: int
-    motion: AleBody  # local numbering
+    motion: AleBody  # local numbering; the first contact surface
+    #: the body's other contact surfaces, one AleBody each (``ale.multisurface``)
+    more_motions: tuple[AleBody, ...] = ()
+
+    @property
+    def motions(self) -> tuple[AleBody, ...]:
+        return (self.motion, *self.more_motions)

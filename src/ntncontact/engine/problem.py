@@ -96,7 +96,7 @@ class StepProblem:
         free[dofs] = False
         self.free_dofs = np.flatnonzero(free)
         t_eval = 0.5 * (t0 + t1) if self.dynamic else t1
-        self.f_ext = self.model.loads(t_eval, ndof)
+        self.f_ext = self.model.loads(t_eval, ndof, self.state.X)  # X: ALE meshes move
 
     @property
     def dynamic(self) -> bool:

@@ -528,7 +528,7 @@ class Simulation:
         dissipation: E_{n+1} - E_n = external + contact work (+ the scheme's own error)."""
         dx = (s.X + d1 - s.x).ravel()
         t_eval = s.time + (0.5 * dt if self.dynamic else dt)
-        self._step_work["external_work"] += float(self.model.loads(t_eval, dx.size) @ dx)
+        self._step_work["external_work"] += float(self.model.loads(t_eval, dx.size, s.X) @ dx)
         active = [r for r in results if r is not None]
         if active:
             self._step_work["contact_work"] -= float(sum(r.force for r in active) @ dx)

@@ -2,7 +2,9 @@
 
 Loads are dead loads defined on the reference configuration: a traction or pressure on an edge
 set (per unit reference length), point forces on a node set, a body force per unit reference
-volume. Their nodal vectors are computed once; at time t the external force is sum_k s_k(t) f_k.
+volume, gravity (an acceleration g: the body force rho g). Their nodal vectors are computed once;
+at time t the external force is sum_k s_k(t) f_k. Gravity on an ALE body is the exception: its
+nodal vector follows the body's moving reference mesh (``MeshBodyForce``).
 """
 
 from __future__ import annotations
@@ -74,16 +76,38 @@ def body_force_vector(X: NDArray, cells: NDArray, force: NDArray, ndof: int) -> 
 
 
 @dataclass(frozen=True)
+class MeshBodyForce:
+    """A uniform body force per unit volume of a body's CURRENT reference mesh (gravity rho g
+    on an ALE body): its nodal vector int N_a b dX is rebuilt from the step's reference
+    coordinates, so that it stays the row sums of the rebuilt mass matrix times g (an ALE
+    remap moves the nodes, hence the particles, the volumes and the masses they carry)."""
+
+    cells: NDArray  # global node numbers of the body's cells
+    force: NDArray  # (2,) per unit volume
+    function: TimeFunction
+
+    def vector(self, X: NDArray, ndof: int) -> NDArray:
+        return body_force_vector(np.asarray(X).reshape(-1, 2), self.cells, self.force, ndof)
+
+
+@dataclass(frozen=True)
 class LoadCase:
-    """Nodal force patterns and their time functions: f_ext(t) = sum_k s_k(t) f_k."""
+    """Nodal force patterns and their time functions: f_ext(t) = sum_k s_k(t) f_k, plus the
+    body forces that follow a moving (ALE) reference mesh, evaluated on ``X`` (default: the
+    reference coordinates ``X0`` they were built with, i.e. an unmoved mesh)."""
 
     patterns: tuple[NDArray, ...]
     functions: tuple[TimeFunction, ...]
+    on_mesh: tuple[MeshBodyForce, ...] = ()
+    X0: NDArray | None = None
 
-    def __call__(self, t: float, ndof: int) -> NDArray:
+    def __call__(self, t: float, ndof: int, X: NDArray | None = None) -> NDArray:
         f = np.zeros(ndof)
         for pattern, func in zip(self.patterns, self.functions, strict=True):
             f += func(t) * pattern
+        coordinates = self.X0 if X is None else X
+        for load in self.on_mesh:
+            f += load.function(t) * load.vector(coordinates, ndof)
         return f
 
 

@@ -106,6 +106,16 @@ class HalfDiskMesh(Strict):
     transform: TransformConfig | None = None
 
 
+class DiskMesh(Strict):
+    type: Literal["disk"]
+    radius: Positive
+    n_circ: Annotated[int, Field(ge=8, multiple_of=8)]
+    n_radial: Annotated[int, Field(ge=1)]
+    surface_size: Positive | None = None
+    center: Vector = (0.0, 0.0)
+    transform: TransformConfig | None = None
+
+
 class GmshMesh(Strict):
     type: Literal["gmsh"]
     file: str
@@ -113,10 +123,10 @@ class GmshMesh(Strict):
 
 
 MeshConfig = Annotated[
-    RectangleMesh | AnnulusMesh | HalfDiskMesh | GmshMesh, Field(discriminator="type")
+    RectangleMesh | AnnulusMesh | HalfDiskMesh | DiskMesh | GmshMesh, Field(discriminator="type")
 ]
 MESH_TYPES = frozenset(get_args(m.model_fields["type"].annotation)[0]
-                       for m in (RectangleMesh, AnnulusMesh, HalfDiskMesh, GmshMesh))
+                       for m in (RectangleMesh, AnnulusMesh, HalfDiskMesh, DiskMesh, GmshMesh))
 
 
 class MaterialConfig(Strict):
@@ -159,9 +169,10 @@ class SupportConfig(Strict):
 
 
 class LoadConfig(Strict):
-    """pressure (scalar, on an edge set), traction / point (vector), body_force (vector)."""
+    """pressure (scalar, on an edge set), traction / point (vector), body_force (vector per
+    volume), gravity (acceleration vector: the body force density * vector)."""
 
-    type: Literal["pressure", "traction", "point", "body_force"]
+    type: Literal["pressure", "traction", "point", "body_force", "gravity"]
     set: str | None = None
     value: float | None = None
     vector: Vector | None = None
@@ -173,7 +184,9 @@ class LoadConfig(Strict):
             raise ValueError("a pressure load needs 'value'")
         if self.type != "pressure" and self.vector is None:
             raise ValueError(f"a {self.type} load needs 'vector'")
-        if self.type != "body_force" and self.set is None:
+        if self.type in ("body_force", "gravity") and self.set is not None:
+            raise ValueError(f"a {self.type} load acts on the whole body: remove 'set'")
+        if self.type not in ("body_force", "gravity") and self.set is None:
             raise ValueError(f"a {self.type} load needs 'set'")
         return self
 

@@ -1,4 +1,4 @@
-"""Structured Q4 mesh generators: rectangle, annulus, half disk (Hertz cylinder).
+"""Structured Q4 mesh generators: rectangle, annulus, disk, half disk (Hertz cylinder).
 
 Every generator returns a :class:`QuadMesh` whose cells are counter-clockwise and whose edge
 sets are oriented with the body on the left of each edge (outward normal ``rot(-90)(b - a)``),
@@ -17,6 +17,7 @@ from ntncontact.mesh.quadmesh import MeshError, QuadMesh
 
 __all__ = [
     "annulus",
+    "disk",
     "geometric_breaks",
     "half_disk",
     "hertz_cylinder_mesh",
@@ -232,6 +233,95 @@ def annulus(
     }
     edge_sets = {"outer": _chain_edges(outer), "inner": _chain_edges(inner)}
     return QuadMesh(nodes, cells, node_sets, edge_sets, name)
+
+
+# ----------------------------------------------------------------------------------------------
+# disk
+# ----------------------------------------------------------------------------------------------
+def _ring_fractions(n_radial: int, thickness: float, surface_size: float | None) -> NDArray:
+    """Blend parameters (0 at the core, 1 on the circle) of the ``n_radial + 1`` ring rows:
+    uniform, or with the outermost layer ``surface_size`` thick and the layers thickening
+    (or thinning) geometrically inward."""
+    if surface_size is None:
+        return np.linspace(0.0, 1.0, n_radial + 1)
+    if not surface_size > 0:
+        raise MeshError(f"surface_size must be positive, got {surface_size}")
+    sizes = _sizes_with_first(thickness, surface_size, n_radial)[::-1]  # core -> circle
+    fractions = np.concatenate(([0.0], np.cumsum(sizes))) / thickness
+    fractions[-1] = 1.0
+    return fractions
+
+
+def disk(
+    radius: float,
+    n_circ: int,
+    n_radial: int,
+    surface_size: float | None = None,
+    center: Sequence[float] = (0.0, 0.0),
+    name: str = "disk",
+    core_fraction: float = 0.5,
+    core_blend: float = 0.5,
+) -> QuadMesh:
+    """Full disk ``|x - center| <= radius`` of quads: an "O-grid".
+
+    A square core ``[-c, c]^2`` (``c = core_fraction * radius``) of ``(n_circ / 4)^2`` cells,
+    surrounded by ``n_radial`` ring layers that blend linearly from the core boundary to the
+    ``n_circ`` circle nodes, as in :func:`half_disk`. The circle nodes sit at the angles
+    ``-90 + 360 i / n_circ`` degrees, so node ``i = 0`` is the lowest point; ``n_circ`` must be
+    a multiple of 8 so that the core's corners face the 45-degree points and the lowest point
+    and the centre are nodes. With ``surface_size`` the outermost layer has that thickness and
+    the layers thicken geometrically inward (contact elements about square:
+    ``surface_size ~ 2 pi radius / n_circ``). ``core_blend`` in [0, 1] mixes uniform (0) and
+    circle-following (1) spacing of the core's rows and columns.
+
+    Edge set ``outer`` runs counter-clockwise from the lowest node (body on the left); node
+    sets ``outer`` (same order), ``bottom`` (lowest node), ``top`` (highest), ``center`` and
+    ``all``.
+    """
+    if not (radius > 0 and np.isfinite(radius)) or n_radial < 1 or n_circ < 8 or n_circ % 8:
+        raise MeshError(
+            f"disk needs radius > 0, n_radial >= 1 and n_circ a multiple of 8 (so the lowest "
+            f"point and the centre are nodes); got radius={radius}, n_circ={n_circ}, "
+            f"n_radial={n_radial}")
+    if not (0.0 < core_fraction < 1.0 / np.sqrt(2.0)) or not (0.0 <= core_blend <= 1.0):
+        raise MeshError("disk needs 0 < core_fraction < 1/sqrt(2) and 0 <= core_blend <= 1")
+    m = n_circ // 4
+    check_size(int(n_circ) * int(n_radial) + m * m,
+               f"mesh.n_circ x mesh.n_radial = {n_circ} x {n_radial} (+ the core)")
+    c = core_fraction * radius
+    # core rows/columns: the circle's projection onto the core side (the 90-degree arc facing
+    # it, scaled to [-c, c]) blended with a uniform division
+    facing = np.sin(np.deg2rad(np.linspace(-45.0, 45.0, m + 1))) / np.sin(np.pi / 4.0)
+    ticks = c * (core_blend * facing + (1.0 - core_blend) * np.linspace(-1.0, 1.0, m + 1))
+    ticks[0], ticks[m // 2], ticks[-1] = -c, 0.0, c
+    gx, gy = np.meshgrid(ticks, ticks)
+    core = np.column_stack((gx.ravel(), gy.ravel()))
+    grid = np.arange(core.shape[0]).reshape(m + 1, m + 1)  # [j up, i right]
+    # the core's rim counter-clockwise from its bottom-left corner, then rolled to start below
+    # the centre (angle -90 degrees, like circle node 0)
+    rim = np.concatenate((grid[0, :-1], grid[:-1, -1], grid[-1, :0:-1], grid[:0:-1, 0]))
+    rim = np.roll(rim, -(m // 2))
+    theta = -0.5 * np.pi + 2.0 * np.pi * np.arange(n_circ) / n_circ
+    circle = radius * np.column_stack((np.cos(theta), np.sin(theta)))
+    quarter = np.arange(0, n_circ, n_circ // 4)  # exactly below, right of, above, left of it
+    circle[quarter] = radius * np.array([[0.0, -1.0], [1.0, 0.0], [0.0, 1.0], [-1.0, 0.0]])
+    fractions = _ring_fractions(n_radial, radius - c, surface_size)[1:, None, None]
+    ring_xy = (1.0 - fractions) * core[rim][None] + fractions * circle[None]
+    n_core = core.shape[0]
+    ring = np.vstack((rim[None], n_core + np.arange(n_radial * n_circ).reshape(n_radial, n_circ)))
+    nodes = np.vstack((core, ring_xy.reshape(-1, 2))) + np.asarray(center, float)
+    closed = np.concatenate((ring, ring[:, :1]), axis=1)  # column n_circ = column 0
+    # ring: i runs counter-clockwise, j must run from the circle inward (as in ``annulus``)
+    cells = np.vstack((_grid_cells(grid), _grid_cells(closed[::-1])))
+    outer = ring[-1]
+    node_sets = {
+        "outer": outer,
+        "bottom": outer[:1],
+        "top": outer[n_circ // 2: n_circ // 2 + 1],
+        "center": grid[m // 2, m // 2:][:1],
+        "all": np.arange(nodes.shape[0]),
+    }
+    return QuadMesh(nodes, cells, node_sets, {"outer": _chain_edges(closed[-1])}, name)
 
 
 # ----------------------------------------------------------------------------------------------
