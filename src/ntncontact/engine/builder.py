@@ -202,12 +202,14 @@ def _ale_setup(index: int, body: Body, cfg: BodyConfig, config: ScenarioConfig) 
     opts = cfg.ale
     motion = AleBody.from_mesh(body.mesh, surfaces.pop(), smoothing=opts.smoothing,
                                smoothing_layers=opts.smoothing_layers, sweeps=opts.sweeps,
-                               remap=opts.remap, conserve_momentum=opts.conserve_momentum,
+                               remap=opts.remap, conserve_momentum=False,
                                respace=opts.respace, interior=opts.interior,
                                slide_tolerance=opts.slide_tolerance,
                                convection=opts.convection,
                                density=body.material.density, name=body.name)
-    return AleSetup(index, body.node_offset, body.mesh.n_nodes, motion)
+    # the engine corrects the remapped velocities with the model's own mass matrix
+    return AleSetup(index, body.node_offset, body.mesh.n_nodes, motion,
+                    opts.conserve_momentum, opts.conserve_energy)
 
 
 def _interface(cfg: ContactConfig, index: int, bodies: tuple[Body, ...],

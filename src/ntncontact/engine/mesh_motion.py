@@ -19,6 +19,7 @@ from ..contact import PairState
 from ..jit import njit
 from .model import AleSetup, Model
 from .problem import StepState
+from .remap_conservation import conserve_remap
 
 
 @dataclass(frozen=True)
@@ -84,6 +85,8 @@ def move_meshes(
             up = move_ale_body(setup.motion, base.X[rows], base.d[rows], base.v[rows],
                                base.a[rows], nodes - setup.node_offset, x_pred[partners],
                                x_pred[nodes], dt, x_start)
+            # momenta and energy exactly as the time loop measures them (docs/theory.md)
+            up = conserve_remap(model, setup, base.X, base.d, base.v, base.time, up)
         X[rows], d[rows], v[rows], a[rows] = up.X, up.d, up.v, up.a
         updates.append(up)
         requests.append(request)

@@ -171,3 +171,7 @@ class AleSetup:
     node_offset: int
     n_nodes: int
     motion: AleBody  # local numbering
+    # the remap's exact velocity correction (engine.remap_conservation; ``motion`` then adds
+    # no rigid correction of its own): momenta, and "total", "kinetic" or "none" energy
+    conserve_momentum: bool = False
+    conserve_energy: str = "none"
