@@ -30,7 +30,7 @@ from dataclasses import dataclass
 
 import numpy as np
 import scipy.sparse as sp
-import scipy.sparse.linalg as spla
+from scipy.linalg import cho_factor, cho_solve
 from numpy.typing import NDArray
 
 __all__ = ["ConservingCorrection", "conserving_correction", "dof_momenta", "rigid_modes"]
@@ -68,23 +68,40 @@ def conserving_correction(mass: sp.spmatrix, x: NDArray, v: NDArray, dofs: NDArr
     energy (None: not imposed) take the given values. ``mass`` is the scalar nodal mass (n, n)
     of the configuration x."""
     v = np.asarray(v, dtype=float)
+    x = np.asarray(x, dtype=float)
     dofs = np.asarray(dofs, dtype=np.int64)
     if dofs.size == 0:
         return ConservingCorrection(v.copy(), kinetic is None, 0.0)
-    M = sp.kron(sp.csr_matrix(mass), sp.eye(2), format="csr")
-    Mv = M @ v.ravel()
-    A = M[dofs][:, dofs].tocsc()
+    mass = sp.csr_matrix(mass)
+    # everything from nodal products with the scalar mass (M acts alike on x and y)
+    p = mass @ v
+    Mv = p.ravel()
+    # A = M_SS, dense: S is the neighbourhood of a few moved nodes (the whole body only when
+    # that cannot take the energy)
+    nodes, where = np.unique(dofs // 2, return_inverse=True)
+    block = mass[nodes][:, nodes].toarray()
+    A = block[where][:, where] * (dofs[:, None] % 2 == dofs[None, :] % 2)
     b = Mv[dofs]
-    solve = spla.splu(A).solve
+    factor = cho_factor(A)
+
+    def solve(rhs: NDArray) -> NDArray:
+        return cho_solve(factor, rhs)
+
     u = solve(b)
     delta = np.zeros(dofs.size)
     u_free = u
     if momenta is not None:
-        G = rigid_modes(x)
-        B = np.asarray(M[dofs] @ G)
+        m1 = mass @ np.ones(len(x))
+        mx, my = mass @ x[:, 0], mass @ x[:, 1]
+        B_full = np.zeros((2 * len(x), 3))  # (M G) on dofs: G the rigid modes
+        B_full[0::2, 0], B_full[1::2, 1] = m1, m1
+        B_full[0::2, 2], B_full[1::2, 2] = -my, mx
+        B = B_full[dofs]
         Phi = solve(B)
         C = B.T @ Phi
-        r = np.asarray(momenta, dtype=float) - G.T @ Mv
+        current = np.array([p[:, 0].sum(), p[:, 1].sum(),
+                            float(np.sum(x[:, 0] * p[:, 1] - x[:, 1] * p[:, 0]))])
+        r = np.asarray(momenta, dtype=float) - current
         delta = Phi @ np.linalg.solve(C, r)
         u_free = u - Phi @ np.linalg.solve(C, B.T @ u)
     restored = kinetic is None
