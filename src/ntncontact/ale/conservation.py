@@ -30,8 +30,8 @@ from dataclasses import dataclass
 
 import numpy as np
 import scipy.sparse as sp
-from scipy.linalg import cho_factor, cho_solve
 from numpy.typing import NDArray
+from scipy.linalg import cho_factor, cho_solve
 
 __all__ = ["ConservingCorrection", "conserving_correction", "dof_momenta", "rigid_modes"]
 
