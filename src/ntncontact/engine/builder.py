@@ -219,10 +219,11 @@ def _ale_setup(index: int, body: Body, cfg: BodyConfig, config: ScenarioConfig) 
     if not surfaces:
         raise ScenarioError(f"{where}: an ALE body needs a contact surface, found none")
     opts = cfg.ale
+    # the engine corrects the remapped velocities with the model's own mass matrix
     motions = tuple(
         AleBody.from_mesh(body.mesh, surface, smoothing=opts.smoothing,
                           smoothing_layers=opts.smoothing_layers, sweeps=opts.sweeps,
-                          remap=opts.remap, conserve_momentum=opts.conserve_momentum,
+                          remap=opts.remap, conserve_momentum=False,
                           respace=opts.respace, interior=opts.interior,
                           slide_tolerance=opts.slide_tolerance, convection=opts.convection,
                           density=body.material.density, name=body.name)
@@ -231,7 +232,8 @@ def _ale_setup(index: int, body: Body, cfg: BodyConfig, config: ScenarioConfig) 
         check_surfaces(motions, surfaces)
     except ValueError as err:
         raise ScenarioError(f"{where}: {err}") from None
-    return AleSetup(index, body.node_offset, body.mesh.n_nodes, motions[0], motions[1:])
+    return AleSetup(index, body.node_offset, body.mesh.n_nodes, motions[0], motions[1:],
+                    opts.conserve_momentum, opts.conserve_energy)
 
 
 def _interface(cfg: ContactConfig, index: int, bodies: tuple[Body, ...],

@@ -20,6 +20,7 @@ from ..contact import PairState
 from ..jit import njit
 from .model import AleSetup, Model
 from .problem import StepState
+from .remap_conservation import conserve_remap
 
 
 @dataclass(frozen=True)
@@ -85,14 +86,13 @@ def move_meshes(
         request = (nodes, partners, wanted)
         if prev is not None and _same_request(previous.requests[i], request, setup):
             up, request = prev, previous.requests[i]  # the move would be below its tolerance
-        elif setup.more_motions:
-            up = move_ale_surfaces(setup.motions, base.X[rows], base.d[rows], base.v[rows],
-                                   base.a[rows], nodes - setup.node_offset, targets,
-                                   x_pred[nodes], dt, x_start)
         else:
-            up = move_ale_body(setup.motion, base.X[rows], base.d[rows], base.v[rows],
-                               base.a[rows], nodes - setup.node_offset, targets,
-                               x_pred[nodes], dt, x_start)
+            move = move_ale_surfaces if setup.more_motions else move_ale_body
+            up = move(setup.motions if setup.more_motions else setup.motion, base.X[rows],
+                      base.d[rows], base.v[rows], base.a[rows], nodes - setup.node_offset,
+                      targets, x_pred[nodes], dt, x_start)
+            # momenta and energy exactly as the time loop measures them (docs/theory.md)
+            up = conserve_remap(model, setup, base.X, base.d, base.v, base.time, up)
         X[rows], d[rows], v[rows], a[rows] = up.X, up.d, up.v, up.a
         updates.append(up)
         requests.append(request)

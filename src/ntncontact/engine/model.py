@@ -173,6 +173,10 @@ class AleSetup:
     motion: AleBody  # local numbering; the first contact surface
     #: the body's other contact surfaces, one AleBody each (``ale.multisurface``)
     more_motions: tuple[AleBody, ...] = ()
+    # the remap's exact velocity correction (engine.remap_conservation; ``motion`` then adds
+    # no rigid correction of its own): momenta, and "total", "kinetic" or "none" energy
+    conserve_momentum: bool = False
+    conserve_energy: str = "none"
 
     @property
     def motions(self) -> tuple[AleBody, ...]:

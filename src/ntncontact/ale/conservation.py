@@ -1,0 +1,121 @@
+"""The velocity correction that makes a remap conserve momenta and kinetic energy exactly.
+
+After a remap the nodal velocities v (n, 2) of a body sit on new particles with new masses
+M (the scalar nodal mass matrix of the moved mesh, consistent or lumped). The correction is the
+smallest change delta, in the mass norm |delta|_M^2 = delta . M delta, of the velocities of the
+dofs S that may change (the remapped nodes and their neighbours, supports excluded) such that
+
+    P(v + delta) = P*,  L(v + delta) = L*   (linear, about the origin; G^T M (v + delta) = g*)
+    K(v + delta) = K*                        (quadratic; 1/2 (v + delta) . M (v + delta))
+
+with G = [t_x, t_y, rho] the rigid modes (rho_a = e_z x x_a) and the momenta as the time loop
+measures them (P = sum M v, L = sum x_a x (M v)_a). Write A = M_SS, B = (M G)_S, b = (M v)_S.
+
+* The linear constraints alone: delta_0 = Phi C^-1 r, Phi = A^-1 B, C = B^T Phi,
+  r = g* - G^T M v (the minimal-norm solution; it is A-orthogonal to every z with B^T z = 0).
+* The energy: every other admissible change is delta = delta_0 + z with B^T z = 0, and
+  K(v + delta) = K(v) + b.delta_0 + |delta_0|^2/2 + <u_N, z>_A + |z|^2/2, where u = A^-1 b and
+  u_N = u - Phi C^-1 B^T u is the part of u that carries no momentum. The admissible z with the
+  right energy form a sphere about -u_N; its point nearest the origin is z = alpha u_N,
+  (1 + alpha)^2 = 1 + 2 k'/|u_N|_A^2, k' = K* - K(v) - b.delta_0 - |delta_0|^2/2.
+  With a lumped mass and S the whole body this scales the non-rigid part of the velocity.
+
+The energy cannot be restored when 1 + 2 k'/|u_N|^2 < 0 (the non-rigid motion on S holds less
+energy than has to be taken out) or u_N vanishes; the caller then widens S.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.sparse as sp
+from numpy.typing import NDArray
+from scipy.linalg import cho_factor, cho_solve
+
+__all__ = ["ConservingCorrection", "conserving_correction", "dof_momenta", "rigid_modes"]
+
+
+def rigid_modes(x: NDArray) -> NDArray[np.float64]:
+    """The rigid velocity modes on dofs (2 n, 3): translations x, y and the rotation e_z x x."""
+    n = len(x)
+    G = np.zeros((2 * n, 3))
+    G[0::2, 0] = 1.0
+    G[1::2, 1] = 1.0
+    G[0::2, 2] = -x[:, 1]
+    G[1::2, 2] = x[:, 0]
+    return G
+
+
+def dof_momenta(mass: sp.spmatrix, x: NDArray, v: NDArray) -> tuple[NDArray, float]:
+    """(P_x, P_y, L) and the kinetic energy of nodal velocities v with the scalar mass."""
+    p = mass @ v
+    return rigid_modes(x).T @ p.ravel(), 0.5 * float(np.sum(v * p))
+
+
+@dataclass(frozen=True)
+class ConservingCorrection:
+    v: NDArray[np.float64]  # corrected velocities (n, 2)
+    energy_restored: bool  # False: only the momenta were restored (see the module doc)
+    change: float  # |delta|_M / |v|_M on S: the relative size of the correction
+
+
+def conserving_correction(mass: sp.spmatrix, x: NDArray, v: NDArray, dofs: NDArray,
+                          momenta: NDArray | None, kinetic: float | None
+                          ) -> ConservingCorrection:
+    """Velocities v (n, 2) changed on ``dofs`` (indices 2 a + i) by the least mass-norm amount
+    so that the momenta (P_x, P_y, L about the origin; None: not imposed) and the kinetic
+    energy (None: not imposed) take the given values. ``mass`` is the scalar nodal mass (n, n)
+    of the configuration x."""
+    v = np.asarray(v, dtype=float)
+    x = np.asarray(x, dtype=float)
+    dofs = np.asarray(dofs, dtype=np.int64)
+    if dofs.size == 0:
+        return ConservingCorrection(v.copy(), kinetic is None, 0.0)
+    mass = sp.csr_matrix(mass)
+    # everything from nodal products with the scalar mass (M acts alike on x and y)
+    p = mass @ v
+    Mv = p.ravel()
+    # A = M_SS, dense: S is the neighbourhood of a few moved nodes (the whole body only when
+    # that cannot take the energy)
+    nodes, where = np.unique(dofs // 2, return_inverse=True)
+    block = mass[nodes][:, nodes].toarray()
+    A = block[where][:, where] * (dofs[:, None] % 2 == dofs[None, :] % 2)
+    b = Mv[dofs]
+    factor = cho_factor(A)
+
+    def solve(rhs: NDArray) -> NDArray:
+        return cho_solve(factor, rhs)
+
+    u = solve(b)
+    delta = np.zeros(dofs.size)
+    u_free = u
+    if momenta is not None:
+        m1 = mass @ np.ones(len(x))
+        mx, my = mass @ x[:, 0], mass @ x[:, 1]
+        B_full = np.zeros((2 * len(x), 3))  # (M G) on dofs: G the rigid modes
+        B_full[0::2, 0], B_full[1::2, 1] = m1, m1
+        B_full[0::2, 2], B_full[1::2, 2] = -my, mx
+        B = B_full[dofs]
+        Phi = solve(B)
+        C = B.T @ Phi
+        current = np.array([p[:, 0].sum(), p[:, 1].sum(),
+                            float(np.sum(x[:, 0] * p[:, 1] - x[:, 1] * p[:, 0]))])
+        r = np.asarray(momenta, dtype=float) - current
+        delta = Phi @ np.linalg.solve(C, r)
+        u_free = u - Phi @ np.linalg.solve(C, B.T @ u)
+    restored = kinetic is None
+    if kinetic is not None:
+        k0 = 0.5 * float(v.ravel() @ Mv)
+        # what is left to change once delta_0 is made (A delta_0 is orthogonal to u_free)
+        left = kinetic - k0 - float(b @ delta) - 0.5 * float(delta @ (A @ delta))
+        norm2 = float(b @ u_free)  # |u_N|_A^2 = u_N . A u = u_N . b
+        ratio = 1.0 + 2.0 * left / norm2 if norm2 > 0.0 else -1.0
+        if ratio >= 0.0 and norm2 > 1e-30 * max(abs(k0), 1e-300):
+            delta = delta + (np.sqrt(ratio) - 1.0) * u_free
+            restored = True
+    out = v.ravel().copy()
+    out[dofs] += delta
+    v_sub = v.ravel()[dofs]
+    size = float(np.sqrt(max(delta @ (A @ delta), 0.0) / max(float(v_sub @ (A @ v_sub)), 1e-300)))
+    return ConservingCorrection(out.reshape(v.shape), restored, size)
