@@ -38,6 +38,11 @@ class MeshMotion:
     def mismatch(self) -> float:
         return max([u.mismatch for u in self.updates if u is not None] or [0.0])
 
+    @property
+    def strain_energy_handover(self) -> float:
+        """Strain energy the remaps changed and their velocity corrections took up."""
+        return sum(u.strain_energy_handover for u in self.updates if u is not None)
+
 
 def _ale_nodes_and_partners(setup: AleSetup, contact: Sequence[PairState]):
     """Active global nodes of this ALE body and their partners, over all interfaces: per

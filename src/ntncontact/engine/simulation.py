@@ -65,7 +65,7 @@ class StepRecord:
 
 
 #: Energy ledger columns accumulated over the run (history.csv).
-LEDGER = ("external_work", "contact_work", "frictional_dissipation")
+LEDGER = ("external_work", "contact_work", "frictional_dissipation", "ale_remap_energy")
 
 #: Quasi-static steps are re-solved at most this many times when new pairs penetrate.
 ACTIVE_SET_PASSES = 5
@@ -84,6 +84,7 @@ class SolvedStep:
     mismatch: float
     tie_forces: dict = field(default_factory=dict)  # per tie: force on its body-1 nodes
     reactions: dict = field(default_factory=dict)  # history columns of the support reactions
+    remap_energy: float = 0.0  # strain energy the ALE remaps handed to the velocities
 
 
 class Observer(Protocol):
@@ -221,6 +222,7 @@ class Simulation:
         self._last_tie_forces = solved.tie_forces
         self._last_reactions = solved.reactions
         self._accumulate_work(s, d1, results, dt)
+        self._step_work["ale_remap_energy"] += solved.remap_energy
         new = StepState(s.step + 1, s.time + dt, s.X, d1, v1, a1, committed)
         return new, iterations
 
@@ -289,12 +291,13 @@ class Simulation:
                                    unconverged_interfaces(interfaces, used, before, previous))
             self._augmentations_converged = False
         mismatch = motion.mismatch if motion is not None else 0.0
+        handover = motion.strain_energy_handover if motion is not None else 0.0
         ties = tie_forces(problem.constraints, problem.multipliers(result.y)) \
             if self.model.ties else {}
         reactions = support_reactions(self._supports, problem.full_residual(result.y),
                                       state.X + d) if self._supports else {}
         return SolvedStep(state, d, used, results, augmentation, iterations, mismatch, ties,
-                          reactions)
+                          reactions, handover)
 
     @staticmethod
     def _require_accepted(augmentations: int, failed: list) -> None:
@@ -551,6 +554,7 @@ class Simulation:
             "augmentations": augmentations,
             "augmentations_converged": int(self._augmentations_converged),
             "ale_mismatch": self._last_mismatch,
+            "ale_remap_energy": self.ledger["ale_remap_energy"],
             "energy_multiplier": self._energy_multiplier,
             "contact_rows": contact_rows(self.model.interfaces, results, self.state.x),
         }

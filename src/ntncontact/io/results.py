@@ -19,7 +19,8 @@ from ..engine.simulation import StepRecord
 from .writers import MemoryResults, ResultsDirectory
 
 CONTACT_HISTORY = ("active_pairs", "frictional_dissipation", "contact_work", "augmentations",
-                   "ale_mismatch", "energy_multiplier", "augmentations_converged")
+                   "ale_mismatch", "energy_multiplier", "augmentations_converged",
+                   "ale_remap_energy")
 HISTORY_DEFAULTS = {"augmentations_converged": 1}  # of the initial row and contact-free steps
 
 
