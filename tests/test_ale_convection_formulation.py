@@ -161,11 +161,17 @@ def fast_sliding():
         # the remap keeps the kinetic energy, not the total: the default "total" also hands the
         # strain energy the remap changed to the velocities, which neither the convective term
         # nor the convection itself does (it moves the upper block's v_y at t = 0.1 by 8e-4,
-        # as much as dropping the convection; "kinetic": 1e-4 from the convective term)
+        # as much as dropping the convection; "kinetic": 1e-4 from the convective term).
+        # The report's pair forces: with moment-free ones the contact tractions' step-to-step
+        # (odd-even) oscillation of the mid-point rule changes phase at t = 0.078 in one
+        # formulation, so the end velocities differ by +-0.019 from step to step; averaged over
+        # the last two steps they differ by 6.6e-4 (2.7e-4 here), and at dt = 0.003 the end
+        # velocities differ by 7.7e-4 with either force (docs/theory.md)
         model = model_from_example("blocks_fast_sliding.toml",
                                    [*coarse_fast_sliding(mode, 0.006),
                                     'analysis.integrator="midpoint"',
-                                    'bodies.1.ale.conserve_energy="kinetic"'])
+                                    'bodies.1.ale.conserve_energy="kinetic"',
+                                    "contact.0.moment_free=false"])
         sim = Simulation(model, [rec])
         if key == "dropped":
             with pytest.MonkeyPatch.context() as mp:

@@ -1,6 +1,6 @@
 """Angular momentum of free bodies in contact under the mid-point rule (issue 16, item 1).
 
-The moment-free pair forces (ContactLaw.moment_free, opt-in: these cases turn them on) are the
+The moment-free pair forces (ContactLaw.moment_free, the default of dynamic runs) are the
 gradients of the rotation-invariant gap g and offset s, evaluated at x_{n+1/2}, so their net
 moment vanishes there and the mid-point rule keeps L = sum_ab M_ab x_a x v_b to round-off
 (docs/theory.md, "Moment-free pair forces").
@@ -100,7 +100,7 @@ def test_report_pair_forces_drift():
     assert drift > 1e3 * TOL
 
 
-def test_the_report_forces_are_the_default_and_moment_free_ones_opt_in():
+def test_moment_free_forces_are_the_default_of_dynamic_runs():
     static = model_from_dict({
         "analysis": {"kind": "static", "dt": 1.0, "t_end": 1.0},
         "bodies": [{"name": "a", "mesh": {"type": "rectangle", "width": 1.0, "height": 1.0,
@@ -114,13 +114,13 @@ def test_the_report_forces_are_the_default_and_moment_free_ones_opt_in():
         "contact": [{"body_1": "a", "surface_1": "bottom", "body_2": "b", "surface_2": "top",
                      "penalty_normal": 10.0}],
     })
-    assert not static.interfaces[0].law.moment_free
-    assert not blocks(moment_free=None).interfaces[0].law.moment_free  # opt-in
-    assert blocks().interfaces[0].law.moment_free
+    assert not static.interfaces[0].law.moment_free  # static: the report's forces
+    assert blocks(moment_free=None).interfaces[0].law.moment_free  # dynamic: on by default
+    assert not blocks(moment_free=False).interfaces[0].law.moment_free
     ale = model_from_example("tilted_blocks.toml")  # an ALE lower block
-    assert not ale.interfaces[0].law.moment_free
-    assert model_from_example("tilted_blocks.toml",
-                              ["contact.0.moment_free=true"]).interfaces[0].law.moment_free
+    assert ale.interfaces[0].law.moment_free
+    assert not model_from_example("tilted_blocks.toml",
+                                  ["contact.0.moment_free=false"]).interfaces[0].law.moment_free
 
 
 @pytest.mark.parametrize("method", ["penalty", "augmented_lagrangian", "lagrange"])
@@ -164,12 +164,11 @@ def test_pair_forces_have_no_net_moment(method, rate_law):
 
 
 @pytest.mark.parametrize(("example", "overrides"), [
-    ("rod_impact.toml", ["analysis.t_end=2.5", "contact.0.moment_free=true"]),
-    ("tilted_blocks.toml", ["bodies.1.mesh_motion=\"lagrangian\"", "analysis.t_end=0.12",
-                            "contact.0.moment_free=true"]),
+    ("rod_impact.toml", ["analysis.t_end=2.5"]),
+    ("tilted_blocks.toml", ["bodies.1.mesh_motion=\"lagrangian\"", "analysis.t_end=0.12"]),
     pytest.param("blocks_fast_sliding.toml",
                  ["bodies.1.mesh_motion=\"lagrangian\"", "analysis.t_end=0.1",
-                  "contact.0.friction=0.2", "contact.0.moment_free=true"],
+                  "contact.0.friction=0.2"],
                  marks=pytest.mark.slow),
 ])
 def test_free_examples_with_lagrangian_bodies_keep_angular_momentum(example, overrides):

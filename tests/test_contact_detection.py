@@ -158,3 +158,34 @@ def test_gap_restoring_rate_acts_on_new_pairs_only():
                           / (2 * h) for e in np.eye(x.size)])
     tangent = results[True, "fresh"].tangent_matrix().toarray()
     assert np.abs(tangent - fd).max() < 1e-6 * np.abs(fd).max()
+
+
+def test_moment_free_detection_takes_the_laws_objective_rate():
+    """With moment-free forces the law and the release test see gdot = dg/dx . v, which adds
+    (s/l) n.(v_a - v_b) to the report's (v_i - v_j).n; detection's approach test takes the
+    same rate. A rigid rotation of the two bodies about a point moves an offset pair (s != 0)
+    along n by the report's rate, but leaves its gap unchanged; with a slow separation added
+    the pair is leaving, while the report's rate still says approach."""
+    from ntncontact.contact import ContactLaw, evaluate_contact, pair_gaps
+
+    x, interface = blocks(-0.01)
+    x[4:, 0] += 0.4  # body 2 shifted: every pair has an offset s = -0.4 (or +0.6)
+    pairs = closest_pairs(x, interface).pairs
+    omega, centre = 0.7, np.array([0.3, -2.0])
+    rigid = omega * np.column_stack((-(x[:, 1] - centre[1]), x[:, 0] - centre[0]))
+    _, _, report = pair_gaps(x, interface, pairs, rigid)
+    _, _, objective = pair_gaps(x, interface, pairs, rigid, objective=True)
+    np.testing.assert_allclose(report, 0.4 * omega, rtol=1e-12)  # -omega s, s = -0.4
+    np.testing.assert_allclose(objective, 0.0, atol=1e-14)
+    leaving = rigid + velocities(0.05)  # body 1 moves off body 2 (n = (0, -1))
+    _, _, objective = pair_gaps(x, interface, pairs, leaving, objective=True)
+    np.testing.assert_allclose(objective, -0.05, rtol=1e-12)
+    state = PairState.empty()
+    assert len(detect(state, pairs, x, leaving, interface).state) == 4  # report's rate: enters
+    assert len(detect(state, pairs, x, leaving, interface, objective=True).state) == 0
+    # a random field: detection's objective rate is the kernel's (the law's) gap rate
+    v = np.random.default_rng(3).normal(size=x.shape)
+    law = ContactLaw("penalty", eps_N=100.0, moment_free=True)
+    kernel = evaluate_contact(x, v, 100.0, interface, PairState.from_pairs(pairs), law)
+    _, _, objective = pair_gaps(x, interface, pairs, v, objective=True)
+    np.testing.assert_allclose(objective, kernel.gap_rate, rtol=1e-13, atol=1e-14)

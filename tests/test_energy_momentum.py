@@ -165,11 +165,17 @@ def test_spinning_neo_hookean_block_conserves_energy_and_momenta_over_1000_steps
     assert np.abs(ang - ang[0]).max() < 1e-10 * abs(ang[0])
 
 
-def bouncing_block(integrator, t_end, material="neo_hookean", dt=0.01):
-    """A 1 x 0.5 block (4 x 2 elements) flying at v = 1 between two walls 0.1 away on either
-    side, each wall 0.25 x 0.5 (1 x 2 elements, matching node rows) held on its outer edge;
-    E = 20, so v/c ~ 0.05 and the block's strains reach a few percent. Lagrangian,
-    frictionless, persistency law."""
+def bouncing_block(integrator, t_end, material="neo_hookean", dt=0.01, gap=0.103, lift=0.0,
+                   moment_free=None):
+    """A 1 x 0.5 block (4 x 2 elements) flying at v = 1 between two walls ``gap`` away on
+    either side, each wall 0.25 x 0.5 (1 x 2 elements, matching node rows) held on its outer
+    edge; E = 20, so v/c ~ 0.2 and the block's strains reach a few percent. Lagrangian,
+    frictionless, persistency law; the block raised by ``lift``. The default gap puts the
+    first touch inside a step: with gap = 0.1 it falls on the end of step 10, where the three
+    pairs of a face have gaps 0, -2e-16, -2e-16 and round-off enters one of them a step before
+    the others. That asymmetric first impact then grows over the impacts, as an off-centre
+    impact physically does (tests/test_moment_free_impacts.py), and decides when the block
+    leaves over a wall."""
     material = {"model": material, "E": 20.0, "nu": 0.3, "density": 1.0}
 
     def wall(name, x0, held):
@@ -179,17 +185,18 @@ def bouncing_block(integrator, t_end, material="neo_hookean", dt=0.01):
                 "supports": [{"set": held, "x": 0.0, "y": 0.0}]}
 
     def contact(body_1, surface_1, body_2, surface_2):
-        return {"body_1": body_1, "surface_1": surface_1, "body_2": body_2,
-                "surface_2": surface_2, "method": "augmented_lagrangian",
-                "law": "persistency", "penalty_normal": 2000.0}
+        entry = {"body_1": body_1, "surface_1": surface_1, "body_2": body_2,
+                 "surface_2": surface_2, "method": "augmented_lagrangian",
+                 "law": "persistency", "penalty_normal": 2000.0}
+        return entry if moment_free is None else entry | {"moment_free": moment_free}
 
     return model_from_dict({
         "analysis": {"kind": "dynamic", "dt": dt, "t_end": t_end, "integrator": integrator},
-        "bodies": [wall("wall_left", -0.35, "left"),
+        "bodies": [wall("wall_left", -0.25 - gap, "left"),
                    {"name": "block", "material": material, "initial": {"velocity": [1.0, 0.0]},
                     "mesh": {"type": "rectangle", "width": 1.0, "height": 0.5, "nx": 4,
-                             "ny": 2}},
-                   wall("wall_right", 1.1, "right")],
+                             "ny": 2, "origin": [0.0, lift]}},
+                   wall("wall_right", 1.0 + gap, "right")],
         "contact": [contact("block", "right", "wall_right", "left"),
                     contact("wall_left", "right", "block", "left")],
     })
@@ -210,8 +217,9 @@ def test_neo_hookean_block_bouncing_between_walls_keeps_its_energy_over_20_impac
     error, ends = energy_after_each_episode(rec)
     assert rec.status == ("completed", None)
     assert len(ends) >= 20
-    # measured: |E/E0 - 1| <= 2e-11 over the whole run, no trend with the impacts; the contact
-    # forces (persistency, matching nodes) do no work to the Newton tolerance either
+    # measured: |E/E0 - 1| <= 4.3e-11 over the whole run (24 episodes; the report's pair
+    # forces 8.5e-11, 21 episodes), no trend with the impacts; the contact forces (persistency,
+    # matching nodes) do no work to the Newton tolerance either
     assert abs(error[-1]) < 1e-4
     assert np.abs(error).max() < 1e-9
     first, last = np.abs(error[ends[:5]]).max(), np.abs(error[ends[-5:]]).max()
@@ -229,7 +237,7 @@ def test_the_bouncing_block_gains_energy_with_the_plain_mid_point_rule():
 
 
 def test_linear_elastic_bouncing_block_is_the_same_with_either_integrator():
-    """Through the first impact (contact from t = 0.1): the energy-momentum integrator gives
+    """Through the first impact (contact from t = 0.103): the energy-momentum integrator gives
     linear elements the plain mid-point force, to the last bit."""
     runs = []
     for integrator in ("midpoint", "energy_momentum"):

@@ -57,11 +57,15 @@ def detect(
     release_steps: int = 2,
     gap_tol: float = 0.0,
     traction_tol: float = 0.0,
+    objective: bool = False,
 ) -> Detection:
     """Release and add pairs (module docstring). ``candidates`` (C, 2) come from
     :func:`~ntncontact.contact.pairing.closest_pairs` at the step-start positions ``x`` and
     velocities ``v``. Kept pairs keep their partner and history; new pairs start fresh and are
-    appended after the kept ones."""
+    appended after the kept ones. ``objective``: the approach test takes the moment-free law's
+    rate dg/dx . v (``ContactLaw.moment_free``), the rate that the law and the release test of
+    the same pair then see; with the report's rate a pair could enter as approaching and be
+    counted as separating in its first step."""
     if release_steps < 1:
         raise ValueError("release_steps must be >= 1")
     released, count = release_mask(state, persistency, release_steps, traction_tol)
@@ -70,7 +74,7 @@ def detect(
     fresh = candidates[~np.isin(candidates[:, 0], kept.pairs[:, 0])]
     if persistency and v is None:
         raise ValueError("detection under the persistency law needs velocities v")
-    _, gap, gap_rate = pair_gaps(x, interface, fresh, v)
+    _, gap, gap_rate = pair_gaps(x, interface, fresh, v, objective)
     enter = gap >= -gap_tol
     if persistency:
         enter &= gap_rate > 0.0  # type: ignore[operator]

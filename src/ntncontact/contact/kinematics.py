@@ -53,13 +53,21 @@ def pair_gaps(
     interface: Interface,
     pairs: NDArray[np.int64],
     v: NDArray[np.float64] | None = None,
+    objective: bool = False,
 ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64] | None]:
     """Normal n, gap g (2.4) and, with ``v``, the report's gap rate gdot = (v_i - v_j).n (2.9)
-    of ``pairs``, without derivatives: what pairing and detection need."""
+    of ``pairs``, without derivatives: what pairing and detection need. ``objective``: the
+    rate dg/dx . v = (v_i - v_j).n + (s/l) n.(v_a - v_b) of the moment-free law instead
+    (s = (x_i - x_j).e, l the normal's chord; docs/theory.md, "Moment-free pair forces")."""
     pairs = np.asarray(pairs, dtype=np.int64).reshape(-1, 2)
-    e, _ = _unit_chord(x, _slots(interface, pairs))
+    slots = _slots(interface, pairs)
+    e, chord = _unit_chord(x, slots)
     n = e @ _ROT_M90.T
     i, j = pairs[:, 0], pairs[:, 1]
     gap = np.einsum("pr,pr->p", x[i] - x[j], n)
     rate = None if v is None else np.einsum("pr,pr->p", v[i] - v[j], n)
+    if rate is not None and objective:
+        offset = np.einsum("pr,pr->p", x[i] - x[j], e)
+        turn = np.einsum("pr,pr->p", v[slots[:, 2]] - v[slots[:, 3]], n)
+        rate = rate + offset / chord * turn
     return n, gap, rate

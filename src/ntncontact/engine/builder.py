@@ -255,12 +255,12 @@ def _interface(cfg: ContactConfig, index: int, bodies: tuple[Body, ...],
     surface1 = ContactSurface(surface1.nodes, surface1.closed,
                               np.isin(surface1.nodes, np.concatenate([auto, corners])))
     surface2 = ContactSurface.from_chain(chain2, b2.node_offset)
-    # moment-free pair forces conserve angular momentum under the mid-point rule (theory.md),
-    # but are opt-in: beside an ALE body they move the two convection formulations apart, and
-    # a Neo-Hookean block bouncing between Lagrangian walls with them passes through a wall
-    # after 13 impacts (docs/theory.md, "Moment-free pair forces")
+    # moment-free pair forces conserve angular momentum under the mid-point rule: the default
+    # of dynamic runs; static runs keep the report's forces (docs/theory.md, "Moment-free pair
+    # forces")
+    moment_free = kind == "dynamic" if cfg.moment_free is None else cfg.moment_free
     law = ContactLaw(cfg.method, cfg.penalty_normal, cfg.penalty_tangential, cfg.friction,
-                     bool(cfg.moment_free), cfg.gap_restoring)
+                     moment_free, cfg.gap_restoring)
     persistency = (cfg.law or ("persistency" if kind == "dynamic" else "gap")) == "persistency"
     aug = cfg.augmentation
     tol = AugmentationTolerances(aug.gap_tolerance, aug.slip_tolerance, aug.traction_tolerance)

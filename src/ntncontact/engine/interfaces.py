@@ -48,7 +48,7 @@ def detect_all(
         else:
             candidates = closest_pairs(x, ci.interface, near, unique=True).pairs
         found = detect(state, candidates, x, v, ci.interface, persistency=ci.persistency,
-                       release_steps=ci.release_steps)
+                       release_steps=ci.release_steps, objective=ci.law.moment_free)
         out.append(found.state)
     return tuple(out)
 

@@ -289,7 +289,7 @@ class ContactConfig(Strict):
     corners: list[str] = []
     release_steps: Annotated[int, Field(ge=1)] = 2
     detection: Literal["penetration", "predicted"] | None = None
-    moment_free: bool = False  # opt-in: docs/theory.md, "Moment-free pair forces"
+    moment_free: bool | None = None  # None: on in dynamic runs (docs/theory.md)
     gap_restoring: bool = False  # persistency law: a pair's first step closes its gap
     augmentation: AugmentationConfig = AugmentationConfig()
 
