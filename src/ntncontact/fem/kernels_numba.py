@@ -68,13 +68,13 @@ def _material(model, H00, H01, H10, H11, lam, mu):
         r = 1.0 / (1.0 + j)
         F00, F11 = 1.0 + H00, 1.0 + H11
         Fi00, Fi01, Fi10, Fi11 = F11 * r, -H01 * r, -H10 * r, F00 * r
-        # P = mu (F - F^-T) + lam ln J F^-T, with J (F - F^-T) = H + H^T + j H + det H I
-        mr, ll = mu * r, lam * lnJ
-        sym = H01 + H10
-        P00 = mr * ((2.0 + j) * H00 + detH) + ll * Fi00
-        P11 = mr * ((2.0 + j) * H11 + detH) + ll * Fi11
-        P01 = mr * (sym + j * H01) + ll * Fi10
-        P10 = mr * (sym + j * H10) + ll * Fi01
+        # P = mu (F - F^-T) + lam ln J F^-T with F - F^-T = H + (H^T + det H I)/J and
+        # F^-T = cof F / J: every term is O(H), none is 1 + O(H)
+        a, b = mu * r, lam * lnJ * r
+        P00 = mu * H00 + a * (H00 + detH) + b * F11
+        P11 = mu * H11 + a * (H11 + detH) + b * F00
+        P01 = mu * H01 + (a - b) * H10
+        P10 = mu * H10 + (a - b) * H01
         # W = mu/2 (|F|^2 - 2) - mu ln J + lam/2 ln J^2, |F|^2 - 2 = 2 tr H + |H|^2
         W = mu * (0.5 * (H00 * H00 + H01 * H01 + H10 * H10 + H11 * H11) - detH + (j - lnJ))
         W += 0.5 * lam * lnJ * lnJ
