@@ -8,11 +8,12 @@ Usage::
 Times ``NumbaAssembly.add`` (the compiled loop and its call) and ``Assembler.internal`` (plus
 the force vector, CSR data and matrix) for force-only and tangent calls with a fixed reference
 X, as within a Newton solve, and a force-only call right after X moved (ALE: the reference data
-are recomputed), on the ring impact's mesh (352 Neo-Hookean elements) and on the 10,000-element
-distorted grid of ``run.py``. Each figure is the minimum over batches of thread CPU time (time
-spent waiting for a core is not counted). With ``--baseline SRC`` (the ``src`` directory of
-another checkout, e.g. a ``git worktree`` of the previous commit) each round runs both codes in
-fresh processes, interleaved, and the table gives both and their ratio.
+are recomputed), on the ring impact's mesh (352 Neo-Hookean elements), on it refined 8x per
+direction (22,528) and on the 10,000-element distorted grid of ``run.py``. Each figure is the
+minimum over batches of thread CPU time (time spent waiting for a core is not counted). With
+``--baseline SRC`` (the ``src`` directory of another checkout, e.g. a ``git worktree`` of the
+previous commit) each round runs both codes in fresh processes, interleaved, and the table gives
+both and their ratio.
 """
 
 from __future__ import annotations
@@ -44,23 +45,33 @@ def best_us(fn: Callable[[], object], calls: int, batches: int = 7) -> float:
 
 def measure_mesh(asm, X, x, calls: int) -> dict[str, float]:
     """us per call of the kernel alone and through Assembler.internal, fixed and moved X."""
+    import inspect
+
     import numpy as np
 
     kernel = asm._numba_groups[0]
     force, data = np.zeros(asm.ndof), np.zeros(asm.pattern.nnz)
     em = asm.pattern.entry_map
+    # the kernel's second argument: displacements since F = I + Grad d, positions before
+    takes_d = "d" in inspect.signature(asm.internal).parameters
+    u = x - X if takes_d else x
 
-    def add(d):
-        return lambda: kernel.add(X, x, asm.lam, asm.mu, em, force, d)
+    def internal(need_tangent):
+        if takes_d:
+            return lambda: asm.internal(X, d=u, need_tangent=need_tangent)
+        return lambda: asm.internal(X, x, need_tangent)
+
+    def add(tangent_data):
+        return lambda: kernel.add(X, u, asm.lam, asm.mu, em, force, tangent_data)
 
     moved = [X + 1e-9 * (k % 2) for k in range(2)]  # alternate: every call sees X moved
     it = iter(range(10**9))
     return {
         "force": best_us(add(None), calls),
         "tangent": best_us(add(data), calls),
-        "internal_force": best_us(lambda: asm.internal(X, x, False), calls),
-        "internal_tangent": best_us(lambda: asm.internal(X, x, True), calls),
-        "force_X_moved": best_us(lambda: kernel.add(moved[next(it) % 2], x, asm.lam, asm.mu,
+        "internal_force": best_us(internal(False), calls),
+        "internal_tangent": best_us(internal(True), calls),
+        "force_X_moved": best_us(lambda: kernel.add(moved[next(it) % 2], u, asm.lam, asm.mu,
                                                     em, force, None), calls),
     }
 
@@ -73,10 +84,16 @@ def worker() -> None:
     from ntncontact.engine.builder import build_model
     from ntncontact.io.scenario import load_scenario
 
-    model = build_model(load_scenario(EXAMPLE), EXAMPLE.parent)
-    X = model.X0.copy()
-    x = X + 1e-3 * __import__("numpy").random.default_rng(0).random(X.shape)
-    out = {"ring": measure_mesh(model.assembler, X, x, 300), "ring_ne": len(model.assembler.cells)}
+    rng = __import__("numpy").random.default_rng(0)
+    out = {}
+    for name, refine, calls in (("ring", 1, 300), ("ring8", 8, 5)):
+        overrides = [f"bodies.0.mesh.n_radial={4 * refine}", f"bodies.0.mesh.n_circ={48 * refine}",
+                     f"bodies.1.mesh.nx={40 * refine}", f"bodies.1.mesh.ny={4 * refine}"]
+        model = build_model(load_scenario(EXAMPLE, overrides), EXAMPLE.parent)
+        X = model.X0.copy()
+        x = X + 1e-3 / refine * rng.random(X.shape)
+        out[name] = measure_mesh(model.assembler, X, x, calls)
+        out[f"{name}_ne"] = len(model.assembler.cells)
     nodes, cells = distorted_grid(*GRIDS[10_000])
     out["grid"] = measure_mesh(neo_hookean_assembler(nodes, cells), nodes, deformed(nodes), 10)
     out["grid_ne"] = len(cells)
@@ -95,7 +112,7 @@ def table(runs: dict[str, list[dict]]) -> str:
     head = "| mesh | call | " + " | ".join(f"{n} us/call | {n} M elements/s" for n in names)
     lines = [head + (" | ratio |" if len(names) == 2 else " |"),
              "|" + " --- |" * 2 + " ---: |" * (2 * len(names) + (len(names) == 2))]
-    for mesh in ("ring", "grid"):
+    for mesh in ("ring", "ring8", "grid"):
         ne = runs[names[0]][0][f"{mesh}_ne"]
         for call in runs[names[0]][0][mesh]:
             best = [min(r[mesh][call] for r in runs[n]) for n in names]

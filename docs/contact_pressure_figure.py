@@ -1,5 +1,6 @@
 """The figure of docs/outputs.md, "Contact pressure in ParaView": contact pressure along the
-surface at a few times, from the VTU frames, and over time at a few nodes, from contact.csv.
+surface at a few times, from the field frames (VTU or XDMF), and over time at a few nodes,
+from contact.csv.
 
 Usage (from the repository root):
 
@@ -19,7 +20,7 @@ import matplotlib.pyplot as plt
 import numpy as np
 import pandas as pd
 
-from ntncontact.io.vtk import read_pvd, read_vtu
+from ntncontact.io.vtk import find_field_series, read_frame, read_series
 
 
 def pressure_along_surface(frame) -> tuple[np.ndarray, np.ndarray]:
@@ -38,14 +39,17 @@ def main() -> None:
     parser.add_argument("--nodes", type=int, default=3, help="nodes in the right panel")
     args = parser.parse_args()
 
-    series = [(t, p) for t, p in read_pvd(args.results / "fields.pvd") if t > 0.0]
+    source = find_field_series(args.results)  # fields.pvd, or fields.xdmf
+    if source is None:
+        parser.error(f"no fields.pvd or fields.xdmf in {args.results}")
+    series = [(t, frame) for t, frame in read_series(source) if t > 0.0]
     picked = [series[int(k)] for k in np.linspace(0, len(series) - 1, args.frames).round()]
     fig, (along, over) = plt.subplots(1, 2, figsize=(10, 4), constrained_layout=True)
-    for time, path in dict(picked).items():
-        x, p = pressure_along_surface(read_vtu(path, time))
+    for time, frame in dict(picked).items():
+        x, p = pressure_along_surface(read_frame(frame, time))
         along.plot(x, p, "o-", ms=3, label=f"t = {time:g}")
     along.set(xlabel="x (current position)", ylabel="contact_pressure (force / length)",
-              title="along the surface (VTU frames)")
+              title="along the surface (field frames)")
     along.legend()
 
     contact = pd.read_csv(args.results / "contact.csv")

@@ -1,14 +1,16 @@
 """NumPy oracle of the compiled element kernel (``ntncontact.fem.kernels_numba``), for tests
 only: the constitutive laws as vectorized P, A = dP/dF and W of F, and the Q4 internal force,
 tangent and energy built from them with einsum. The package has one implementation (the Numba
-kernel); this independent one checks it (issue 15: oracles live in tests/)."""
+kernel); this independent one checks it (issue 15: oracles live in tests/). Like the kernel it
+takes nodal displacements d and forms F = I + Grad d (positions x of size L would put eps L / h
+of round-off into F); the laws themselves are written in F, not in the kernel's forms in H."""
 
 from __future__ import annotations
 
 import numpy as np
 from numpy.typing import NDArray
 
-from ntncontact.fem.q4 import check_current_jacobian, kinematics
+from ntncontact.fem.q4 import check_current_jacobian, reference_gradients
 
 _I2 = np.eye(2)
 
@@ -69,31 +71,33 @@ def stress_and_tangent(kind: str, F: NDArray, lam, mu) -> tuple[NDArray, NDArray
     return MODELS[kind](F, lam, mu)
 
 
-def element_force_tangent(kind: str, X_e: NDArray, x_e: NDArray, lam: NDArray, mu: NDArray,
+def element_force_tangent(kind: str, X_e: NDArray, d_e: NDArray, lam: NDArray, mu: NDArray,
                           need_tangent: bool = True):
     """Internal force f_e (ne, 8), tangent K_e (ne, 8, 8) and strain energy (ne,) of Q4
-    elements (report (5.10)); dof order (a, i) -> 2 a + i."""
-    kin = kinematics(X_e, x_e)
+    elements (report (5.10)) at nodal displacements d_e (ne, 4, 2); dof order (a, i) -> 2 a + i."""
+    grad, weight = reference_gradients(X_e)
+    F = _I2 + np.einsum("eai,egaJ->egiJ", d_e, grad)
     if kind == "neo_hookean":
-        check_current_jacobian(kin.F)
-    P, A, Wd = stress_and_tangent(kind, kin.F, lam[:, None], mu[:, None])
-    gw = kin.grad * kin.weight[..., None, None]
+        check_current_jacobian(F)
+    P, A, Wd = stress_and_tangent(kind, F, lam[:, None], mu[:, None])
+    gw = grad * weight[..., None, None]
     f = np.einsum("egiJ,egaJ->eai", P, gw).reshape(-1, 8)
-    W = np.einsum("eg,eg->e", Wd, kin.weight)
+    W = np.einsum("eg,eg->e", Wd, weight)
     if not need_tangent:
         return f, None, W
-    AG = np.einsum("egiJkL,egbL->egiJbk", A, kin.grad)
+    AG = np.einsum("egiJkL,egbL->egiJbk", A, grad)
     return f, np.einsum("egaJ,egiJbk->eaibk", gw, AG).reshape(-1, 8, 8), W
 
 
-def oracle_internal(asm, X: NDArray, x: NDArray, need_tangent: bool = True):
-    """What ``Assembler.internal`` returns (force, CSR tangent, energy), from the oracle."""
+def oracle_internal(asm, X: NDArray, d: NDArray, need_tangent: bool = True):
+    """What ``Assembler.internal(X, d=d)`` returns (force, CSR tangent, energy), from the
+    oracle."""
     ne = len(asm.cells)
     fe, Ke, energy = np.empty((ne, 8)), np.empty((ne, 8, 8)), 0.0
     for group in asm.groups:
         idx = group.elements
         cells = asm.cells[idx]
-        f, K, W = element_force_tangent(group.kind, X[cells], x[cells], asm.lam[idx],
+        f, K, W = element_force_tangent(group.kind, X[cells], d[cells], asm.lam[idx],
                                         asm.mu[idx], need_tangent)
         fe[idx] = f
         if need_tangent:

@@ -301,7 +301,7 @@ def newton_force_bound(model, state) -> float:
     sum to zero, so that difference is the sum of its nodes' vertical residuals, at most
     sqrt(n) |R| (Cauchy-Schwarz). The scale is at least the round-off floor
     1e-4 max|K_ii| L (~3e8 on these meshes, so |R| <= 0.03) and |f_int|."""
-    f_int, K, _ = model.assembler.internal(state.X, state.X + state.d, need_tangent=True)
+    f_int, K, _ = model.assembler.internal(state.X, d=state.d, need_tangent=True)
     length = float(np.ptp(model.X0, axis=0).max())
     scale = max(1e-4 * np.abs(K.diagonal()).max() * length, np.linalg.norm(f_int))
     nodes = model.body("cylinder").nodes.size

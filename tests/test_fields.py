@@ -3,6 +3,8 @@ mesh velocity and material positions."""
 
 from __future__ import annotations
 
+import shutil
+
 import numpy as np
 import pandas as pd
 import pytest
@@ -157,32 +159,90 @@ def test_contact_node_fields_match_the_contact_rows_of_the_same_step(tmp_path):
     assert isinstance(contact, pd.DataFrame)
 
 
-def test_xdmf_series_holds_the_frames_of_the_vtu_series(tmp_path):
-    from ntncontact.io.vtk import read_xdmf
-
+@pytest.fixture(scope="module")
+def vtu_and_xdmf_runs(tmp_path_factory):
+    """Block sliding (its foundation's ALE mesh moves) written as VTU frames and as XDMF."""
+    folder = tmp_path_factory.mktemp("formats")
     overrides = {"analysis.t_end": 1.25, "analysis.output_interval": 0.5}
     for fmt in ("vtu", "xdmf"):
         scenario = api.load_scenario(EXAMPLES / "block_sliding.toml",
                                      overrides | {"analysis.field_format": fmt})
-        api.run(scenario, out=tmp_path / fmt)
-    vtu = [read_vtu(path, t) for t, path in read_pvd(tmp_path / "vtu" / "fields.pvd")]
-    assert not (tmp_path / "xdmf" / "fields.pvd").exists()
-    xdmf = read_xdmf(tmp_path / "xdmf" / "fields.xdmf")
-    assert [f.time for f in xdmf] == pytest.approx([f.time for f in vtu], abs=1e-12)
-    assert len(xdmf) == 4  # t = 0, 0.5, 1.0 and the end
-    for a, b in zip(vtu, xdmf, strict=True):
-        assert np.array_equal(a.cells, b.cells)
-        assert set(a.point_data) | {"node_displacement"} == set(b.point_data)
+        api.run(scenario, out=folder / fmt)
+    return folder / "vtu", folder / "xdmf"
+
+
+def test_results_fields_of_an_xdmf_run_are_the_meshes_of_the_vtu_run(vtu_and_xdmf_runs):
+    vtu, xdmf = (api.read_results(folder) for folder in vtu_and_xdmf_runs)
+    assert not (vtu_and_xdmf_runs[1] / "fields.pvd").exists()
+    assert len(xdmf.times) == 4  # t = 0, 0.5, 1.0 and the end
+    assert xdmf.times == pytest.approx(vtu.times, rel=0, abs=1e-12)
+    for t in vtu.times:
+        a, b = vtu.fields(t), xdmf.fields(t)
+        assert a.points.shape == b.points.shape
+        assert np.allclose(a.points, b.points, rtol=0, atol=1e-12)
+        assert [c.type for c in a.cells] == [c.type for c in b.cells] == ["quad"]
+        assert np.array_equal(a.cells[0].data, b.cells[0].data)
+        assert set(a.point_data) == set(b.point_data)
         assert set(a.cell_data) == set(b.cell_data)
+        for name, value in a.point_data.items():
+            assert np.allclose(value, b.point_data[name], rtol=0, atol=1e-12,
+                               equal_nan=True), name
+        for name, blocks in a.cell_data.items():
+            assert np.allclose(blocks[0], b.cell_data[name][0], rtol=0, atol=1e-12), name
+    moved = np.abs(vtu.fields(vtu.times[-1]).points - vtu.fields(0.0).points).max()
+    assert moved > 1e-6  # the ALE foundation's material positions did move
+
+
+def test_xdmf_frames_read_back_as_the_vtu_frames(vtu_and_xdmf_runs):
+    import meshio
+
+    from ntncontact.io.vtk import read_xdmf
+
+    folder_vtu, folder_xdmf = vtu_and_xdmf_runs
+    vtu = [read_vtu(path, t) for t, path in read_pvd(folder_vtu / "fields.pvd")]
+    xdmf = read_xdmf(folder_xdmf / "fields.xdmf")
+    assert [f.time for f in xdmf] == pytest.approx([f.time for f in vtu], abs=1e-12)
+    for a, b in zip(vtu, xdmf, strict=True):
+        assert np.array_equal(a.cells, b.cells) and np.array_equal(a.points, b.points)
+        assert set(a.point_data) == set(b.point_data) and set(a.cell_data) == set(b.cell_data)
         for name, value in a.point_data.items():
             assert np.array_equal(value, b.point_data[name], equal_nan=True), name
         for name, value in a.cell_data.items():
             assert np.array_equal(value, b.cell_data[name]), name
-        # the stored mesh is the first frame's; the offset puts every node where it is
-        current = b.points + b.point_data["node_displacement"]
-        assert np.allclose(current, a.deformed_points, rtol=0, atol=1e-12)
-    moved = np.abs(vtu[-1].points - vtu[0].points).max()
-    assert moved > 1e-6  # the ALE foundation's material positions did move
+    # in the file, the mesh is stored once and node_displacement puts every node where it is
+    with meshio.xdmf.TimeSeriesReader(folder_xdmf / "fields.xdmf") as reader:
+        stored, _ = reader.read_points_cells()
+        _, point_data, _ = reader.read_data(reader.num_steps - 1)
+    current = stored[:, :2] + point_data["node_displacement"][:, :2]
+    assert np.allclose(current, vtu[-1].deformed_points, rtol=0, atol=1e-12)
+
+
+def test_the_figures_of_an_xdmf_run_are_those_of_the_vtu_run(vtu_and_xdmf_runs, tmp_path):
+    from ntncontact.cli import main
+    from ntncontact.report.plotting import frames_at, plot_all
+
+    made = {}
+    for folder in vtu_and_xdmf_runs:
+        copy = tmp_path / folder.name  # the figures go into the folder: keep the fixture's
+        shutil.copytree(folder, copy)
+        made[folder.name] = sorted(p.name for p in plot_all(copy, times=[0.75], gif=True))
+        assert main(["plot", str(copy)]) == 0
+    assert made["xdmf"] == made["vtu"]
+    assert {"snapshots.png", "animation.gif", "pair_history.png"} <= set(made["xdmf"])
+    # an interpolated state between two XDMF frames is the VTU run's
+    (a, between_a), (b, between_b) = (frames_at(folder, [0.75])[0]
+                                      for folder in vtu_and_xdmf_runs)
+    assert between_a and between_b
+    assert np.array_equal(a.deformed_points, b.deformed_points)
+    assert np.array_equal(a.cell_data["von_mises"], b.cell_data["von_mises"])
+
+
+def test_a_damaged_xdmf_index_is_reported_naming_the_file(tmp_path):
+    from ntncontact.report.plotting import ResultsNotFoundError, load_frames
+
+    (tmp_path / "fields.xdmf").write_text("<Xdmf Version='3.0'><Domain/></Xdmf>")
+    with pytest.raises(ResultsNotFoundError, match=r"fields.xdmf is not a readable XDMF"):
+        load_frames(tmp_path)
 
 
 def test_an_unknown_field_format_is_refused_naming_the_key():

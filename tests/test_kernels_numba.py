@@ -43,8 +43,10 @@ def make_assembler(nodes, cells, groups, rng):
 
 
 def both_kernels(asm, X, x, need_tangent=True):
-    """(the oracle's, the package's) force, tangent and energy."""
-    return oracle_internal(asm, X, x, need_tangent), asm.internal(X, x, need_tangent)
+    """(the oracle's, the package's) force, tangent and energy at positions x."""
+    d = x - X
+    return (oracle_internal(asm, X, d, need_tangent),
+            asm.internal(X, d=d, need_tangent=need_tangent))
 
 
 def assert_same(reference, result):
@@ -118,7 +120,7 @@ def test_inverted_element_is_named_by_global_index(monkeypatch, threads):
     x[cells[bad, 2]] = x[cells[bad, 0]] - [0.01, 0.01]  # fold element `bad` over its corner
     entry_map = np.zeros(64 * len(cells), dtype=np.int64)
     with pytest.raises(InvertedElementError, match=r"element 1[45]\d .*current") as info:
-        kernel.add(nodes, x, lam, mu, entry_map, force, None)
+        kernel.add(nodes, x - nodes, lam, mu, entry_map, force, None)
     # the moved node is shared by up to four elements: the first of them is named
     first = min(e for e in range(len(cells)) if cells[bad, 2] in cells[e])
     assert info.value.element == first and info.value.value < 0.0
@@ -132,7 +134,7 @@ def test_reference_inversion_is_reported_for_both_models():
     for kind in ("neo_hookean", "linear_elastic"):
         asm = make_assembler(nodes, cells, [MaterialGroup(kind, np.arange(len(cells)))], rng)
         with pytest.raises(InvertedElementError, match="element 5 .*reference"):
-            asm.internal(nodes, nodes)
+            asm.internal(nodes, d=np.zeros_like(nodes))
 
 
 def test_the_global_element_of_a_group_is_named():
@@ -144,12 +146,12 @@ def test_the_global_element_of_a_group_is_named():
     x = nodes.copy()
     x[cells[6, 2]] = x[cells[6, 0]] - [0.05, 0.05]  # node 2 of element 6 is in elements 6, 7
     with pytest.raises(InvertedElementError, match="element 6 .*current"):
-        asm.internal(nodes, x)
+        asm.internal(nodes, d=x - nodes)
 
 
 def numba_internal(asm, X, x, need_tangent=True):
-    """The Numba path's force, CSR data and energy."""
-    f, K, W = asm.internal(X, x, need_tangent)
+    """The Numba path's force, CSR data and energy at positions x."""
+    f, K, W = asm.internal(X, d=x - X, need_tangent=need_tangent)
     return f, None if K is None else K.data, W
 
 
@@ -218,7 +220,7 @@ def test_reference_inversion_after_cached_calls_and_recovery():
     X[n2] = nodes[n0] - 0.3 * (nodes[n2] - nodes[n0])  # element 9 folded over its corner 0
     for _ in range(2):  # the failed element must not be taken from the cache the second time
         with pytest.raises(InvertedElementError, match=r"element \d+ .*reference"):
-            asm.internal(X, X)
+            asm.internal(X, d=np.zeros_like(X))
     X[n2] = nodes[n2]
     assert_identical(numba_internal(asm, X, x), first)
 
@@ -230,7 +232,29 @@ def test_current_inversion_reported_before_a_later_reference_one():
     asm = Assembler(np.array([[0, 1, 2, 3]]), 4, [MaterialGroup("neo_hookean", np.arange(1))],
                     np.ones(1), np.ones(1), np.ones(1))
     with pytest.raises(InvertedElementError, match="element 0 .*reference"):
-        asm.internal(nodes, nodes)
+        asm.internal(nodes, d=np.zeros_like(nodes))
     x = nodes[[0, 3, 2, 1]]  # mirrored: det F < 0 wherever det J > 0
     with pytest.raises(InvertedElementError, match="element 0 .*current"):
-        asm.internal(nodes, x)
+        asm.internal(nodes, d=x - nodes)
+
+
+@pytest.mark.parametrize("kind", ["linear_elastic", "neo_hookean"])
+def test_force_round_off_is_relative_to_the_stress_not_to_the_positions(kind):
+    """A stiff body (block sliding's E = 1e10 foundation) far from the origin, strained 1e-8:
+    the kernel forms F = I + Grad d from the displacements, so moving the body by c changes
+    its force only through the rounding of dN/dX (~eps c / h relative). From positions x of
+    size c, F - I would carry eps c / h absolutely: 2e-5 of this force, measured 5e-5 of 3600
+    in block sliding's reactions before the change."""
+    rng = np.random.default_rng(11)
+    nodes, cells = distorted_grid(12, 7, rng)
+    ne = len(cells)
+    asm = Assembler(cells, len(nodes), [MaterialGroup(kind, np.arange(ne))],
+                    np.full(ne, 0.3e10), np.full(ne, 0.4e10), np.ones(ne))
+    d = 1e-8 * (deformed(nodes, rng, 1 / 7) - nodes)
+    f0, K0, W0 = asm.internal(nodes, d=d)
+    c, h = 1000.0, 1.0 / 7.0
+    f1, K1, W1 = asm.internal(nodes + c, d=d)
+    tolerance = 100.0 * np.finfo(float).eps * c / h
+    assert np.abs(f1 - f0).max() <= tolerance * np.abs(f0).max()
+    assert np.abs(K1.data - K0.data).max() <= tolerance * np.abs(K0.data).max()
+    assert abs(W1 - W0) <= tolerance * W0

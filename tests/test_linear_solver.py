@@ -27,8 +27,7 @@ def block(nx=12, ny=8, kind="neo_hookean", stretch=0.1, seed=0):
     ne = len(cells)
     asm = Assembler(cells, len(nodes), [MaterialGroup(kind, np.arange(ne))],
                     np.full(ne, 2.0), np.full(ne, 1.0), np.ones(ne))
-    x = nodes + stretch * nodes @ np.array([[1.0, 0.5], [0.0, -0.8]]).T
-    _, K, _ = asm.internal(nodes, x)
+    _, K, _ = asm.internal(nodes, d=stretch * nodes @ np.array([[1.0, 0.5], [0.0, -0.8]]).T)
     return K, nodes
 
 

@@ -33,8 +33,7 @@ def test_uniaxial_plane_strain_stretch_matches_closed_form_stress():
     model = stretch_model(s)
     sim = Simulation(model)
     sim.run()
-    x = sim.state.x
-    f_int, _, energy = model.assembler.internal(model.X0, x, need_tangent=False)
+    f_int, _, energy = model.assembler.internal(model.X0, d=sim.state.d, need_tangent=False)
     right = model.bodies[0].global_nodes("right")
     # Reaction on the right edge = P11 times the reference height 1 (P11 closed form).
     lam, mu = 3.0, 2.0

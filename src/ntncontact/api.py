@@ -29,7 +29,7 @@ from .engine.simulation import Simulation
 from .io import checkpoint
 from .io.results import ResultWriter
 from .io.scenario import ScenarioConfig, ScenarioError, apply_override, parse_scenario, read_toml
-from .io.vtk import read_pvd
+from .io.vtk import find_field_series, read_frame_mesh, read_series
 from .io.writers import CONTACT_FILE, HISTORY_FILE, SUMMARY_FILE, MemoryResults, to_jsonable
 
 Overrides = Mapping[str, Any] | Sequence[str] | None
@@ -136,7 +136,7 @@ class Results:
         if abs(times[k] - t) > 1e-9 * scale:
             raise ValueError(f"no field frame at t = {t:g}; frames at {_listing(times)}")
         frame = self.frames[k][1]
-        return frame if isinstance(frame, meshio.Mesh) else meshio.read(frame)
+        return frame if isinstance(frame, meshio.Mesh) else read_frame_mesh(frame)
 
 
 def _listing(times: np.ndarray, most: int = 8) -> str:
@@ -152,8 +152,8 @@ def read_results(directory: str | Path) -> Results:
     if not summary_path.is_file():
         raise FileNotFoundError(f"{directory}: not a results folder (no {SUMMARY_FILE})")
     summary = json.loads(summary_path.read_text(encoding="utf-8"))
-    pvd = directory / "fields.pvd"
-    frames = tuple(read_pvd(pvd)) if pvd.is_file() else ()
+    series = find_field_series(directory)  # fields.pvd, or fields.xdmf (field_format)
+    frames = tuple(read_series(series)) if series is not None else ()
     return Results(read_table(directory / HISTORY_FILE), read_table(directory / CONTACT_FILE),
                    summary, directory, frames)
 

@@ -106,7 +106,8 @@ def _run_until_stopped(args: argparse.Namespace, stop: StopOnSignal) -> int:
                 bar.update(t - bar.n)
 
             sim.run(progress, stop.reason)
-    print(f"results written to {out} (history.csv, summary.json, fields.pvd)")
+    fields = "fields.xdmf" if model.analysis.field_format == "xdmf" else "fields.pvd"
+    print(f"results written to {out} (history.csv, summary.json, {fields})")
     if args.compare:
         _print_comparison(out)
     if args.plot or args.gif or args.times:

@@ -42,8 +42,8 @@ class EndEnergy:
 
     def __call__(self, d: NDArray) -> tuple[float, NDArray]:
         v1 = 4.0 * (d - self.d_n) / self.dt - self.v_n  # 2 v_{n+1/2} - v_n
-        x1 = self.X.ravel() + 2.0 * d - self.d_n
-        f1, _, w1 = self.assembler.internal(self.X, x1.reshape(-1, 2), need_tangent=False)
+        d1 = 2.0 * d - self.d_n  # d_{n+1}
+        f1, _, w1 = self.assembler.internal(self.X, d=d1, need_tangent=False)
         Mv1 = self.mass @ v1
         return 0.5 * float(v1 @ Mv1) + w1, (4.0 / self.dt) * Mv1 + 2.0 * f1
 

@@ -133,7 +133,7 @@ class StepProblem:
         """R on all dofs and, if asked, its tangent K; sets ``self._scale``."""
         d = self.full(y)
         x = self.state.X.ravel() + d
-        f_int, K = self._internal(x.reshape(-1, 2), need_tangent)
+        f_int, K = self._internal(d, need_tangent)
         R = f_int - self.f_ext
         scale = max(norm2(f_int), norm2(self.f_ext))
         v_eval, rate = None, None
@@ -164,12 +164,14 @@ class StepProblem:
         self._scale = float(max(scale, self.scale_floor))
         return R, K
 
-    def _internal(self, x: NDArray, need_tangent: bool) -> tuple[NDArray, sp.csr_matrix | None]:
-        """Internal force at x (= x_{n+1/2} when dynamic) and its tangent; the energy-momentum
-        integrator evaluates the Neo-Hookean stress between x_n and x_{n+1} = 2 x - x_n."""
-        x_start = (self.state.x if self.dynamic
+    def _internal(self, d: NDArray, need_tangent: bool) -> tuple[NDArray, sp.csr_matrix | None]:
+        """Internal force at displacement d (= d_{n+1/2} when dynamic) and its tangent; the
+        energy-momentum integrator evaluates the Neo-Hookean stress between d_n and
+        d_{n+1} = 2 d - d_n."""
+        d_start = (self.state.d if self.dynamic
                    and self.model.analysis.integrator == "energy_momentum" else None)
-        f_int, K, _ = self.model.assembler.internal(self.state.X, x, need_tangent, x_start)
+        f_int, K, _ = self.model.assembler.internal(self.state.X, d=d, need_tangent=need_tangent,
+                                                    d_start=d_start)
         return f_int, K
 
     def _add_mass(self, K: sp.csr_matrix, factor: float) -> sp.csr_matrix:

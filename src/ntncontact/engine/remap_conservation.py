@@ -120,7 +120,7 @@ class _BodyData:
                                   self.pattern)
             momenta, kinetic = dof_momenta(mass, X[rows] + d[rows], v[rows])
             self.last = _OldState(key, me, mass, momenta, kinetic,
-                                  self._energy(X, X + d))
+                                  self._energy(X, d))
         return self.last
 
     def mass_after(self, old: _OldState, X_local: NDArray, touched: NDArray) -> sp.csr_matrix:
@@ -131,15 +131,15 @@ class _BodyData:
 
     def strain_energy(self, X: NDArray, d: NDArray, update: AleUpdate) -> float:
         """The body's strain energy on the moved mesh."""
-        X_new, x_new = X.copy(), X + d
-        X_new[self.rows], x_new[self.rows] = update.X, update.x_mesh
-        return self._energy(X_new, x_new)
+        X_new, d_new = X.copy(), d.copy()
+        X_new[self.rows], d_new[self.rows] = update.X, update.d
+        return self._energy(X_new, d_new)
 
-    def _energy(self, X: NDArray, x: NDArray) -> float:
+    def _energy(self, X: NDArray, d: NDArray) -> float:
         asm = self.model.assembler
         force = np.zeros(asm.ndof)
-        X, x = np.ascontiguousarray(X), np.ascontiguousarray(x)
-        return sum(k.add(X, x, asm.lam, asm.mu, asm.pattern.entry_map, force, None)
+        X, d = np.ascontiguousarray(X), np.ascontiguousarray(d)
+        return sum(k.add(X, d, asm.lam, asm.mu, asm.pattern.entry_map, force, None)
                    for k in self.kernels)
 
 

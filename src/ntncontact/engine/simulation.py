@@ -187,7 +187,7 @@ class Simulation:
         self._resumed = True
 
     def balance(self, state: StepState) -> Balance:
-        _, _, energy = self.model.assembler.internal(state.X, state.x, need_tangent=False)
+        _, _, energy = self.model.assembler.internal(state.X, d=state.d, need_tangent=False)
         # ALE bodies: the dof mass of the step's mesh, which the solve built already
         mass = self._dof_mass(state) if self.model.ale_bodies else self._nodal_mass
         return balance(mass, state.x, state.v, energy)

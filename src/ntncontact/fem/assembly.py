@@ -83,21 +83,28 @@ class Assembler:
         self.node_pattern = CsrPattern.from_element_dofs(self.cells, self.n_nodes)
 
     def internal(
-        self, X: NDArray, x: NDArray, need_tangent: bool = True, x_start: NDArray | None = None
+        self, X: NDArray, *, d: NDArray, need_tangent: bool = True,
+        d_start: NDArray | None = None,
     ) -> tuple[NDArray, sp.csr_matrix | None, float]:
-        """Internal force vector, tangent stiffness (CSR) and total strain energy at x, from
-        the compiled kernel adding straight into the CSR data.
+        """Internal force vector, tangent stiffness (CSR) and total strain energy at the
+        nodal displacements ``d`` from the reference positions ``X`` (x = X + d), from the
+        compiled kernel adding straight into the CSR data.
 
-        ``x_start`` = x_n with x = x_{n+1/2}: the energy-momentum scheme's force of the
-        Neo-Hookean elements and its tangent with respect to x."""
+        The displacement, not x, is the argument: F = I + Grad d keeps the stresses' round-off
+        relative to the stresses (from x it would be eps E L / h, L the size of x). Keyword
+        only, so that no caller passes positions by mistake.
+        ``d_start`` = d_n with d = d_{n+1/2}: the energy-momentum scheme's force of the
+        Neo-Hookean elements and its tangent with respect to d."""
         X = np.ascontiguousarray(X, dtype=float)
-        x = np.ascontiguousarray(x, dtype=float)
+        d = np.ascontiguousarray(np.reshape(d, (-1, 2)), dtype=float)
+        if d_start is not None:
+            d_start = np.reshape(d_start, (-1, 2))
         force = np.zeros(self.ndof)
         data = np.zeros(self.pattern.nnz) if need_tangent else None
         energy = 0.0
         for kernel in self._numba_groups:
-            energy += kernel.add(X, x, self.lam, self.mu, self.pattern.entry_map, force, data,
-                                 x_start)
+            energy += kernel.add(X, d, self.lam, self.mu, self.pattern.entry_map, force, data,
+                                 d_start)
         if data is None:
             return force, None, energy
         return force, self.pattern_matrix(data), energy

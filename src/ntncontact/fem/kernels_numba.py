@@ -43,27 +43,44 @@ _DETA = tuple(tuple(float(v) for v in DN_GP[g, :, 1]) for g in range(4))
 _GW = tuple(float(w) for w in GAUSS_WEIGHTS)
 
 
+@njit(cache=True, inline="always")
+def _jacobian_minus_one(H00, H01, H10, H11):
+    """J - 1 = det(I + H) - 1 = tr H + det H, without the round-off of 1 + ... (J near 1)."""
+    return H00 + H11 + (H00 * H11 - H01 * H10)
+
+
 @njit(cache=True, inline="always", error_model="numpy")
-def _material(model, F00, F01, F10, F11, lam, mu):
-    """Stress and tangent data at one point: (W, P00, P01, P10, P11, Fi00, Fi01, Fi10, Fi11, c1).
+def _material(model, H00, H01, H10, H11, lam, mu):
+    """Stress and tangent data at one point of displacement gradient H = Grad d (F = I + H):
+    (W, P00, P01, P10, P11, Fi00, Fi01, Fi10, Fi11, c1).
 
     Both models have A_iJkL = mu d_ik d_JL + c1 Fi_Li Fi_Jk + lam Fi_Ji Fi_Lk, with Fi = F^-1 and
     c1 = mu - lam ln J for Neo-Hookean, and Fi = I, c1 = mu for linear elasticity, so the
     element tangent takes the cheap spatial form used in :func:`_add_tangent`.
+    The stress is formed from H, never from F - I: its round-off is then relative to the
+    stress itself (a stress of E |H| computed as E (F - I) carries eps E; from positions x of
+    size L, eps E L / h: the residual floor of a stiff body far from the origin).
     """
     if model == 1:
-        J = F00 * F11 - F01 * F10
-        lnJ = np.log(J)
-        r = 1.0 / J
-        Fi00, Fi01, Fi10, Fi11 = F11 * r, -F01 * r, -F10 * r, F00 * r
-        # P = mu F + (lam ln J - mu) F^-T
-        c = lam * lnJ - mu
-        W = 0.5 * mu * (F00 * F00 + F01 * F01 + F10 * F10 + F11 * F11 - 2.0) - mu * lnJ
+        detH = H00 * H11 - H01 * H10
+        j = H00 + H11 + detH  # J - 1
+        lnJ = np.log1p(j)
+        r = 1.0 / (1.0 + j)
+        F00, F11 = 1.0 + H00, 1.0 + H11
+        Fi00, Fi01, Fi10, Fi11 = F11 * r, -H01 * r, -H10 * r, F00 * r
+        # P = mu (F - F^-T) + lam ln J F^-T with F - F^-T = H + (H^T + det H I)/J and
+        # F^-T = cof F / J: every term is O(H), none is 1 + O(H)
+        a, b = mu * r, lam * lnJ * r
+        P00 = mu * H00 + a * (H00 + detH) + b * F11
+        P11 = mu * H11 + a * (H11 + detH) + b * F00
+        P01 = mu * H01 + (a - b) * H10
+        P10 = mu * H10 + (a - b) * H01
+        # W = mu/2 (|F|^2 - 2) - mu ln J + lam/2 ln J^2, |F|^2 - 2 = 2 tr H + |H|^2
+        W = mu * (0.5 * (H00 * H00 + H01 * H01 + H10 * H10 + H11 * H11) - detH + (j - lnJ))
         W += 0.5 * lam * lnJ * lnJ
-        return (W, mu * F00 + c * Fi00, mu * F01 + c * Fi10, mu * F10 + c * Fi01,
-                mu * F11 + c * Fi11, Fi00, Fi01, Fi10, Fi11, mu - lam * lnJ)
-    # linear elastic: eps = sym(F - I), P = lam tr(eps) I + 2 mu eps
-    e00, e11, e01 = F00 - 1.0, F11 - 1.0, 0.5 * (F01 + F10)
+        return W, P00, P01, P10, P11, Fi00, Fi01, Fi10, Fi11, mu - lam * lnJ
+    # linear elastic: eps = sym(H), P = lam tr(eps) I + 2 mu eps
+    e00, e11, e01 = H00, H11, 0.5 * (H01 + H10)
     tr = e00 + e11
     P00, P11, P01 = lam * tr + 2.0 * mu * e00, lam * tr + 2.0 * mu * e11, 2.0 * mu * e01
     W = 0.5 * (P00 * e00 + P11 * e11 + 2.0 * P01 * e01)
@@ -136,45 +153,45 @@ def _gradients(gp, g):
 
 
 @njit(cache=True, error_model="numpy")
-def _where_inverted(model, p, valid, xx, xy, geo):
+def _where_inverted(model, p, valid, ux, uy, geo):
     """Where code of an element whose reference det J fails at Gauss point ``valid``: the
     current configuration (2) if a Neo-Hookean det F fails at an earlier point, as the points
     are checked in order, else the reference one (1)."""
     for g in range(valid):
         Gx, Gy, _ = _gradients(geo[p], g)
-        F00, F01, F10, F11 = _dot4(xx, Gx), _dot4(xx, Gy), _dot4(xy, Gx), _dot4(xy, Gy)
-        if model == 1 and not F00 * F11 - F01 * F10 > 0.0:
+        j = _jacobian_minus_one(_dot4(ux, Gx), _dot4(ux, Gy), _dot4(uy, Gx), _dot4(uy, Gy))
+        if model == 1 and not 1.0 + j > 0.0:
             return 2
     return 1
 
 
 @njit(cache=True, error_model="numpy", inline="always")
-def _element_coordinates(model, p, X, x, ecells, geo, Xc, status):
-    """Current coordinates (xx, xy) of the p-th element of a group; refreshes its cached
+def _element_displacements(model, p, X, d, ecells, geo, Xc, status):
+    """Nodal displacements (ux, uy) of the p-th element of a group; refreshes its cached
     reference data when X moved (ALE) and sets status[1] (1: reference, 2: current
     configuration) if it is inverted."""
     n0, n1, n2, n3 = ecells[p, 0], ecells[p, 1], ecells[p, 2], ecells[p, 3]
-    xx = (x[n0, 0], x[n1, 0], x[n2, 0], x[n3, 0])
-    xy = (x[n0, 1], x[n1, 1], x[n2, 1], x[n3, 1])
+    ux = (d[n0, 0], d[n1, 0], d[n2, 0], d[n3, 0])
+    uy = (d[n0, 1], d[n1, 1], d[n2, 1], d[n3, 1])
     Xx = (X[n0, 0], X[n1, 0], X[n2, 0], X[n3, 0])
     Xy = (X[n0, 1], X[n1, 1], X[n2, 1], X[n3, 1])
     if not _same_reference(Xx, Xy, Xc[p]):  # X moved (ALE) or first call
         valid = _reference(p, Xx, Xy, geo, Xc)
         if valid < 4:
-            status[1] = _where_inverted(model, p, valid, xx, xy, geo)
-    return xx, xy
+            status[1] = _where_inverted(model, p, valid, ux, uy, geo)
+    return ux, uy
 
 
 @njit(cache=True, error_model="numpy", inline="always")
-def _element(model, p, e, X, x, ecells, lam, mu, geo, Xc, need_tangent, Ke, status):
+def _element(model, p, e, X, d, ecells, lam, mu, geo, Xc, need_tangent, Ke, status):
     """Force (fx, fy) 4-tuples, upper block triangle of Ke (8,8) and energy of element e, the
-    p-th of its group (the row of its cached reference data).
+    p-th of its group (the row of its cached reference data), at nodal displacements d.
 
     Sets status[1] (1: reference, 2: current configuration) and stops at an inverted point.
     """
     fx = fy = (0.0, 0.0, 0.0, 0.0)
     energy = 0.0
-    xx, xy = _element_coordinates(model, p, X, x, ecells, geo, Xc, status)
+    ux, uy = _element_displacements(model, p, X, d, ecells, geo, Xc, status)
     if status[1] != 0:
         return fx, fy, energy
     if need_tangent:
@@ -182,12 +199,12 @@ def _element(model, p, e, X, x, ecells, lam, mu, geo, Xc, need_tangent, Ke, stat
     gp = geo[p]
     for g in range(4):
         Gx, Gy, w = _gradients(gp, g)
-        F00, F01, F10, F11 = _dot4(xx, Gx), _dot4(xx, Gy), _dot4(xy, Gx), _dot4(xy, Gy)
-        if model == 1 and not F00 * F11 - F01 * F10 > 0.0:
+        H00, H01, H10, H11 = _dot4(ux, Gx), _dot4(ux, Gy), _dot4(uy, Gx), _dot4(uy, Gy)
+        if model == 1 and not 1.0 + _jacobian_minus_one(H00, H01, H10, H11) > 0.0:
             status[1] = 2
             return fx, fy, energy
         W, P00, P01, P10, P11, Fi00, Fi01, Fi10, Fi11, c1 = _material(
-            model, F00, F01, F10, F11, lam[e], mu[e])
+            model, H00, H01, H10, H11, lam[e], mu[e])
         energy += w * W
         fx = _comb4(fx, _comb4(Gx, Gy, P00, P01), 1.0, w)  # f_ai += w P_iJ G_aJ
         fy = _comb4(fy, _comb4(Gx, Gy, P10, P11), 1.0, w)
@@ -237,31 +254,38 @@ def _log_quotient(z):
 
 
 @njit(cache=True, error_model="numpy", inline="always")
-def _element_em(p, e, X, x0, x, ecells, lam, mu, geo, Xc, need_tangent, Ke, status):
-    """Neo-Hookean element of the energy-momentum scheme (docs/theory.md), x0 = x_n and
-    x = x_{n+1/2}: force f_ai = int (F_m S_alg)_iJ G_aJ with F_m = F(x) and Gonzalez's
-    discrete gradient S_alg = mu I + 2 q cof(C_m), q = (U(I_{n+1}) - U(I_n))/(I_{n+1} - I_n)
-    for U(I) = -mu/2 ln I + lam/8 (ln I)^2 and I = det C; its full (unsymmetric) tangent with
-    respect to x in Ke; the strain energy at x. status[1] = 2 if det F <= 0 at t_n, t_{n+1/2}
-    or t_{n+1}."""
+def _element_em(p, e, X, d0, d, ecells, lam, mu, geo, Xc, need_tangent, Ke, status):
+    """Neo-Hookean element of the energy-momentum scheme (docs/theory.md), displacements
+    d0 = d_n and d = d_{n+1/2} (x = X + d): force f_ai = int (F_m S_alg)_iJ G_aJ with
+    F_m = I + Grad d and Gonzalez's discrete gradient S_alg = mu I + 2 q cof(C_m),
+    q = (U(I_{n+1}) - U(I_n))/(I_{n+1} - I_n) for U(I) = -mu/2 ln I + lam/8 (ln I)^2 and
+    I = det C; its full (unsymmetric) tangent with respect to d in Ke; the strain energy at d.
+    status[1] = 2 if det F <= 0 at t_n, t_{n+1/2} or t_{n+1}."""
     fx = fy = (0.0, 0.0, 0.0, 0.0)
     energy = 0.0
-    xx, xy = _element_coordinates(1, p, X, x, ecells, geo, Xc, status)
+    ux, uy = _element_displacements(1, p, X, d, ecells, geo, Xc, status)
     if status[1] != 0:
         return fx, fy, energy
     n0, n1, n2, n3 = ecells[p, 0], ecells[p, 1], ecells[p, 2], ecells[p, 3]
-    ox = (x0[n0, 0], x0[n1, 0], x0[n2, 0], x0[n3, 0])
-    oy = (x0[n0, 1], x0[n1, 1], x0[n2, 1], x0[n3, 1])
+    ox = (d0[n0, 0], d0[n1, 0], d0[n2, 0], d0[n3, 0])
+    oy = (d0[n0, 1], d0[n1, 1], d0[n2, 1], d0[n3, 1])
     if need_tangent:
         Ke[:, :] = 0.0
     gp = geo[p]
     lam_e, mu_e = lam[e], mu[e]
     for g in range(4):
         Gx, Gy, w = _gradients(gp, g)
-        m00, m01, m10, m11 = _dot4(xx, Gx), _dot4(xx, Gy), _dot4(xy, Gx), _dot4(xy, Gy)
-        a00, a01, a10, a11 = _dot4(ox, Gx), _dot4(ox, Gy), _dot4(oy, Gx), _dot4(oy, Gy)
-        b00, b01, b10, b11 = 2.0 * m00 - a00, 2.0 * m01 - a01, 2.0 * m10 - a10, 2.0 * m11 - a11
-        Jm, J0, J1 = m00 * m11 - m01 * m10, a00 * a11 - a01 * a10, b00 * b11 - b01 * b10
+        # F = I + Grad d at t_{n+1/2} (m), t_n (a) and t_{n+1} (b: 2 d_{n+1/2} - d_n)
+        h00, h01, h10, h11 = _dot4(ux, Gx), _dot4(ux, Gy), _dot4(uy, Gx), _dot4(uy, Gy)
+        k00, k01, k10, k11 = _dot4(ox, Gx), _dot4(ox, Gy), _dot4(oy, Gx), _dot4(oy, Gy)
+        m00, m01, m10, m11 = 1.0 + h00, h01, h10, 1.0 + h11
+        a00, a01, a10, a11 = 1.0 + k00, k01, k10, 1.0 + k11
+        b00, b01 = 1.0 + (2.0 * h00 - k00), 2.0 * h01 - k01
+        b10, b11 = 2.0 * h10 - k10, 1.0 + (2.0 * h11 - k11)
+        jm = _jacobian_minus_one(h00, h01, h10, h11)  # J - 1, free of the round-off of 1 + ..
+        j0 = _jacobian_minus_one(k00, k01, k10, k11)
+        j1 = _jacobian_minus_one(b00 - 1.0, b01, b10, b11 - 1.0)
+        Jm, J0, J1 = 1.0 + jm, 1.0 + j0, 1.0 + j1
         if not (Jm > 0.0 and J0 > 0.0 and J1 > 0.0):
             status[1] = 2
             return fx, fy, energy
@@ -270,12 +294,14 @@ def _element_em(p, e, X, x0, x, ecells, lam, mu, geo, Xc, need_tangent, Ke, stat
         cm01 = 0.5 * (a00 * a01 + a10 * a11 + b00 * b01 + b10 * b11)
         cm11 = 0.5 * (a01 * a01 + a11 * a11 + b01 * b01 + b11 * b11)
         I0, I1 = J0 * J0, J1 * J1
-        phi, dphi = _log_quotient((J1 - J0) * (J1 + J0) / I0)
-        slope = 0.25 * lam_e * (np.log(J0) + np.log(J1)) - 0.5 * mu_e  # dU/d(ln I), averaged
+        phi, dphi = _log_quotient((j1 - j0) * (J1 + J0) / I0)
+        slope = 0.25 * lam_e * (np.log1p(j0) + np.log1p(j1)) - 0.5 * mu_e  # dU/d(ln I), avg.
         q = slope * phi / I0
         S00, S01, S11 = mu_e + 2.0 * q * cm11, -2.0 * q * cm01, mu_e + 2.0 * q * cm00
-        lnJ = np.log(Jm)
-        W = 0.5 * mu_e * (m00 * m00 + m01 * m01 + m10 * m10 + m11 * m11 - 2.0) - mu_e * lnJ
+        lnJ = np.log1p(jm)
+        # as in _material: mu/2 (|F|^2 - 2) - mu ln J = mu (|H|^2/2 - det H + j - ln J)
+        W = mu_e * (0.5 * (h00 * h00 + h01 * h01 + h10 * h10 + h11 * h11)
+                    - (h00 * h11 - h01 * h10) + (jm - lnJ))
         energy += w * (W + 0.5 * lam_e * lnJ * lnJ)
         # P = F_m S_alg
         P00, P01 = m00 * S00 + m01 * S01, m00 * S01 + m01 * S11
@@ -335,22 +361,22 @@ def _scatter(p, e, ecells, fx, fy, Ke, need_tangent, full, entry_map, force, dat
 
 
 @njit(cache=True, inline="always")
-def _run(model, order, lo, hi, X, x0, x, ecells, lam, mu, geo, Xc, need_tangent, entry_map,
+def _run(model, order, lo, hi, X, d0, d, ecells, lam, mu, geo, Xc, need_tangent, entry_map,
          force, data, status):
     """Process order[lo:hi]; return the energy. Stops at the first inverted element.
 
-    With x0 (x_n) not empty, a Neo-Hookean group takes the energy-momentum element at the
-    mid-point x = x_{n+1/2}; its tangent is unsymmetric, so it is scattered in full."""
-    full = x0.shape[0] > 0
+    With d0 (d_n) not empty, a Neo-Hookean group takes the energy-momentum element at the
+    mid-point d = d_{n+1/2}; its tangent is unsymmetric, so it is scattered in full."""
+    full = d0.shape[0] > 0
     Ke = np.empty((8, 8))
     energy = 0.0
     for p in range(lo, hi):
         e = order[p]
         if full:
-            fx, fy, w = _element_em(p, e, X, x0, x, ecells, lam, mu, geo, Xc, need_tangent, Ke,
+            fx, fy, w = _element_em(p, e, X, d0, d, ecells, lam, mu, geo, Xc, need_tangent, Ke,
                                     status)
         else:
-            fx, fy, w = _element(model, p, e, X, x, ecells, lam, mu, geo, Xc, need_tangent,
+            fx, fy, w = _element(model, p, e, X, d, ecells, lam, mu, geo, Xc, need_tangent,
                                  Ke, status)
         if status[1] != 0:
             status[0] = p
@@ -361,35 +387,36 @@ def _run(model, order, lo, hi, X, x0, x, ecells, lam, mu, geo, Xc, need_tangent,
 
 
 @njit(cache=True)
-def _run_both(model, order, lo, hi, X, x0, x, ecells, lam, mu, geo, Xc, need_tangent,
+def _run_both(model, order, lo, hi, X, d0, d, ecells, lam, mu, geo, Xc, need_tangent,
               entry_map, force, data, status):
     """:func:`_run` compiled once per case, so that the force-only loop has no tangent code in
     it (and behind a call: Numba's parallel pass fails on the inlined loop)."""
     if need_tangent:
-        return _run(model, order, lo, hi, X, x0, x, ecells, lam, mu, geo, Xc, True,
+        return _run(model, order, lo, hi, X, d0, d, ecells, lam, mu, geo, Xc, True,
                     entry_map, force, data, status)
-    return _run(model, order, lo, hi, X, x0, x, ecells, lam, mu, geo, Xc, False, entry_map,
+    return _run(model, order, lo, hi, X, d0, d, ecells, lam, mu, geo, Xc, False, entry_map,
                 force, data, status)
 
 
 @njit(cache=True)
-def assemble_serial(model, order, X, x0, x, ecells, lam, mu, geo, Xc, need_tangent, entry_map,
+def assemble_serial(model, order, X, d0, d, ecells, lam, mu, geo, Xc, need_tangent, entry_map,
                     force, data, status):
-    """Serial assembly of the elements ``order``: adds into ``force`` and ``data``.
+    """Serial assembly of the elements ``order`` at nodal displacements ``d`` (n, 2) from the
+    reference positions ``X``: adds into ``force`` and ``data``.
 
-    ``x0``: x_n for the energy-momentum scheme (Neo-Hookean groups), or an empty (0, 2) array.
+    ``d0``: d_n for the energy-momentum scheme (Neo-Hookean groups), or an empty (0, 2) array.
     ``ecells`` = cells[order]; ``geo`` and ``Xc`` are the reference data cache (see
     :class:`NumbaAssembly`). ``status`` (int64[2]) is reset, then receives (position in order,
     where code) of the first inverted element. Returns (energy, whether an element inverted).
     """
     status[0] = status[1] = 0
-    energy = _run_both(model, order, 0, order.size, X, x0, x, ecells, lam, mu, geo, Xc,
+    energy = _run_both(model, order, 0, order.size, X, d0, d, ecells, lam, mu, geo, Xc,
                        need_tangent, entry_map, force, data, status)
     return energy, status[1] != 0
 
 
 @njit(cache=True, parallel=True)
-def assemble_blocks(model, order, starts, X, x0, x, ecells, lam, mu, geo, Xc, need_tangent,
+def assemble_blocks(model, order, starts, X, d0, d, ecells, lam, mu, geo, Xc, need_tangent,
                     entry_map, force, data, status):
     """Threaded assembly: block t is order[starts[t]:starts[t+1]], then order[starts[-1]:]
     (the deferred elements) serially.
@@ -400,9 +427,9 @@ def assemble_blocks(model, order, starts, X, x0, x, ecells, lam, mu, geo, Xc, ne
     status[:, :] = 0
     energies = np.zeros(nb + 1)
     for t in prange(nb):
-        energies[t] = _run_both(model, order, starts[t], starts[t + 1], X, x0, x, ecells, lam,
+        energies[t] = _run_both(model, order, starts[t], starts[t + 1], X, d0, d, ecells, lam,
                                 mu, geo, Xc, need_tangent, entry_map, force, data, status[t])
-    energies[nb] = _run_both(model, order, starts[nb], order.size, X, x0, x, ecells, lam, mu,
+    energies[nb] = _run_both(model, order, starts[nb], order.size, X, d0, d, ecells, lam, mu,
                              geo, Xc, need_tangent, entry_map, force, data, status[nb])
     return energies.sum(), status[:, 1].any()
 
@@ -465,11 +492,14 @@ class NumbaAssembly:
         self.Xc = np.full((order.size, 8), np.nan)  # X of each element's geo row; NaN: none
         self.status = np.zeros((self.starts.size if self.threads > 1 else 1, 2), dtype=np.int64)
 
-    def add(self, X: NDArray, x: NDArray, lam: NDArray, mu: NDArray, entry_map: NDArray,
-            force: NDArray, data: NDArray | None, x_start: NDArray | None = None) -> float:
-        """Add internal force (and tangent if ``data`` is given); return the strain energy at x.
+    def add(self, X: NDArray, d: NDArray, lam: NDArray, mu: NDArray, entry_map: NDArray,
+            force: NDArray, data: NDArray | None, d_start: NDArray | None = None) -> float:
+        """Add internal force (and tangent if ``data`` is given) at the nodal displacements
+        ``d`` (n, 2) from the reference positions ``X``; return the strain energy.
 
-        ``x_start`` (x_n, with x = x_{n+1/2}): a Neo-Hookean group adds the energy-momentum
+        The kernel forms F = I + Grad d, never Grad x: positions of size L would put a
+        round-off of eps E L / h into every stress (see :func:`_material`).
+        ``d_start`` (d_n, with d = d_{n+1/2}): a Neo-Hookean group adds the energy-momentum
         scheme's force and its unsymmetric tangent instead (linear elasticity is unchanged: the
         mid-point rule already conserves its quadratic energy).
         Raises :class:`InvertedElementError` naming the global index of the first inverted
@@ -477,44 +507,45 @@ class NumbaAssembly:
         """
         need_tangent = data is not None
         data_ = data if need_tangent else _NO_DATA
-        em = x_start is not None and self.model == MODEL_CODES["neo_hookean"]
-        x0 = np.ascontiguousarray(x_start, dtype=float) if em else _NO_POSITIONS
+        em = d_start is not None and self.model == MODEL_CODES["neo_hookean"]
+        d0 = np.ascontiguousarray(d_start, dtype=float) if em else _NO_DISPLACEMENTS
         if self.threads > 1:
             energy, failed = assemble_blocks(
-                self.model, self.order, self.starts, X, x0, x, self.ecells, lam, mu, self.geo,
+                self.model, self.order, self.starts, X, d0, d, self.ecells, lam, mu, self.geo,
                 self.Xc, need_tangent, entry_map, force, data_, self.status)
         else:
             energy, failed = assemble_serial(
-                self.model, self.order, X, x0, x, self.ecells, lam, mu, self.geo, self.Xc,
+                self.model, self.order, X, d0, d, self.ecells, lam, mu, self.geo, self.Xc,
                 need_tangent, entry_map, force, data_, self.status[0])
         if failed:
-            self._raise(X, x, x0 if em else None)
+            self._raise(X, d, d0 if em else None)
         return energy
 
-    def _raise(self, X: NDArray, x: NDArray, x_start: NDArray | None) -> None:
+    def _raise(self, X: NDArray, d: NDArray, d_start: NDArray | None) -> None:
         """Raise for the first inverted element (the lowest global index over the blocks)."""
         rows = np.flatnonzero(self.status[:, 1])
         bad = [int(self.order[self.status[t, 0]]) for t in rows]
         t = rows[int(np.argmin(bad))]
-        configurations = [x] if x_start is None else [x_start, x, 2.0 * x - x_start]
+        configurations = [d] if d_start is None else [d_start, d, 2.0 * d - d_start]
         _raise_inverted(min(bad), int(self.status[t, 1]), X, configurations, self.cells)
 
 
 #: The ``data`` argument of force-only calls (never written).
 _NO_DATA = np.empty(0)
-#: The ``x0`` argument of the plain kernel (no energy-momentum scheme).
-_NO_POSITIONS = np.empty((0, 2))
+#: The ``d0`` argument of the plain kernel (no energy-momentum scheme).
+_NO_DISPLACEMENTS = np.empty((0, 2))
 
 
 def _raise_inverted(e: int, where: int, X: NDArray, configurations: list[NDArray],
                     cells: NDArray) -> None:
     """Raise :class:`InvertedElementError` for element e with its smallest determinant (over
-    the current ``configurations`` when where == 2)."""
+    the current configurations, given by their displacements, when where == 2)."""
     X_e = X[cells[e]]
     J = np.einsum("gaj,ai->gij", _DN, X_e)
     det = J[:, 0, 0] * J[:, 1, 1] - J[:, 0, 1] * J[:, 1, 0]
     if where == 2:
         grad = np.einsum("gaj,gjI->gaI", _DN, np.linalg.inv(J))
-        F = np.stack([np.einsum("ai,gaJ->giJ", x[cells[e]], grad) for x in configurations])
+        F = np.eye(2) + np.stack([np.einsum("ai,gaJ->giJ", d[cells[e]], grad)
+                                  for d in configurations])
         det = F[..., 0, 0] * F[..., 1, 1] - F[..., 0, 1] * F[..., 1, 0]
     raise InvertedElementError(e, float(det.min()), _WHERE[where])

@@ -185,7 +185,11 @@ def read_vtu(path: str | os.PathLike, time: float = float("nan")) -> VtuFrame:
     and ``ValueError`` when it holds no quadrilaterals.
     """
     # meshio.read() calls sys.exit on a corrupt file; the format reader raises ReadError instead.
-    mesh = meshio.vtu.read(os.fspath(path))
+    return _frame_of(meshio.vtu.read(os.fspath(path)), time, Path(path))
+
+
+def _frame_of(mesh: meshio.Mesh, time: float, path: Path) -> VtuFrame:
+    """A meshio Mesh of Q4 cells as 2D arrays (the padding of :func:`pad_to_3d` undone)."""
     blocks = [block for block in mesh.cells if block.type == "quad"]
     if len(blocks) != len(mesh.cells) or not blocks:
         raise ValueError(f"{path} holds cells other than 4-node quadrilaterals")
@@ -193,7 +197,7 @@ def read_vtu(path: str | os.PathLike, time: float = float("nan")) -> VtuFrame:
     n_points, n_cells = len(mesh.points), len(quads)
     return VtuFrame(
         time=time,
-        path=Path(path),
+        path=path,
         points=np.asarray(mesh.points[:, :2], dtype=float),
         cells=quads,
         point_data={name: _drop_z(v, n_points) for name, v in mesh.point_data.items()},
@@ -279,20 +283,111 @@ class XdmfSeriesWriter:
             self._series.h5_file.close()
 
 
+class XdmfSeries:
+    """An XDMF time series written by :class:`XdmfSeriesWriter`, read back frame by frame with
+    meshio's TimeSeriesReader as the frames of a VTU run: :meth:`mesh` gives the meshio Mesh
+    that the VTU of the same frame holds (its points are the frame's material positions, the
+    point data ``material_position``, and the writer's ``node_displacement`` is dropped).
+
+    The XML index is parsed once; the HDF5 file is opened for each read and closed again, so
+    that an instance holds no open file. Raises ``meshio.ReadError`` (or an XML
+    ``ParseError``) if the index is not an XDMF time series.
+    """
+
+    def __init__(self, path: str | os.PathLike) -> None:
+        self.path = Path(path)
+        self._reader = meshio.xdmf.TimeSeriesReader(self.path)
+        # the index is meshio's: one temporal grid per frame, its Time element first
+        self.times = [float(grid.find("Time").attrib["Value"])  # type: ignore[union-attr]
+                      for grid in self._reader.collection]
+        self._points_cells: tuple[NDArray, list] | None = None
+
+    def __len__(self) -> int:
+        return len(self.times)
+
+    def steps(self) -> list[tuple[float, XdmfStep]]:
+        """(time, :class:`XdmfStep`) of every frame, in the order written (time order)."""
+        return [(time, XdmfStep(self, k)) for k, time in enumerate(self.times)]
+
+    def mesh(self, k: int) -> meshio.Mesh:
+        """Frame k as the meshio Mesh of the VTU frame it replaces."""
+        reader = self._reader
+        try:
+            if self._points_cells is None:
+                self._points_cells = reader.read_points_cells()
+            _, point_data, cell_data = reader.read_data(k)
+        finally:  # meshio keeps the HDF5 files it opened until its context exits
+            for h5 in reader.hdf5_files.values():
+                h5.close()
+            reader.hdf5_files.clear()
+        stored, cells = self._points_cells
+        offset = point_data.pop("node_displacement", None)
+        points = point_data.get("material_position")
+        if points is None:  # a series without the field: the node's position less d
+            points = stored + offset - point_data["displacement"]
+        return meshio.Mesh(np.array(points), cells, point_data=point_data, cell_data=cell_data)
+
+    def frame(self, k: int) -> VtuFrame:
+        """Frame k as :func:`read_vtu` reads the VTU frame it replaces."""
+        return _frame_of(self.mesh(k), self.times[k], self.path)
+
+
+@dataclass(frozen=True)
+class XdmfStep:
+    """Frame ``index`` of an XDMF series: the entry of a field series that a VTU path is in a
+    VTU run (see :func:`read_series`)."""
+
+    series: XdmfSeries
+    index: int
+
+    def mesh(self) -> meshio.Mesh:
+        return self.series.mesh(self.index)
+
+    def __str__(self) -> str:
+        return f"{self.series.path} (frame {self.index})"
+
+
+#: A field series entry: a VTU file, or a frame of an XDMF series.
+FrameSource = Path | XdmfStep
+
+
+def find_field_series(directory: str | os.PathLike, name: str = "fields") -> Path | None:
+    """The field series of a results folder: ``<name>.pvd`` (VTU frames) or else
+    ``<name>.xdmf`` (``analysis.field_format = "xdmf"``); None if it has neither."""
+    for suffix in (".pvd", ".xdmf"):
+        path = Path(directory) / f"{name}{suffix}"
+        if path.is_file():
+            return path
+    return None
+
+
+def read_series(path: str | os.PathLike) -> list[tuple[float, FrameSource]]:
+    """(time, frame source) of every frame of a PVD (the VTU files that exist) or of an XDMF
+    series, in time order; read a frame with :func:`read_frame` or :func:`read_frame_mesh`."""
+    if Path(path).suffix == ".xdmf":
+        try:
+            return list(XdmfSeries(path).steps())
+        except (meshio.ReadError, ET.ParseError, KeyError, AttributeError) as error:
+            raise ValueError(f"{path} is not a readable XDMF time series ({error!r})") from None
+    return list(read_pvd(path))
+
+
+def read_frame(source: FrameSource, time: float = float("nan")) -> VtuFrame:
+    """One frame of a field series (see :func:`read_series`) as 2D arrays."""
+    if isinstance(source, XdmfStep):
+        return source.series.frame(source.index)
+    return read_vtu(source, time)
+
+
+def read_frame_mesh(source: FrameSource) -> meshio.Mesh:
+    """One frame of a field series as the meshio Mesh of its VTU (see :class:`XdmfSeries`)."""
+    if isinstance(source, XdmfStep):
+        return source.mesh()
+    return meshio.vtu.read(os.fspath(source))
+
+
 def read_xdmf(path: str | os.PathLike) -> list[VtuFrame]:
-    """Every frame of an XDMF series written by :class:`XdmfSeriesWriter`, in time order
-    (points: the stored mesh; ``deformed_points`` are not meaningful on ALE bodies there, use
-    points + ``node_displacement``)."""
-    frames = []
-    with meshio.xdmf.TimeSeriesReader(os.fspath(path)) as reader:
-        points, blocks = reader.read_points_cells()
-        quads = np.vstack([b.data for b in blocks]).astype(np.int64)
-        for k in range(reader.num_steps):
-            time, point_data, cell_data = reader.read_data(k)
-            frames.append(VtuFrame(
-                time=float(time), path=Path(path), points=np.asarray(points[:, :2], float),
-                cells=quads,
-                point_data={n: _drop_z(v, len(points)) for n, v in point_data.items()},
-                cell_data={n: _drop_z(np.concatenate([np.asarray(b) for b in v], axis=0),
-                                      len(quads)) for n, v in cell_data.items()}))
-    return frames
+    """Every frame of an XDMF series written by :class:`XdmfSeriesWriter`, in time order, as
+    :func:`read_vtu` reads the VTU frames of the same run."""
+    series = XdmfSeries(path)
+    return [series.frame(k) for k in range(len(series))]

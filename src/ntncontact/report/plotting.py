@@ -1,10 +1,11 @@
-"""Figures made from a results folder alone (history.csv, contact.csv, fields.pvd + VTUs).
+"""Figures made from a results folder alone (history.csv, contact.csv, fields.pvd + VTUs or
+fields.xdmf + fields.h5).
 
 They are drawn after a run, in the calling process. matplotlib is imported inside the
 functions and the figures are made without pyplot, so importing this module costs nothing and
 never changes the user's backend; matplotlib's constrained layout places the axes. Every
 function tolerates a partially written run: truncated CSV lines are dropped and only the VTU
-files the PVD lists (and that parse) are used.
+files the PVD lists (and that parse) are used, or the frames of the XDMF index.
 """
 
 from __future__ import annotations
@@ -18,13 +19,14 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from numpy.typing import NDArray
 
-from ntncontact.io.vtk import VtuFrame, read_pvd, read_vtu
+from ntncontact.io.vtk import FrameSource, VtuFrame, find_field_series, read_frame, read_series
 from ntncontact.io.writers import CONTACT_FILE, HISTORY_FILE, read_csv_table
 
 if TYPE_CHECKING:
     from matplotlib.figure import Figure
 
 PVD_FILE = "fields.pvd"
+XDMF_FILE = "fields.xdmf"  # analysis.field_format = "xdmf"
 EVENLY_SPACED_PANELS = 6  # meshes in deformed_<field>.png when no times are asked for
 DPI = 110
 FIELD_CMAP = "viridis"  # colour map of the mesh fields
@@ -124,39 +126,43 @@ def plot_momenta(directory: str | os.PathLike, path: str | os.PathLike | None = 
     return _save(fig, Path(path) if path else folder / "momenta.png")
 
 
-def _series(directory: Path) -> list[tuple[float, Path]]:
-    pvd = directory / PVD_FILE
-    if not pvd.is_file():
-        raise ResultsNotFoundError(f"no {PVD_FILE} in results folder {directory}")
-    series = read_pvd(pvd)
+def _series(directory: Path) -> tuple[Path, list[tuple[float, FrameSource]]]:
+    """The folder's field series (fields.pvd, or fields.xdmf) and its frames."""
+    source = find_field_series(directory)
+    if source is None:
+        raise ResultsNotFoundError(f"no {PVD_FILE} or {XDMF_FILE} in results folder {directory}")
+    try:
+        series = read_series(source)
+    except ValueError as error:
+        raise ResultsNotFoundError(str(error)) from None
     if not series:
-        raise ResultsNotFoundError(f"{pvd} lists no existing VTU files")
-    return series
+        raise ResultsNotFoundError(f"{source} lists no existing frames")
+    return source, series
 
 
 def _evenly_spaced(count: int, wanted: int) -> list[int]:
     return sorted({int(i) for i in np.round(np.linspace(0, count - 1, min(count, wanted)))})
 
 
-def _read_or_warn(vtu: Path, time: float) -> VtuFrame | None:
+def _read_or_warn(source: FrameSource, time: float) -> VtuFrame | None:
     try:
-        return read_vtu(vtu, time=time)
+        return read_frame(source, time=time)
     except Exception as error:  # a corrupt file (any parser error) must not stop the plot
-        warnings.warn(f"skipping unreadable {vtu}: {error}", stacklevel=3)
+        warnings.warn(f"skipping unreadable {source}: {error}", stacklevel=3)
         return None
 
 
 def load_frames(directory: str | os.PathLike, max_frames: int = EVENLY_SPACED_PANELS
                 ) -> list[VtuFrame]:
     """Up to ``max_frames`` evenly spaced frames of the folder; unreadable files skipped."""
-    series = _series(Path(directory))
+    _, series = _series(Path(directory))
     frames = []
     for index in _evenly_spaced(len(series), max_frames):
         frame = _read_or_warn(series[index][1], series[index][0])
         if frame is not None:
             frames.append(frame)
     if not frames:
-        raise ResultsNotFoundError(f"no readable VTU files in results folder {directory}")
+        raise ResultsNotFoundError(f"no readable frames in results folder {directory}")
     return frames
 
 
@@ -177,10 +183,10 @@ def frames_at(directory: str | os.PathLike, times: Sequence[float]
     at that time (within 1e-9 of the run's span), or else the linear interpolation between the
     readable frames before and after it. Times outside the frames raise a ValueError."""
     folder = Path(directory)
-    series = _series(folder)
+    source, series = _series(folder)
     written = np.array([t for t, _ in series])
     tolerance = 1e-9 * max(written[-1] - written[0], abs(written[-1]))
-    check_times(times, written[0], written[-1], f"the frames of {folder / PVD_FILE}", tolerance)
+    check_times(times, written[0], written[-1], f"the frames of {source}", tolerance)
     read: dict[int, VtuFrame | None] = {}
 
     def frame(index: int) -> VtuFrame | None:
@@ -406,7 +412,7 @@ def plot_all(directory: str | os.PathLike, times: Sequence[float] | None = None,
     if not made:
         raise ResultsNotFoundError(
             f"no results to plot in {directory} (looked for {HISTORY_FILE}, {CONTACT_FILE}, "
-            f"{PVD_FILE})"
+            f"{PVD_FILE}, {XDMF_FILE})"
         )
     return made + asked + ([animate(folder, folder / "animation.gif")] if gif else [])
 
