@@ -468,9 +468,9 @@ class AleUpdate:
     smoothing: SmoothingResult | None = None  # of the position smoother, when it ran
     interior: str = "none"  # stage used for the interior: none, surface, displacement, position
     resets: int = 0  # surface runs respaced in the original proportions ("local" respacing)
-    # strain energy the remap changed and the velocity correction took up
-    # (engine.remap_conservation, conserve_energy = "total"; 0 otherwise)
-    strain_energy_handover: float = 0.0
+    # strain energy the remap changed, W after - W before (engine.remap_conservation, with
+    # conserve_energy "total" or "kinetic"; 0 with "none")
+    remap_strain_change: float = 0.0
 
     @property
     def convective(self) -> NDArray[np.float64]:

@@ -39,9 +39,9 @@ class MeshMotion:
         return max([u.mismatch for u in self.updates if u is not None] or [0.0])
 
     @property
-    def strain_energy_handover(self) -> float:
-        """Strain energy the remaps changed and their velocity corrections took up."""
-        return sum(u.strain_energy_handover for u in self.updates if u is not None)
+    def remap_strain_change(self) -> float:
+        """Strain energy the remaps changed (W after - W before, summed over the bodies)."""
+        return sum(u.remap_strain_change for u in self.updates if u is not None)
 
 
 def _ale_nodes_and_partners(setup: AleSetup, contact: Sequence[PairState]):

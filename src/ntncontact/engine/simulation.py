@@ -84,7 +84,7 @@ class SolvedStep:
     mismatch: float
     tie_forces: dict = field(default_factory=dict)  # per tie: force on its body-1 nodes
     reactions: dict = field(default_factory=dict)  # history columns of the support reactions
-    remap_energy: float = 0.0  # strain energy the ALE remaps handed to the velocities
+    remap_energy: float = 0.0  # strain energy the ALE remaps changed
 
 
 class Observer(Protocol):
@@ -291,13 +291,13 @@ class Simulation:
                                    unconverged_interfaces(interfaces, used, before, previous))
             self._augmentations_converged = False
         mismatch = motion.mismatch if motion is not None else 0.0
-        handover = motion.strain_energy_handover if motion is not None else 0.0
+        strain_change = motion.remap_strain_change if motion is not None else 0.0
         ties = tie_forces(problem.constraints, problem.multipliers(result.y)) \
             if self.model.ties else {}
         reactions = support_reactions(self._supports, problem.full_residual(result.y),
                                       state.X + d) if self._supports else {}
         return SolvedStep(state, d, used, results, augmentation, iterations, mismatch, ties,
-                          reactions, handover)
+                          reactions, strain_change)
 
     @staticmethod
     def _require_accepted(augmentations: int, failed: list) -> None:

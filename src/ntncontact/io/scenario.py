@@ -204,9 +204,10 @@ class AleConfig(Strict):
     sweeps: Annotated[int, Field(ge=0)] = 10
     remap: Literal["linear", "quadratic"] = "linear"
     conserve_momentum: bool = True
-    # the remap's velocity correction also sets the kinetic energy: "total" (to the old kinetic
-    # energy minus the strain energy the remap changed: E exact), "kinetic" or "none"
-    conserve_energy: Literal["total", "kinetic", "none"] = "total"
+    # the remap's velocity correction also sets the kinetic energy: "kinetic" (its value before
+    # the remap), "total" (minus the strain energy the remap changed: E exact, but a body at
+    # rest gets velocity kicks: docs/scenarios.md) or "none"
+    conserve_energy: Literal["total", "kinetic", "none"] = "kinetic"
     respace: Literal["local", "reference"] = "local"
     interior: Literal["minimal", "displacement", "position"] = "minimal"
     slide_tolerance: Positive = 1e-8
