@@ -243,7 +243,7 @@ class StepProblem:
         """K restricted to the free dofs (all of K when nothing is prescribed)."""
         if self.fixed_dofs.size == 0:
             return K
-        return K[self.free_dofs][:, self.free_dofs]
+        return self.union.free_block(K, self.free_dofs)
 
 
 def _add_triplets(K: sp.csr_matrix, triplets: list, union: TripletUnion) -> sp.csr_matrix:
