@@ -46,7 +46,7 @@ class TripletUnion:
         if self._k_key is None:
             return False
         indptr, indices = self._k_key
-        return np.array_equal(K.indptr, indptr) and np.array_equal(K.indices, indices)
+        return _same_array(K.indptr, indptr) and _same_array(K.indices, indices)
 
     def _same_triplets(self, rows: NDArray, cols: NDArray) -> bool:
         r, c = self._t_key
@@ -77,8 +77,10 @@ class TripletUnion:
         self._indptr = np.cumsum(indptr)
         self._indices = (union % n_cols).astype(K.indices.dtype)
         self._keys = union
-        self._k_map, self._t_map = np.searchsorted(union, keys_k), np.searchsorted(union, keys_t)
-        self._k_key = (K.indptr.copy(), K.indices.copy())
+        position = np.int32 if union.size < 2**31 else np.int64  # kept: half the bytes
+        self._k_map = np.searchsorted(union, keys_k).astype(position)
+        self._t_map = np.searchsorted(union, keys_t)
+        self._k_key = (K.indptr, K.indices)  # by reference, see FreeBlock._build
         self._t_key = (np.array(rows, copy=True), np.array(cols, copy=True))
 
 
