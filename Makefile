@@ -42,7 +42,7 @@ test-fast: $(WARM)
 bench: $(WARM)
 	$(BIN)/python -m pip install --quiet -e ".[bench,fast]"
 	$(BIN)/python benchmarks/run.py
-	$(BIN)/python benchmarks/scaling.py
+	$(BIN)/python benchmarks/scaling.py --k 1 2 4 8
 
 lint: $(STAMP)
 	$(BIN)/ruff check src tests benchmarks

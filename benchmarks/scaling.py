@@ -4,7 +4,7 @@ every body refined k times in each direction (dt unchanged).
 Usage::
 
     .venv/bin/python benchmarks/scaling.py                 # k = 1, 2, 4 (~10-20 min, loaded)
-    .venv/bin/python benchmarks/scaling.py --k 1 2 4 8     # + k = 8 (much longer)
+    .venv/bin/python benchmarks/scaling.py --k 1 2 4 8     # + k = 8 (make bench; ~15 min quiet)
     .venv/bin/python benchmarks/scaling.py --cases ring --k 1 2
     .venv/bin/python benchmarks/scaling.py --threads ring 4 2   # thread settings, A/B/C
 
@@ -15,7 +15,8 @@ load steps. Reported per run: elements, unknowns, wall and CPU seconds per step,
 iterations and augmentations per step (over all steps and over the steps with contact), the
 linear solver's analyses / factorizations / solves, the time per part of a step (exclusive:
 a part's time excludes the parts it calls), the peak resident memory above the memory after
-the model was built, and, over k, the fitted exponent p of time ~ elements^p.
+the model was built, PARDISO's own peak memory (MKL's count; part of the resident memory),
+and, over k, the fitted exponent p of time ~ elements^p.
 
 Parts: ``solve`` (LinearSolver.factorize, Factorization calls), ``assembly`` (element
 internal forces and tangents, and the rest of StepProblem.residual/jacobian: mass, union
@@ -195,7 +196,19 @@ def child(case: str, k: int, out: Path) -> dict:
         "stats": vars(solver.stats), "backend": solver.backend,
         "peak_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024,
         "above_start_kb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss - start_kb,
+        "pardiso_mb": pardiso_mb(solver),
     }
+
+
+def pardiso_mb(solver) -> float:
+    """PARDISO's own peak memory (MKL: max(iparm 15, iparm 16 + iparm 17), in KB), which
+    tracemalloc does not see; 0 when the run did not use PARDISO."""
+    peak = 0
+    for impl in getattr(solver, "_impls", {}).values():
+        p = getattr(impl, "pardiso", None)
+        if p is not None:
+            peak = max(peak, p.get_iparm(15), p.get_iparm(16) + p.get_iparm(17))
+    return peak / 1024
 
 
 def run_child(case: str, k: int, tmp: Path, env: dict | None = None, tag: str = "") -> dict:
@@ -220,9 +233,9 @@ def report(rows: list[dict]) -> str:
              f"{load[2]:.1f} at the end (1 / 5 / 15 min).", "",
              "| case | k | elements | dofs | steps (contact) | s/step | CPU s/step | "
              "its/step | its/contact step | augs/contact step | analyses / factorizations "
-             "/ solves | peak MB | KB/element above start | "
+             "/ solves | peak MB | KB/element above start | PARDISO MB | "
              + " | ".join(f"{p} s/step" for p in PARTS) + " |",
-             "|" + " --- |" * 4 + " ---: |" * (10 + len(PARTS))]
+             "|" + " --- |" * 2 + " ---: |" * (12 + len(PARTS))]
     for r in rows:
         if "elements" not in r:
             lines.append(f"| {r['case']} | {r['k']} | failed: {r['error']} |")
@@ -235,6 +248,7 @@ def report(rows: list[dict]) -> str:
             f"| {r['its_per_step']:.1f} | {r['its_per_contact_step']:.1f} "
             f"| {r['augs_per_contact_step']:.1f} | {s['analyses']} / {s['factorizations']} / "
             f"{s['solves']} | {r['peak_mb']:.0f} | {r['above_start_kb'] / r['elements']:.1f} | "
+            f"{r.get('pardiso_mb', 0.0):.0f} | "
             + " | ".join(f"{r['parts_per_step'][p]:.4f}" for p in PARTS) + " |")
     lines += ["", "Fitted exponents p (time per step ~ elements^p over the k run):", "",
               "| case | s/step | CPU s/step | " + " | ".join(PARTS) + " | its/contact step |",

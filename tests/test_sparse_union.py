@@ -3,7 +3,7 @@
 import numpy as np
 import scipy.sparse as sp
 
-from ntncontact.fem.sparse import TripletUnion
+from ntncontact.fem.sparse import FreeBlock, TripletUnion
 
 
 def _random_case(rng, n=12, m=20):
@@ -86,3 +86,37 @@ def test_pattern_kept_when_the_active_set_shrinks_and_returns():
     fresh = union.add(other_k, rows, cols, vals)
     assert np.allclose(fresh.toarray(), (other_k + sp.csr_matrix(
         (vals, (rows, cols)), shape=K.shape)).toarray())
+
+
+def test_free_block_equals_scipy_fancy_indexing():
+    """The map of kept entries gives K[free][:, free] exactly, reuses its pattern while K's
+    pattern and the free dofs hold, and is rebuilt when either changes."""
+    rng = np.random.default_rng(3)
+    block = FreeBlock()
+    K, *_ = _random_case(rng, n=15)
+    free = np.sort(rng.choice(15, 11, replace=False))
+    first = None
+    for step in range(6):
+        if step == 2:
+            free = np.sort(rng.choice(15, 9, replace=False))  # other supports
+        if step == 4:
+            K, *_ = _random_case(rng, n=15)  # another pattern
+        K = sp.csr_matrix((rng.normal(size=K.nnz), K.indices, K.indptr), shape=K.shape)
+        got = block(K, free)
+        want = K[free][:, free]
+        assert got.shape == want.shape
+        np.testing.assert_array_equal(got.toarray(), want.toarray())
+        assert got.has_sorted_indices
+        if step == 0:
+            first = got
+        if step == 1:  # same pattern and dofs: the block's pattern arrays are shared
+            assert np.shares_memory(got.indices, first.indices)
+            assert np.shares_memory(got.indptr, first.indptr)
+
+
+def test_union_places_repeated_triplets_once_each():
+    """Triplets at the same place add up (np.add.at, not a buffered fancy assignment)."""
+    K = sp.eye(3, format="csr")
+    rows, cols = np.array([0, 0, 2, 0]), np.array([1, 1, 2, 1])
+    got = TripletUnion().add(K, rows, cols, np.array([1.0, 2.0, 5.0, 4.0])).toarray()
+    np.testing.assert_array_equal(got, [[1.0, 7.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 6.0]])

@@ -27,6 +27,7 @@ class TripletUnion:
         self._t_key: tuple | None = None  # the triplets' (rows, cols) that _t_map places
         self._keys = np.zeros(0, dtype=np.int64)  # union entries as row * n_cols + col, sorted
         self._k_map = self._t_map = self._indptr = self._indices = None
+        self.free_block = FreeBlock()  # the Newton matrix's free-dof block, same lifetime
 
     def add(self, K: sp.csr_matrix, rows: NDArray, cols: NDArray,
             vals: NDArray) -> sp.csr_matrix:
@@ -37,14 +38,15 @@ class TripletUnion:
             self._place(K, rows, cols)
         data = np.zeros(self._indices.size)
         data[self._k_map] = K.data
-        data += np.bincount(self._t_map, weights=vals, minlength=data.size)
+        # only the few triplets' places (a bincount to the full size took another nnz array)
+        np.add.at(data, self._t_map, vals)
         return sp.csr_matrix((data, self._indices, self._indptr), shape=K.shape)
 
     def _same_k(self, K: sp.csr_matrix) -> bool:
         if self._k_key is None:
             return False
         indptr, indices = self._k_key
-        return np.array_equal(K.indptr, indptr) and np.array_equal(K.indices, indices)
+        return _same_array(K.indptr, indptr) and _same_array(K.indices, indices)
 
     def _same_triplets(self, rows: NDArray, cols: NDArray) -> bool:
         r, c = self._t_key
@@ -75,10 +77,61 @@ class TripletUnion:
         self._indptr = np.cumsum(indptr)
         self._indices = (union % n_cols).astype(K.indices.dtype)
         self._keys = union
-        self._k_map, self._t_map = np.searchsorted(union, keys_k), np.searchsorted(union, keys_t)
-        self._k_key = (K.indptr.copy(), K.indices.copy())
+        position = np.int32 if union.size < 2**31 else np.int64  # kept: half the bytes
+        self._k_map = np.searchsorted(union, keys_k).astype(position)
+        self._t_map = np.searchsorted(union, keys_t)
+        self._k_key = (K.indptr, K.indices)  # by reference, see FreeBlock._build
         self._t_key = (np.array(rows, copy=True), np.array(cols, copy=True))
 
 
 def _keys(rows: NDArray, cols: NDArray, n_cols: int) -> NDArray:
     return np.asarray(rows, np.int64) * n_cols + np.asarray(cols, np.int64)
+
+
+class FreeBlock:
+    """``K[free][:, free]`` by a map of the kept entries, computed once per pattern of K and
+    set of free dofs. SciPy's two fancy-index passes made two copies of K's pattern and data
+    per Newton matrix (~3 arrays of nnz entries live at the factorization, issue 18); the map
+    makes one data array and shares the block's pattern between calls."""
+
+    def __init__(self) -> None:
+        self._key: tuple | None = None  # K's (indptr, indices) and the free dofs of the map
+        self._map = self._indptr = self._indices = None
+        self._shape = (0, 0)
+
+    def __call__(self, K: sp.csr_matrix, free: NDArray) -> sp.csr_matrix:
+        if not self._same(K, free):
+            self._build(K, free)
+        return sp.csr_matrix((K.data[self._map], self._indices, self._indptr),
+                             shape=self._shape)
+
+    def _same(self, K: sp.csr_matrix, free: NDArray) -> bool:
+        if self._key is None:
+            return False
+        indptr, indices, kept = self._key
+        return (_same_array(K.indptr, indptr) and _same_array(K.indices, indices)
+                and _same_array(free, kept))
+
+    def _build(self, K: sp.csr_matrix, free: NDArray) -> None:
+        n = K.shape[0]
+        position = np.full(n, -1, dtype=np.int64)  # free dof -> its row/column in the block
+        position[free] = np.arange(free.size)
+        rows = np.repeat(np.arange(n), np.diff(K.indptr))
+        keep = (position[rows] >= 0) & (position[K.indices] >= 0)
+        self._map = np.flatnonzero(keep).astype(np.int32 if K.nnz < 2**31 else np.int64)
+        counts = np.bincount(position[rows[keep]], minlength=free.size)
+        self._indptr = np.concatenate([[0], np.cumsum(counts)]).astype(K.indptr.dtype)
+        self._indices = position[K.indices[keep]].astype(K.indices.dtype)
+        self._shape = (free.size, free.size)
+        # K's pattern arrays by reference (no copy of nnz entries): the assembler's and the
+        # union's patterns are replaced, never changed in place
+        self._key = (K.indptr, K.indices, np.array(free, copy=True))
+
+
+def _same_array(a: NDArray, b: NDArray) -> bool:
+    """Equal arrays; views of the same memory (SciPy wraps index arrays in views) at once."""
+    if a.shape != b.shape or a.dtype != b.dtype:
+        return a.shape == b.shape and np.array_equal(a, b)
+    same_memory = (a.__array_interface__["data"][0] == b.__array_interface__["data"][0]
+                   and a.strides == b.strides)
+    return same_memory or np.array_equal(a, b)

@@ -136,13 +136,17 @@ class _Pattern:
         self.indptr = A.indptr.copy()
         self.indices = A.indices.copy()
         rows = np.repeat(np.arange(self.n), np.diff(self.indptr))
-        self.transpose = _transpose_map(self.indptr, self.indices, self.n)
-        self.upper = np.flatnonzero(self.indices >= rows)  # entries kept in symmetric mode
+        # positions as int32 where they fit, and no int32 copy of int32 arrays: these maps are
+        # kept for the run, a few arrays of nnz entries each (issue 18, memory)
+        position = np.int32 if self.indices.size < 2**31 else np.int64
+        self.transpose = _transpose_map(self.indptr, self.indices, self.n, position)
+        # entries kept in symmetric mode
+        self.upper = np.flatnonzero(self.indices >= rows).astype(position)
         self.upper_indptr = np.zeros(self.n + 1, dtype=np.int32)
         self.upper_indptr[1:] = np.cumsum(np.bincount(rows[self.upper], minlength=self.n))
         self.upper_indices = self.indices[self.upper].astype(np.int32)
-        self.indptr32 = self.indptr.astype(np.int32)
-        self.indices32 = self.indices.astype(np.int32)
+        self.indptr32 = self.indptr.astype(np.int32, copy=False)
+        self.indices32 = self.indices.astype(np.int32, copy=False)
 
     def matches(self, A: sp.csr_matrix) -> bool:
         return (A.shape[0] == self.n and A.nnz == self.indices.size
@@ -154,10 +158,14 @@ class _Pattern:
         if self.transpose is None:
             return False
         scale = np.abs(data).max(initial=0.0)
-        return bool(np.abs(data - data[self.transpose]).max(initial=0.0) <= SYMMETRY_RTOL * scale)
+        difference = data[self.transpose]  # one temporary of nnz entries, worked in place
+        np.subtract(data, difference, out=difference)
+        np.abs(difference, out=difference)
+        return bool(difference.max(initial=0.0) <= SYMMETRY_RTOL * scale)
 
 
-def _transpose_map(indptr: NDArray, indices: NDArray, n: int) -> NDArray | None:
+def _transpose_map(indptr: NDArray, indices: NDArray, n: int,
+                   dtype: type = np.int64) -> NDArray | None:
     """Position of entry (j, i) for each entry (i, j) of a sorted CSR pattern, or None if some
     (j, i) is structurally absent. Transposes a matrix holding entry positions (SciPy's C++)."""
     nnz = indices.size
@@ -166,7 +174,7 @@ def _transpose_map(indptr: NDArray, indices: NDArray, n: int) -> NDArray | None:
     if not (np.array_equal(transposed.indptr, indptr)
             and np.array_equal(transposed.indices, indices)):
         return None
-    return transposed.data.astype(np.int64)
+    return transposed.data.astype(dtype)
 
 
 #: Below this many unknowns "auto" uses SuperLU even when PARDISO is installed: PARDISO's
