@@ -157,7 +157,7 @@ MIN_MATCHED_SPACING = 0.5
 
 def ordered_partners(
     x: NDArray[np.float64], interface: Interface, node1: ArrayLike, taken: ArrayLike = (),
-    kept: ArrayLike = (),
+    kept: ArrayLike = (), reference_arc: ArrayLike | None = None,
 ) -> NDArray[np.int64]:
     """Distinct surface-2 partners for the free candidates ``node1``, in the same order along
     both surfaces, for node-to-node contact with an ALE surface at any spacing ratio; -1 where a
@@ -171,7 +171,10 @@ def ordered_partners(
     matched is, each to its nearest partner where the order allows. Consecutive matched
     pairs, the kept pairs ``kept`` ((k, 2), which bound the order and whose surface-2 nodes
     are taken, as are ``taken``) included, must leave their surface-2 nodes at least
-    :data:`MIN_MATCHED_SPACING` of their present distance apart along surface 2. So a
+    :data:`MIN_MATCHED_SPACING` of their distance along surface 2 in ``reference_arc`` (the
+    arc length of every surface-2 node in the original mesh; default: at x). Measured on the
+    original mesh, repeated pairings cannot creep: a finer partner rolling over the ALE
+    surface does not pull one ALE node per partner node into its wake. So a
     partner finer than the ALE surface gets one node per ALE node and its other nodes stay
     unpaired; a coarser one gets one ALE node per partner node and the other ALE nodes are
     respaced between them by the mesh motion.
@@ -192,7 +195,8 @@ def ordered_partners(
     chain_index[s2] = np.arange(s2.size)
     cand, j, weight = _admissible_pairs(x, interface, node1, taken, kept_pairs, s2)
     kept_j = chain_index[kept_pairs[:, 1]]
-    picks = _best_matching(along[: node1.size], arc2, cand, j, weight,
+    spacing_arc = arc2 if reference_arc is None else np.asarray(reference_arc, dtype=float)
+    picks = _best_matching(along[: node1.size], arc2, spacing_arc, cand, j, weight,
                            along[node1.size:], kept_j)
     out[cand[picks]] = s2[j[picks]]
     return out
@@ -227,15 +231,17 @@ def _admissible_pairs(x: NDArray, interface: Interface, node1: NDArray, taken: A
     return cand, j, 1.0 + closeness / (node1.size + 1.0)
 
 
-def _best_matching(along: NDArray, arc2: NDArray, cand: NDArray, j: NDArray, weight: NDArray,
-                   kept_along: NDArray, kept_j: NDArray) -> NDArray[np.int64]:
+def _best_matching(along: NDArray, arc2: NDArray, spacing_arc: NDArray, cand: NDArray,
+                   j: NDArray, weight: NDArray, kept_along: NDArray, kept_j: NDArray
+                   ) -> NDArray[np.int64]:
     """Indices into the admissible pairs of the best order-preserving matching (see
     ``ordered_partners``): between each two consecutive kept pairs (and beyond the outer
-    ones) a longest-path DP over the pairs sorted along surface 2."""
+    ones) a longest-path DP over the pairs sorted along surface 2. ``arc2``: the surface-2
+    nodes' arc lengths at x, ``spacing_arc`` those the spacing rule measures."""
     order = np.argsort(kept_j)
     bounds_j = np.concatenate([[-1], kept_j[order], [arc2.size]])
     bounds_along = np.concatenate([[-np.inf], kept_along[order], [np.inf]])
-    bounds_arc = np.concatenate([[-np.inf], arc2[kept_j[order]], [np.inf]])
+    bounds_arc = np.concatenate([[-np.inf], spacing_arc[kept_j[order]], [np.inf]])
     picks = []
     for k in range(bounds_j.size - 1):
         inside = np.flatnonzero((j > bounds_j[k]) & (j < bounds_j[k + 1])
@@ -244,8 +250,8 @@ def _best_matching(along: NDArray, arc2: NDArray, cand: NDArray, j: NDArray, wei
         if inside.size:
             left = (bounds_along[k], bounds_arc[k])
             right = (bounds_along[k + 1], bounds_arc[k + 1])
-            picks += _interval_matching(inside, along[cand], arc2[j], j, cand, weight, left,
-                                        right)
+            picks += _interval_matching(inside, along[cand], spacing_arc[j], j, cand, weight,
+                                        left, right)
     return np.asarray(picks, dtype=np.int64)
 
 
