@@ -24,6 +24,9 @@ from .problem import StepState
 #: Active ALE nodes end their step on their partners to this fraction of the surface spacing
 #: (``mesh_settled``): the augmentations go on until the mesh motion settles this far.
 SETTLED = 1e-7
+#: a pair whose predicted gap exceeds this fraction of the ALE surface's smallest spacing
+#: slides along the ALE surface's own normal, not the pair's (``_request``)
+DEEP = 0.5
 
 
 @dataclass(frozen=True)
@@ -109,8 +112,14 @@ def _request(model: Model, setup: AleSetup, base: StepState, prev: AleUpdate | N
     x_mesh = base.x if prev is None else _placed(base.x, prev.x_mesh, setup)
     normal = _contact_normals(model, contact, x_pred, nodes)
     offset = x_pred[partners] - x_pred[nodes]
-    across = offset - np.einsum("ij,ij->i", offset, normal)[:, None] * normal
     chord_start, chord_end = (_surface_chords(setup, nodes, y) for y in (x_mesh, x_pred))
+    # a predicted end deeper than DEEP x the spacing inside the body (a first step at high
+    # speed) is no contact configuration, and the pair normal there no line of action: the
+    # node then slides by the offset along its own surface, as the normal foot gives it
+    own = np.column_stack([chord_end[:, 1], -chord_end[:, 0]])
+    deep = np.abs(np.einsum("ij,ij->i", offset, normal)) > DEEP * setup.motion.min_spacing
+    normal[deep] = own[deep]
+    across = offset - np.einsum("ij,ij->i", offset, normal)[:, None] * normal
     slide = np.einsum("ij,ij->i", across, chord_end)
     return x_start, (nodes, partners, x_start + slide[:, None] * chord_start)
 
