@@ -59,11 +59,17 @@ def sliding_block(ratio: float, speed: float, shift: float, steps: int = 10,
 
 
 def offsets_across_normal(model, record) -> np.ndarray:
-    """|offset of the two nodes of every active pair across the pair's contact normal|."""
+    """|offset of the two nodes of every active pair across its line of action|: the pair's
+    contact normal where it is closed (g >= 0), the ALE surface's normal where it is open."""
     rows = record.extra["contact_rows"]
     pairs = np.column_stack([rows["node_1"], rows["node_2"]]).astype(np.int64)
     x = record.state.x
-    normal, _, _ = pair_gaps(x, model.interfaces[0].interface, pairs)
+    surfaces = model.interfaces[0].interface
+    normal, gap, _ = pair_gaps(x, surfaces, pairs)
+    k = surfaces.surface2.index_of(pairs[:, 1])
+    chord = x[surfaces.surface2.next[k]] - x[surfaces.surface2.prev[k]]
+    own = np.column_stack([chord[:, 1], -chord[:, 0]]) / np.linalg.norm(chord, axis=1)[:, None]
+    normal[gap < 0.0] = own[gap < 0.0]
     offset = x[pairs[:, 0]] - x[pairs[:, 1]]
     across = offset - np.einsum("ij,ij->i", offset, normal)[:, None] * normal
     return np.linalg.norm(across, axis=1)

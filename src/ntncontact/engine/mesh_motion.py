@@ -116,9 +116,12 @@ def _request(model: Model, setup: AleSetup, base: StepState, prev: AleUpdate | N
     # a predicted end deeper than DEEP x the spacing inside the body (a first step at high
     # speed) is no contact configuration, and the pair normal there no line of action: the
     # node then slides by the offset along its own surface, as the normal foot gives it
+    # an open pair (predicted gap < 0) carries no force along n: its node then sits under
+    # its partner along the ALE surface's own normal
     own = np.column_stack([chord_end[:, 1], -chord_end[:, 0]])
-    deep = np.abs(np.einsum("ij,ij->i", offset, normal)) > DEEP * setup.motion.min_spacing
-    normal[deep] = own[deep]
+    along_n = np.einsum("ij,ij->i", offset, normal)  # the predicted gap
+    keep = (along_n >= 0.0) & (along_n <= DEEP * setup.motion.min_spacing)
+    normal[~keep] = own[~keep]
     across = offset - np.einsum("ij,ij->i", offset, normal)[:, None] * normal
     slide = np.einsum("ij,ij->i", across, chord_end)
     return x_start, (nodes, partners, x_start + slide[:, None] * chord_start)
@@ -133,7 +136,8 @@ def _contact_normals(model: Model, contact: Sequence[PairState], x: NDArray,
         if len(state):
             normal, _, _ = pair_gaps(x, ci.interface, state.pairs)
             for side in (0, 1):  # the report moves the body-2 node: its pair comes first
-                out[state.pairs[::-1, side]] = normal[::-1]
+                # oriented so that (partner - node) . n is the gap g (> 0: penetration)
+                out[state.pairs[::-1, side]] = normal[::-1] if side == 1 else -normal[::-1]
     return out[nodes]
 
 
