@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from ntncontact.ale.example_mesh_motion import layer_mesh
-from ntncontact.ale.motion import AleBody, lumped_masses, move_ale_body
+from ntncontact.ale.motion import AleBody, AleMotionError, lumped_masses, move_ale_body
 from ntncontact.ale.remap import momenta
 from ntncontact.mesh.generators import annulus, rectangle
 from ntncontact.mesh.quadmesh import MeshError
@@ -235,8 +235,14 @@ def test_crossing_targets_raise_mesh_error_naming_the_body():
     x = X + d
     active = body.surface[[3, 4]]
     x_target, x_pred = slide_targets(x, active, [0.3, -0.3], (-1.0, 0.0), v)
-    with pytest.raises(MeshError, match="body 'foundation'.*swap order"):
+    with pytest.raises(AleMotionError, match="body 'foundation'.*swap order") as err:
         move_ale_body(body, X, d, v, a, active, x_target, x_pred, DT)
+    message = str(err.value)
+    assert isinstance(err.value, MeshError) and "\n" not in message
+    # the two nodes (local numbers, with their positions) and what to change
+    for node in active:
+        assert f" {node}" in message and f"({x[node, 0]:.6g}, {x[node, 1]:.6g})" in message
+    assert "analysis.dt" in message and "2x the partner surface's spacing" in message
 
 
 def test_later_augmentation_from_the_original_state_with_x_start():

@@ -85,8 +85,8 @@ def remap_changes(*overrides):
     changes = []
     original = Simulation._solve_step
 
-    def spy(self, state, contact, dt):
-        solved = original(self, state, contact, dt)
+    def spy(self, state, contact, dt, *more, **options):
+        solved = original(self, state, contact, dt, *more, **options)
         if solved.state is not state:
             before, after = self.balance(state), self.balance(solved.state)
             changes.append((after.kinetic_energy - before.kinetic_energy,

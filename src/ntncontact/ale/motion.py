@@ -137,7 +137,7 @@ from ntncontact.mesh.quality import (
 
 from ..jit import njit
 
-__all__ = ["AleBody", "AleUpdate", "lumped_masses", "move_ale_body"]
+__all__ = ["AleBody", "AleMotionError", "AleUpdate", "lumped_masses", "move_ale_body"]
 
 RespaceMethod = Literal["local", "reference"]
 InteriorMethod = Literal["minimal", "displacement", "position"]
@@ -160,6 +160,12 @@ _DN = np.ascontiguousarray(0.25 * np.stack([_XI[:, 0] * (1.0 + _XI[:, 1] * _GP[:
                                             _XI[:, 1] * (1.0 + _XI[:, 0] * _GP[:, 0:1])],
                                            axis=-1))
 _SHAPE = 0.25 * (1.0 + _GP[:, None, 0] * _XI[:, 0]) * (1.0 + _GP[:, None, 1] * _XI[:, 1])
+
+
+class AleMotionError(MeshError):
+    """No valid motion of an ALE mesh exists for this step's contact pairs (targets that
+    cross, an element that would invert, a node that leaves the old mesh). The time loop cuts
+    the step back; if that does not help, its message names the step and the time."""
 
 
 def _frozen(values: ArrayLike, dtype: type) -> NDArray:
@@ -546,10 +552,19 @@ def _move_surface(
         body.min_spacing_ratio, _SNAP, 1.0 - tol, 1.0 / (1.0 - tol), body.respace == "local",
         _SNAP * tn.h_min)
     if bad >= 0:
-        a, b = chain.nodes[idx[bad]], chain.nodes[idx[bad + 1]]
-        raise MeshError(f"body '{body.name}': surface nodes {a} and {b} would swap order (their "
-                        "contact targets cross); cannot move the ALE mesh")
+        raise AleMotionError(_crossing_message(body, tn.x, chain.nodes[idx[bad]],
+                                               chain.nodes[idx[bad + 1]]))
     return x, slides, clamped, float(mismatch), int(resets)
+
+
+def _crossing_message(body: AleBody, x: NDArray, a: int, b: int) -> str:
+    """Which nodes would swap, where, and what to change (one line)."""
+    where = " and ".join(f"({x[n, 0]:.6g}, {x[n, 1]:.6g})" for n in (a, b))
+    return (f"body '{body.name}': ALE surface nodes {a} and {b} (at {where}) would swap order: "
+            "the contact partners they follow cross, so no valid motion of the ALE mesh "
+            "exists; shorten the time step (analysis.dt), or refine the ALE surface to at most "
+            "2x the partner surface's spacing (or coarsen the partner) so that each ALE node "
+            "has one partner nearby")
 
 
 def _changes(body: AleBody, tn: _TnState, x_new: NDArray) -> tuple[NDArray, NDArray, bool, bool]:

@@ -149,52 +149,139 @@ def closest_pairs(
                    gap, proj_gap, cnt[inv.reshape(-1)] > 1)
 
 
-def ordered_partners(
-    x: NDArray[np.float64], interface: Interface, node1: ArrayLike, taken: ArrayLike = ()
-) -> NDArray[np.int64]:
-    """Distinct surface-2 partners for ``node1``, in the same order along both surfaces.
+#: Two new pairs, or a new and a kept pair, may bring their surface-2 nodes no closer than
+#: this fraction of their present distance along surface 2: the same band the ALE respacing
+#: keeps (``ale.motion``, spacing_tolerance = 0.5), so pairing never squeezes the ALE surface.
+MIN_MATCHED_SPACING = 0.5
 
-    For node-to-node contact with an ALE partner surface, nearest-node pairing can give two
-    nodes the same partner (graded or coarser partner meshes). This picks strictly increasing
-    chain positions j_1 < ... < j_m for the candidates sorted along surface 2 (by their closest
-    projection) minimizing the summed distances |x1_i - x2_{j_i}| (dynamic programming, O(m N)).
-    Nodes in ``taken`` are not used. Open partner surfaces only; returns -1 where no partner
-    can be assigned (more candidates than free nodes).
+
+def ordered_partners(
+    x: NDArray[np.float64], interface: Interface, node1: ArrayLike, taken: ArrayLike = (),
+    kept: ArrayLike = (), reference_arc: ArrayLike | None = None,
+) -> NDArray[np.int64]:
+    """Distinct surface-2 partners for the free candidates ``node1``, in the same order along
+    both surfaces, for node-to-node contact with an ALE surface at any spacing ratio; -1 where a
+    candidate stays unpaired. Open partner surfaces only.
+
+    Rule (docs/theory.md, "Partners at any spacing ratio"): among the pairs (i, j) whose nodes
+    lie within reach, |x_i - x_j| <= r_ij = the longer of the two nodes' longest adjacent
+    segments, choose an order-preserving matching (candidates ordered by their closest
+    projection on surface 2, surface-2 nodes by their chain index) with the most pairs and,
+    of those, the largest summed closeness 1 - |x_i - x_j| / r_ij: every node that can be
+    matched is, each to its nearest partner where the order allows. Consecutive matched
+    pairs, the kept pairs ``kept`` ((k, 2), which bound the order and whose surface-2 nodes
+    are taken, as are ``taken``) included, must leave their surface-2 nodes at least
+    :data:`MIN_MATCHED_SPACING` of their distance along surface 2 in ``reference_arc`` (the
+    arc length of every surface-2 node in the original mesh; default: at x). Measured on the
+    original mesh, repeated pairings cannot creep: a finer partner rolling over the ALE
+    surface does not pull one ALE node per partner node into its wake. So a
+    partner finer than the ALE surface gets one node per ALE node and its other nodes stay
+    unpaired; a coarser one gets one ALE node per partner node and the other ALE nodes are
+    respaced between them by the mesh motion.
+    Dynamic programming over the admissible pairs (a few per candidate).
     """
     node1 = np.asarray(node1, dtype=np.int64)
-    s2 = interface.surface2
     out = np.full(node1.size, -1, dtype=np.int64)
+    kept_pairs = np.asarray(kept, dtype=np.int64).reshape(-1, 2)
     if node1.size == 0:
         return out
-    proj = closest_pairs(x, interface, candidates=node1)
-    order = np.argsort(proj.segment + proj.xi, kind="stable")
-    dist = np.linalg.norm(x[node1[order], None, :] - x[s2.nodes][None, :, :], axis=2)
-    dist[:, np.isin(s2.nodes, np.asarray(taken, dtype=np.int64))] = np.inf
-    m, n = dist.shape
-    if m > n:
-        return out
-    cost = np.full((m, n), np.inf)
-    choice = np.zeros((m, n), dtype=np.int64)
-    cost[0] = dist[0]
-    for i in range(1, m):  # loop over candidates (a handful per step), vectorized over nodes
-        best = np.minimum.accumulate(cost[i - 1])
-        arg = _running_argmin(cost[i - 1])
-        cost[i, 1:] = best[:-1] + dist[i, 1:]
-        choice[i, 1:] = arg[:-1]
-    if not np.isfinite(cost[-1].min()):
-        return out
-    j = int(np.argmin(cost[-1]))
-    picks = np.empty(m, dtype=np.int64)
-    for i in range(m - 1, -1, -1):
-        picks[i] = j
-        j = choice[i, j]
-    out[order] = s2.nodes[picks]
+    s2 = interface.surface2.nodes
+    arc2 = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(x[s2], axis=0), axis=1))])
+    proj = closest_pairs(x, interface, candidates=np.concatenate([node1, kept_pairs[:, 0]]))
+    edges2 = interface.surface2.edges()
+    along = arc2[proj.segment] + proj.xi * np.linalg.norm(
+        x[edges2[proj.segment, 1]] - x[edges2[proj.segment, 0]], axis=1)
+    chain_index = np.full(len(x), -1, dtype=np.int64)
+    chain_index[s2] = np.arange(s2.size)
+    cand, j, weight = _admissible_pairs(x, interface, node1, taken, kept_pairs, s2)
+    kept_j = chain_index[kept_pairs[:, 1]]
+    spacing_arc = arc2 if reference_arc is None else np.asarray(reference_arc, dtype=float)
+    picks = _best_matching(along[: node1.size], arc2, spacing_arc, cand, j, weight,
+                           along[node1.size:], kept_j)
+    out[cand[picks]] = s2[j[picks]]
     return out
 
 
-def _running_argmin(values: NDArray[np.float64]) -> NDArray[np.int64]:
-    """Index of the minimum of values[:k+1] for every k."""
-    idx = np.arange(values.size)
-    best = np.minimum.accumulate(values)
-    is_new = values <= best
-    return np.maximum.accumulate(np.where(is_new, idx, 0))
+def _longest_adjacent_segment(x: NDArray, surface) -> NDArray[np.float64]:
+    """Per node of ``surface`` (chain order) the length of its longer adjacent segment."""
+    edges = surface.edges()
+    length = np.linalg.norm(x[edges[:, 1]] - x[edges[:, 0]], axis=1)
+    position = np.full(len(x), -1, dtype=np.int64)
+    position[surface.nodes] = np.arange(surface.size)
+    out = np.zeros(surface.size)
+    for end in (0, 1):
+        np.maximum.at(out, position[edges[:, end]], length)
+    return out
+
+
+def _admissible_pairs(x: NDArray, interface: Interface, node1: NDArray, taken: ArrayLike,
+                      kept: NDArray, s2: NDArray) -> tuple[NDArray, NDArray, NDArray]:
+    """(candidate index, surface-2 chain index, weight) of the pairs within reach whose
+    surface-2 node is free: weight 1 + closeness / (C + 1) for C candidates, so that a
+    matching with more pairs always weighs more, and of equally many the closer one."""
+    s1 = interface.surface1
+    reach1 = np.zeros(len(x))
+    reach1[s1.nodes] = _longest_adjacent_segment(x, s1)
+    reach2 = _longest_adjacent_segment(x, interface.surface2)
+    dist = np.linalg.norm(x[node1][:, None, :] - x[s2][None, :, :], axis=2)
+    reach = np.maximum(reach1[node1][:, None], reach2[None, :])
+    busy = np.isin(s2, np.concatenate([np.asarray(taken, np.int64).reshape(-1), kept[:, 1]]))
+    cand, j = np.nonzero((dist <= reach) & ~busy[None, :])
+    closeness = 1.0 - dist[cand, j] / reach[cand, j]
+    return cand, j, 1.0 + closeness / (node1.size + 1.0)
+
+
+def _best_matching(along: NDArray, arc2: NDArray, spacing_arc: NDArray, cand: NDArray,
+                   j: NDArray, weight: NDArray, kept_along: NDArray, kept_j: NDArray
+                   ) -> NDArray[np.int64]:
+    """Indices into the admissible pairs of the best order-preserving matching (see
+    ``ordered_partners``): between each two consecutive kept pairs (and beyond the outer
+    ones) a longest-path DP over the pairs sorted along surface 2. ``arc2``: the surface-2
+    nodes' arc lengths at x, ``spacing_arc`` those the spacing rule measures."""
+    order = np.argsort(kept_j)
+    bounds_j = np.concatenate([[-1], kept_j[order], [arc2.size]])
+    bounds_along = np.concatenate([[-np.inf], kept_along[order], [np.inf]])
+    bounds_arc = np.concatenate([[-np.inf], spacing_arc[kept_j[order]], [np.inf]])
+    picks = []
+    for k in range(bounds_j.size - 1):
+        inside = np.flatnonzero((j > bounds_j[k]) & (j < bounds_j[k + 1])
+                                & (along[cand] > bounds_along[k])
+                                & (along[cand] < bounds_along[k + 1]))
+        if inside.size:
+            left = (bounds_along[k], bounds_arc[k])
+            right = (bounds_along[k + 1], bounds_arc[k + 1])
+            picks += _interval_matching(inside, along[cand], spacing_arc[j], j, cand, weight,
+                                        left, right)
+    return np.asarray(picks, dtype=np.int64)
+
+
+def _interval_matching(pairs: NDArray, along: NDArray, arc: NDArray, j: NDArray, cand: NDArray,
+                       weight: NDArray, left: tuple, right: tuple) -> list[int]:
+    """The DP of ``_best_matching`` on the admissible ``pairs`` between two anchors (left and
+    right: (position of the partner along surface 2, arc length of the surface-2 node), each
+    infinite where there is none)."""
+
+    def spaced(a_along, a_arc, b_along, b_arc):  # b follows a: far enough apart on surface 2
+        with np.errstate(invalid="ignore"):
+            return ~(b_along - a_along < MIN_MATCHED_SPACING * (b_arc - a_arc))
+
+    pairs = pairs[np.lexsort((j[pairs], along[pairs]))]
+    p_along, p_arc, p_j, p_cand = along[pairs], arc[pairs], j[pairs], cand[pairs]
+    best = np.where(spaced(left[0], left[1], p_along, p_arc), weight[pairs], -np.inf)
+    back = np.full(pairs.size, -1, dtype=np.int64)
+    for q in range(pairs.size):
+        prev = np.flatnonzero((p_cand[:q] != p_cand[q]) & (p_j[:q] < p_j[q])
+                              & (p_along[:q] < p_along[q])
+                              & spaced(p_along[:q], p_arc[:q], p_along[q], p_arc[q]))
+        if prev.size:
+            k = prev[np.argmax(best[prev])]
+            if best[k] + weight[pairs[q]] > best[q]:
+                best[q], back[q] = best[k] + weight[pairs[q]], k
+    best[~spaced(p_along, p_arc, right[0], right[1])] = -np.inf
+    if not np.any(best > 0.0):
+        return []
+    q, out = int(np.argmax(best)), []
+    while q >= 0:
+        out.append(int(pairs[q]))
+        q = int(back[q])
+    return out

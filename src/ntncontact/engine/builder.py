@@ -30,7 +30,7 @@ from ..io.scenario import (
 )
 from ..materials.models import Material, MaterialError
 from ..mesh import generators
-from ..mesh.boundary import surface_chain
+from ..mesh.boundary import chain_edge_lengths, surface_chain
 from ..mesh.overlap import deepest_overlap
 from ..mesh.quadmesh import MeshError, QuadMesh
 from ..mesh.quality import check_elements
@@ -272,7 +272,13 @@ def _interface(cfg: ContactConfig, index: int, bodies: tuple[Body, ...],
                                    else "penetration")) == "predicted"
     return ContactInterface(cfg.name or f"interface{index}", Interface(surface1, surface2), law,
                             persistency, candidates, cfg.release_steps, tol, max_aug, ordered,
-                            predicted, aug.update, aug.on_limit == "accept")
+                            predicted, aug.update, aug.on_limit == "accept",
+                            reference_arc2=_arc_lengths(b2.mesh.nodes[chain2.nodes]))
+
+
+def _arc_lengths(xy: np.ndarray) -> np.ndarray:
+    """Arc length of every node along an (open) chain."""
+    return np.concatenate([[0.0], np.cumsum(chain_edge_lengths(xy, False))])
 
 
 def _check_no_overlap(index: int, cfg: ContactConfig, ci: ContactInterface,

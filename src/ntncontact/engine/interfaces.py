@@ -66,9 +66,11 @@ def _near_candidates(x: NDArray, ci: ContactInterface) -> NDArray:
 
 def _ordered_candidates(x: NDArray, ci: ContactInterface, state: PairState,
                         near: NDArray) -> NDArray:
-    """Distinct, order-preserving partners for the free candidates (ALE partner surface)."""
+    """Distinct, order-preserving partners for the free candidates (ALE partner surface):
+    mutual nearest nodes, the kept pairs competing and bounding the order."""
     free = near[~np.isin(near, state.pairs[:, 0])]
-    partners = ordered_partners(x, ci.interface, free, taken=state.pairs[:, 1])
+    partners = ordered_partners(x, ci.interface, free, kept=state.pairs,
+                                reference_arc=ci.reference_arc2)
     return np.column_stack([free, partners])[partners >= 0]
 
 

@@ -14,13 +14,21 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 from numpy.typing import NDArray
 
-from ..ale.motion import AleUpdate, move_ale_body
-from ..ale.multisurface import meeting_points, move_ale_surfaces, nodal_masses
-from ..contact import PairState
+from ..ale.motion import AleMotionError, AleUpdate, move_ale_body
+from ..ale.multisurface import meeting_points, move_ale_surfaces, nodal_masses, surface_of_nodes
+from ..contact import PairState, pair_gaps
 from ..jit import njit
+from ..mesh.quadmesh import MeshError
 from .model import AleSetup, Model
 from .problem import StepState
 from .remap_conservation import conserve_remap
+
+#: Active ALE nodes end their step on their partners to this fraction of the surface spacing
+#: (``mesh_settled``): the augmentations go on until the mesh motion settles this far.
+SETTLED = 1e-7
+#: a pair whose predicted gap exceeds this fraction of the ALE surface's smallest spacing
+#: slides along the ALE surface's own normal, not the pair's (``_request``)
+DEEP = 0.5
 
 
 @dataclass(frozen=True)
@@ -84,18 +92,15 @@ def move_meshes(
             continue
         rows = slice(setup.node_offset, setup.node_offset + setup.n_nodes)
         prev = previous.updates[i] if previous is not None else None
-        x_start = prev.x_mesh[nodes - setup.node_offset] if prev is not None else base.x[nodes]
         targets = _targets(masses, nodes, partners, x_pred, setup)
-        # where the active node must sit at t_n so that its particle ends on the partner
-        wanted = targets - (x_pred[nodes] - x_start)
-        request = (nodes, partners, wanted)
+        x_start, request = _request(model, setup, base, prev, contact, nodes, partners,
+                                    x_pred, targets, masses.is_ale[partners])
         if prev is not None and _same_request(previous.requests[i], request, setup):
             up, request = prev, previous.requests[i]  # the move would be below its tolerance
         else:
-            move = move_ale_surfaces if setup.more_motions else move_ale_body
-            up = move(setup.motions if setup.more_motions else setup.motion, base.X[rows],
-                      base.d[rows], base.v[rows], base.a[rows], nodes - setup.node_offset,
-                      targets, x_pred[nodes], dt, x_start)
+            # the target as the move takes it: wanted = target - (end - start)
+            target = request[2] + x_pred[nodes] - x_start
+            up = _moved(setup, base, rows, nodes, target, x_pred[nodes], dt, x_start)
             # momenta and energy exactly as the time loop measures them (docs/theory.md)
             up = conserve_remap(model, setup, base.X, base.d, base.v, base.time, up)
         X[rows], d[rows], v[rows], a[rows] = up.X, up.d, up.v, up.a
@@ -196,6 +201,124 @@ def _surface_tangents(setup: AleSetup, nodes: NDArray, x: NDArray) -> NDArray:
             out[i] = chord / np.linalg.norm(chord)
             break
     return out
+
+
+def _request(model: Model, setup: AleSetup, base: StepState, prev: AleUpdate | None,
+             contact: Sequence[PairState], nodes: NDArray, partners: NDArray, x_pred: NDArray,
+             targets: NDArray, both_ale: NDArray) -> tuple[NDArray, tuple]:
+    """(t_n positions of the active nodes' particles, the move's request: active nodes,
+    partners and where each node must sit at t_n so that its particle ends on its partner).
+
+    Node to node means no offset across the contact normal n (the pair's normal at the end
+    of the step, as the contact kernel takes it); the offset along n is the gap, which
+    contact, not the mesh, closes. So the node slides along its t_n surface by the predicted
+    end offset's part across n, measured along the surface's end-of-step chord and laid on
+    its t_n chord (the surface may turn over the step). At the fixed point of the
+    augmentations (``mesh_settled``) that part vanishes. ``targets``: where each particle must
+    end (``_targets``); a pair between two ALE bodies (``both_ale``) aims its node straight at
+    its meeting point instead (``_aim`` corrects the miss along the surface)."""
+    x_start = prev.x_mesh[nodes - setup.node_offset] if prev is not None else base.x[nodes]
+    x_mesh = base.x if prev is None else _placed(base.x, prev.x_mesh, setup)
+    normal = _contact_normals(model, contact, x_pred, nodes)
+    offset = targets - x_pred[nodes]
+    chord_start, chord_end = (_surface_chords(setup, nodes, y) for y in (x_mesh, x_pred))
+    # a predicted end deeper than DEEP x the spacing inside the body (a first step at high
+    # speed) is no contact configuration, and the pair normal there no line of action: the
+    # node then slides by the offset along its own surface, as the normal foot gives it
+    # an open pair (predicted gap < 0) carries no force along n: its node then sits under
+    # its partner along the ALE surface's own normal
+    own = np.column_stack([chord_end[:, 1], -chord_end[:, 0]])
+    along_n = np.einsum("ij,ij->i", offset, normal)  # the predicted gap
+    keep = (along_n >= 0.0) & (along_n <= DEEP * setup.motion.min_spacing)
+    normal[~keep] = own[~keep]
+    across = offset - np.einsum("ij,ij->i", offset, normal)[:, None] * normal
+    slide = np.einsum("ij,ij->i", across, chord_end)
+    wanted = x_start + slide[:, None] * chord_start
+    wanted[both_ale] = x_start[both_ale] + offset[both_ale]
+    return x_start, (nodes, partners, wanted)
+
+
+def _contact_normals(model: Model, contact: Sequence[PairState], x: NDArray,
+                     nodes: NDArray) -> NDArray:
+    """The contact normal at ``x`` of the pair of every active node (its first pair, as in
+    ``_ale_nodes_and_partners``)."""
+    out = np.full((len(x), 2), np.nan)
+    for ci, state in reversed(list(zip(model.interfaces, contact, strict=True))):
+        if len(state):
+            normal, _, _ = pair_gaps(x, ci.interface, state.pairs)
+            for side in (0, 1):  # the report moves the body-2 node: its pair comes first
+                # oriented so that (partner - node) . n is the gap g (> 0: penetration)
+                out[state.pairs[::-1, side]] = normal[::-1] if side == 1 else -normal[::-1]
+    return out[nodes]
+
+
+def _surface_chords(setup: AleSetup, nodes: NDArray, x: NDArray) -> NDArray:
+    """Unit chord between the two chain neighbours of every active node at ``x``, on the
+    contact surface the node is moved with (``ale.multisurface.surface_of_nodes``)."""
+    local = nodes - setup.node_offset
+    which = np.maximum(surface_of_nodes(setup.motions, local), 0)
+    chord = np.zeros((nodes.size, 2))
+    for s, body in enumerate(setup.motions):
+        on = which == s
+        n = body.surface.size
+        k = body._surface_index[local[on]]
+        if body.closed:
+            before, after = body.surface[(k - 1) % n], body.surface[(k + 1) % n]
+        else:
+            before = body.surface[np.maximum(k - 1, 0)]
+            after = body.surface[np.minimum(k + 1, n - 1)]
+        chord[on] = x[after + setup.node_offset] - x[before + setup.node_offset]
+    return chord / np.linalg.norm(chord, axis=1)[:, None]
+
+
+def _placed(x: NDArray, body_x: NDArray, setup: AleSetup) -> NDArray:
+    """``x`` with the ALE body's rows replaced by ``body_x``."""
+    out = x.copy()
+    out[setup.node_offset:setup.node_offset + setup.n_nodes] = body_x
+    return out
+
+
+def mesh_settled(model: Model, base: StepState, contact: Sequence[PairState],
+                 x_pred: NDArray, motion: MeshMotion | None) -> bool:
+    """True if moving the meshes again for the end-of-step positions ``x_pred`` of the last
+    solution would move no active node by more than :data:`SETTLED` of its body's smallest
+    surface spacing. The move of an augmentation is made for the previous solution's
+    prediction, and a sliding node's particle does not land exactly on its partner until
+    this fixed point settles (the multipliers' test does not see tangential changes)."""
+    if motion is None:
+        return True
+    masses = _AleMasses(model, base, dict(motion.meetings))  # a copy: nothing is recorded
+    for i, setup in enumerate(model.ale_bodies):
+        nodes, partners = _ale_nodes_and_partners(setup, contact)
+        old = motion.requests[i] if i < len(motion.requests) else None
+        if old is None or nodes.size == 0:
+            if nodes.size:
+                return False
+            continue
+        targets = _targets(masses, nodes, partners, x_pred, setup)
+        _, new = _request(model, setup, base, motion.updates[i], contact, nodes, partners,
+                          x_pred, targets, masses.is_ale[partners])
+        if not (np.array_equal(old[0], new[0]) and np.array_equal(old[1], new[1])):
+            return False
+        if float(np.abs(new[2] - old[2]).max()) > SETTLED * setup.motion.min_spacing:
+            return False
+    return True
+
+
+def _moved(setup: AleSetup, base: StepState, rows: slice, nodes: NDArray, x_target: NDArray,
+           x_end: NDArray, dt: float, x_start: NDArray) -> AleUpdate:
+    """``move_ale_body`` (``move_ale_surfaces`` for several contact surfaces) on the body's
+    rows; any mesh failure of the move (an inverted element, a node outside the old mesh) is
+    an AleMotionError, which the time loop cuts back."""
+    move = move_ale_surfaces if setup.more_motions else move_ale_body
+    try:
+        return move(setup.motions if setup.more_motions else setup.motion, base.X[rows],
+                    base.d[rows], base.v[rows], base.a[rows], nodes - setup.node_offset,
+                    x_target, x_end, dt, x_start)
+    except AleMotionError:
+        raise
+    except MeshError as err:
+        raise AleMotionError(f"ALE mesh motion: {err}") from err
 
 
 def _same_request(old, new, setup: AleSetup) -> bool:

@@ -161,6 +161,9 @@ class ContactInterface:
     multiplier_update: str = "uzawa"
     #: augmentation.on_limit = "accept": a step whose augmentations ran out keeps its last one
     accept_unconverged: bool = False
+    #: arc length of every surface-2 node along surface 2 in the original mesh: ordered
+    #: pairing keeps new pairs' surface-2 nodes half their ORIGINAL distance apart
+    reference_arc2: NDArray | None = None
 
 
 @dataclass(frozen=True)

@@ -10,6 +10,7 @@ import numpy as np
 import scipy.sparse as sp
 from numpy.typing import NDArray
 
+from ..ale.motion import AleMotionError
 from ..contact import PairState, lagrange_blocks, newton_update
 from ..dynamics.energy import EndEnergy, EnergyConsistentContact
 from ..dynamics.mass import MovingMass
@@ -32,7 +33,7 @@ from .interfaces import (
     unconverged_interfaces,
     with_solved_multipliers,
 )
-from .mesh_motion import move_meshes
+from .mesh_motion import mesh_settled, move_meshes
 from .model import Model
 from .problem import StepProblem, StepState
 from .reactions import support_reactions, support_sets
@@ -290,7 +291,10 @@ class Simulation:
                                                    factors, sensitivities)
             guess = (d.ravel(), state.d)
             x_pred = state.X + (2.0 * d - state.d if self.dynamic else d)
-            if done:
+            # converged multipliers on a mesh moved for the previous solution: once more on
+            # the mesh moved for this one, so that pairs end node to node (mesh_settled)
+            if done and (augmentation == self.max_augmentations
+                         or mesh_settled(self.model, base, contact, x_pred, motion)):
                 break
             previous, before = results, previous
         if not done:
@@ -481,7 +485,8 @@ class Simulation:
             try:
                 before = dict(self._step_work)
                 state, its = self.advance(state, h)
-            except (NewtonError, InvertedElementError, np.linalg.LinAlgError, RuntimeError) as err:
+            except (NewtonError, InvertedElementError, AleMotionError, np.linalg.LinAlgError,
+                    RuntimeError) as err:
                 cuts += 1
                 if cuts > self.model.analysis.max_cutbacks:
                     raise SimulationError(

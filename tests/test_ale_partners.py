@@ -1,0 +1,247 @@
+"""ALE contact at any spacing ratio (issue 17, item 1; docs/theory.md, "Partners at any
+spacing ratio"): a partner surface finer or coarser than the ALE surface, up to 4x either way.
+
+- Property test: a block slides on an ALE base at a random speed, its bottom spacing a random
+  1/4 to 4 times the base's; the ALE never fails and every active pair ends its step node to
+  node (no offset across the contact normal beyond 1e-6 of the spacing).
+- The user case of the issue: a Neo-Hookean disk with 64 outer nodes (radius 0.5, from gmsh)
+  dropped with friction 0.3 and a body force on an ALE block 4 x 0.5 with nx = 40, i.e. a
+  partner twice as fine as the ALE surface (it stopped at step 116: "surface nodes 226 and 225
+  would swap order").
+- Where no valid motion exists the step is cut back, and the run stops with one line naming
+  the step, the time, the body and what to change.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from helpers import Recorder, model_from_dict
+
+from ntncontact.ale.motion import AleMotionError
+from ntncontact.contact import pair_gaps
+from ntncontact.engine import mesh_motion
+from ntncontact.engine.simulation import Simulation, SimulationError
+from ntncontact.mesh.quadmesh import MeshError
+
+BASE_SPACING = 0.125  # the ALE base: 4.0 wide, 32 elements
+#: node to node: no offset across the contact normal beyond this fraction of the spacing
+NODE_TO_NODE = 1e-6
+T_DISK = 0.3  # lands at t = 0.02, then rolls and slides: 56 contact steps
+
+
+def sliding_block(ratio: float, speed: float, shift: float, steps: int = 10,
+                  dt: float = 0.02) -> dict:
+    """A 1.0 x 0.25 block (bottom spacing BASE_SPACING / ratio) landing slowly at x = 0.5 +
+    shift on an ALE base, pressed by its weight and sliding at ``speed``; it stays clear of the
+    base's corners (at most 0.6 of travel from x >= 0.5 on [-1, 3])."""
+    nx_top = max(round(ratio / BASE_SPACING), 1)
+    return {
+        "analysis": {"kind": "dynamic", "dt": dt, "t_end": steps * dt},
+        "bodies": [
+            {"name": "block", "mesh": {"type": "rectangle", "width": 1.0, "height": 0.25,
+                                       "nx": nx_top, "ny": 2, "origin": [0.5 + shift, 0.001]},
+             "material": {"model": "neo_hookean", "lambda": 115.38, "mu": 76.92,
+                          "density": 1.0},
+             "initial": {"velocity": [speed, -0.1]},
+             "loads": [{"type": "body_force", "vector": [0.0, -20.0]}]},
+            {"name": "base", "mesh_motion": "ale", "ale": {"smoothing_layers": 1},
+             "mesh": {"type": "rectangle", "width": 4.0, "height": 0.2, "nx": 32, "ny": 2,
+                      "origin": [-1.0, -0.2]},
+             "material": {"model": "neo_hookean", "lambda": 2884.6, "mu": 1923.1,
+                          "density": 500.0}},
+        ],
+        "contact": [{"body_1": "block", "surface_1": "bottom", "body_2": "base",
+                     "surface_2": "top", "method": "augmented_lagrangian",
+                     "law": "persistency", "penalty_normal": 1000.0,
+                     "penalty_tangential": 1000.0}],
+    }
+
+
+def offsets_across_normal(model, record) -> np.ndarray:
+    """|offset of the two nodes of every active pair across its line of action|: the pair's
+    contact normal where it is closed (g >= 0), the ALE surface's normal where it is open."""
+    rows = record.extra["contact_rows"]
+    pairs = np.column_stack([rows["node_1"], rows["node_2"]]).astype(np.int64)
+    x = record.state.x
+    surfaces = model.interfaces[0].interface
+    normal, gap, _ = pair_gaps(x, surfaces, pairs)
+    k = surfaces.surface2.index_of(pairs[:, 1])
+    chord = x[surfaces.surface2.next[k]] - x[surfaces.surface2.prev[k]]
+    own = np.column_stack([chord[:, 1], -chord[:, 0]]) / np.linalg.norm(chord, axis=1)[:, None]
+    normal[gap < 0.0] = own[gap < 0.0]
+    offset = x[pairs[:, 0]] - x[pairs[:, 1]]
+    across = offset - np.einsum("ij,ij->i", offset, normal)[:, None] * normal
+    return np.linalg.norm(across, axis=1)
+
+
+def test_any_spacing_ratio_from_a_quarter_to_four_keeps_pairs_node_to_node():
+    rng = np.random.default_rng(17)
+    ratios = np.exp(rng.uniform(np.log(0.25), np.log(4.0), 5))
+    ratios[:2] = 0.25, 4.0  # both ends of the range, then random ones
+    for ratio in ratios:
+        speed, shift = rng.uniform(-3.0, 3.0), rng.uniform(0.0, BASE_SPACING)
+        rec = Recorder()
+        model = model_from_dict(sliding_block(ratio, speed, shift))
+        Simulation(model, [rec]).run()  # the ALE never fails
+        contact_steps = [r for r in rec.records[1:] if len(r.extra["contact_rows"]["node_1"])]
+        assert len(contact_steps) >= len(rec.records) - 3, (ratio, speed)  # lands, stays
+        surfaces = model.interfaces[0].interface
+        for record in contact_steps:
+            rows = record.extra["contact_rows"]
+            assert np.unique(rows["node_2"]).size == rows["node_2"].size  # distinct partners
+            # every node of the sparser side under the block is paired (but the two ends,
+            # which may just have landed or be waiting for a partner within reach)
+            x = record.state.x
+            bottom = x[surfaces.surface1.nodes, 0]
+            top = x[surfaces.surface2.nodes, 0]
+            under = np.count_nonzero((top >= bottom.min()) & (top <= bottom.max()))
+            sparser = min(bottom.size, under)
+            assert rows["node_1"].size >= sparser - 2, (ratio, speed, record.state.step)
+            worst = offsets_across_normal(model, record).max()
+            assert worst <= NODE_TO_NODE * BASE_SPACING, (ratio, speed, record.state.step)
+
+
+def write_gmsh_disk(path, n_outer: int = 64, radius: float = 0.5) -> None:
+    """An all-quad gmsh disk with ``n_outer`` nodes on its outer circle (edge set ``outer``)."""
+    gmsh = pytest.importorskip("gmsh")
+    gmsh.initialize()
+    try:
+        gmsh.option.setNumber("General.Terminal", 0)
+        gmsh.model.add("disk")
+        disk = gmsh.model.occ.addDisk(0.0, 0.0, 0.0, radius, radius)
+        gmsh.model.occ.synchronize()
+        circle = [tag for _, tag in gmsh.model.getBoundary([(2, disk)], oriented=False)]
+        gmsh.model.mesh.setTransfiniteCurve(circle[0], n_outer + 1)
+        gmsh.option.setNumber("Mesh.MeshSizeMax", 3.2 * np.pi * radius / n_outer)
+        gmsh.option.setNumber("Mesh.RecombineAll", 1)
+        gmsh.option.setNumber("Mesh.Algorithm", 8)  # frontal-Delaunay for quads
+        gmsh.option.setNumber("Mesh.RecombinationAlgorithm", 2)  # blossom: quads only
+        gmsh.model.addPhysicalGroup(2, [disk], name="disk")
+        gmsh.model.addPhysicalGroup(1, circle, name="outer")
+        gmsh.model.mesh.generate(2)
+        gmsh.option.setNumber("Mesh.MshFileVersion", 2.2)
+        gmsh.write(str(path))
+    finally:
+        gmsh.finalize()
+
+
+def disk_on_block(mesh_file, nx: int, t_end: float, dt: float = 0.005) -> dict:
+    """The issue's case: the disk lands at v = (1, -1) (it rolls and slides) with friction
+    0.3 and its weight on a supported ALE block 4 x 0.5 (nx elements across)."""
+    return {
+        "analysis": {"kind": "dynamic", "dt": dt, "t_end": t_end},
+        "bodies": [
+            {"name": "disk", "mesh": {"type": "gmsh", "file": str(mesh_file)},
+             "material": {"model": "neo_hookean", "lambda": 461.54, "mu": 307.69,
+                          "density": 2.0},
+             "initial": {"velocity": [1.0, -1.0]},
+             "loads": [{"type": "body_force", "vector": [0.0, -20.0]}]},
+            {"name": "block", "mesh_motion": "ale",
+             "ale": {"smoothing_layers": 1, "remap": "quadratic"},
+             "mesh": {"type": "rectangle", "width": 4.0, "height": 0.5, "nx": nx, "ny": 4,
+                      "origin": [-2.0, -1.02]},
+             "material": {"model": "neo_hookean", "lambda": 230.77, "mu": 153.85,
+                          "density": 20.0},
+             "supports": [{"set": "bottom", "x": 0.0, "y": 0.0}]},
+        ],
+        "contact": [{"body_1": "disk", "surface_1": "outer", "body_2": "block",
+                     "surface_2": "top", "method": "augmented_lagrangian",
+                     "law": "persistency", "penalty_normal": 1000.0,
+                     "penalty_tangential": 1000.0, "friction": 0.3,
+                     "augmentation": {"gap_tolerance": 1e-6},
+                     # the report's pair forces: with the moment-free ones (the dynamic
+                     # default since session 9) the augmentations of step 22 stall at a
+                     # normal-rate change of 1.2e-5 against this gap_tolerance of 1e-6 (the
+                     # ALE slide aims across the pair normal, the force acts along the pair's
+                     # chord); an open interaction, see issue 16's note
+                     "moment_free": False}],
+    }
+
+
+def test_disk_with_a_finer_surface_rolls_on_a_coarser_ale_block(tmp_path):
+    mesh = tmp_path / "disk.msh"
+    write_gmsh_disk(mesh)
+    rec = Recorder()
+    model = model_from_dict(disk_on_block(mesh, nx=40, t_end=T_DISK))
+    assert model.interfaces[0].interface.surface1.size == 64
+    Simulation(model, [rec]).run()
+    assert rec.records[-1].state.time == pytest.approx(T_DISK, abs=1e-12)
+    contact_steps = [r for r in rec.records if len(r.extra.get("contact_rows", {"node_1": ()})
+                                                  ["node_1"])]
+    assert len(contact_steps) > 0.8 * (len(rec.records) - 5)  # lands at t = 0.02 and stays
+    disk_spacing = 2 * np.pi * 0.5 / 64
+    for record in contact_steps:
+        rows = record.extra["contact_rows"]
+        assert np.unique(rows["node_2"]).size == rows["node_2"].size
+        assert offsets_across_normal(model, record).max() <= NODE_TO_NODE * disk_spacing
+
+
+
+SLIDE_TOML = """
+[analysis]
+kind = "dynamic"
+dt = 0.02
+t_end = 0.1
+max_cutbacks = 2
+
+[[bodies]]
+name = "block"
+mesh = { type = "rectangle", width = 1.0, height = 0.25, nx = 8, ny = 2, origin = [0.5, 0.001] }
+material = { model = "neo_hookean", lambda = 115.38, mu = 76.92, density = 1.0 }
+initial = { velocity = [1.0, -0.1] }
+
+[[bodies]]
+name = "base"
+mesh_motion = "ale"
+mesh = { type = "rectangle", width = 4.0, height = 0.2, nx = 32, ny = 2, origin = [-1.0, -0.2] }
+material = { model = "neo_hookean", lambda = 2884.6, mu = 1923.1, density = 500.0 }
+
+[[contact]]
+body_1 = "block"
+surface_1 = "bottom"
+body_2 = "base"
+surface_2 = "top"
+penalty_normal = 1000.0
+"""  # noqa: E501 (a TOML inline table is one line)
+
+
+def test_an_ale_move_without_valid_motion_is_cut_back_then_named_in_one_line(
+        monkeypatch, tmp_path, capsys):
+    """Every ALE move fails from the first contact step on (as when targets cross): the step
+    is cut back max_cutbacks times, then the CLI prints one line with the step, its time, the
+    failure (body, nodes) and the advice, and no traceback."""
+    from ntncontact.cli import main
+
+    calls = []
+
+    def no_valid_motion(body, *args, **kwargs):
+        calls.append(args[-2])  # dt of the (sub-)step
+        raise AleMotionError(f"body '{body.name}': ALE surface nodes 3 and 4 would swap order: "
+                             "... refine the ALE surface to at most 2x the partner surface's "
+                             "spacing")
+
+    monkeypatch.setattr(mesh_motion, "move_ale_body", no_valid_motion)
+    path = tmp_path / "slide.toml"
+    path.write_text(SLIDE_TOML)
+    assert main(["run", str(path), "--out", str(tmp_path / "out"), "--quiet"]) == 1
+    err = capsys.readouterr().err
+    assert "Traceback" not in err
+    message = err.strip().splitlines()[-1]  # (a first run may announce compiling kernels)
+    assert sum(line.startswith("error:") for line in err.splitlines()) == 1
+    assert message.startswith("error: step 2 (t = 0.02 -> 0.04) failed after 2 halvings")
+    assert "body 'base': ALE surface nodes 3 and 4 would swap order" in message
+    assert "2x the partner surface's spacing" in message
+    assert calls == pytest.approx([0.02, 0.01, 0.005])  # tried at dt, dt/2, dt/4
+
+
+def test_other_mesh_failures_of_an_ale_move_are_ale_motion_errors(monkeypatch):
+    """A remap or inversion failure inside the move (a MeshError) is cut back like a crossing."""
+    def outside(*args, **kwargs):
+        raise MeshError("point [0.1, 0.2] lies 0.003 outside the old mesh; cannot remap it")
+
+    monkeypatch.setattr(mesh_motion, "move_ale_body", outside)
+    model = model_from_dict(sliding_block(1.0, 1.0, 0.0, steps=3))
+    with pytest.raises(SimulationError, match=r"step 2 \(t = 0.02 -> 0.04\) failed after \d+ "
+                       r"halvings of the step: ALE mesh motion: point .* outside the old mesh"):
+        Simulation(model).run()
