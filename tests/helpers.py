@@ -6,6 +6,9 @@ import subprocess
 import time
 from pathlib import Path
 
+import numpy as np
+
+from ntncontact.contact import pair_gaps
 from ntncontact.engine.builder import build_model
 from ntncontact.engine.model import Model
 from ntncontact.io.scenario import load_scenario, parse_scenario
@@ -69,3 +72,20 @@ def wait_until(condition, child: subprocess.Popen, what: str, timeout: float,
             child.kill()
             raise AssertionError(f"timed out waiting for {what}")
         time.sleep(poll)
+
+
+def offsets_across_normal(model, record) -> np.ndarray:
+    """|offset of the two nodes of every active pair across its line of action|: the pair's
+    contact normal where it is closed (g >= 0), the ALE surface's normal where it is open."""
+    rows = record.extra["contact_rows"]
+    pairs = np.column_stack([rows["node_1"], rows["node_2"]]).astype(np.int64)
+    x = record.state.x
+    surfaces = model.interfaces[0].interface
+    normal, gap, _ = pair_gaps(x, surfaces, pairs)
+    k = surfaces.surface2.index_of(pairs[:, 1])
+    chord = x[surfaces.surface2.next[k]] - x[surfaces.surface2.prev[k]]
+    own = np.column_stack([chord[:, 1], -chord[:, 0]]) / np.linalg.norm(chord, axis=1)[:, None]
+    normal[gap < 0.0] = own[gap < 0.0]
+    offset = x[pairs[:, 0]] - x[pairs[:, 1]]
+    across = offset - np.einsum("ij,ij->i", offset, normal)[:, None] * normal
+    return np.linalg.norm(across, axis=1)

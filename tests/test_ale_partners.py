@@ -16,10 +16,9 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from helpers import Recorder, model_from_dict
+from helpers import Recorder, model_from_dict, offsets_across_normal
 
 from ntncontact.ale.motion import AleMotionError
-from ntncontact.contact import pair_gaps
 from ntncontact.engine import mesh_motion
 from ntncontact.engine.simulation import Simulation, SimulationError
 from ntncontact.mesh.quadmesh import MeshError
@@ -56,23 +55,6 @@ def sliding_block(ratio: float, speed: float, shift: float, steps: int = 10,
                      "law": "persistency", "penalty_normal": 1000.0,
                      "penalty_tangential": 1000.0}],
     }
-
-
-def offsets_across_normal(model, record) -> np.ndarray:
-    """|offset of the two nodes of every active pair across its line of action|: the pair's
-    contact normal where it is closed (g >= 0), the ALE surface's normal where it is open."""
-    rows = record.extra["contact_rows"]
-    pairs = np.column_stack([rows["node_1"], rows["node_2"]]).astype(np.int64)
-    x = record.state.x
-    surfaces = model.interfaces[0].interface
-    normal, gap, _ = pair_gaps(x, surfaces, pairs)
-    k = surfaces.surface2.index_of(pairs[:, 1])
-    chord = x[surfaces.surface2.next[k]] - x[surfaces.surface2.prev[k]]
-    own = np.column_stack([chord[:, 1], -chord[:, 0]]) / np.linalg.norm(chord, axis=1)[:, None]
-    normal[gap < 0.0] = own[gap < 0.0]
-    offset = x[pairs[:, 0]] - x[pairs[:, 1]]
-    across = offset - np.einsum("ij,ij->i", offset, normal)[:, None] * normal
-    return np.linalg.norm(across, axis=1)
 
 
 def test_any_spacing_ratio_from_a_quarter_to_four_keeps_pairs_node_to_node():

@@ -19,7 +19,8 @@ def test_run_writes_history_summary_and_fields_then_plot(tmp_path, capsys):
     assert len(table["step"]) == 11 and table["time"][-1] == np.float64(0.2)
     summary = json.loads((out / "summary.json").read_text())
     assert summary["status"] == "completed" and summary["steps"] == 10
-    for key in ("wall_time_s", "cpu_time_s", "energy_initial", "energy_final", "energy_max_relative_variation"):
+    for key in ("wall_time_s", "cpu_time_s", "energy_initial", "energy_final",
+                "energy_max_relative_variation"):
         assert key in summary
     assert (out / "fields.pvd").is_file() and len(list((out / "fields").glob("*.vtu"))) == 3
     assert main(["plot", str(out)]) == 0
