@@ -89,3 +89,12 @@ def offsets_across_normal(model, record) -> np.ndarray:
     offset = x[pairs[:, 0]] - x[pairs[:, 1]]
     across = offset - np.einsum("ij,ij->i", offset, normal)[:, None] * normal
     return np.linalg.norm(across, axis=1)
+
+
+def energy_after_each_episode(recorder) -> tuple[np.ndarray, np.ndarray]:
+    """(E/E0 - 1 per record, the records that end a contact episode: a step with pairs, then
+    one without)."""
+    energy = np.array([r.balance.total_energy for r in recorder.records])
+    active = np.array([sum(len(c.pairs) for c in r.state.contact) for r in recorder.records])
+    ends = np.flatnonzero((active[1:] == 0) & (active[:-1] > 0)) + 1
+    return energy / energy[0] - 1.0, ends

@@ -6,7 +6,7 @@ The Lagrangian cases (linear and Neo-Hookean, matching walls) are in test_energy
 
 import numpy as np
 import pytest
-from helpers import Recorder, model_from_dict
+from helpers import Recorder, energy_after_each_episode, model_from_dict
 
 from ntncontact.engine.simulation import Simulation
 
@@ -42,13 +42,6 @@ def block_between_ale_walls(material, t_end, conserve_energy="total"):
     })
 
 
-def energy_at_episode_ends(recorder):
-    energy = np.array([r.balance.total_energy for r in recorder.records])
-    active = np.array([sum(len(c.pairs) for c in r.state.contact) for r in recorder.records])
-    ends = np.flatnonzero((active[1:] == 0) & (active[:-1] > 0)) + 1
-    return energy / energy[0] - 1.0, ends
-
-
 @pytest.mark.slow
 @pytest.mark.parametrize("material", ["linear_elastic", "neo_hookean"])
 def test_block_between_ale_walls_keeps_its_energy_over_20_impacts(material):
@@ -58,7 +51,7 @@ def test_block_between_ale_walls_keeps_its_energy_over_20_impacts(material):
     masses, no energy): -2.8 % after the first episode, -37 % after 7 s."""
     rec = Recorder()
     Simulation(block_between_ale_walls(material, 7.0), [rec]).run()
-    error, ends = energy_at_episode_ends(rec)
+    error, ends = energy_after_each_episode(rec)
     assert rec.status == ("completed", None)
     assert len(ends) >= 20
     assert abs(error[-1]) < 1e-4
@@ -73,6 +66,6 @@ def test_without_the_energy_correction_the_same_walls_lose_energy():
     energy the remap cuts is lost (measured -1 to -2 % per episode)."""
     rec = Recorder()
     Simulation(block_between_ale_walls("linear_elastic", 1.5, "kinetic"), [rec]).run()
-    error, ends = energy_at_episode_ends(rec)
+    error, ends = energy_after_each_episode(rec)
     assert len(ends) >= 2
     assert error[ends[-1]] < -1e-3

@@ -3,7 +3,7 @@ Gonzalez's discrete gradient for the Neo-Hookean stress, with F_{n+1/2} in the f
 
 import numpy as np
 import pytest
-from helpers import Recorder, model_from_dict, model_from_example
+from helpers import Recorder, energy_after_each_episode, model_from_dict, model_from_example
 
 from ntncontact.engine.simulation import Simulation
 from ntncontact.fem.assembly import Assembler, MaterialGroup
@@ -203,14 +203,6 @@ def bouncing_block(integrator, t_end, material="neo_hookean", dt=0.01, gap=0.103
         "contact": [contact("block", "right", "wall_right", "left"),
                     contact("wall_left", "right", "block", "left")],
     })
-
-
-def energy_after_each_episode(recorder):
-    """E/E0 - 1 at the end of every contact episode (a step with pairs, then one without)."""
-    energy = np.array([r.balance.total_energy for r in recorder.records])
-    active = np.array([sum(len(c.pairs) for c in r.state.contact) for r in recorder.records])
-    ends = np.flatnonzero((active[1:] == 0) & (active[:-1] > 0)) + 1
-    return energy / energy[0] - 1.0, ends
 
 
 @pytest.mark.slow
