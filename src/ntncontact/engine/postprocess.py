@@ -84,11 +84,6 @@ def _nodal_averages(cells: NDArray, area: NDArray, cell: dict, n_nodes: int) -> 
     return out
 
 
-def element_von_mises(model: Model, X: NDArray, x: NDArray) -> NDArray:
-    """Von Mises stress of each element, averaged over its Gauss points (plane strain s_33)."""
-    return stress_fields(model, X, x)[0]["von_mises"]
-
-
 def contact_node_fields(rows: dict | None, n_nodes: int) -> dict[str, NDArray]:
     """Point data from a step's contact.csv rows, on the surface-1 node of each active pair
     (zero elsewhere; ``contact_partner`` -1): tractions, gap, gap rate, status, partner."""

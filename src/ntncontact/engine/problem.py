@@ -102,10 +102,6 @@ class StepProblem:
     def dynamic(self) -> bool:
         return self.mass is not None
 
-    @property
-    def n_multipliers(self) -> int:
-        return sum(c.size for c in self.constraints)
-
     def initial_guess(self) -> NDArray:
         """Start from the positions the step's contact detection predicted, x_n + dt v_n (the
         mid-point rule's unknown d_{n+1/2}: d_n + v_n dt/2; quasi-static d_{n+1}: d_n + the

@@ -183,6 +183,3 @@ class ResultWriter:
         x = self._last.state.x
         return {b.name: quality_statistics(x[b.nodes], b.mesh.cells) for b in self.model.bodies}
 
-    def update_summary(self, **fields: object) -> None:
-        self.results.summary.update(**fields)
-

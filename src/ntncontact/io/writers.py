@@ -244,12 +244,6 @@ def to_jsonable(value: Any) -> Any:
     raise TypeError(f"cannot write {value!r} of type {type(value).__name__} to JSON")
 
 
-def write_json_atomic(path: str | os.PathLike, data: Mapping[str, Any]) -> None:
-    """Write ``data`` as JSON to a temporary file, then rename it over ``path``."""
-    text = _json_text(data) + "\n"
-    replace_atomically(Path(path), lambda tmp: tmp.write_text(text, encoding="utf-8"), True)
-
-
 def _json_text(data: Mapping[str, Any]) -> str:
     return json.dumps(to_jsonable(data), indent=2, allow_nan=False)
 

@@ -74,10 +74,6 @@ class Material:
     def poisson(self) -> float:
         return self.lam / (2.0 * (self.lam + self.mu))
 
-    def wave_speed(self) -> float:
-        """Dilatational wave speed sqrt((lambda + 2 mu)/rho), for time-step advice."""
-        return float(np.sqrt((self.lam + 2.0 * self.mu) / self.density))
-
 
 def cauchy_stress(
     kind: MaterialKind, F: NDArray, lam: NDArray, mu: NDArray, plane_stress: bool = False
