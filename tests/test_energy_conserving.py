@@ -63,14 +63,9 @@ def test_end_energy_is_the_energy_of_the_mid_point_update():
 
 @pytest.mark.slow
 def test_energy_variant_conserves_the_ring_impact_energy_where_the_gap_law_does_not():
-    # the ring 1e-9 higher: its touch at t = 0.065 falls exactly on a step boundary, and since
-    # the element kernel forms F = I + Grad d the zero gap there comes out closed; the
-    # gap-law multipliers' Newton solve of that step then stalls (|R| ~1e-5, the newest
-    # multiplier swinging by 10-25 per iteration) and fails after 4 halvings. An open
-    # robustness problem of the gap law at an exact touch (session 9's note, issue 16),
-    # kept out of this test of the energy equation
-    base = ['bodies.1.mesh_motion="lagrangian"', "analysis.t_end=0.3",
-            "bodies.0.mesh.center=[0.0, 1.065000001]"] + LAGRANGE_GAP
+    # the ring's touch at t = 0.065 falls exactly on a step boundary (issue 16; see also
+    # tests/test_exact_touch.py)
+    base = ['bodies.1.mesh_motion="lagrangian"', "analysis.t_end=0.3"] + LAGRANGE_GAP
     results = {}
     for flag in ("false", "true"):
         rec = Recorder()

@@ -26,6 +26,9 @@ from ..fem.sparse import TripletUnion
 from ..solvers.newton import norm2
 from .model import Model
 
+#: The residual scale's round-off floor, as a fraction of max |diag K| times the model size.
+FLOOR_RATIO = 1e-4
+
 ExtraTerm = Callable[
     [NDArray, NDArray | None, float | None, NDArray],
     tuple[NDArray, tuple[NDArray, NDArray, NDArray]],
@@ -81,6 +84,7 @@ class StepProblem:
     #: The augmentations of a step pass it on, so their first residuals need no tangent.
     scale_floor: float | None = None
     _cache: dict = field(default_factory=dict, repr=False)
+    _row_scale: NDArray | None = field(default=None, repr=False)  # see _balanced_rows
     _same_pattern: bool | None = field(default=None, repr=False)
 
     def __post_init__(self) -> None:
@@ -158,10 +162,27 @@ class StepProblem:
             K = _add_triplets(K, triplets, self.union)
             # Forces computed from positions of size L carry round-off ~ eps |K| L: never ask
             # for less. Kept from the first tangent, so residual-only calls use it too.
-            self.scale_floor = 1e-4 * np.abs(K.diagonal()).max() * self.length_scale
+            self.scale_floor = FLOOR_RATIO * np.abs(K.diagonal()).max() * self.length_scale
+        if h.size:
+            h, G = self._balanced_rows(h, G)
         self._blocks = (h, G, B)
         self._scale = float(max(scale, self.scale_floor))
         return R, K
+
+    def _balanced_rows(self, h: NDArray, G: sp.csr_matrix) -> tuple[NDArray, sp.csr_matrix]:
+        """h, G and C with every constraint row in force units: row p times k / |G_p|, k the
+        largest diagonal stiffness (``scale_floor``'s), fixed at the problem's first call. A
+        row scale leaves the Newton step unchanged, but |R| then weighs a constraint error
+        like the force that would cause it: unscaled, the gap law's L_c g (length^2) against
+        forces made the line search reject the full step that closes a gap at first touch
+        (its nonlinear force residual >> L_c g) and crawl in 1/16 steps (issue 16)."""
+        if self._row_scale is None or self._row_scale.size != h.size:
+            stiffness = self.scale_floor / (FLOOR_RATIO * self.length_scale)
+            norms = np.sqrt(np.asarray(G.multiply(G).sum(axis=1)).ravel())
+            self._row_scale = np.where(norms > 0.0, stiffness / np.maximum(norms, 1e-300), 1.0)
+        rows = sp.diags(self._row_scale, format="csr")
+        self._multiplier_block = (rows @ self._multiplier_block).tocsr()
+        return self._row_scale * h, (rows @ G).tocsr()
 
     def _internal(self, d: NDArray, need_tangent: bool) -> tuple[NDArray, sp.csr_matrix | None]:
         """Internal force at displacement d (= d_{n+1/2} when dynamic) and its tangent; the
