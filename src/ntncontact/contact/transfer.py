@@ -88,16 +88,14 @@ def _shared_segments(pos_s: NDArray, pos_o: NDArray, n_s: int, n_o: int, closed_
     their partners on the other surface are chain neighbours: one coarse segment facing
     several segments of s."""
     order = np.argsort(pos_s, kind="stable")
-    links = list(zip(order[:-1], order[1:], strict=True))
+    a, b = order[:-1], order[1:]
     if closed_s and order.size > 2:
-        links.append((order[-1], order[0]))
-    out = []
-    for a, b in links:
-        between = (pos_s[b] - pos_s[a]) % n_s
-        step = (pos_o[b] - pos_o[a]) % n_o if closed_o else abs(int(pos_o[b] - pos_o[a]))
-        if between >= 2 and (step == 1 or (closed_o and step == n_o - 1)):
-            out.append((int(a), int(b)))
-    return out
+        a, b = np.append(a, order[-1]), np.append(b, order[0])
+    between = (pos_s[b] - pos_s[a]) % n_s
+    step = np.abs(pos_o[b] - pos_o[a])
+    neighbours = (step == 1) | (closed_o & (step == n_o - 1))
+    keep = (between >= 2) & neighbours
+    return list(zip(a[keep].tolist(), b[keep].tolist(), strict=True))
 
 
 def _tributary(x: NDArray, surface: ContactSurface, nodes: NDArray) -> NDArray:
