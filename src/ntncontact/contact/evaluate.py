@@ -31,6 +31,7 @@ from ..jit import njit
 from .laws import ContactLaw
 from .state import PairState
 from .surfaces import Interface
+from .transfer import Transfer, unpaired_share
 
 __all__ = [
     "ContactResult",
@@ -421,6 +422,9 @@ class ContactResult:
     #: g_n/dt of the gap-restoring pairs (0 for the others); the rate law constrains
     #: gdot + rate_offset. None from the tests' oracle
     rate_offset: NDArray[np.float64] | None = None
+    #: the unpaired nodes' share (transfer.py): slots and gradients are those of the kernel's
+    #: positions S x; force and tangent are already mapped back. None: pairs node to node
+    transfer: Transfer | None = None
 
     @property
     def normal_force(self) -> NDArray[np.float64]:
@@ -488,6 +492,11 @@ def _evaluate_compiled(
     flags = np.array([METHOD_CODES[law.method], rate_law, v_eval is not None,
                       x_start is not None, law.frictional, law.moment_free], dtype=np.int64)
     pairs = state.pairs
+    transfer = unpaired_share(x_eval, interface, pairs) if law.unpaired_share else None
+    table1 = interface.surface1.kernel_table
+    if transfer is not None:  # the kernel sees each shared pair's weighted point
+        x_eval, v_eval, x_start = (transfer.positions(a) for a in (x_eval, v_eval, x_start))
+        table1 = transfer.surface1.kernel_table
     # the pairs' first step (no committed gap rate yet) under law.gap_restoring
     restoring = (np.isnan(state.gap_rate) if law.gap_restoring
                  else np.zeros(len(state), bool)).astype(np.float64)
@@ -497,7 +506,7 @@ def _evaluate_compiled(
 
     (code, force, rows, cols, vals, scalars, normal, tangent, status, dissipation, slots,
      gradients) = evaluate_pairs(
-            c_float(x_eval), c_float(v_eval), c_float(x_start), interface.surface1.kernel_table,
+            c_float(x_eval), c_float(v_eval), c_float(x_start), table1,
             interface.surface2.kernel_table, np.ascontiguousarray(pairs, dtype=np.int64),
             c_float(state.lambda_N), c_float(state.dlambda_T), c_float(state.t_T), restoring,
             params,
@@ -507,6 +516,9 @@ def _evaluate_compiled(
         interface.surface2.index_of(pairs[:, 1])
     if code == ZERO_CHORD:
         raise ValueError("a contact normal is undefined (coincident chain neighbours)")
+    if transfer is not None:
+        force = transfer.force(force)
+        rows, cols, vals = transfer.tangent(rows, cols, vals)
     return ContactResult(
         force=force, rows=rows, cols=cols, vals=vals, pairs=pairs, gap=scalars[GAP],
         gap_rate=scalars[GAP_RATE], slip_measure=scalars[SLIP_MEASURE],
@@ -514,7 +526,7 @@ def _evaluate_compiled(
         length=scalars[LENGTH], normal=normal, tangent=tangent,
         dissipation=float(dissipation), rate_law=rate_law, slots=slots, gradients=gradients,
         offset=scalars[OFFSET], chord=scalars[CHORD], friction_slope=scalars[FRICTION_SLOPE],
-        rate_offset=scalars[RATE_OFFSET],
+        rate_offset=scalars[RATE_OFFSET], transfer=transfer,
     )
 
 

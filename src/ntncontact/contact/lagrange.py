@@ -99,7 +99,11 @@ def blocks_of(result: ContactResult, law: ContactLaw) -> LagrangeBlocks:
     b_cols = np.repeat(np.arange(p), 2 * n_nodes)
     sign = np.array([1.0, -1.0] * (n_nodes // 2))[None, :, None]
     b_vals = (sign * column.reshape(p, n_nodes // 2, 2).repeat(2, axis=1)).ravel()
-    return LagrangeBlocks(values, g_rows, g_cols, d_h.ravel(), b_rows, b_cols, b_vals)
+    g_vals = d_h.ravel()
+    if result.transfer is not None:  # back from the kernel's positions S x: G S and S^T B
+        g_rows, g_cols, g_vals = result.transfer.columns(g_rows, g_cols, g_vals, p)
+        b_cols, b_rows, b_vals = result.transfer.columns(b_cols, b_rows, b_vals, p)
+    return LagrangeBlocks(values, g_rows, g_cols, g_vals, b_rows, b_cols, b_vals)
 
 
 def release_tensile_pairs(

@@ -30,6 +30,9 @@ class ContactLaw:
     gap_restoring: under the persistency law, a pair's first step constrains gdot + g_n/dt
         instead of gdot (g_n its gap at the step start), so that it ends that step touching:
         the gap of a pair detected one step late (or early) is not frozen for the impact.
+    unpaired_share: where one surface has nodes between two consecutive pairs that get no pair
+        of their own (unequal node counts), they take their share of the pairs' forces by dual
+        mortar weights (``contact/transfer.py``); False: the report's point forces on the pairs.
     """
 
     method: Method = "augmented_lagrangian"
@@ -38,6 +41,7 @@ class ContactLaw:
     mu: float = 0.0
     moment_free: bool = False
     gap_restoring: bool = False
+    unpaired_share: bool = False
 
     def __post_init__(self) -> None:
         if self.method not in _METHODS:

@@ -262,8 +262,11 @@ def _interface(cfg: ContactConfig, index: int, bodies: tuple[Body, ...],
     lagrangian = b1.mesh_motion == "lagrangian" and b2.mesh_motion == "lagrangian"
     moment_free = (kind == "dynamic" and lagrangian) if cfg.moment_free is None \
         else cfg.moment_free
+    # unpaired nodes between pairs share the pair forces where an ALE body ends the pairs node
+    # to node; offset Lagrangian pairs would share them at the wrong places (docs/theory.md)
+    share = not lagrangian if cfg.unpaired_share is None else cfg.unpaired_share
     law = ContactLaw(cfg.method, cfg.penalty_normal, cfg.penalty_tangential, cfg.friction,
-                     moment_free, cfg.gap_restoring)
+                     moment_free, cfg.gap_restoring, share)
     persistency = (cfg.law or ("persistency" if kind == "dynamic" else "gap")) == "persistency"
     aug = cfg.augmentation
     tol = AugmentationTolerances(aug.gap_tolerance, aug.slip_tolerance, aug.traction_tolerance)

@@ -292,6 +292,7 @@ class ContactConfig(Strict):
     detection: Literal["penetration", "predicted"] | None = None
     moment_free: bool | None = None  # None: on in dynamic runs (docs/theory.md)
     gap_restoring: bool = False  # persistency law: a pair's first step closes its gap
+    unpaired_share: bool | None = None  # None: on beside an ALE body (docs/theory.md)
     augmentation: AugmentationConfig = AugmentationConfig()
 
     @model_validator(mode="after")

@@ -1,0 +1,173 @@
+"""The share of unpaired surface nodes: node-to-node pairs between surfaces of unequal node counts.
+
+Node-to-node pairs carry point forces. Where one surface has more nodes than the other in the
+contact zone, some of its nodes lie between two paired nodes and get no pair: the traction on
+that surface is lumped onto the paired nodes only, and a uniform pressure is not transmitted as
+one (issue 16's patch test: 6 % with an ALE body, 13 % without). Here each such segment of the
+finer surface takes its share with the weights of a dual mortar method (docs/theory.md,
+"Unequal node counts"): over a coarse segment between two consecutive pairs a, b, parametrised
+by xi in [0, 1] along the finer surface's arc length, the pressure node a of the coarse side has
+the dual shape function psi_a = 2 - 3 xi (psi_b = 3 xi - 1), biorthogonal to the hats:
+int psi_a N_b = 0, int psi_a N_a = int N_a. The finer surface's node q then receives the share
+
+    w_aq = sum over a's segments of (H / L_c,a) int_0^1 psi_a N_q dxi
+
+of pair a's force (H the segment's length on surface 1, L_c,a the pair's tributary length), and
+the pair's point on that surface is sum_q w_aq x_q. Where a segment has no unpaired node
+between its pairs (equal counts), w is the identity: the pairs stay node to node.
+
+The transfer is a fixed linear map S of the node positions: the contact kernel is evaluated at
+x_c = S x (and v_c = S v), and its force and tangent come back as S^T f and S^T K S. The weights
+are taken at the evaluated positions, their own derivative is left out of the tangent (it
+vanishes where the arc-length parameters of the finer surface do not change, as on a flat
+surface under uniform strain).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.sparse as sp
+from numpy.typing import NDArray
+
+from .surfaces import ContactSurface, Interface
+
+__all__ = ["Transfer", "unpaired_share"]
+
+
+@dataclass(frozen=True)
+class Transfer:
+    """The kernel's view of an interface whose pairs have unpaired nodes between them.
+
+    surface1: surface 1 without its unpaired nodes between consecutive pairs (the pairs' chain:
+        tributary lengths and normals from the paired nodes); ``dofs``: S as a (ndof, ndof) map
+        of the displacement dofs, x_c = S x."""
+
+    surface1: ContactSurface
+    dofs: sp.csr_matrix
+
+    def positions(self, x: NDArray[np.float64] | None) -> NDArray[np.float64] | None:
+        return None if x is None else (self.dofs @ x.reshape(-1)).reshape(x.shape)
+
+    def force(self, force: NDArray[np.float64]) -> NDArray[np.float64]:
+        return self.dofs.T @ force
+
+    def tangent(self, rows: NDArray, cols: NDArray, vals: NDArray
+                ) -> tuple[NDArray[np.int64], NDArray[np.int64], NDArray[np.float64]]:
+        n = self.dofs.shape[0]
+        k = sp.csr_matrix((vals, (rows, cols)), shape=(n, n))
+        out = (self.dofs.T @ k @ self.dofs).tocoo()
+        return out.row.astype(np.int64), out.col.astype(np.int64), out.data
+
+    def columns(self, rows: NDArray, cols: NDArray, vals: NDArray, n_rows: int
+                ) -> tuple[NDArray[np.int64], NDArray[np.int64], NDArray[np.float64]]:
+        """A (n_rows, ndof) COO block G_c as G_c S."""
+        g = sp.csr_matrix((vals, (rows, cols)), shape=(n_rows, self.dofs.shape[0]))
+        out = (g @ self.dofs).tocoo()
+        return out.row.astype(np.int64), out.col.astype(np.int64), out.data
+
+
+def _dual_hat_integrals(xi: NDArray[np.float64]) -> NDArray[np.float64]:
+    """(2, m) int_0^1 psi N_q dxi for psi_a = 2 - 3 xi, psi_b = 3 xi - 1 and the hats N_q of
+    the nodes at xi (0 = xi_0 < ... < xi_{m-1} = 1); Simpson's rule is exact for the products."""
+    out = np.zeros((2, xi.size))
+    for lo in range(xi.size - 1):
+        a, b = xi[lo], xi[lo + 1]
+        mid, h = 0.5 * (a + b), b - a
+        for side, psi in enumerate((lambda t: 2.0 - 3.0 * t, lambda t: 3.0 * t - 1.0)):
+            # the hat of the left node falls 1 -> 0 over [a, b], the right one rises 0 -> 1
+            out[side, lo] += h / 6.0 * (psi(a) + 4.0 * psi(mid) * 0.5)
+            out[side, lo + 1] += h / 6.0 * (4.0 * psi(mid) * 0.5 + psi(b))
+    return out
+
+
+def _shared_segments(pos_s: NDArray, pos_o: NDArray, n_s: int, n_o: int, closed_s: bool,
+                     closed_o: bool) -> list[tuple[int, int]]:
+    """(pair a, pair b) consecutive along surface s with unpaired nodes between them while
+    their partners on the other surface are chain neighbours: one coarse segment facing
+    several segments of s."""
+    order = np.argsort(pos_s, kind="stable")
+    a, b = order[:-1], order[1:]
+    if closed_s and order.size > 2:
+        a, b = np.append(a, order[-1]), np.append(b, order[0])
+    between = (pos_s[b] - pos_s[a]) % n_s
+    step = np.abs(pos_o[b] - pos_o[a])
+    neighbours = (step == 1) | (closed_o & (step == n_o - 1))
+    keep = (between >= 2) & neighbours
+    return list(zip(a[keep].tolist(), b[keep].tolist(), strict=True))
+
+
+def _tributary(x: NDArray, surface: ContactSurface, nodes: NDArray) -> NDArray:
+    k = surface.index_of(nodes)
+    back = np.linalg.norm(x[nodes] - x[surface.prev[k]], axis=1)
+    ahead = np.linalg.norm(x[surface.next[k]] - x[nodes], axis=1)
+    return 0.5 * (back + ahead)
+
+
+def unpaired_share(x: NDArray[np.float64], interface: Interface,
+                   pairs: NDArray[np.int64]) -> Transfer | None:
+    """The transfer of ``pairs`` at positions ``x``, or None where every segment between two
+    consecutive pairs is a single segment on both surfaces (node to node, nothing to share)."""
+    pairs = np.asarray(pairs, dtype=np.int64).reshape(-1, 2)
+    if len(pairs) < 2:
+        return None
+    surfaces = (interface.surface1, interface.surface2)
+    pos = [surfaces[s].index_of(pairs[:, s]) for s in range(2)]
+    found = []
+    for s in range(2):
+        o = 1 - s
+        for a, b in _shared_segments(pos[s], pos[o], surfaces[s].size, surfaces[o].size,
+                                     surfaces[s].closed, surfaces[o].closed):
+            found.append((s, a, b))
+    if not found:
+        return None
+    surface1 = _without_inner_nodes(interface.surface1, pos[0],
+                                    [(a, b) for s, a, b in found if s == 0])
+    length = _tributary(x, surface1, pairs[:, 0])
+    weights: dict[int, dict[int, float]] = {}  # distributed node -> {node: weight}
+    for s, a, b in found:
+        chain = _inner_chain(surfaces[s], pos[s][a], pos[s][b])
+        arc = np.concatenate(([0.0], np.cumsum(np.linalg.norm(np.diff(x[chain], axis=0),
+                                                              axis=1))))
+        share = _dual_hat_integrals(arc / arc[-1])
+        span = np.linalg.norm(x[pairs[a, 0]] - x[pairs[b, 0]])
+        for side, p in enumerate((a, b)):
+            scale = span / length[p]
+            row = weights.setdefault(int(pairs[p, s]), {int(pairs[p, s]): 1.0})
+            row[int(pairs[p, s])] -= 0.5 * scale  # this half of L_c no longer stays on the node
+            for node, w in zip(chain.tolist(), (scale * share[side]).tolist(), strict=True):
+                row[node] = row.get(node, 0.0) + w
+    if any(np.count_nonzero(pairs[:, s] == node) > 1 for s in range(2) for node in weights):
+        return None  # a node paired twice has no single weighted point
+    return Transfer(surface1, _dof_map(x.shape[0], weights))
+
+
+def _inner_chain(surface: ContactSurface, start: int, stop: int) -> NDArray[np.int64]:
+    """Global nodes from chain position start to stop inclusive (wrapping on a closed chain)."""
+    span = (stop - start) % surface.size
+    return surface.nodes[(start + np.arange(span + 1)) % surface.size]
+
+
+def _without_inner_nodes(surface: ContactSurface, pos: NDArray,
+                         links: list[tuple[int, int]]) -> ContactSurface:
+    if not links:
+        return surface
+    drop = np.zeros(surface.size, bool)
+    for a, b in links:
+        span = (pos[b] - pos[a]) % surface.size
+        drop[(pos[a] + np.arange(1, span)) % surface.size] = True
+    drop &= ~surface.corner
+    return ContactSurface(surface.nodes[~drop], surface.closed, surface.corner[~drop])
+
+
+def _dof_map(n_nodes: int, weights: dict[int, dict[int, float]]) -> sp.csr_matrix:
+    """Identity on every node but the distributed ones, whose rows are their weights (node
+    level), expanded to the two displacement components."""
+    keep = np.setdiff1d(np.arange(n_nodes), np.fromiter(weights, np.int64))
+    rows = [keep] + [np.full(len(row), node) for node, row in weights.items()]
+    cols = [keep] + [np.fromiter(row, np.int64) for row in weights.values()]
+    vals = [np.ones(keep.size)] + [np.fromiter(row.values(), float) for row in weights.values()]
+    nodes = sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))),
+                          shape=(n_nodes, n_nodes))
+    return sp.kron(nodes, sp.identity(2), format="csr")
