@@ -14,8 +14,9 @@ before the move, to round-off:
   removes; it goes into the velocities of the same neighbourhood (docs/theory.md, "ALE remap
   that conserves energy").
 
-The correction acts on the free dofs of the nodes of the cells around the remapped nodes, and
-on all free dofs of the body when those cannot take the energy.
+The correction acts on the free dofs of the nodes of the cells around the remapped nodes and
+around the step's active contact nodes (slid or not: ``_correction_nodes``), and on all free
+dofs of the body when those cannot take the energy.
 """
 
 from __future__ import annotations
