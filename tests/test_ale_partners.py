@@ -131,13 +131,7 @@ def disk_on_block(mesh_file, nx: int, t_end: float, dt: float = 0.005) -> dict:
                      "surface_2": "top", "method": "augmented_lagrangian",
                      "law": "persistency", "penalty_normal": 1000.0,
                      "penalty_tangential": 1000.0, "friction": 0.3,
-                     "augmentation": {"gap_tolerance": 1e-6},
-                     # the report's pair forces: with the moment-free ones (the dynamic
-                     # default since session 9) the augmentations of step 22 stall at a
-                     # normal-rate change of 1.2e-5 against this gap_tolerance of 1e-6 (the
-                     # ALE slide aims across the pair normal, the force acts along the pair's
-                     # chord); an open interaction, see issue 16's note
-                     "moment_free": False}],
+                     "augmentation": {"gap_tolerance": 1e-6}}],
     }
 
 

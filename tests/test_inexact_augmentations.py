@@ -3,17 +3,23 @@ augmentations before the last stop early; every step still ends with a solve to 
 run gives the exact-solve results to within the augmentation tolerance, with fewer iterations."""
 
 import numpy as np
+import pytest
 from helpers import Recorder, recorded_ring_impact
 
 from ntncontact.engine.simulation import Simulation
 
 
-def ring_impact(ratio: float) -> Recorder:
-    return recorded_ring_impact(f"analysis.newton.inexact_augmentations={ratio}")
+def ring_impact(ratio: float, moment_free: bool | None = None) -> Recorder:
+    forces = [] if moment_free is None else [f"contact.0.moment_free={str(moment_free).lower()}"]
+    return recorded_ring_impact(f"analysis.newton.inexact_augmentations={ratio}", *forces)
 
 
-def test_ring_impact_with_inexact_augmentations_matches_exact_solves():
-    exact, rough = ring_impact(0.0), ring_impact(1e-4)
+#: Newton iterations of the inexact run over the exact one: the report's forces 231 / 365
+#: (0.63); the moment-free forces (the default since session 10) 354 / 417 (0.85): their
+#: early-stopped solves take more augmentations (146 against 119 with exact solves)
+@pytest.mark.parametrize(("moment_free", "saving"), [(False, 0.8), (True, 0.9)])
+def test_ring_impact_with_inexact_augmentations_matches_exact_solves(moment_free, saving):
+    exact, rough = ring_impact(0.0, moment_free), ring_impact(1e-4, moment_free)
     energy = [np.array([r.balance.total_energy for r in rec.records]) for rec in (exact, rough)]
     # contact from t = 0.065: the comparison covers 27 contact steps
     assert max(r.extra["active_pairs"] for r in rough.records[1:]) >= 3
@@ -25,7 +31,7 @@ def test_ring_impact_with_inexact_augmentations_matches_exact_solves():
         np.testing.assert_array_equal(a.extra["contact_rows"]["node_1"],
                                       b.extra["contact_rows"]["node_1"])
     its = [sum(r.newton_iterations for r in rec.records) for rec in (exact, rough)]
-    assert its[1] < 0.8 * its[0]
+    assert its[1] < saving * its[0]
 
 
 def test_every_step_ends_with_a_solve_to_the_tolerances(monkeypatch):

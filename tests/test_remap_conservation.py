@@ -126,3 +126,28 @@ def test_the_ring_impacts_remap_conserves_total_energy_and_momenta(mass):
 def test_kinetic_mode_keeps_the_kinetic_energy_of_each_remap():
     changes, _ = remap_changes('bodies.1.ale.conserve_energy="kinetic"')
     assert all(abs(dK) < 1e-13 for dK, *_ in changes)
+
+
+@pytest.mark.parametrize("interior", ["minimal", "displacement"])
+def test_the_corrections_support_does_not_depend_on_which_active_nodes_slid(interior):
+    """The correction acts around every active contact node whether its slide was made or
+    dropped (below ale.slide_tolerance): a sticking pair's node wants a slide of ~0, and a
+    support that followed the moved nodes made the corrected velocities jump from one
+    augmentation to the next (tilted blocks, mu = 10: the augmentations cycled;
+    tests/test_angular_momentum.py runs that case)."""
+    from ntncontact.engine.remap_conservation import _correction_nodes
+
+    model = model_from_example("tilted_blocks.toml", [f'bodies.1.ale.interior="{interior}"'])
+    setup = model.ale_bodies[0]
+    motion = setup.motion
+    active = motion.surface[[20, 21, 22]]
+    around = np.flatnonzero(np.isin(motion.cells, active).any(axis=1))
+    one = np.flatnonzero(np.isin(motion.cells, active[2]).any(axis=1))
+    supports = [_correction_nodes(setup, touched, active) for touched in (around, one)]
+    assert np.array_equal(supports[0], supports[1])
+    assert supports[0][motion.cells[around].ravel()].all()
+    # without the active nodes the support is that of the moved nodes' cells: it changes
+    plain = [_correction_nodes(setup, touched, None) for touched in (around, one)]
+    assert plain[0].sum() > plain[1].sum()
+    if interior != "minimal":  # the interior nodes a small slide moves, and their cells
+        assert supports[0].sum() > np.unique(motion.cells[around]).size

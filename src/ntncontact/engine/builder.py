@@ -256,14 +256,12 @@ def _interface(cfg: ContactConfig, index: int, bodies: tuple[Body, ...],
                               np.isin(surface1.nodes, np.concatenate([auto, corners])))
     surface2 = ContactSurface.from_chain(chain2, b2.node_offset)
     # moment-free pair forces conserve angular momentum under the mid-point rule: the default
-    # of dynamic runs between Lagrangian bodies; static runs and pairs with an ALE body keep
-    # the report's forces, because the ALE slide that ends pairs node to node then stalls the
-    # augmentations (docs/theory.md, "Moment-free pair forces")
-    lagrangian = b1.mesh_motion == "lagrangian" and b2.mesh_motion == "lagrangian"
-    moment_free = (kind == "dynamic" and lagrangian) if cfg.moment_free is None \
-        else cfg.moment_free
+    # of dynamic runs; static runs keep the report's forces (docs/theory.md, "Moment-free
+    # pair forces")
+    moment_free = kind == "dynamic" if cfg.moment_free is None else cfg.moment_free
     # unpaired nodes between pairs share the pair forces where an ALE body ends the pairs node
     # to node; offset Lagrangian pairs would share them at the wrong places (docs/theory.md)
+    lagrangian = b1.mesh_motion == "lagrangian" and b2.mesh_motion == "lagrangian"
     share = not lagrangian if cfg.unpaired_share is None else cfg.unpaired_share
     law = ContactLaw(cfg.method, cfg.penalty_normal, cfg.penalty_tangential, cfg.friction,
                      moment_free, cfg.gap_restoring, share)

@@ -106,7 +106,8 @@ def move_meshes(
             target = request[2] + x_pred[nodes] - x_start
             up = _moved(setup, base, rows, nodes, target, x_pred[nodes], dt, x_start)
             # momenta and energy exactly as the time loop measures them (docs/theory.md)
-            up = conserve_remap(model, setup, base.X, base.d, base.v, base.time, up)
+            up = conserve_remap(model, setup, base.X, base.d, base.v, base.time, up,
+                                nodes - setup.node_offset)
         X[rows], d[rows], v[rows], a[rows] = up.X, up.d, up.v, up.a
         updates.append(up)
         requests.append(request)

@@ -14,8 +14,9 @@ before the move, to round-off:
   removes; it goes into the velocities of the same neighbourhood (docs/theory.md, "ALE remap
   that conserves energy").
 
-The correction acts on the free dofs of the nodes of the cells around the remapped nodes, and
-on all free dofs of the body when those cannot take the energy.
+The correction acts on the free dofs of the nodes of the cells around the remapped nodes and
+around the step's active contact nodes (slid or not: ``_correction_nodes``), and on all free
+dofs of the body when those cannot take the energy.
 """
 
 from __future__ import annotations
@@ -38,8 +39,13 @@ __all__ = ["conserve_remap"]
 
 
 def conserve_remap(model: Model, setup: AleSetup, X: NDArray, d: NDArray, v: NDArray,
-                   time: float, update: AleUpdate) -> AleUpdate:
-    """``update`` (the body's move from the t_n rows X, d, v) with its velocities corrected."""
+                   time: float, update: AleUpdate,
+                   active: NDArray | None = None) -> AleUpdate:
+    """``update`` (the body's move from the t_n rows X, d, v) with its velocities corrected.
+
+    ``active``: the body's local contact nodes the move was made for. The correction then
+    also acts around them (``_correction_nodes``) whether or not they slid, so that it does
+    not jump when a node's slide crosses zero."""
     motion = setup.motion
     energy = setup.conserve_energy
     if (not update.moved.any() or motion.convection != "remap"
@@ -56,8 +62,7 @@ def conserve_remap(model: Model, setup: AleSetup, X: NDArray, d: NDArray, v: NDA
     if energy == "total":
         kinetic -= strain_change
     free = _free_dofs(model, setup, time)
-    near = np.zeros(setup.n_nodes, bool)
-    near[motion.cells[touched].ravel()] = True
+    near = _correction_nodes(setup, touched, active)
     dofs = np.flatnonzero(np.repeat(near, 2) & free)
     mass = body.mass_after(old, update.X, touched)
     target_momenta = old.momenta if setup.conserve_momentum else None
@@ -68,6 +73,31 @@ def conserve_remap(model: Model, setup: AleSetup, X: NDArray, d: NDArray, v: NDA
         fixed = conserving_correction(mass, update.x_mesh, update.v, np.flatnonzero(free),
                                       target_momenta, target_kinetic)
     return replace(update, v=fixed.v, remap_strain_change=strain_change)
+
+
+def _correction_nodes(setup: AleSetup, touched: NDArray, active: NDArray | None
+                      ) -> NDArray[np.bool_]:
+    """Mask of the nodes whose velocities the correction may change: those of the cells the
+    move changed and, with ``active``, those of the cells around every node that an
+    arbitrarily small slide of the active nodes moves (the active nodes themselves; with
+    ``interior`` other than "minimal" also the interior nodes within ``smoothing_layers``).
+
+    Why: the set must not depend on which nodes moved by exactly zero. A sticking pair that
+    stays node to node (moment-free forces: its objective slip rate vanishes) wants a slide of
+    ~0 +- the solver's noise; its node then moves (remapped, its cells corrected) in one
+    augmentation and not at all (slide below ``ale.slide_tolerance``) in the next. With the
+    cells taken from the moved nodes only, the correction's velocities then jumped by up to
+    2e-3 around the node (tilted blocks, mu = 10, step 35), the normal rates by 3e-6, and the
+    augmentations cycled without converging (docs/theory.md, "Moment-free pair forces")."""
+    motion = setup.motion
+    near = np.zeros(setup.n_nodes, bool)
+    near[motion.cells[touched].ravel()] = True
+    if active is None or np.size(active) == 0:
+        return near
+    seeds = np.zeros(setup.n_nodes, bool)
+    seeds[np.asarray(active, dtype=np.int64)] = True
+    layers = max(m.smoothing_layers if m.interior != "minimal" else 0 for m in setup.motions)
+    return near | motion.within_layers(seeds, layers + 1)
 
 
 def body_mass(X: NDArray, cells: NDArray, rho: NDArray, lumped: bool) -> sp.csr_matrix:
