@@ -104,12 +104,16 @@ def test_bars_deck_reads_back(bars_deck):
 def test_hertz_pressure_faces_on_the_flat_face(tmp_path):
     scenario, overrides = calculix.problem("hertz", 1, tmp_path)
     config = calculix.load_scenario(scenario, overrides)
-    deck = calculix.write_deck(config, scenario.parent, tmp_path / "hertz.inp")
+    shift = calculix.CCX_SHIFT["hertz"]
+    deck = calculix.write_deck(config, scenario.parent, tmp_path / "hertz.inp", shift)
     nodes, elements, surfaces, dloads = read_deck(tmp_path / "hertz.inp")
     assert deck.n_cells == len(elements) == 950
     assert dloads, "no pressure faces"
-    for face in dloads:  # the cylinder's flat face, y = R = 400
-        assert np.allclose(face_points(nodes, elements, *face)[:, 1], 400.0)
+    dy = shift[0][1]
+    for face in dloads:  # the cylinder's flat face, y = R = 400, shifted by dy
+        assert np.allclose(face_points(nodes, elements, *face)[:, 1], 400.0 + dy, atol=1e-9)
+    lowest = min(nodes[n][1] for n in range(1, deck.node_offset[1] + 1))  # the cylinder's
+    assert lowest == pytest.approx(dy, abs=1e-12)
     for face in surfaces["S1_TOP"]:
         assert np.allclose(face_points(nodes, elements, *face)[:, 1], 0.0, atol=1e-9)
 
