@@ -43,6 +43,7 @@ bench: $(WARM)
 	$(BIN)/python -m pip install --quiet -e ".[bench,fast]"
 	$(BIN)/python benchmarks/run.py
 	$(BIN)/python benchmarks/scaling.py --k 1 2 4 8
+	$(BIN)/python benchmarks/calculix.py  # CalculiX comparison; one line and skipped without ccx
 
 lint: $(STAMP)
 	$(BIN)/ruff check src tests benchmarks
