@@ -143,6 +143,9 @@ def test_persistent_velocities_zero_the_pair_normal_rate_of_the_body_1_node_only
     v = rng.normal(size=base.v.shape)
     ci = model.interfaces[0]
     assert ci.persistency
+    fresh = persistent_velocities(model.interfaces, contact, x_pred, v)
+    assert np.array_equal(fresh, v)  # a pair not pressed at the last step's end keeps its v
+    contact = (replace(contact[0], t_N=np.ones(1)),)
     out = persistent_velocities(model.interfaces, contact, x_pred, v)
     _, _, rate = pair_gaps(x_pred, ci.interface, contact[0].pairs, out)
     _, _, before = pair_gaps(x_pred, ci.interface, contact[0].pairs, v)

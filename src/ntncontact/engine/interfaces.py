@@ -77,8 +77,10 @@ def _ordered_candidates(x: NDArray, ci: ContactInterface, state: PairState,
 
 def persistent_velocities(interfaces: Sequence[ContactInterface], states: Sequence[PairState],
                           x: NDArray, v: NDArray) -> NDArray:
-    """v with every persistency pair's body-1 node given its partner's velocity along the pair
-    normal (gdot = 0 at x): the velocity the step's first Newton start advances the nodes with.
+    """v with the body-1 node of every persistency pair held at the last step's end (t_N > 0)
+    given its partner's velocity along the pair normal (gdot = 0 at x): the velocity the step's
+    first Newton start advances the nodes with. A fresh pair keeps its approach: zeroing it would
+    crush the row behind the node (the ring at speed 50 of test_step_end_inversion).
     The mid-point rule leaves a node held by persistency with the end velocity
     v_{n+1} = 2 v_{n+1/2} - v_n, which flips its normal part from step to step (the odd-even
     mode, docs/examples.md); started from x_n + dt/2 v_n such a node is pushed by v dt/2 into
@@ -89,8 +91,11 @@ def persistent_velocities(interfaces: Sequence[ContactInterface], states: Sequen
     for ci, state in zip(interfaces, states, strict=True):
         if len(state) == 0 or not ci.persistency:
             continue
-        n, _, rate = pair_gaps(x, ci.interface, state.pairs, v)
-        out[state.pairs[:, 0]] -= rate[:, None] * n
+        held = state.t_N > 0.0  # pressed at the last step's end; a fresh pair keeps its v
+        if not held.any():
+            continue
+        n, _, rate = pair_gaps(x, ci.interface, state.pairs[held], v)
+        out[state.pairs[held, 0]] -= rate[:, None] * n
     return out
 
 
