@@ -25,6 +25,7 @@ from ..contact import (
     evaluate_contact,
     lagrange_blocks,
     ordered_partners,
+    pair_gaps,
     release_tensile_pairs,
 )
 from .model import ContactInterface
@@ -72,6 +73,30 @@ def _ordered_candidates(x: NDArray, ci: ContactInterface, state: PairState,
     partners = ordered_partners(x, ci.interface, free, kept=state.pairs,
                                 reference_arc=ci.reference_arc2)
     return np.column_stack([free, partners])[partners >= 0]
+
+
+def persistent_velocities(interfaces: Sequence[ContactInterface], states: Sequence[PairState],
+                          x: NDArray, v: NDArray) -> NDArray:
+    """v with the body-1 node of every persistency pair held at the last step's end (t_N > 0)
+    given its partner's velocity along the pair normal (gdot = 0 at x): the velocity the step's
+    first Newton start advances the nodes with. A fresh pair keeps its approach: zeroing it would
+    crush the row behind the node (the ring at speed 50 of test_step_end_inversion).
+    The mid-point rule leaves a node held by persistency with the end velocity
+    v_{n+1} = 2 v_{n+1/2} - v_n, which flips its normal part from step to step (the odd-even
+    mode, docs/examples.md); started from x_n + dt/2 v_n such a node is pushed by v dt/2 into
+    its surface element (fast-sliding blocks refined 4x: 3.8 mm of the 3.9 mm contact-side
+    row), and the first Newton steps inverted it (docs/theory.md, "Newton start of held
+    pairs")."""
+    out = np.array(v, dtype=float, copy=True)
+    for ci, state in zip(interfaces, states, strict=True):
+        if len(state) == 0 or not ci.persistency:
+            continue
+        held = state.t_N > 0.0  # pressed at the last step's end; a fresh pair keeps its v
+        if not held.any():
+            continue
+        n, _, rate = pair_gaps(x, ci.interface, state.pairs[held], v)
+        out[state.pairs[held, 0]] -= rate[:, None] * n
+    return out
 
 
 def contact_terms(interfaces: Sequence[ContactInterface], states: Sequence[PairState],

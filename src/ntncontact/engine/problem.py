@@ -83,6 +83,8 @@ class StepProblem:
     #: round-off floor of the residual scale (see ``_evaluate``); None: set by the first tangent.
     #: The augmentations of a step pass it on, so their first residuals need no tangent.
     scale_floor: float | None = None
+    #: the velocity (n, 2) :meth:`initial_guess` advances d_n with; None: the state's v
+    start_velocity: NDArray | None = None
     _cache: dict = field(default_factory=dict, repr=False)
     _row_scale: NDArray | None = field(default=None, repr=False)  # see _balanced_rows
     _same_pattern: bool | None = field(default=None, repr=False)
@@ -112,9 +114,11 @@ class StepProblem:
         last step's increment, v_n dt), then the constraints' multipliers. Quasi-static
         steps started from d_n, where the predicted pairs were still open, and their first
         solve line-searched (Hertz: 9.4 -> 8.4 Newton iterations per step at k = 1, 12.7 ->
-        10.7 at k = 2)."""
+        10.7 at k = 2). ``start_velocity`` replaces v_n (the simulation gives persistency
+        pairs their partners' normal velocity, ``interfaces.persistent_velocities``)."""
         d = self.state.d.ravel()
-        d = d + (0.5 if self.dynamic else 1.0) * self.dt * self.state.v.ravel()
+        v = self.state.v if self.start_velocity is None else self.start_velocity
+        d = d + (0.5 if self.dynamic else 1.0) * self.dt * v.ravel()
         return np.concatenate([d[self.free_dofs]] + [c.initial for c in self.constraints])
 
     def full(self, y: NDArray) -> NDArray:

@@ -30,6 +30,7 @@ from .interfaces import (
     detect_all,
     evaluate_all,
     lagrange_terms,
+    persistent_velocities,
     unconverged_interfaces,
     with_solved_multipliers,
 )
@@ -265,7 +266,10 @@ class Simulation:
                                   # ties after the contact multipliers (see TieTerm.order)
                                   [*lagrange_terms(interfaces, contact, dt),
                                    *tie_terms(self.model.ties)], union=self._union,
-                                  scale_floor=floor)
+                                  scale_floor=floor,
+                                  start_velocity=(persistent_velocities(
+                                      interfaces, contact, state.x, state.v)
+                                      if self.dynamic and guess is None else None))
             y0 = problem.initial_guess()
             if guess is not None:  # warm start: the last solution, shifted by the remap
                 d_guess = guess[0] + (state.d - guess[1]).ravel()
