@@ -78,13 +78,13 @@ def test_a_block_skidding_on_an_ale_slab_closes_the_energy_ledger():
 
 
 def test_fast_sliding_with_friction_keeps_angular_momentum_with_an_exact_remap():
-    """Free bodies, one of them ALE, mu = 0.2: with moment-free pair forces and the remap's
-    exact momentum correction (with the run's consistent mass) L stays to round-off (measured
-    9e-12 of |L0| = 0.141; 1.2-1.6 % with the report's forces and the earlier lumped-mass
-    correction, issue 16)."""
+    """Free bodies, one of them ALE, mu = 0.2: with moment-free pair forces (the dynamic
+    default, not set here) and the remap's exact momentum correction (with the run's consistent
+    mass) L stays to round-off (measured 9e-12 of |L0| = 0.141; 1.2-1.6 % with the report's
+    forces and the earlier lumped-mass correction, issue 16)."""
     rec = Recorder()
     model = model_from_example("blocks_fast_sliding.toml",
-                               ["contact.0.friction=0.2", "contact.0.moment_free=true"])
+                               ["contact.0.friction=0.2"])
     Simulation(model, [rec]).run()
     L = np.array([r.balance.angular_momentum for r in rec.records])
     P = np.array([r.balance.linear_momentum for r in rec.records])
