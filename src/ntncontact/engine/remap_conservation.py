@@ -59,6 +59,8 @@ def conserve_remap(model: Model, setup: AleSetup, X: NDArray, d: NDArray, v: NDA
     # in E, and history.csv's ale_remap_energy shows it either way
     strain_change = 0.0 if energy == "none" else \
         body.strain_energy(X, d, update) - old.strain_energy
+    if model.analysis.kind != "dynamic":  # no velocities to correct, only the books
+        return replace(update, remap_strain_change=strain_change)
     if energy == "total":
         kinetic -= strain_change
     free = _free_dofs(model, setup, time)
