@@ -69,7 +69,7 @@ def conserve_remap(model: Model, setup: AleSetup, X: NDArray, d: NDArray, v: NDA
     free = _free_dofs(model, setup, time)
     changed = touched
     if setup.restore_strain:
-        update, changed = body.restore_strain(old, X, d, update, touched, free)
+        update, changed = body.restore_strain(old, X, d, update, touched, free, active)
     kinetic = old.kinetic
     # measured in both energy modes: "total" hands it to the velocities, "kinetic" leaves it
     # in E, and history.csv's ale_remap_energy shows it either way
@@ -178,19 +178,31 @@ class _BodyData:
         return self.last
 
     def restore_strain(self, old: _OldState, X: NDArray, d: NDArray, update: AleUpdate,
-                       touched: NDArray, free: NDArray) -> tuple[AleUpdate, NDArray]:
+                       touched: NDArray, free: NDArray, active: NDArray | None = None
+                       ) -> tuple[AleUpdate, NDArray]:
         """``update`` with the reference positions of the interior nodes around the move
         changed at fixed positions so that the strain energy is the one before the move
         (``ale.strain_repair``), and the cells whose reference image changed. The nodes are
-        those of the changed cells, widened by a layer of cells while W cannot reach its
-        target on them (up to ``REPAIR_LAYERS``)."""
+        the free interior nodes of the cells around the moved nodes and the ``active``
+        contact nodes, widened by a layer of cells while W cannot reach its target on them
+        (up to ``REPAIR_LAYERS``).
+
+        Why the active nodes too: as for the velocity correction (``_correction_nodes``),
+        the nodes relabelled must not depend on which slides were exactly zero. A sticking
+        pair's node wants a slide of ~0 +- the solver's noise, made in one augmentation
+        (above ``ale.slide_tolerance``) and dropped in the next; with the nodes taken around
+        the moved ones only, the relabel jumped between the two sets (tilted blocks,
+        mu = 10, step 35: |delta| 4.43e-6 and 4.80e-6) and the augmentations cycled."""
         setup, cells = self.setup, self.cells
         X_old, d_old = X[self.rows], d[self.rows]
         free_node = free.reshape(-1, 2).all(axis=1) & ~setup.motion.boundary
         weights = self._nodal_area(X_old)
+        seeds = update.moved.copy()
+        if active is not None:
+            seeds[np.asarray(active, dtype=np.int64)] = True
         result = None
         for layers in range(1, REPAIR_LAYERS + 1):
-            allowed = setup.motion.within_layers(update.moved, layers) & free_node
+            allowed = setup.motion.within_layers(seeds, layers) & free_node
             if not allowed.any():
                 continue
             around = np.flatnonzero((allowed | update.moved)[cells].any(axis=1))
