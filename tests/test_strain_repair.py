@@ -182,12 +182,12 @@ def test_the_ring_impacts_remap_keeps_k_w_and_momenta_each(mass):
     assert np.abs(energy / E0 - 1).max() < 1e-8
 
 
-@pytest.mark.slow
 def test_the_ring_impact_remaps_change_less_than_1e_6_of_e0_per_impact():
     """Issue 16 item 3's aim on examples/ring_impact.toml: over the whole impact the remaps
     change the strain energy by < 1e-6 E0 (measured 1.7e-12; 4.3e-4 net and 2.3e-3 summed
     over the steps with the plain remap); the energy varies by < 1e-8 (measured 2.5e-10;
-    5.9e-4) and contact, penetration and momenta are those of the plain remap."""
+    5.9e-4), contact ends at 0.875 as with the plain remap and the momentum is kept to
+    round-off. The whole example: 19 s on a loaded machine, so not marked slow."""
     rec = Recorder()
     Simulation(model_from_example("ring_impact.toml"), [rec]).run()
     assert rec.status == ("completed", None)
