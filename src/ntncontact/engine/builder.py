@@ -233,7 +233,7 @@ def _ale_setup(index: int, body: Body, cfg: BodyConfig, config: ScenarioConfig) 
     except ValueError as err:
         raise ScenarioError(f"{where}: {err}") from None
     return AleSetup(index, body.node_offset, body.mesh.n_nodes, motions[0], motions[1:],
-                    opts.conserve_momentum, opts.conserve_energy)
+                    opts.conserve_momentum, opts.conserve_energy, opts.restore_strain_energy)
 
 
 def _interface(cfg: ContactConfig, index: int, bodies: tuple[Body, ...],

@@ -180,6 +180,9 @@ class AleSetup:
     # no rigid correction of its own): momenta, and "total", "kinetic" or "none" energy
     conserve_momentum: bool = False
     conserve_energy: str = "none"
+    #: relabel the particles at the moved nodes so that the remap keeps the strain energy
+    #: (``ale.strain_repair``; engine.remap_conservation)
+    restore_strain: bool = False
 
     @property
     def motions(self) -> tuple[AleBody, ...]:

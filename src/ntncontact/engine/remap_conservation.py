@@ -6,13 +6,19 @@ model's own mass matrix (consistent or lumped, as the step and the history use i
 body's linear and angular momentum and its kinetic energy are those the time loop measures
 before the move, to round-off:
 
-* ``conserve_energy = "kinetic"``: K after = K before;
-* ``"total"`` (default): K after = K before - (W after - W before), W the strain energy of the
-  cells the move changed: the remap then conserves the total energy exactly. The strain energy
-  a remap changes is first order in the slide (the nodal values of a C0 field with a kink at a
-  loaded node are cut by the interpolation), far above anything a higher-order interpolant
-  removes; it goes into the velocities of the same neighbourhood (docs/theory.md, "ALE remap
-  that conserves energy").
+* ``restore_strain_energy`` (default): before the velocities, the reference positions X of
+  the interior nodes around the move are changed at fixed positions x so that the strain
+  energy W is the one before the move (``ale.strain_repair``: which particle sits at a node
+  near the kink that a point-loaded contact node puts into the field is known only to the
+  remap's accuracy, and the repair chooses within it). The strain energy a remap changes is
+  first order in the slide (the nodal values of a C0 field with a kink at a loaded node are
+  cut by the interpolation), far above anything a higher-order interpolant removes
+  (docs/theory.md, "The strain energy the remap changes");
+* ``conserve_energy = "kinetic"`` (default): K after = K before, so with the repair the remap
+  keeps K and W, hence E, each to round-off;
+* ``"total"``: K after = K before - (W after - W before), W over the cells the move changed:
+  the strain energy the remap changed (all of it without the repair, what the repair could
+  not restore with it) goes into the velocities of the same neighbourhood.
 
 The correction acts on the free dofs of the nodes of the cells around the remapped nodes and
 around the step's active contact nodes (slid or not: ``_correction_nodes``), and on all free
@@ -29,13 +35,19 @@ from numpy.typing import NDArray
 
 from ..ale.conservation import conserving_correction, dof_momenta
 from ..ale.motion import AleUpdate
+from ..ale.strain_repair import RepairResult, StrainRepair, restore_strain_energy
 from ..fem.assembly import CsrPattern
 from ..fem.element import element_mass
-from ..fem.kernels_numba import NumbaAssembly
+from ..fem.kernels_numba import MODEL_CODES, NumbaAssembly
 from ..fem.loads import dirichlet_values
 from .model import AleSetup, Model
 
 __all__ = ["conserve_remap"]
+
+#: the repaired strain energy matches its target to this fraction of the body's
+REPAIR_RTOL = 1e-12
+#: the repair relabels interior nodes up to this many cell layers from the moved nodes
+REPAIR_LAYERS = 3
 
 
 def conserve_remap(model: Model, setup: AleSetup, X: NDArray, d: NDArray, v: NDArray,
@@ -54,6 +66,10 @@ def conserve_remap(model: Model, setup: AleSetup, X: NDArray, d: NDArray, v: NDA
     body = _body_data(model, setup)
     old = body.old_state(X, d, v)
     touched = np.flatnonzero(update.moved[motion.cells].any(axis=1))
+    free = _free_dofs(model, setup, time)
+    changed = touched
+    if setup.restore_strain:
+        update, changed = body.restore_strain(old, X, d, update, touched, free, active)
     kinetic = old.kinetic
     # measured in both energy modes: "total" hands it to the velocities, "kinetic" leaves it
     # in E, and history.csv's ale_remap_energy shows it either way
@@ -63,10 +79,9 @@ def conserve_remap(model: Model, setup: AleSetup, X: NDArray, d: NDArray, v: NDA
         return replace(update, remap_strain_change=strain_change)
     if energy == "total":
         kinetic -= strain_change
-    free = _free_dofs(model, setup, time)
     near = _correction_nodes(setup, touched, active)
     dofs = np.flatnonzero(np.repeat(near, 2) & free)
-    mass = body.mass_after(old, update.X, touched)
+    mass = body.mass_after(old, update.X, changed)
     target_momenta = old.momenta if setup.conserve_momentum else None
     target_kinetic = None if energy == "none" else kinetic
     fixed = conserving_correction(mass, update.x_mesh, update.v, dofs, target_momenta,
@@ -144,6 +159,13 @@ class _BodyData:
                         for g in asm.groups
                         if (mine := np.intersect1d(g.elements, global_cells)).size]
         self.last: _OldState | None = None
+        models = np.zeros(len(global_cells), np.int64)
+        for g in asm.groups:
+            models[np.isin(global_cells, g.elements)] = MODEL_CODES[g.kind]
+        self.repair = StrainRepair(np.ascontiguousarray(self.cells, dtype=np.int64), models,
+                                   np.ascontiguousarray(asm.lam[global_cells]),
+                                   np.ascontiguousarray(asm.mu[global_cells]))
+        self.last_repair: RepairResult | None = None
 
     def old_state(self, X: NDArray, d: NDArray, v: NDArray) -> _OldState:
         rows = self.rows
@@ -156,6 +178,55 @@ class _BodyData:
             self.last = _OldState(key, me, mass, momenta, kinetic,
                                   self._energy(X, d))
         return self.last
+
+    def restore_strain(self, old: _OldState, X: NDArray, d: NDArray, update: AleUpdate,
+                       touched: NDArray, free: NDArray, active: NDArray | None = None
+                       ) -> tuple[AleUpdate, NDArray]:
+        """``update`` with the reference positions of the interior nodes around the move
+        changed at fixed positions so that the strain energy is the one before the move
+        (``ale.strain_repair``), and the cells whose reference image changed. The nodes are
+        the free interior nodes of the cells around the moved nodes and the ``active``
+        contact nodes, widened by a layer of cells while W cannot reach its target on them
+        (up to ``REPAIR_LAYERS``).
+
+        Why the active nodes too: as for the velocity correction (``_correction_nodes``),
+        the nodes relabelled must not depend on which slides were exactly zero. A sticking
+        pair's node wants a slide of ~0 +- the solver's noise, made in one augmentation
+        (above ``ale.slide_tolerance``) and dropped in the next; with the nodes taken around
+        the moved ones only, the relabel jumped between the two sets (tilted blocks,
+        mu = 10, step 35: |delta| 4.43e-6 and 4.80e-6) and the augmentations cycled."""
+        setup, cells = self.setup, self.cells
+        X_old, d_old = X[self.rows], d[self.rows]
+        free_node = free.reshape(-1, 2).all(axis=1) & ~setup.motion.boundary
+        weights = self._nodal_area(X_old)
+        seeds = update.moved.copy()
+        if active is not None:
+            seeds[np.asarray(active, dtype=np.int64)] = True
+        result = None
+        for layers in range(1, REPAIR_LAYERS + 1):
+            allowed = setup.motion.within_layers(seeds, layers) & free_node
+            if not allowed.any():
+                continue
+            around = np.flatnonzero((allowed | update.moved)[cells].any(axis=1))
+            target = self.repair.energy(X_old, d_old, around)
+            scale = max(abs(target), abs(old.strain_energy), 1e-300)
+            result = restore_strain_energy(self.repair, update.X, update.x_mesh, allowed,
+                                           weights, around, target, REPAIR_RTOL * scale)
+            if result.restored:
+                break
+        self.last_repair = result
+        if result is None or not result.restored:
+            return update, touched
+        X_new = result.X
+        return replace(update, X=X_new, d=update.x_mesh - X_new), np.union1d(touched, around)
+
+    def _nodal_area(self, X_local: NDArray) -> NDArray:
+        """Lumped reference areas of the nodes (the repair's norm weights)."""
+        xc = X_local[self.cells]
+        d1, d2 = xc[:, 2] - xc[:, 0], xc[:, 3] - xc[:, 1]
+        area = 0.5 * np.abs(d1[:, 0] * d2[:, 1] - d1[:, 1] * d2[:, 0])
+        out = np.bincount(self.cells.ravel(), np.repeat(area / 4.0, 4), self.setup.n_nodes)
+        return np.where(out > 0.0, out, 1.0)
 
     def mass_after(self, old: _OldState, X_local: NDArray, touched: NDArray) -> sp.csr_matrix:
         """The body's mass with the cells ``touched`` on their new reference images."""

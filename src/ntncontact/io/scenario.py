@@ -208,6 +208,9 @@ class AleConfig(Strict):
     # the remap), "total" (minus the strain energy the remap changed: E exact, but a body at
     # rest gets velocity kicks: docs/scenarios.md) or "none"
     conserve_energy: Literal["total", "kinetic", "none"] = "kinetic"
+    # relabel the particles at the moved nodes (X at fixed x) so that the remap keeps the
+    # strain energy: docs/theory.md, "The strain energy the remap changes"
+    restore_strain_energy: bool = True
     respace: Literal["local", "reference"] = "local"
     interior: Literal["minimal", "displacement", "position"] = "minimal"
     slide_tolerance: Positive = 1e-8
