@@ -10,6 +10,12 @@ stopped at step 18 (t = 0.051): the persisting penetration of the upper block's 
 6.0e-3 to 6.3e-3, lies about the ALE slide's deep-pair threshold, half the 4x spacing
 (mesh_motion.DEEP x 0.0125 = 6.25e-3), and one pair flipped between the two slides at every
 augmentation; the deep decision is now made once per step and pair.
+
+Refined 8x (22,272 elements) the first contact step stalled (>19 min): the remap's velocity
+correction factored the resting lower block (23,698 dofs) densely at every augmentation
+(test_remap_conservation: a body at rest needs no widening; the factor is sparse). Then step 18
+failed: nodes one step had taken deeper than a segment were neither detected nor paired
+(``test_nodes_a_step_deep_are_detected_and_paired_node_to_node``).
 """
 
 from dataclasses import replace
