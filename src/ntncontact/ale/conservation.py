@@ -63,9 +63,11 @@ class ConservingCorrection:
 def _dof_block(mass: sp.csr_matrix, dofs: NDArray) -> sp.csc_matrix:
     """A = M_SS on the dofs (2 a + i) from the scalar nodal mass: M acts alike on x and y.
 
-    Sparse: S is the neighbourhood of a few moved nodes, but the whole body when that cannot
-    take the energy, and a dense block of a body of 10^4 nodes takes GBs (the Hertz foundation
-    refined 8x grew to 7.4 GB in a dense Cholesky factor)."""
+    Sparse, for a sparse LU: S is the neighbourhood of a few moved nodes, but the whole body
+    when that cannot take the energy. Dense, the whole lower block of the fast-sliding blocks
+    refined 4x (6,090 dofs) took 8 s a factorization, 8x (23,698 dofs) ~8 min and 4.5 GB, at
+    every augmentation of its first contact step, and the Hertz foundation refined 8x grew to
+    7.4 GB (issues 17, 18)."""
     nodes, where = np.unique(dofs // 2, return_inverse=True)
     block = mass[nodes][:, nodes][where][:, where].tocoo()
     same = dofs[block.row] % 2 == dofs[block.col] % 2
@@ -117,12 +119,12 @@ def conserving_correction(mass: sp.spmatrix, x: NDArray, v: NDArray, dofs: NDArr
         left = kinetic - k0 - float(b @ delta) - 0.5 * float(delta @ (A @ delta))
         norm2 = float(b @ u_free)  # |u_N|_A^2 = u_N . A u = u_N . b
         ratio = 1.0 + 2.0 * left / norm2 if norm2 > 0.0 else -1.0
-        if ratio >= 0.0 and norm2 > 1e-30 * max(abs(k0), 1e-300):
-            delta = delta + (np.sqrt(ratio) - 1.0) * u_free
+        if abs(left) <= 1e-14 * max(abs(kinetic), k0):
+            # nothing left to change (a body at rest: v = 0 meets K* = 0 and P* = 0), which
+            # no velocity change could do when the motion vanishes (u_N = 0)
             restored = True
-        elif abs(left) <= 1e-14 * max(abs(k0), abs(kinetic)):
-            # nothing to restore, as for a body at rest (K* = K = 0): widening S to the
-            # whole body would find nothing else to change
+        elif ratio >= 0.0 and norm2 > 1e-30 * max(abs(k0), 1e-300):
+            delta = delta + (np.sqrt(ratio) - 1.0) * u_free
             restored = True
     out = v.ravel().copy()
     out[dofs] += delta
