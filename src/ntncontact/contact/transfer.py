@@ -164,7 +164,10 @@ def _without_inner_nodes(surface: ContactSurface, pos: NDArray,
 def _dof_map(n_nodes: int, weights: dict[int, dict[int, float]]) -> sp.csr_matrix:
     """Identity on every node but the distributed ones, whose rows are their weights (node
     level), expanded to the two displacement components."""
-    keep = np.setdiff1d(np.arange(n_nodes), np.fromiter(weights, np.int64))
+    # a mask, not np.setdiff1d: its np.unique of all nodes took 13 ms per call at ring k = 8
+    identity = np.ones(n_nodes, dtype=bool)
+    identity[np.fromiter(weights, np.int64)] = False
+    keep = np.flatnonzero(identity)
     rows = [keep] + [np.full(len(row), node) for node, row in weights.items()]
     cols = [keep] + [np.fromiter(row, np.int64) for row in weights.values()]
     vals = [np.ones(keep.size)] + [np.fromiter(row.values(), float) for row in weights.values()]
