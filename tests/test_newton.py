@@ -113,3 +113,45 @@ def test_large_newton_loops_run_with_serial_blas(size):
     expected = [1] * len(before) if size >= newton_module.SERIAL_BLAS_FROM else before
     assert inside and all(threads == expected for threads in inside)
     assert [lib["num_threads"] for lib in blas.info()] == before
+
+
+def test_no_kept_factor_try_after_a_poorly_contracting_fresh_step():
+    """Far from the root of y^3 = c each full Newton step only shrinks |R| ~3x: a kept factor
+    (the Jacobian at the last iterate) cannot shrink it 10x either, so Newton factors at once
+    instead of paying a solve and a residual for a rejected try; near the root the kept
+    factor is tried (and used) again. Same root as full Newton."""
+    target = np.linspace(1.0, 2.0, N)
+    calls: list[int] = []  # per use of a factor: its number
+    made: list[int] = []
+
+    def residual(y):
+        return y**3 - target, float(np.linalg.norm(target))
+
+    def jacobian(y):
+        return sp.diags(3.0 * y**2, format="csr")
+
+    solver = LinearSolver("superlu")
+
+    def factorize(matrix):
+        factor, number = solver.factorize(matrix), len(made)
+        made.append(number)
+
+        def solve(b):
+            calls.append(number)
+            return factor(b)
+        return solve
+
+    cache = FactorCache(factorize)
+    start = np.full(N, 20.0)
+    settings = NewtonSettings(rtol=1e-12)
+    result = newton(residual, jacobian, solver.solve, start, settings, factors=cache)
+    reference = newton(residual, jacobian, solver.solve, start, settings)
+    assert np.abs(result.y - reference.y).max() <= 1e-10 * np.abs(reference.y).max()
+    norms = result.residual_norms
+    ratios = np.array(norms[1:]) / np.array(norms[:-1])
+    damped = int(np.sum(ratios > settings.reuse_contraction))
+    assert damped >= 4  # the case has a damped phase
+    uses = np.unique(calls, return_counts=True)[1]
+    # every factor whose own step was damped is used once; the kept factor is used near the root
+    assert np.sum(uses == 1) >= damped and cache.reused_steps >= 1
+    assert cache.factorizations == result.iterations - cache.reused_steps
