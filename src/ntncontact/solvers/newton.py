@@ -148,10 +148,9 @@ def _newton(residual: Residual, jacobian: Jacobian, solve: LinearSolve, y0: NDAr
     if y.size == 0 or norms[0] <= settings.atol or norms[0] == 0.0:
         return NewtonResult(y, 0, norms)
     reused = 0
-    damped = False  # the last fresh-Jacobian step contracted |R| less than reuse_contraction
     for it in range(1, settings.max_iterations + 1):
         step = None
-        if reused < settings.max_reused_steps and not damped:
+        if reused < settings.max_reused_steps:
             step = _modified_step(residual, y, R, norms[-1], factors, settings)
         reused = reused + 1 if step is not None else 0
         if step is not None:
@@ -163,11 +162,6 @@ def _newton(residual: Residual, jacobian: Jacobian, solve: LinearSolve, y0: NDAr
                 raise NewtonError("linear solve returned non-finite values", norms[-1], it)
             y, R, scale = _line_search(residual, y, dy, norms[-1], settings.line_search_steps)
         norms.append(norm2(R))
-        # Where the exact Jacobian's own step contracted |R| less than a kept factor must, the
-        # kept factor's next step would not pass either: factor at once, without the solve and
-        # residual of a doomed try (the first solve of a contact step, |R| falling 1.2-5x per
-        # line-searched iteration: 6-9 such tries per ring k = 8 contact step, issue 18).
-        damped = step is None and norms[-1] > settings.reuse_contraction * norms[-2]
         limit = settings.divergence_factor * max(first, 1e-300)
         if not np.isfinite(norms[-1]) or norms[-1] > limit:
             raise NewtonError(f"diverged (|R| = {norms[-1]:.3e})", norms[-1], it)
