@@ -286,3 +286,39 @@ def test_pardiso_runs_on_the_chosen_threads(monkeypatch):
     assert_accurate(A, b, solver.solve(A, b))
     assert seen == [1, 1, 1]  # analysis, factorization, solve
     assert linear._mkl_controller().info()[0]["num_threads"] == before
+
+
+@pytest.mark.skipif(not pardiso_available(), reason="pypardiso not installed")
+def test_pardiso_handles_are_reused_across_patterns(monkeypatch):
+    """A new sparsity pattern releases PARDISO's memory and takes the released solver object
+    up again with a fresh handle (building one searches the disk for mkl_rt): one object for
+    a run of pattern changes in one mode, two for the symmetric and the general mode, and
+    every solution as accurate as from a new object."""
+    import pypardiso
+
+    from ntncontact.solvers import linear
+
+    built = []
+
+    class Counted(pypardiso.PyPardisoSolver):
+        def __init__(self, *args, **kwargs):
+            built.append(self)
+            super().__init__(*args, **kwargs)
+
+    monkeypatch.setattr(pypardiso, "PyPardisoSolver", Counted)
+    monkeypatch.setattr(linear, "_IDLE_PARDISO", [])
+    solver = LinearSolver("pardiso")
+    # general mode, the pattern changing at every matrix
+    for A in [unsymmetric_matrix(1), structurally_unsymmetric_matrix(), unsymmetric_matrix(2),
+              structurally_unsymmetric_matrix(), unsymmetric_matrix(3)]:
+        b = np.linspace(1.0, 2.0, A.shape[0])
+        assert_accurate(A, b, solver.solve(A, b))
+    assert len(built) == 1
+    spd, unsym = spd_matrix(), unsymmetric_matrix(4)
+    assert linear._Pattern(spd).matches(unsym)
+    assert_accurate(spd, np.ones(spd.shape[0]), solver.solve(spd, np.ones(spd.shape[0])))
+    # the same pattern in the other mode keeps the first mode's analysis: a second object
+    assert_accurate(unsym, np.ones(unsym.shape[0]), solver.solve(unsym, np.ones(unsym.shape[0])))
+    assert len(built) == 2
+    del solver
+    assert len(linear._IDLE_PARDISO) == 2  # released with the solver, for the next one

@@ -120,3 +120,16 @@ def test_union_places_repeated_triplets_once_each():
     rows, cols = np.array([0, 0, 2, 0]), np.array([1, 1, 2, 1])
     got = TripletUnion().add(K, rows, cols, np.array([1.0, 2.0, 5.0, 4.0])).toarray()
     np.testing.assert_array_equal(got, [[1.0, 7.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 6.0]])
+
+
+def test_union_keys_are_those_of_np_unique():
+    """The union's keys (a stable sort of a few sorted runs, not NumPy's hash-based unique):
+    sorted, without repeats, the same set as np.unique, for runs that overlap and repeat."""
+    from ntncontact.fem.sparse import _sorted_unique
+
+    rng = np.random.default_rng(5)
+    runs = [np.sort(rng.integers(0, 10**12, size)) for size in (1000, 37, 0, 500)]
+    runs.append(runs[0][::3].copy())  # an earlier union's keys again
+    keys = np.concatenate(runs)
+    assert np.array_equal(_sorted_unique(keys), np.unique(keys))
+    assert _sorted_unique(np.zeros(0, np.int64)).size == 0

@@ -203,3 +203,33 @@ def test_weighted_tangent_is_the_derivative_of_the_weighted_force(n1, n2):
         e[col] = step
         fd[:, col] = (force(x + e.reshape(x.shape)) - force(x - e.reshape(x.shape))) / (2 * step)
     np.testing.assert_allclose(k, fd, atol=1e-6 * np.abs(k).max())
+
+
+@pytest.mark.parametrize(("n1", "n2"), [(4, 10), (10, 4), (7, 10)])
+def test_transfer_on_its_rows_equals_the_full_map(n1, n2):
+    """positions, force, tangent and columns act on the distributed rows only; they equal
+    S x, S^T f, S^T K S and G S with S the full (ndof, ndof) map, to round-off."""
+    x, interface, pairs = flat_pair_interface(n1, n2)
+    transfer = unpaired_share(x, interface, pairs)
+    assert transfer is not None and transfer.distributed.size > 0
+    S = transfer.dofs.toarray()
+    rng = np.random.default_rng(7)
+    y = x + 0.01 * rng.standard_normal(x.shape)
+    np.testing.assert_allclose(transfer.positions(y), (S @ y.ravel()).reshape(y.shape),
+                               rtol=0, atol=1e-15)
+    f = rng.standard_normal(x.size)
+    np.testing.assert_allclose(transfer.force(f), S.T @ f, rtol=0, atol=1e-14)
+    n = x.size
+    rows, cols = rng.integers(0, n, 60), rng.integers(0, n, 60)
+    rows[:20] = 2 * transfer.distributed[rng.integers(0, transfer.distributed.size, 20)]
+    vals = rng.standard_normal(60)
+    K = sp.coo_matrix((vals, (rows, cols)), shape=(n, n)).toarray()
+    r, c, v = transfer.tangent(rows, cols, vals)
+    assert np.unique(r * n + c).size == r.size  # summed entries
+    np.testing.assert_allclose(sp.coo_matrix((v, (r, c)), shape=(n, n)).toarray(),
+                               S.T @ K @ S, rtol=0, atol=1e-13)
+    g_rows = rng.integers(0, 3, 30)
+    r, c, v = transfer.columns(g_rows, cols[:30], vals[:30], 3)
+    G = sp.coo_matrix((vals[:30], (g_rows, cols[:30])), shape=(3, n)).toarray()
+    np.testing.assert_allclose(sp.coo_matrix((v, (r, c)), shape=(3, n)).toarray(), G @ S,
+                               rtol=0, atol=1e-13)

@@ -482,10 +482,8 @@ class _PardisoBackend:
     Every call runs on :func:`pardiso_threads` MKL threads."""
 
     def __init__(self, pattern: _Pattern, symmetric: bool, stats: SolverStats) -> None:
-        from pypardiso import PyPardisoSolver  # pardiso_available() found it
-
         self.pattern, self.symmetric, self.stats = pattern, symmetric, stats
-        self.pardiso = PyPardisoSolver(mtype=-2 if symmetric else 11)
+        self.pardiso = _pardiso_handle(mtype=-2 if symmetric else 11)
         for one_based, value in _pardiso_iparm(symmetric).items():
             self.pardiso.set_iparm(one_based, value)
         indptr, indices = ((pattern.upper_indptr, pattern.upper_indices) if symmetric
@@ -537,10 +535,37 @@ class _PardisoBackend:
             raise LinearSolverError(_pardiso_message(code, phase)) from None
 
     def release(self) -> None:
+        if self.pardiso is None:
+            return
         if self.analysed:
             self.analysed = False
             with _mkl_controller().limit(limits=self.threads):
                 self.pardiso.free_memory(everything=True)  # all of PARDISO's memory (phase -1)
+        _IDLE_PARDISO.append(self.pardiso)
+        self.pardiso = None
+
+
+#: PyPardisoSolver objects whose PARDISO memory was released, for the next pattern or solver:
+#: building one makes pypardiso search sys.prefix recursively for mkl_rt (``find_library``
+#: does not find the wheel's copy), 0.5-1.2 s per new pattern at ring k = 8 (issue 18: 8.6 s
+#: of an 18-step run with 6 analyses).
+_IDLE_PARDISO: list = []
+
+
+def _pardiso_handle(mtype: int):
+    """A PyPardisoSolver for matrices of type ``mtype`` with a fresh handle (pt all zero, as
+    PARDISO requires before its first call), reused from :data:`_IDLE_PARDISO` if one waits."""
+    if _IDLE_PARDISO:
+        solver = _IDLE_PARDISO.pop()
+    else:
+        from pypardiso import PyPardisoSolver  # pardiso_available() found it
+
+        solver = PyPardisoSolver()
+    solver.pt[:] = 0
+    solver.iparm[:] = 0
+    solver.set_matrix_type(mtype)
+    solver.set_phase(13)
+    return solver
 
 
 def _pardiso_iparm(symmetric: bool) -> dict[int, int]:
