@@ -68,14 +68,15 @@ def conserve_remap(model: Model, setup: AleSetup, X: NDArray, d: NDArray, v: NDA
     touched = np.flatnonzero(update.moved[motion.cells].any(axis=1))
     free = _free_dofs(model, setup, time)
     changed = touched
-    if setup.restore_strain:
+    dynamic = model.analysis.kind == "dynamic"
+    if setup.restore_strain and dynamic:  # a static step re-solves equilibrium on the new mesh
         update, changed = body.restore_strain(old, X, d, update, touched, free, active)
     kinetic = old.kinetic
     # measured in both energy modes: "total" hands it to the velocities, "kinetic" leaves it
     # in E, and history.csv's ale_remap_energy shows it either way
     strain_change = 0.0 if energy == "none" else \
         body.strain_energy(X, d, update) - old.strain_energy
-    if model.analysis.kind != "dynamic":  # no velocities to correct, only the books
+    if not dynamic:  # no velocities to correct, only the books
         return replace(update, remap_strain_change=strain_change)
     if energy == "total":
         kinetic -= strain_change
