@@ -50,8 +50,9 @@ def test_block_between_ale_walls_keeps_its_energy_over_20_impacts(material):
     |E/E0 - 1| <= 7e-10 throughout (with the repair 4.9e-10 / 1.1e-9), no trend; the remap
     conserves E exactly: the repair restores the strain energy it changes, and "total" hands
     what the repair could not restore to the velocities (linear: 4.5e-3 E0 summed over the
-    run; Neo-Hookean: 3e-12; without the repair 2-3e-2 E0 per episode). Before (the remap's rigid correction with lumped
-    masses, no energy): -2.8 % after the first episode, -37 % after 7 s."""
+    run; Neo-Hookean: 3e-12; without the repair 2-3e-2 E0 per episode). Before (the remap's
+    rigid correction with lumped masses, no energy): -2.8 % after the first episode, -37 %
+    after 7 s."""
     rec = Recorder()
     Simulation(block_between_ale_walls(material, 7.0), [rec]).run()
     error, ends = energy_after_each_episode(rec)

@@ -10,6 +10,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..fem.q4 import DN_GP, InvertedElementError
+from ..solvers.newton import NewtonError
 
 if TYPE_CHECKING:
     import scipy.sparse as sp
@@ -130,9 +131,12 @@ def check_end_of_step(model: Model, x: NDArray, time: float) -> None:
 
 def named_failure(model: Model, err: BaseException) -> str:
     """The message of a step's failure; an inverted element found by the solve (numbered
-    globally) is also named by its body and its number in that body."""
-    if isinstance(err, InvertedElementError) and not isinstance(err, InvertedAtStepEnd) \
-            and 0 <= err.element < len(model.cells):
-        body = model.bodies[int(model.body_of_cell()[err.element])]
-        return f"{err}: element {err.element - body.cell_offset} of body '{body.name}'"
+    globally), or by every trial of its line search, is also named by its body and its
+    number in that body."""
+    inverted = err.__cause__ if isinstance(err, NewtonError) else err
+    if isinstance(inverted, InvertedElementError) \
+            and not isinstance(inverted, InvertedAtStepEnd) \
+            and 0 <= inverted.element < len(model.cells):
+        body = model.bodies[int(model.body_of_cell()[inverted.element])]
+        return f"{err}: element {inverted.element - body.cell_offset} of body '{body.name}'"
     return str(err)

@@ -203,12 +203,13 @@ def _line_search(
 ) -> tuple[NDArray, NDArray, float]:
     """Backtrack on |R| from the full step; keep the full step if nothing is better."""
     alpha = 1.0
-    best = None
+    best = last = None
     for _ in range(max(steps, 1)):
         try:
             R, scale = residual(y + alpha * dy)
-        except (ValueError, FloatingPointError):  # e.g. an element inverted by a too-long step
-            alpha *= 0.5
+        except (ValueError, FloatingPointError) as err:  # e.g. an element inverted by a
+            alpha *= 0.5  # too-long step
+            last = err
             continue
         norm = norm2(R)
         if best is None or norm < best[0]:
@@ -217,6 +218,8 @@ def _line_search(
             break
         alpha *= 0.5
     if best is None:
-        raise NewtonError("every line-search trial inverted an element", norm0, 0)
+        # the last trial's error names the element (the shortest step inverted it too)
+        raise NewtonError(f"every line-search trial inverted an element (the last: {last})",
+                          norm0, 0) from last
     _, alpha, R, scale = best
     return y + alpha * dy, R, scale
