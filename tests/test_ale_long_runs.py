@@ -78,7 +78,7 @@ def test_without_the_energy_correction_the_same_walls_lose_energy():
 
 
 def test_the_strain_energy_repair_alone_keeps_the_walls_energy():
-    """The defaults (``restore_strain_energy``, ``conserve_energy = "kinetic"``): the remap
+    """The repair with ``conserve_energy = "kinetic"`` (the default is "total"): the remap
     keeps K and W each and hands nothing to the velocities; over 1.5 s (4 episodes) E stays
     within 1e-8 (measured 8.8e-11 over 2 s, Neo-Hookean; without the repair -16.7 %), and
     what the remaps changed in W, summed, stays below 1e-10 E0."""

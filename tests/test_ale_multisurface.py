@@ -195,19 +195,20 @@ def test_a_block_in_a_corner_keeps_contact_on_two_sides(corner_run):
 
 
 def test_a_block_in_a_corner_balances_its_energy(corner_run):
-    """The ledger against the energy put in (initial kinetic energy plus gravity's work): what
-    is lost is the strain energy the remaps changed (history's ale_remap_energy), to the
-    Newton tolerance (measured 2.2e-11); nothing is gained. The remap's loss itself: 0.82 %
-    on the branch that added several surfaces, 2.07 % once pairs end node to node across the
-    pair normal (issue 17 item 1) with moment-free forces (1.75 % with the report's forces,
-    2.46 % with conserve_energy = "none"): the surface nodes slide further; bound 3 %."""
+    """The ledger against the energy put in (initial kinetic energy plus gravity's work)
+    closes to the Newton tolerance: with the defaults (the strain-energy repair, and
+    conserve_energy = "total" for what it cannot restore) the remaps change no energy. The
+    strain energy the remaps changed before that (history's ale_remap_energy) stays booked:
+    0.82 % of what was put in on the branch that added several surfaces, 2.07 % once pairs
+    end node to node across the pair normal (issue 17 item 1), with the plain remap; bound
+    3 %."""
     _, rec = corner_run
     errors = energy_errors(rec)
     remap = np.array([r.extra["ale_remap_energy"] for r in rec.records[1:]])
     put_in = rec.records[0].balance.total_energy + max(
         abs(r.extra.get("external_work", 0.0)) for r in rec.records[1:])
-    assert np.abs(errors - remap).max() < 1e-8 * put_in
-    assert errors.max() < 1e-8 * put_in and remap.min() > -0.03 * put_in
+    assert np.abs(errors).max() < 1e-8 * put_in
+    assert np.abs(remap).max() < 0.03 * put_in
 
 
 def test_one_surface_in_two_interfaces_is_one_ale_surface():

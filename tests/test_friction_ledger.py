@@ -1,7 +1,7 @@
 """Frictional runs (issue 16 item 5): the energy never increases, the frictional dissipation
 grows at every step, and the ledger E + D_friction - W_ext - R closes to 1e-6 E0 at every step
-(R = ale_remap_energy, the strain energy the ALE remaps changed: with the default
-conserve_energy = "kinetic" it is part of E's change, with "total" the remap hands it to the
+(R = ale_remap_energy, the strain energy the ALE remaps changed: with conserve_energy =
+"kinetic" it is part of E's change, with the default "total" the remap hands it to the
 velocities and R does not enter E)."""
 
 import numpy as np
@@ -25,7 +25,7 @@ def ledger(recorder, total: bool):
     return (E if total else E - R), D, W
 
 
-def check_ledger(recorder, min_dissipation, total: bool = False):
+def check_ledger(recorder, min_dissipation, total: bool = True):
     E, D, W = ledger(recorder, total)
     E0 = E[0]
     assert recorder.status == ("completed", None)

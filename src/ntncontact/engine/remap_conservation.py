@@ -14,11 +14,14 @@ before the move, to round-off:
   first order in the slide (the nodal values of a C0 field with a kink at a loaded node are
   cut by the interpolation), far above anything a higher-order interpolant removes
   (docs/theory.md, "The strain energy the remap changes");
-* ``conserve_energy = "kinetic"`` (default): K after = K before, so with the repair the remap
-  keeps K and W, hence E, each to round-off;
-* ``"total"``: K after = K before - (W after - W before), W over the cells the move changed:
-  the strain energy the remap changed (all of it without the repair, what the repair could
-  not restore with it) goes into the velocities of the same neighbourhood.
+* ``conserve_energy = "total"`` (default): K after = K before - (W after - W before), W over
+  the cells the move changed: the strain energy the remap changed (all of it without the
+  repair, what the repair could not restore with it) goes into the velocities of the same
+  neighbourhood, so E is exact. With the repair that is only the rare unrestorable move, so
+  the velocities are not kicked where the repair works;
+* ``"kinetic"``: K after = K before, so with the repair the remap keeps K and W, hence E,
+  each to round-off where the repair restores W, and leaves E changed where it does not
+  (a block between linear ALE walls over 7 s: +1.1 % E0, after 30 episodes).
 
 The correction acts on the free dofs of the nodes of the cells around the remapped nodes and
 around the step's active contact nodes (slid or not: ``_correction_nodes``), and on all free

@@ -204,10 +204,10 @@ class AleConfig(Strict):
     sweeps: Annotated[int, Field(ge=0)] = 10
     remap: Literal["linear", "quadratic"] = "linear"
     conserve_momentum: bool = True
-    # the remap's velocity correction also sets the kinetic energy: "kinetic" (its value before
-    # the remap), "total" (minus the strain energy the remap changed: E exact, but a body at
-    # rest gets velocity kicks: docs/scenarios.md) or "none"
-    conserve_energy: Literal["total", "kinetic", "none"] = "kinetic"
+    # the remap's velocity correction also sets the kinetic energy: "total" (its value before
+    # the remap minus the strain energy the remap changed and the repair below could not
+    # restore: E exact), "kinetic" (its value before the remap) or "none"
+    conserve_energy: Literal["total", "kinetic", "none"] = "total"
     # relabel the particles at the moved nodes (X at fixed x) so that the remap keeps the
     # strain energy: docs/theory.md, "The strain energy the remap changes"
     restore_strain_energy: bool = True
