@@ -135,6 +135,7 @@ from ntncontact.mesh.quality import (
     min_sines_below,
 )
 
+from ..fem.kernels_numba import gauss_jacobian
 from ..jit import njit
 
 __all__ = ["AleBody", "AleMotionError", "AleUpdate", "lumped_masses", "move_ale_body"]
@@ -730,13 +731,7 @@ def _element_masses(X, cells, which, density, dn, shape):
     for k in range(which.size):
         e = which[k]
         for g in range(4):
-            j00 = j01 = j10 = j11 = 0.0  # J_ik = dx_i / dxi_k
-            for a in range(4):
-                n = cells[e, a]
-                j00 += dn[g, a, 0] * X[n, 0]
-                j01 += dn[g, a, 1] * X[n, 0]
-                j10 += dn[g, a, 0] * X[n, 1]
-                j11 += dn[g, a, 1] * X[n, 1]
+            j00, j01, j10, j11 = gauss_jacobian(dn, g, X, cells[e])
             det[g] = (j00 * j11 - j01 * j10) * density[k]
         for a in range(4):
             total = 0.0

@@ -30,7 +30,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from ..fem.kernels_numba import _jacobian_minus_one, _material
+from ..fem.kernels_numba import _jacobian_minus_one, _material, gauss_jacobian
 from ..fem.q4 import DN_GP, GAUSS_WEIGHTS
 from ..jit import njit
 
@@ -53,13 +53,7 @@ def _energy_and_force(models, X, d, cells, which, lam, mu, want_force, force):
         e = which[k]
         model = models[e]
         for g in range(4):
-            J00 = J01 = J10 = J11 = 0.0
-            for a in range(4):
-                n = cells[e, a]
-                J00 += _DN[g, a, 0] * X[n, 0]
-                J01 += _DN[g, a, 1] * X[n, 0]
-                J10 += _DN[g, a, 0] * X[n, 1]
-                J11 += _DN[g, a, 1] * X[n, 1]
+            J00, J01, J10, J11 = gauss_jacobian(_DN, g, X, cells[e])
             det = J00 * J11 - J01 * J10
             if not det > 0.0:
                 return energy, False

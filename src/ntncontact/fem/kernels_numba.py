@@ -88,6 +88,21 @@ def _material(model, H00, H01, H10, H11, lam, mu):
 
 
 @njit(cache=True, inline="always")
+def gauss_jacobian(dn, g, X, cell):
+    """J_ij = dX_i / dxi_j at Gauss point g of the Q4 with nodes ``cell`` (4,), from the
+    natural gradients ``dn`` (g, a, j) and the node positions X (n, 2); for the ALE kernels
+    that gather X by node (the element kernel keeps its cached, per-element form)."""
+    J00 = J01 = J10 = J11 = 0.0
+    for a in range(4):
+        n = cell[a]
+        J00 += dn[g, a, 0] * X[n, 0]
+        J01 += dn[g, a, 1] * X[n, 0]
+        J10 += dn[g, a, 0] * X[n, 1]
+        J11 += dn[g, a, 1] * X[n, 1]
+    return J00, J01, J10, J11
+
+
+@njit(cache=True, inline="always")
 def _dot4(a, b):
     return a[0] * b[0] + a[1] * b[1] + a[2] * b[2] + a[3] * b[3]
 
