@@ -133,3 +133,31 @@ def test_union_keys_are_those_of_np_unique():
     keys = np.concatenate(runs)
     assert np.array_equal(_sorted_unique(keys), np.unique(keys))
     assert _sorted_unique(np.zeros(0, np.int64)).size == 0
+
+
+def test_no_triplets_keep_the_union_pattern_and_a_restored_union_is_the_same():
+    """A step without contact after one with it (``problem._add_triplets`` with no triplets)
+    gives K in the union's pattern, so the solver keeps its analysis; and a union restored
+    from a checkpoint's keys gives the same pattern as the union it was saved from."""
+    from ntncontact.engine.problem import _add_triplets
+
+    rng = np.random.default_rng(7)
+    K, rows, cols, vals = _random_case(rng)
+    union = TripletUnion()
+    assert _add_triplets(K, [], union) is K  # nothing coupled yet: K itself
+    contact = _add_triplets(K, [(rows, cols, vals)], union)
+    assert contact.nnz > K.nnz and union.holds(K)
+    free = _add_triplets(K, [(rows[:0], cols[:0], vals[:0])], union)
+    assert np.array_equal(free.indices, contact.indices)
+    assert np.array_equal(free.indptr, contact.indptr)
+    np.testing.assert_array_equal(free.toarray(), K.toarray())
+    restored = TripletUnion()
+    restored.restore(union.keys.copy())
+    assert restored.holds(K)
+    for triplets in ([], [(rows[:4], cols[:4], vals[:4])]):
+        again = _add_triplets(K, triplets, restored)
+        want = _add_triplets(K, triplets, union)
+        assert np.array_equal(again.indices, want.indices)
+        np.testing.assert_array_equal(again.toarray(), want.toarray())
+    other_k = (K + sp.eye(K.shape[0], k=1)).tocsr()
+    assert not union.holds(other_k)

@@ -274,6 +274,13 @@ def _add_triplets(K: sp.csr_matrix, triplets: list, union: TripletUnion) -> sp.c
     (explicit zeros kept, see :mod:`ntncontact.fem.sparse`)."""
     kept = [(r, c, v) for r, c, v in triplets if len(v)]
     if not kept:
-        return K
+        # no contact now, but once a union exists K goes on in its pattern (zeros in the
+        # pairs' places): back to K's own pattern and to the union at the next touch were
+        # two new analyses per contact episode (issue 18)
+        return union.add(K, _NONE, _NONE, _NO_VALUES) if union.holds(K) else K
     rows, cols, vals = (np.concatenate([np.asarray(t[i]) for t in kept]) for i in range(3))
     return union.add(K, rows, cols, vals)
+
+
+_NONE = np.zeros(0, dtype=np.int64)
+_NO_VALUES = np.zeros(0)

@@ -175,7 +175,7 @@ class Simulation:
         return {"state": self.state, "ledger": dict(self.ledger),
                 "energy_multiplier": self._energy_multiplier, "last_substep": self._last_substep,
                 # the linear solver's orderings: the next factorization takes the same path
-                "linear_solver": analysis}
+                "linear_solver": analysis, "union_keys": self._union.keys}
 
     def restore_state(self, saved: dict) -> None:
         """Continue from :meth:`checkpoint_state`'s values; :meth:`run` then goes on with
@@ -187,6 +187,8 @@ class Simulation:
         solver = getattr(self.solve, "__self__", None)
         if hasattr(solver, "restore_analysis") and "linear_solver" in saved:
             solver.restore_analysis(*saved["linear_solver"])
+        if "union_keys" in saved:
+            self._union.restore(saved["union_keys"])
         self._resumed = True
 
     def balance(self, state: StepState) -> Balance:

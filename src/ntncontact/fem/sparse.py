@@ -28,11 +28,14 @@ class TripletUnion:
         self._keys = np.zeros(0, dtype=np.int64)  # union entries as row * n_cols + col, sorted
         self._k_map = self._t_map = self._indptr = self._indices = None
         self.free_block = FreeBlock()  # the Newton matrix's free-dof block, same lifetime
+        self._restored = False  # _keys came from a checkpoint, for the K pattern to come
 
     def add(self, K: sp.csr_matrix, rows: NDArray, cols: NDArray,
             vals: NDArray) -> sp.csr_matrix:
         if not self._same_k(K):
-            self._keys = np.zeros(0, dtype=np.int64)  # a new K pattern: start afresh
+            if not self._restored:
+                self._keys = np.zeros(0, dtype=np.int64)  # a new K pattern: start afresh
+            self._restored = False
             self._build(K, rows, cols)
         elif not self._same_triplets(rows, cols):
             self._place(K, rows, cols)
@@ -41,6 +44,23 @@ class TripletUnion:
         # only the few triplets' places (a bincount to the full size took another nnz array)
         np.add.at(data, self._t_map, vals)
         return sp.csr_matrix((data, self._indices, self._indptr), shape=K.shape)
+
+    def holds(self, K: sp.csr_matrix) -> bool:
+        """Whether a union pattern beyond K's own was built (or restored) for K's pattern."""
+        return self._keys.size > K.nnz and (self._restored or self._same_k(K))
+
+    @property
+    def keys(self) -> NDArray:
+        """The union's entries (row * n_cols + col, sorted), for a restart checkpoint."""
+        return self._keys
+
+    def restore(self, keys: NDArray) -> None:
+        """Start from a checkpoint's union (its K pattern is the model's, rebuilt the same):
+        without it a restarted run would factor a smaller pattern than the run it continues,
+        which PARDISO and the static LU order differently (other round-off)."""
+        self.__init__()
+        self._keys = np.asarray(keys, dtype=np.int64)
+        self._restored = self._keys.size > 0
 
     def _same_k(self, K: sp.csr_matrix) -> bool:
         if self._k_key is None:

@@ -124,7 +124,8 @@ class Checkpointer:
                   "ledger": saved["ledger"], "energy_multiplier": saved["energy_multiplier"],
                   "interfaces": len(state.contact), "next_checkpoint": self._next,
                   "writer": self.writer.checkpoint_state()}
-        arrays = {"X": state.X, "x": state.x, "d": state.d, "v": state.v, "a": state.a}
+        arrays = {"X": state.X, "x": state.x, "d": state.d, "v": state.v, "a": state.a,
+                  "union_keys": saved["union_keys"]}
         solver_info, solver_arrays = saved["linear_solver"]
         header["linear_solver"] = solver_info
         arrays |= {f"solver_{name}": value for name, value in solver_arrays.items()}
@@ -205,6 +206,8 @@ def _resume_values(header: dict, arrays: dict[str, np.ndarray]) -> dict:
     return {"simulation": {"state": state, "ledger": header["ledger"],
                            "energy_multiplier": header["energy_multiplier"],
                            "last_substep": header["last_substep"],
+                           # the stiffness pattern's union (checkpoints before it: none)
+                           "union_keys": arrays.get("union_keys", np.zeros(0, np.int64)),
                            "linear_solver": (header["linear_solver"], {
                                name.removeprefix("solver_"): value
                                for name, value in arrays.items()
