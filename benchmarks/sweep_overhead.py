@@ -18,6 +18,8 @@ event loop, profiler, monitors) over the case: that is overhead, not the case's.
 overhead is also split into: before each worker's first case, around each run on its worker
 (run_case's span - the case's own), between cases, and after each worker's last case.
 
+Dask is imported by the sweep, inside the timing (as the ``ntncontact sweep`` command does).
+
 Options: ``--warm``: the cases run on a cluster started (and warmed by one case) before the
 timing, as a sweep on a running cluster (``--scheduler``) does. ``--dask-defaults``: the
 LocalCluster with Dask's default settings instead of the sweep's ``LOCAL_DASK_CONFIG``.
@@ -39,7 +41,6 @@ import tempfile
 import time
 from pathlib import Path
 
-import dask.distributed
 import pandas as pd
 
 from ntncontact.studies import sweep as sweep_module
@@ -66,7 +67,9 @@ def _cpu(scheduler: str | None = None) -> float:
     if scheduler is None:
         children = resource.getrusage(resource.RUSAGE_CHILDREN)
         return total + children.ru_utime + children.ru_stime
-    with dask.distributed.Client(scheduler) as client:
+    from dask.distributed import Client
+
+    with Client(scheduler) as client:
         return total + sum(client.run(time.process_time).values())
 
 
@@ -117,8 +120,10 @@ def main(cases: int, workers: int, t_end: float, spec_file: str | None, warm: bo
         tmp = Path(tmp)
         cluster = scheduler = None
         if warm:
-            cluster = dask.distributed.LocalCluster(n_workers=workers, threads_per_worker=1,
-                                                    processes=True, dashboard_address=None)
+            from dask.distributed import LocalCluster
+
+            cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
+                                   dashboard_address=None)
             scheduler = cluster.scheduler_address
             module.sweep(_ring_spec(tmp, workers, 0.05, offset=10**6), tmp / "warm",
                          scheduler=scheduler, progress=False)  # imports and kernels loaded
