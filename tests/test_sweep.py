@@ -107,3 +107,71 @@ def test_the_sweep_command_exits_1_when_a_case_failed(sweep_file, tmp_path):
     assert done.returncode == 1, done.stderr
     assert "5 cases (0 already done, 1 not completed)" in done.stdout
     assert "Traceback" not in done.stderr
+
+
+def test_a_case_costs_its_steps_times_its_elements_and_nothing_once_completed(
+        sweep_file, tmp_path):
+    from ntncontact.api import load_scenario
+    from ntncontact.studies.sweep import case_cost
+
+    block = sweep_file.parent / "block.toml"
+    base = case_cost(load_scenario(block), tmp_path / "a")
+    assert base == 4 * 2 * round(0.06 / 0.02)  # 4 x 2 elements, 3 steps
+    finer = load_scenario(block, {"bodies.0.mesh.nx": 12, "analysis.dt": 0.005})
+    assert case_cost(finer, tmp_path / "b") == pytest.approx(12 * 2 * 12)
+    # a mesh that cannot be built costs nothing here: the case fails on its worker
+    broken = load_scenario(block, {"bodies.0.mesh": {"type": "gmsh", "file": "missing.msh"}})
+    assert case_cost(broken, tmp_path / "c") == 0.0
+    done = tmp_path / "done"
+    done.mkdir()
+    (done / "summary.json").write_text(
+        f'{{"status": "completed", "overrides": {list(finer.overrides)!r}}}'.replace("'", '"'))
+    assert case_cost(finer, done) == 0.0  # a rerun only reads it back
+    assert case_cost(load_scenario(block, {"bodies.0.mesh.nx": 12, "analysis.dt": 0.01}),
+                     done) > 0  # other overrides: run again
+
+
+def test_the_cases_start_longest_first_and_come_back_in_the_files_order(monkeypatch, tmp_path):
+    """One worker thread: the cases run strictly in the order the sweep hands them out."""
+    from dask.distributed import Client, LocalCluster
+
+    from ntncontact.studies import sweep as sweep_module
+
+    def fake_case(scenario_path, case, folder, reductions):
+        import time
+
+        return {"case": folder, "started": time.perf_counter_ns()}  # one process: one clock
+
+    monkeypatch.setattr(sweep_module, "run_case", fake_case)
+    spec = sweep_module.SweepSpec(scenario="x.toml", cases=[{"a": k} for k in range(5)])
+    costs = [3.0, 10.0, 0.0, 10.0, 7.0]
+    work = [({"a": k}, f"case{k}", cost) for k, cost in enumerate(costs)]
+    with LocalCluster(n_workers=1, threads_per_worker=1, processes=False,
+                      dashboard_address=None) as cluster, Client(cluster) as client:
+        rows = sweep_module._run_cases(client, True, spec, "x.toml", work, progress=False)
+    started = [r["case"] for r in sorted(rows, key=lambda r: r["started"])]
+    assert started == ["case1", "case3", "case4", "case0", "case2"]  # ties in file order
+    assert [r["case"] for r in rows] == [f"case{k}" for k in range(5)]
+
+
+@pytest.mark.slow
+def test_the_sweeps_own_cluster_runs_with_the_sweeps_dask_settings():
+    """The settings reach the worker processes, the nannies and the scheduler, as the
+    intervals of their periodic callbacks (ms), and leave this process's Dask config alone."""
+    import dask
+
+    from ntncontact.studies.sweep import LOCAL_DASK_CONFIG, _dask_client
+
+    def intervals(server) -> dict[str, float]:
+        return {name: pc.callback_time for name, pc in server.periodic_callbacks.items()}
+
+    before = {key: dask.config.get(key) for key in LOCAL_DASK_CONFIG}
+    with _dask_client(None, 1) as (client, cluster):
+        (worker,) = client.run(lambda dask_worker: intervals(dask_worker)).values()
+        (nanny,) = (intervals(n) for n in cluster.workers.values())
+        scheduler = intervals(cluster.scheduler)
+    assert "profile" not in worker and "profile-cycle" not in worker  # no profiler
+    for server in (worker, scheduler):
+        assert server["tick"] == 1000 and server["monitor"] == 5000
+    assert worker["memory_monitor"] == nanny["memory_monitor"] == 1000
+    assert {key: dask.config.get(key) for key in LOCAL_DASK_CONFIG} == before  # not leaked

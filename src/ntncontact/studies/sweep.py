@@ -23,12 +23,13 @@ without stopping the others.
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import itertools
 import json
 import sys
 import traceback
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from pathlib import Path
 from typing import Annotated, Any, Literal
 
@@ -36,7 +37,8 @@ import numpy as np
 import pandas as pd
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
-from ..api import load_scenario, override_strings, read_results, run
+from ..api import Scenario, load_scenario, override_strings, read_results, run
+from ..engine.builder import build_mesh
 from ..io.scenario import ScenarioError, read_toml
 
 SWEEP_FILE = "sweep.csv"
@@ -52,6 +54,18 @@ REDUCTIONS: dict[str, Callable[[np.ndarray], float]] = {
 HEADLINE = ("status", "steps", "wall_time_s", "cpu_time_s", "energy_initial", "energy_final",
             "energy_max_relative_variation", "contact_start_time", "contact_end_time",
             "max_penetration", "max_active_pairs")
+
+#: Dask settings of the LocalCluster a sweep starts (docs/api.md, "Where it runs"). Its
+#: periodic work otherwise costs ~7 % of a core-second per worker-second of a running case
+#: (benchmarks/README.md, "Sweep overhead"): the workers' statistical profiler (every 10 ms;
+#: it feeds only the dashboard, which this cluster has not), the system monitor (500 ms),
+#: the event loops' health tick (20 ms) and the nannies' memory monitor (100 ms).
+LOCAL_DASK_CONFIG: dict[str, Any] = {
+    "distributed.worker.profile.enabled": False,
+    "distributed.admin.system-monitor.interval": "5s",
+    "distributed.admin.tick.interval": "1s",
+    "distributed.worker.memory.monitor-interval": "1s",
+}
 
 
 class _Strict(BaseModel):
@@ -168,47 +182,104 @@ def sweep(spec: str | Path, out: str | Path, *, scheduler: str | None = None,
     sweep_spec, scenario_path = load_sweep(spec)
     load_scenario(scenario_path)  # a broken scenario fails here, once, not in every case
     cases = sweep_spec.case_overrides()
-    for case in cases:  # every override must name a key of the scenario: check before running
-        load_scenario(scenario_path, case)
     out = Path(out)
+    folders = [str(out / "cases" / case_name(override_strings(c))) for c in cases]
+    meshes: dict[str, int] = {}
+    costs = [case_cost(load_scenario(scenario_path, case), Path(folder), meshes)  # every
+             for case, folder in zip(cases, folders, strict=True)]  # override checked here
     (out / "cases").mkdir(parents=True, exist_ok=True)
-    rows = _run_on_dask(sweep_spec, str(scenario_path), cases, out, scheduler, workers, progress)
-    table = pd.DataFrame(rows)
-    table.to_csv(out / SWEEP_FILE, index=False)
-    _draw_figures(table, sweep_spec.figures, out)
+    work = [(case, folder, cost) for case, folder, cost in zip(cases, folders, costs, strict=True)]
+    with _dask_client(scheduler, workers) as (client, cluster):
+        rows = _run_cases(client, cluster is not None, sweep_spec, str(scenario_path), work,
+                          progress)
+        if cluster is not None:
+            cluster.scale(0)  # its workers shut down while the results are written
+        table = pd.DataFrame(rows)
+        table.to_csv(out / SWEEP_FILE, index=False)
+        _draw_figures(table, sweep_spec.figures, out)
     return table
 
 
-def _run_on_dask(spec: SweepSpec, scenario_path: str, cases: list[dict[str, Any]], out: Path,
-                 scheduler: str | None, workers: int | None, progress: bool) -> list[dict]:
-    from dask.distributed import Client, LocalCluster, as_completed
-    from tqdm import tqdm
+def case_cost(scenario: Scenario, folder: Path, meshes: dict[str, int] | None = None) -> float:
+    """A case's expected run time up to a constant, to start the longest cases first: its
+    steps times its elements; 0 for a case its folder says completed (a rerun only reads
+    it) and for one whose meshes cannot be built (it fails on its worker, recorded there).
+    ``meshes`` caches element counts by mesh settings (a grid repeats the same meshes)."""
+    if _completed(folder, scenario.overrides):
+        return 0.0
+    meshes = {} if meshes is None else meshes
+    cells = 0
+    for body in scenario.config.bodies:
+        key = body.mesh.model_dump_json()
+        if key not in meshes:
+            try:
+                meshes[key] = len(build_mesh(body.mesh, body.name, scenario.base_dir).cells)
+            except Exception:  # noqa: BLE001 - any error here is the case's own, on its worker
+                meshes[key] = 0
+        cells += meshes[key]
+    analysis = scenario.config.analysis
+    return cells * analysis.t_end / analysis.dt
 
-    folders = [str(out / "cases" / case_name(override_strings(c))) for c in cases]
+
+@contextlib.contextmanager
+def _dask_client(scheduler: str | None, workers: int | None) -> Iterator[tuple[Any, Any]]:
+    """A Dask client, and the LocalCluster it uses (with :data:`LOCAL_DASK_CONFIG`) unless
+    ``scheduler`` gives the address of a running one (then the cluster is None)."""
+    import dask
+    from dask.distributed import Client, LocalCluster
+
+    cluster = None
     if scheduler is None:
-        cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
-                               dashboard_address=None)
-    else:
-        cluster = None
+        with dask.config.set(LOCAL_DASK_CONFIG):  # read by the scheduler, nannies, workers
+            cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
+                                   dashboard_address=None)
     try:
         with Client(cluster if cluster is not None else scheduler) as client:
-            futures = [client.submit(run_case, scenario_path, case, folder, spec.reductions,
-                                     pure=False)
-                       for case, folder in zip(cases, folders, strict=True)]
-            order = {f.key: i for i, f in enumerate(futures)}
-            rows: list[dict | None] = [None] * len(futures)
-            with tqdm(total=len(futures), unit="case", disable=not progress or None,
-                      file=sys.stderr) as bar:
-                for future in as_completed(futures):
-                    rows[order[future.key]] = future.result()
-                    bar.update(1)
+            yield client, cluster
     finally:
         if cluster is not None:
             cluster.close()
+
+
+def _run_cases(client: Any, own_cluster: bool, spec: SweepSpec, scenario_path: str,
+               work: list[tuple[dict, str, float]], progress: bool) -> list[dict]:
+    """The cases' rows, in the order of ``work`` (case, folder, cost), run longest first.
+
+    On the sweep's own LocalCluster one case per worker thread is in flight and the next
+    longest goes to the first worker that is free (list scheduling: Dask assigns a few long
+    tasks at submission, before their lengths are known, and a short case queued behind a
+    long one then leaves the other worker idle at the end). On a running scheduler every
+    case is submitted at once, longest first by priority, so that a cluster that is still
+    scaling up sees all of them."""
+    from dask.distributed import as_completed
+    from tqdm import tqdm
+
+    slots = max(sum(client.nthreads().values()), 1) if own_cluster else len(work)
+    waiting = iter(enumerate(sorted(range(len(work)), key=lambda i: -work[i][2])))
+    index: dict[str, int] = {}
+
+    def submit(rank: int, i: int) -> Any:
+        case, folder, _ = work[i]
+        future = client.submit(run_case, scenario_path, case, folder, spec.reductions,
+                               pure=False, priority=len(work) - rank)
+        index[future.key] = i
+        return future
+
+    rows: list[dict | None] = [None] * len(work)
+    running = as_completed([submit(*item) for item in itertools.islice(waiting, slots)])
+    with tqdm(total=len(work), unit="case", disable=not progress or None,
+              file=sys.stderr) as bar:
+        for future in running:
+            rows[index[future.key]] = future.result()
+            bar.update(1)
+            for item in itertools.islice(waiting, 1):  # the next longest, if any
+                running.add(submit(*item))
     return [r for r in rows if r is not None]
 
 
 def _draw_figures(table: pd.DataFrame, figures: Sequence[FigureSpec], out: Path) -> None:
+    if not figures:
+        return  # nothing to draw: no plotting library to load (~0.5 s) after the last case
     import matplotlib.pyplot as plt
 
     for fig_spec in figures:
@@ -234,4 +305,4 @@ def _slug(name: str) -> str:
     return "".join(ch if ch.isalnum() else "_" for ch in name).strip("_")
 
 
-__all__ = ["SweepSpec", "load_sweep", "run_case", "sweep"]
+__all__ = ["LOCAL_DASK_CONFIG", "SweepSpec", "case_cost", "load_sweep", "run_case", "sweep"]
