@@ -30,8 +30,8 @@ from ..contact import (
 )
 from .model import ContactInterface
 
-#: Under the persistency law a candidate whose gap lies within this fraction of the largest
-#: coordinate of its interface's nodes below zero touches (``touch_tolerance``).
+#: Under the persistency law a gap within this fraction of the largest coordinate of its
+#: interface's nodes is zero to round-off, and decided one way (``touch_tolerance``).
 TOUCH_ROUNDOFF = 1e-10
 
 
@@ -86,9 +86,10 @@ def touch_tolerance(x: NDArray, ci: ContactInterface) -> float:
 
 def _near_candidates(x: NDArray, v: NDArray, dt: float, ci: ContactInterface,
                      tol: float = 0.0) -> NDArray:
-    """Surface-1 candidates lying on or behind surface 2 (projection gap >= 0) within one
-    segment length of it plus the distance the node approached its nearest surface-2 node in
-    the last step (|v_1 - v_2| dt): far nodes "behind" the surface (the far side of a ring)
+    """Surface-1 candidates lying on or behind surface 2 (projection gap >= -tol, the touch
+    tolerance's size) within one segment length of it plus the distance the node approached
+    its nearest surface-2 node in the last step (|v_1 - v_2| dt): far nodes "behind" the
+    surface (the far side of a ring)
     are not penetrating, whatever the sign of their gap. Detected at the step start, a touch
     inside the last step has penetrated by up to that approach: with one segment alone, the
     fast-sliding blocks refined 8x (segments 6.25e-3, v dt = 6e-3) left the nodes that had

@@ -471,9 +471,9 @@ class Simulation:
         odd-even mode wherever contact holds a velocity constraint (v_n = 2 v_{n-1/2} -
         v_{n-1}: the held nodes and the rows behind them flip by ~2 |v| from step to step),
         the mid-point velocities do not. Started from x_n + dt/2 v_n, the fast-sliding blocks
-        refined 8x (contact-side rows 2.1e-3 and 2.5e-3 thick, rows moving at +1.7 and -0.2)
-        started inside an inverted element, and most contact steps were halved
-        (docs/theory.md, "Newton start of held pairs")."""
+        refined 8x (contact-side row 2.1e-3 thick) started the step at t = 0.057 inside an
+        inverted element (det J -0.33), and most contact steps were halved (docs/theory.md,
+        "Newton start of held pairs")."""
         h = self._state_substep
         return state.v if h is None else state.v - 0.5 * h * state.a
 
