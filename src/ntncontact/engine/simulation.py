@@ -163,6 +163,7 @@ class Simulation:
         self._union = TripletUnion()  # one stiffness pattern for all steps (fem.sparse)
         self._newton_updates = any(_newton_updated(ci) for ci in model.interfaces)
         self._last_substep: float | None = None  # the last sub-step after cut-backs
+        self._state_substep: float | None = None  # the sub-step that ended at advance's state
         self._resumed = False  # restored from a checkpoint: no initial record
 
     def checkpoint_state(self) -> dict:
@@ -270,7 +271,7 @@ class Simulation:
                                    *tie_terms(self.model.ties)], union=self._union,
                                   scale_floor=floor,
                                   start_velocity=(persistent_velocities(
-                                      interfaces, contact, state.x, state.v)
+                                      interfaces, contact, state.x, self._start_velocity(state))
                                       if self.dynamic and guess is None else None))
             y0 = problem.initial_guess()
             if guess is not None:  # warm start: the last solution, shifted by the remap
@@ -465,6 +466,19 @@ class Simulation:
         factorize = getattr(getattr(self.solve, "__self__", None), "factorize", None)
         return FactorCache(factorize) if factorize is not None else None
 
+    def _start_velocity(self, state: StepState) -> NDArray:
+        """The velocity a step's first Newton start advances the nodes with: the mid-point
+        velocity of the sub-step that ended at ``state``, v_n - h/2 a_n (a_n = (v_n -
+        v_{n-1}) / h), not v_n. The end velocities of the mid-point rule carry its undamped
+        odd-even mode wherever contact holds a velocity constraint (v_n = 2 v_{n-1/2} -
+        v_{n-1}: the held nodes and the rows behind them flip by ~2 |v| from step to step),
+        the mid-point velocities do not. Started from x_n + dt/2 v_n, the fast-sliding blocks
+        refined 8x (contact-side row 2.1e-3 thick) started the step at t = 0.057 inside an
+        inverted element (det J -0.33), and most contact steps were halved (docs/theory.md,
+        "Newton start of held pairs")."""
+        h = self._state_substep
+        return state.v if h is None else state.v - 0.5 * h * state.a
+
     def _dof_mass(self, state: StepState) -> sp.csr_matrix:
         """The mass on dofs; ALE bodies carry new particles at their nodes, so it is rebuilt."""
         if not self.model.ale_bodies:
@@ -486,6 +500,7 @@ class Simulation:
         h = dt
         self._step_work = dict.fromkeys(LEDGER, 0.0)  # summed over the accepted sub-steps
         self._augmentations_converged = True
+        self._state_substep = self._last_substep
         while remaining > 1e-12 * dt:
             h = min(h, remaining)
             try:
@@ -505,6 +520,7 @@ class Simulation:
                 continue
             iterations += its
             remaining -= h
+            self._state_substep = h
         return replace(state, step=self.state.step + 1, time=self.state.time + dt), iterations, h
 
     def run(self, progress: Callable[[float], None] | None = None,
