@@ -11,7 +11,8 @@ import scipy.sparse as sp
 from numpy.typing import NDArray
 
 from ..ale.motion import AleMotionError
-from ..contact import PairState, lagrange_blocks, newton_update
+from ..contact import PairState, hold_branches, lagrange_blocks, newton_update
+from ..contact.state import UNDECIDED
 from ..dynamics.energy import EndEnergy, EnergyConsistentContact
 from ..dynamics.mass import MovingMass
 from ..dynamics.midpoint import end_of_step, midpoint_velocity, velocity_factor
@@ -87,6 +88,9 @@ class SolvedStep:
     tie_forces: dict = field(default_factory=dict)  # per tie: force on its body-1 nodes
     reactions: dict = field(default_factory=dict)  # history columns of the support reactions
     remap_energy: float = 0.0  # strain energy the ALE remaps changed
+    #: quasi-static: the active sets grown by pairs that penetrate at an unconverged
+    #: augmentation's solution; the step's solve stopped there to start a new pass
+    grown: tuple | None = None
 
 
 class Observer(Protocol):
@@ -203,12 +207,14 @@ class Simulation:
         contact = (detect_all(interfaces, state.contact, state.x, state.v, dt) if interfaces
                    else ())
         iterations, start = 0, None
-        for _ in range(ACTIVE_SET_PASSES):
-            solved = self._solve_step(state, contact, dt, start)
+        for passes in range(1, ACTIVE_SET_PASSES + 1):
+            solved = self._solve_step(state, contact, dt, start,
+                                      may_grow=passes < ACTIVE_SET_PASSES)
             iterations += solved.iterations
             if self.dynamic or not interfaces:
                 break
-            grown = self._with_new_penetrations(solved.used, solved.state.X + solved.d)
+            grown = solved.grown or self._with_new_penetrations(solved.used,
+                                                                solved.state.X + solved.d)
             if grown is None:
                 break
             # the next pass starts from this one's solution, not from the step's start: the
@@ -242,10 +248,13 @@ class Simulation:
         return tuple(grown) if added else None
 
     def _solve_step(self, state: StepState, contact, dt: float,
-                    start: tuple | None = None) -> SolvedStep:
+                    start: tuple | None = None, may_grow: bool = False) -> SolvedStep:
         """Per augmentation: the ALE mesh motion and Newton with the contact multipliers
         fixed, then the multiplier update, until report 5.4's test is met. ``start``: (d, the
-        d of the state it was solved on) of an earlier solve of this step, to start from."""
+        d of the state it was solved on) of an earlier solve of this step, to start from.
+        ``may_grow`` (quasi-static): an unconverged augmentation whose solution shows new
+        penetrating pairs ends the solve there (``SolvedStep.grown``): the step's next
+        active-set pass takes them in at once instead of after the augmentations converge."""
         interfaces = self.model.interfaces
         base, motion = state, None
         x_pred = state.x + dt * state.v  # first prediction of the end-of-step positions
@@ -274,6 +283,11 @@ class Simulation:
             if guess is not None:  # warm start: the last solution, shifted by the remap
                 d_guess = guess[0] + (state.d - guess[1]).ravel()
                 y0[: problem.free_dofs.size] = d_guess[problem.free_dofs]
+            held = self._hold_branches(problem, y0, contact)
+            if held is not contact:  # the same terms, each pair held on its branch at y0
+                contact, terms = held, contact_terms(interfaces, held, dt, last_contact)
+                problem = replace(problem, extra=[*terms, *problem.extra[len(terms):]],
+                                  _cache={})
             # Inexact augmentations: the multiplier update and mesh move that follow change the
             # problem by far more than rtol, so the solve stops at early_ratio x its start;
             # the augmentation that meets report 5.4's test is then solved to rtol and tested
@@ -293,6 +307,11 @@ class Simulation:
             if not done and self._newton_updates:
                 contact = self._newton_multipliers(problem, result.y, d, used, contact, results,
                                                    factors, sensitivities)
+            grown = (self._with_new_penetrations(contact, state.X + d)
+                     if may_grow and not done and not self.dynamic else None)
+            if grown is not None:  # Hertz k = 2: 5 passes' augmentations to convergence
+                return SolvedStep(state, d, used, results, augmentation, iterations, 0.0,
+                                  grown=grown)
             guess = (d.ravel(), state.d)
             x_pred = state.X + (2.0 * d - state.d if self.dynamic else d)
             # converged multipliers on a mesh moved for the previous solution: once more on
@@ -313,6 +332,19 @@ class Simulation:
                                       state.X + d) if self._supports else {}
         return SolvedStep(state, d, used, results, augmentation, iterations, mismatch, ties,
                           reactions, strain_change)
+
+    def _hold_branches(self, problem: StepProblem, y0: NDArray, contact: tuple) -> tuple:
+        """``contact`` with the undecided pairs of the frictionless augmented-Lagrangian
+        interfaces held on the branch the bracket gives at the solve's start y0
+        (``contact.hold_branches``); ``contact`` itself when there are none."""
+        interfaces = self.model.interfaces
+        if not any(ci.law.frictionless_augmented and (st.branch == UNDECIDED).any()
+                   for ci, st in zip(interfaces, contact, strict=True)):
+            return contact
+        d0 = problem.full(y0).reshape(-1, 2)
+        results = self._contact_results(interfaces, contact, problem.state, d0, problem.dt)
+        return tuple(st if res is None else hold_branches(st, res, ci.law)
+                     for ci, st, res in zip(interfaces, contact, results, strict=True))
 
     @staticmethod
     def _require_accepted(augmentations: int, failed: list) -> None:
