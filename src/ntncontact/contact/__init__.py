@@ -9,10 +9,8 @@ from .augmentation import (
     AugmentationCheck,
     AugmentationTolerances,
     augment,
-    bracket_branches,
     check_augmentation,
     commit_step,
-    hold_branches,
     newton_update,
 )
 from .detection import Detection, detect, release_mask
@@ -41,7 +39,6 @@ __all__ = [
     "ordered_partners",
     "augment",
     "blocks_of",
-    "bracket_branches",
     "check_augmentation",
     "chord_normals",
     "closest_pairs",
@@ -50,7 +47,6 @@ __all__ = [
     "corner_mask",
     "detect",
     "evaluate_contact",
-    "hold_branches",
     "lagrange_blocks",
     "pair_gaps",
     "newton_update",

@@ -10,7 +10,7 @@ Update (Uzawa):   lambda_N <- <lambda_N + eps_N gdot> = <t_N^(k)>        (5.4 st
 The tangential update covers both branches of 4.2: on a sticking pair t_T^(k) = t_T,n + dlambda_T
 + eps_T gdot_T, so dlambda_T grows by eps_T gdot_T; on a slipping pair t_T^(k) = mu t_N^(k)
 trial/|trial|, so dlambda_T = mu lambda_N^(k) trial/|trial| - t_T,n.
-A pair held on the pressed branch during the solve (``evaluate._normal_traction``) may come out with a
+A pair held on the pressed branch during the solve (``laws.held_pairs``) may come out with a
 tensile t_N^(k) < 0: it is not converged, and its multiplier drops to 0 (the bracket).
 
 Newton update (optional, frictionless): the Uzawa update is a fixed-point iteration whose error
@@ -31,51 +31,20 @@ from numpy.typing import NDArray
 from .evaluate import ContactResult
 from .friction import SLIP
 from .laws import ContactLaw
-from .state import OPEN, PRESSED, UNDECIDED, PairState
+from .state import PairState
 
-__all__ = ["AugmentationCheck", "AugmentationTolerances", "augment", "bracket_branches",
-           "check_augmentation", "commit_step", "hold_branches", "newton_update"]
+__all__ = ["AugmentationCheck", "AugmentationTolerances", "augment", "check_augmentation",
+           "commit_step", "newton_update"]
 
 
 def augment(state: PairState, result: ContactResult, law: ContactLaw) -> PairState:
-    """Multipliers for the next augmentation from the converged Newton result (module doc),
-    and, frictionless, the branch each pair is held on in the next solve: the bracket's at
-    this solution (:func:`bracket_branches`)."""
+    """Multipliers for the next augmentation from the converged Newton result (module doc)."""
     if law.method != "augmented_lagrangian":
         raise ValueError(f"augment() applies to 'augmented_lagrangian', not {law.method!r}")
     if not np.array_equal(result.pairs, state.pairs):
         raise ValueError("result and state describe different active sets")
-    branch = bracket_branches(state, result, law) if law.frictionless_augmented else None
     return replace(state, lambda_N=np.maximum(result.t_N, 0.0),
-                   dlambda_T=result.t_T - state.t_T, branch=branch)
-
-
-def bracket_branches(state: PairState, result: ContactResult, law: ContactLaw) -> NDArray:
-    """The branch of t_N = <lambda_N + eps_N measure> at ``result``'s configuration, per pair:
-    PRESSED where the trial is >= 0 (the kink takes the pressed branch, as in the kernel),
-    else OPEN. A held pressed pair that came out tensile opens; a held open pair that came out
-    penetrating is pressed."""
-    trial = state.lambda_N + law.eps_N * result.normal_measure
-    return np.where(trial >= 0.0, PRESSED, OPEN).astype(np.int8)
-
-
-def hold_branches(state: PairState, result: ContactResult, law: ContactLaw) -> PairState:
-    """``state`` with its UNDECIDED pairs held on a branch for the next Newton solve, decided
-    at the solve's start configuration (``result``, evaluated with ``state``): PRESSED if
-    lambda_N > 0 (as the kernel holds them anyway) or if the bracket presses them there, else
-    OPEN. Only frictionless augmented-Lagrangian laws hold branches; other states are returned
-    as they are. Switches inside Newton cost the Hertz example line-searched steps that hardly
-    contract (issue 18); the augmentation loop decides the switches instead."""
-    if not law.frictionless_augmented:
-        return state
-    undecided = state.branch == UNDECIDED
-    if not undecided.any():
-        return state
-    if not np.array_equal(result.pairs, state.pairs):
-        raise ValueError("result and state describe different active sets")
-    decided = bracket_branches(state, result, law)
-    decided[state.lambda_N > 0.0] = PRESSED
-    return replace(state, branch=np.where(undecided, decided, state.branch).astype(np.int8))
+                   dlambda_T=result.t_T - state.t_T)
 
 
 def newton_update(used: PairState, uzawa: PairState, result: ContactResult,
@@ -115,11 +84,8 @@ class AugmentationCheck:
     status_changes: int
     constraint_violation: float
     converged: bool
-    #: pairs held on the pressed branch whose traction came out tensile (evaluate._normal_traction)
+    #: pairs held on the pressed branch whose traction came out tensile (laws.held_pairs)
     tensile_pairs: int = 0
-    #: pairs held on the open branch (``state.OPEN``) that came out penetrating by more than
-    #: the normal tolerance
-    penetrating_open_pairs: int = 0
 
 
 def _max_abs(values: np.ndarray) -> float:
@@ -134,8 +100,7 @@ def check_augmentation(
 
     Also requires the stick/slip status to be unchanged, since a status switch means the
     multipliers were built for a different friction branch, and no tensile traction (a pair
-    held on the pressed branch during the solve that wants to separate, or held open and
-    penetrating by more than the normal tolerance; ``evaluate._normal_traction``).
+    held by its multiplier during the solve, ``laws.held_pairs``, that wants to separate).
     The tangential tests (TOL2, the slip slack, the status) apply to frictional laws only:
     without friction there is no tangential multiplier to augment (ring impact: 714 -> 665
     augmentations, the largest energy variation 1.525444e-3 -> 1.525445e-3).
@@ -150,20 +115,14 @@ def check_augmentation(
     pressed = current.t_N > 0.0
     violation = _max_abs(current.normal_measure[pressed])
     tensile = int(np.count_nonzero(current.t_N < 0.0))
-    # only a pair held open has t_N = 0 with a positive measure (the bracket would press it);
-    # within the normal tolerance, pressing it would change its measure by less than the test
-    # accepts between augmentations
-    penetrating_open = int(np.count_nonzero((current.t_N == 0.0)
-                                            & (current.normal_measure > tol.normal)))
     # Without friction no multiplier acts along the surface: the tangential tests would only
     # ask the solution to settle further, for nothing an augmentation changes.
     tangential_ok = not law.frictional or (
         tangential <= tol.tangential and slip_excess <= tol.slip and changes == 0)
     ok = (normal <= tol.normal and tangential_ok
-          and (tol.constraint is None or violation <= tol.constraint) and tensile == 0
-          and penetrating_open == 0)
+          and (tol.constraint is None or violation <= tol.constraint) and tensile == 0)
     return AugmentationCheck(normal, tangential, slip_excess, changes, violation, bool(ok),
-                             tensile, penetrating_open)
+                             tensile)
 
 
 def commit_step(state: PairState, result: ContactResult, law: ContactLaw) -> PairState:
@@ -174,5 +133,5 @@ def commit_step(state: PairState, result: ContactResult, law: ContactLaw) -> Pai
     return replace(
         state, lambda_N=lam, dlambda_T=np.zeros(len(state)), t_T=result.t_T.copy(),
         t_N=result.t_N.copy(), gap=result.gap.copy(), gap_rate=result.gap_rate.copy(),
-        slip=result.status == SLIP, branch=None,  # the next step decides them afresh
+        slip=result.status == SLIP,
     )

@@ -142,26 +142,20 @@ def _sign(a):
 
 
 @njit(cache=True, inline="always")
-def _normal_traction(method, lambda_n, eps_N, measure, frictional, branch):
+def _normal_traction(method, lambda_n, eps_N, measure, frictional):
     """(t_N, dt_N/d measure): t_N = <lambda_N + eps_N measure> (2.33/2.34, lambda_N = 0 for
     penalty); "lagrange": the multiplier itself, without the bracket, so Newton sees a smooth
     system (its sign is checked after the solve). A pair exactly at the kink (trial = 0) takes
     the pressed branch's derivative, else a body held only by contact has a singular tangent at
-    first touch. Held pairs (frictionless augmented Lagrangian, docs/theory.md, 5.4): the bracket
-    is not re-decided inside Newton. A pair on the PRESSED branch (``state.PRESSED``, or
-    UNDECIDED with lambda_N > 0) keeps t_N = trial, unbracketed: one that starts a solve
-    separating would otherwise give Newton neither force nor stiffness and be driven deep into
-    penetration; an OPEN pair carries nothing. Pairs that switch inside Newton made its steps
-    contract little and line-search (Hertz, issue 18); the augmentation test accepts neither
-    tensile pressed pairs nor penetrating open ones, so the converged step is the bracket's."""
+    first touch. Held pairs: a frictionless augmented-Lagrangian pair with lambda_N > 0 stays on
+    the pressed branch within one augmentation's solve, unbracketed (docs/theory.md, 5.4): one
+    that starts a solve separating would otherwise give Newton neither force nor stiffness and be
+    driven deep into penetration; the augmentation test accepts only non-tensile tractions."""
     if method == 2:
         return lambda_n, 0.0
     trial = (0.0 if method == 0 else lambda_n) + eps_N * measure
-    if method == 1 and not frictional:
-        if branch > 0 or (branch == 0 and lambda_n > 0.0):  # held pressed
-            return trial, eps_N
-        if branch < 0:  # held open
-            return 0.0, 0.0
+    if method == 1 and not frictional and lambda_n > 0.0:  # held pair
+        return trial, eps_N
     return (trial, eps_N) if trial >= 0.0 else (0.0, 0.0)
 
 
@@ -281,10 +275,8 @@ def _restoring_rate(x_start, slots, i, j, rate_factor):
 
 @njit(cache=True)
 def evaluate_pairs(x, v, x_start, table1, table2, pairs, lambda_N, dlambda_T, t_prev, restoring,
-                   params, flags, branch):
+                   params, flags):
     """Force, COO tangent and per-pair results of the active pairs.
-
-    branch: per pair the normal law's held branch (``state.PairState.branch``).
 
     restoring: per pair, non-zero where the persistency law gets the gap-restoring rate
     g_n/dt (:func:`_restoring_rate`), g_n the gap at ``x_start``.
@@ -360,8 +352,7 @@ def evaluate_pairs(x, v, x_start, table1, table2, pairs, lambda_N, dlambda_T, t_
         if rate_law and has_start and restoring[p] != 0.0:
             rate_offset = _restoring_rate(x_start, slots, i, j, rate_factor)
             measure += rate_offset
-        t_n, dt_dm = _normal_traction(method, lambda_N[p], eps_N, measure, frictional,
-                                      branch[p])
+        t_n, dt_dm = _normal_traction(method, lambda_N[p], eps_N, measure, frictional)
         t_t, trial, stat, ds_coef, dn_coef = 0.0, 0.0, _SLIP, 0.0, 0.0
         if frictional:
             dlam = dlambda_T[p] if method != 0 else 0.0
@@ -519,7 +510,7 @@ def _evaluate_compiled(
             interface.surface2.kernel_table, np.ascontiguousarray(pairs, dtype=np.int64),
             c_float(state.lambda_N), c_float(state.dlambda_T), c_float(state.t_T), restoring,
             params,
-            flags, np.ascontiguousarray(state.branch, dtype=np.int8))
+            flags)
     if code == NOT_ON_SURFACE:
         interface.surface1.index_of(pairs[:, 0])  # raises, naming the nodes
         interface.surface2.index_of(pairs[:, 1])

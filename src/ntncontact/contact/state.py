@@ -7,10 +7,7 @@ from dataclasses import dataclass, fields, replace
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-__all__ = ["OPEN", "PRESSED", "UNDECIDED", "PairState"]
-
-#: Values of ``PairState.branch``.
-OPEN, UNDECIDED, PRESSED = -1, 0, 1
+__all__ = ["PairState"]
 
 
 @dataclass(frozen=True)
@@ -25,11 +22,6 @@ class PairState:
     t_N, gap, gap_rate, slip: converged values of the last committed step (release test and
         direction-reversal rule); gap_rate is NaN when unknown.
     release_count: consecutive committed steps with t_N = 0 while separating (3.2).
-    branch: the normal law's branch each pair is held on during one Newton solve (frictionless
-        augmented Lagrangian, ``evaluate._normal_traction``): PRESSED (t_N = lambda_N + eps_N
-        measure, unbracketed), OPEN (t_N = 0), or UNDECIDED (the bracket decides at every
-        evaluation; a pair with lambda_N > 0 is pressed). The step's augmentation loop decides
-        it between solves (``augmentation.hold_branches``, ``augmentation.augment``).
     """
 
     pairs: NDArray[np.int64]
@@ -41,13 +33,10 @@ class PairState:
     gap_rate: NDArray[np.float64]
     slip: NDArray[np.bool_]
     release_count: NDArray[np.int64]
-    branch: NDArray[np.int8] | None = None  # None: every pair UNDECIDED
 
     def __post_init__(self) -> None:
         pairs = np.asarray(self.pairs, dtype=np.int64).reshape(-1, 2)
         object.__setattr__(self, "pairs", pairs)
-        branch = np.zeros(len(pairs), np.int8) if self.branch is None else self.branch
-        object.__setattr__(self, "branch", np.asarray(branch, dtype=np.int8))
         for f in fields(self)[1:]:
             value = np.asarray(getattr(self, f.name))
             if value.shape != (len(pairs),):

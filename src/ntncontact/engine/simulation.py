@@ -11,8 +11,7 @@ import scipy.sparse as sp
 from numpy.typing import NDArray
 
 from ..ale.motion import AleMotionError
-from ..contact import PairState, hold_branches, lagrange_blocks, newton_update
-from ..contact.state import UNDECIDED
+from ..contact import PairState, lagrange_blocks, newton_update
 from ..dynamics.energy import EndEnergy, EnergyConsistentContact
 from ..dynamics.mass import MovingMass
 from ..dynamics.midpoint import end_of_step, midpoint_velocity, velocity_factor
@@ -70,7 +69,8 @@ class StepRecord:
 #: Energy ledger columns accumulated over the run (history.csv).
 LEDGER = ("external_work", "contact_work", "frictional_dissipation", "ale_remap_energy")
 
-#: Quasi-static steps are re-solved at most this many times when new pairs penetrate.
+#: Quasi-static steps are re-solved at most this many times when new pairs penetrate at a
+#: converged solve (passes stopped at an unconverged augmentation for new pairs not counted).
 ACTIVE_SET_PASSES = 5
 
 
@@ -206,11 +206,12 @@ class Simulation:
         interfaces = self.model.interfaces
         contact = (detect_all(interfaces, state.contact, state.x, state.v, dt) if interfaces
                    else ())
-        iterations, start = 0, None
-        for passes in range(1, ACTIVE_SET_PASSES + 1):
-            solved = self._solve_step(state, contact, dt, start,
-                                      may_grow=passes < ACTIVE_SET_PASSES)
+        iterations, start, converged_passes = 0, None, 0
+        # a pass stopped early for new pairs (SolvedStep.grown) does not count: each adds pairs
+        while converged_passes < ACTIVE_SET_PASSES:
+            solved = self._solve_step(state, contact, dt, start, may_grow=True)
             iterations += solved.iterations
+            converged_passes += solved.grown is None
             if self.dynamic or not interfaces:
                 break
             grown = solved.grown or self._with_new_penetrations(solved.used,
@@ -283,11 +284,6 @@ class Simulation:
             if guess is not None:  # warm start: the last solution, shifted by the remap
                 d_guess = guess[0] + (state.d - guess[1]).ravel()
                 y0[: problem.free_dofs.size] = d_guess[problem.free_dofs]
-            held = self._hold_branches(problem, y0, contact)
-            if held is not contact:  # the same terms, each pair held on its branch at y0
-                contact, terms = held, contact_terms(interfaces, held, dt, last_contact)
-                problem = replace(problem, extra=[*terms, *problem.extra[len(terms):]],
-                                  _cache={})
             # Inexact augmentations: the multiplier update and mesh move that follow change the
             # problem by far more than rtol, so the solve stops at early_ratio x its start;
             # the augmentation that meets report 5.4's test is then solved to rtol and tested
@@ -332,19 +328,6 @@ class Simulation:
                                       state.X + d) if self._supports else {}
         return SolvedStep(state, d, used, results, augmentation, iterations, mismatch, ties,
                           reactions, strain_change)
-
-    def _hold_branches(self, problem: StepProblem, y0: NDArray, contact: tuple) -> tuple:
-        """``contact`` with the undecided pairs of the frictionless augmented-Lagrangian
-        interfaces held on the branch the bracket gives at the solve's start y0
-        (``contact.hold_branches``); ``contact`` itself when there are none."""
-        interfaces = self.model.interfaces
-        if not any(ci.law.frictionless_augmented and (st.branch == UNDECIDED).any()
-                   for ci, st in zip(interfaces, contact, strict=True)):
-            return contact
-        d0 = problem.full(y0).reshape(-1, 2)
-        results = self._contact_results(interfaces, contact, problem.state, d0, problem.dt)
-        return tuple(st if res is None else hold_branches(st, res, ci.law)
-                     for ci, st, res in zip(interfaces, contact, results, strict=True))
 
     @staticmethod
     def _require_accepted(augmentations: int, failed: list) -> None:
