@@ -253,9 +253,10 @@ class Simulation:
         """Per augmentation: the ALE mesh motion and Newton with the contact multipliers
         fixed, then the multiplier update, until report 5.4's test is met. ``start``: (d, the
         d of the state it was solved on) of an earlier solve of this step, to start from.
-        ``may_grow`` (quasi-static): an unconverged augmentation whose solution shows new
-        penetrating pairs ends the solve there (``SolvedStep.grown``): the step's next
-        active-set pass takes them in at once instead of after the augmentations converge."""
+        ``may_grow`` (quasi-static): an unconverged augmentation (the second or a later one)
+        whose solution shows new penetrating pairs ends the solve there
+        (``SolvedStep.grown``): the step's next active-set pass takes them in at once instead
+        of after the augmentations converge."""
         interfaces = self.model.interfaces
         base, motion = state, None
         x_pred = state.x + dt * state.v  # first prediction of the end-of-step positions
@@ -303,9 +304,12 @@ class Simulation:
             if not done and self._newton_updates:
                 contact = self._newton_multipliers(problem, result.y, d, used, contact, results,
                                                    factors, sensitivities)
+            # not after the first augmentation: its solution has the new pairs on penalty alone
+            # (Hertz k = 4 step 1: the pass it started went in 0.6 deep and failed)
             grown = (self._with_new_penetrations(contact, state.X + d)
-                     if may_grow and not done and not self.dynamic else None)
-            if grown is not None:  # Hertz k = 2: 5 passes' augmentations to convergence
+                     if may_grow and not done and not self.dynamic and augmentation > 1
+                     else None)
+            if grown is not None:
                 return SolvedStep(state, d, used, results, augmentation, iterations, 0.0,
                                   grown=grown)
             guess = (d.ravel(), state.d)
