@@ -57,8 +57,8 @@ def test_active_set_re_pass_starts_from_the_previous_pass(monkeypatch):
     passes: list[tuple] = []
     solve_step = Simulation._solve_step
 
-    def spy(self, state, contact, dt, start=None):
-        solved = solve_step(self, state, contact, dt, start)
+    def spy(self, state, contact, dt, start=None, may_grow=False):
+        solved = solve_step(self, state, contact, dt, start, may_grow)
         passes.append((state.step, start, solved))
         return solved
 
@@ -77,8 +77,8 @@ def test_active_set_re_pass_starts_from_the_previous_pass(monkeypatch):
             np.testing.assert_array_equal(start[0], before.d.ravel())
             np.testing.assert_array_equal(start[1], before.state.d)
 
-    def cold(self, state, contact, dt, start=None):  # every pass from the step's start
-        return solve_step(self, state, contact, dt, None)
+    def cold(self, state, contact, dt, start=None, may_grow=False):  # from the step's start
+        return solve_step(self, state, contact, dt, None, may_grow)
 
     monkeypatch.setattr(Simulation, "_solve_step", cold)
     cold_records = Recorder()

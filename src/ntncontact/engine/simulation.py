@@ -69,7 +69,8 @@ class StepRecord:
 #: Energy ledger columns accumulated over the run (history.csv).
 LEDGER = ("external_work", "contact_work", "frictional_dissipation", "ale_remap_energy")
 
-#: Quasi-static steps are re-solved at most this many times when new pairs penetrate.
+#: Quasi-static steps are re-solved at most this many times when new pairs penetrate at a
+#: converged solve (passes stopped at an unconverged augmentation for new pairs not counted).
 ACTIVE_SET_PASSES = 5
 
 
@@ -87,6 +88,9 @@ class SolvedStep:
     tie_forces: dict = field(default_factory=dict)  # per tie: force on its body-1 nodes
     reactions: dict = field(default_factory=dict)  # history columns of the support reactions
     remap_energy: float = 0.0  # strain energy the ALE remaps changed
+    #: quasi-static: the active sets grown by pairs that penetrate at an unconverged
+    #: augmentation's solution; the step's solve stopped there to start a new pass
+    grown: tuple | None = None
 
 
 class Observer(Protocol):
@@ -205,13 +209,16 @@ class Simulation:
         interfaces = self.model.interfaces
         contact = (detect_all(interfaces, state.contact, state.x, state.v, dt) if interfaces
                    else ())
-        iterations, start = 0, None
-        for _ in range(ACTIVE_SET_PASSES):
-            solved = self._solve_step(state, contact, dt, start)
+        iterations, start, converged_passes = 0, None, 0
+        # a pass stopped early for new pairs (SolvedStep.grown) does not count: each adds pairs
+        while converged_passes < ACTIVE_SET_PASSES:
+            solved = self._solve_step(state, contact, dt, start, may_grow=True)
             iterations += solved.iterations
+            converged_passes += solved.grown is None
             if self.dynamic or not interfaces:
                 break
-            grown = self._with_new_penetrations(solved.used, solved.state.X + solved.d)
+            grown = solved.grown or self._with_new_penetrations(solved.used,
+                                                                solved.state.X + solved.d)
             if grown is None:
                 break
             # the next pass starts from this one's solution, not from the step's start: the
@@ -245,10 +252,14 @@ class Simulation:
         return tuple(grown) if added else None
 
     def _solve_step(self, state: StepState, contact, dt: float,
-                    start: tuple | None = None) -> SolvedStep:
+                    start: tuple | None = None, may_grow: bool = False) -> SolvedStep:
         """Per augmentation: the ALE mesh motion and Newton with the contact multipliers
         fixed, then the multiplier update, until report 5.4's test is met. ``start``: (d, the
-        d of the state it was solved on) of an earlier solve of this step, to start from."""
+        d of the state it was solved on) of an earlier solve of this step, to start from.
+        ``may_grow`` (quasi-static): an unconverged augmentation (the second or a later one)
+        whose solution shows new penetrating pairs ends the solve there
+        (``SolvedStep.grown``): the step's next active-set pass takes them in at once instead
+        of after the augmentations converge."""
         interfaces = self.model.interfaces
         base, motion = state, None
         x_pred = state.x + dt * state.v  # first prediction of the end-of-step positions
@@ -296,6 +307,14 @@ class Simulation:
             if not done and self._newton_updates:
                 contact = self._newton_multipliers(problem, result.y, d, used, contact, results,
                                                    factors, sensitivities)
+            # not after the first augmentation: its solution has the new pairs on penalty alone
+            # (Hertz k = 4 step 1: the pass it started went in 0.6 deep and failed)
+            grown = (self._with_new_penetrations(contact, state.X + d)
+                     if may_grow and not done and not self.dynamic and augmentation > 1
+                     else None)
+            if grown is not None:
+                return SolvedStep(state, d, used, results, augmentation, iterations, 0.0,
+                                  grown=grown)
             guess = (d.ravel(), state.d)
             x_pred = state.X + (2.0 * d - state.d if self.dynamic else d)
             # converged multipliers on a mesh moved for the previous solution: once more on
