@@ -271,6 +271,9 @@ def _run_cases(client: Any, own_cluster: bool, spec: SweepSpec, scenario_path: s
               file=sys.stderr) as bar:
         for future in running:
             rows[index[future.key]] = future.result()
+            # released now, so that scaling the workers down after the last case does not
+            # find a result still wanted ("... lose already computed task(s)" warnings)
+            future.release()
             bar.update(1)
             for item in itertools.islice(waiting, 1):  # the next longest, if any
                 running.add(submit(*item))
