@@ -11,6 +11,7 @@ import numpy as np
 from ntncontact.contact import pair_gaps
 from ntncontact.engine.builder import build_model
 from ntncontact.engine.model import Model
+from ntncontact.engine.simulation import Simulation
 from ntncontact.io.scenario import load_scenario, parse_scenario
 from ntncontact.io.writers import read_csv_table
 
@@ -98,3 +99,20 @@ def energy_after_each_episode(recorder) -> tuple[np.ndarray, np.ndarray]:
     active = np.array([sum(len(c.pairs) for c in r.state.contact) for r in recorder.records])
     ends = np.flatnonzero((active[1:] == 0) & (active[:-1] > 0)) + 1
     return energy / energy[0] - 1.0, ends
+
+
+class SubStepCounting(Simulation):
+    """Records every sub-step attempt: (t_n, dt, completed)."""
+
+    def __init__(self, model) -> None:
+        super().__init__(model)
+        self.attempts: list[tuple[float, float, bool]] = []
+
+    def advance(self, state, dt):
+        try:
+            out = super().advance(state, dt)
+        except Exception:
+            self.attempts.append((state.time, dt, False))
+            raise
+        self.attempts.append((state.time, dt, True))
+        return out

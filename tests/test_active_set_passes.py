@@ -1,6 +1,7 @@
 """Quasi-static active-set passes (issue 18): a pass ends at the first unconverged augmentation
-after the first whose solution shows new penetrating pairs, and the step's next pass takes them in from there,
-instead of converging the augmentations of an active set that is known to be incomplete.
+after the first whose solution shows new penetrating pairs, and the step's next pass takes
+them in from there, instead of converging the augmentations of an active set that is known
+to be incomplete.
 
 Hertz mesh 1 (the contact zone grows by new pairs at its edge in most load steps), frictionless
 and with the report's mu = 0.3, against the same runs with every pass converged first (the

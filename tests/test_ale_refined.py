@@ -26,7 +26,7 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
-from helpers import EXAMPLES, Recorder, model_from_example
+from helpers import EXAMPLES, Recorder, SubStepCounting, model_from_example
 
 from ntncontact.contact import PairState
 from ntncontact.engine import mesh_motion
@@ -110,23 +110,6 @@ def test_a_pair_keeps_its_deep_decision_for_the_step_so_the_slide_has_a_fixed_po
     shallow[rows] = again.state.x[rows]
     assert mesh_motion.mesh_settled(model, base, contact, shallow, again)
     assert not mesh_motion.mesh_settled(model, base, contact, shallow, replace(again, deep={}))
-
-
-class SubStepCounting(Simulation):
-    """Records every sub-step attempt: (t_n, dt, completed)."""
-
-    def __init__(self, model) -> None:
-        super().__init__(model)
-        self.attempts: list[tuple[float, float, bool]] = []
-
-    def advance(self, state, dt):
-        try:
-            out = super().advance(state, dt)
-        except Exception:
-            self.attempts.append((state.time, dt, False))
-            raise
-        self.attempts.append((state.time, dt, True))
-        return out
 
 
 def test_held_pairs_start_newton_at_their_partners_normal_velocity():

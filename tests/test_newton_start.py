@@ -2,7 +2,7 @@
 detection predicted, and an active-set re-pass from the previous pass's solution."""
 
 import numpy as np
-from helpers import Recorder, model_from_dict, model_from_example
+from helpers import Recorder, SubStepCounting, model_from_dict, model_from_example
 
 from ntncontact.engine.problem import StepProblem, StepState
 from ntncontact.engine.simulation import Simulation
@@ -94,23 +94,6 @@ def test_active_set_re_pass_starts_from_the_previous_pass(monkeypatch):
     np.testing.assert_allclose(warm.state.d, cold_sim.state.d, rtol=0, atol=1e-7 * scale)
 
 
-class _Attempts(Simulation):
-    """Records every sub-step attempt: (t_n, dt, completed)."""
-
-    def __init__(self, model) -> None:
-        super().__init__(model)
-        self.attempts: list[tuple[float, float, bool]] = []
-
-    def advance(self, state, dt):
-        try:
-            out = super().advance(state, dt)
-        except Exception:
-            self.attempts.append((state.time, dt, False))
-            raise
-        self.attempts.append((state.time, dt, True))
-        return out
-
-
 def _thin_rows():
     """The fast-sliding blocks (report 6.5) with the upper block refined 8x in y only (1,524
     elements): its contact-side row is 2.1e-3 thick, a third of a step's approach |v| dt."""
@@ -126,7 +109,7 @@ def test_dynamic_steps_start_from_the_last_mid_point_velocity():
     state): from x_n + dt/2 v_n the thin rows of these blocks started inverted and 9 of 45
     sub-step attempts to t = 0.072 failed; now none does."""
     rec = Recorder()
-    sim = _Attempts(_thin_rows())
+    sim = SubStepCounting(_thin_rows())
     sim.observers.append(rec)
     sim.run()
     assert [a for a in sim.attempts if not a[2]] == []
