@@ -28,14 +28,12 @@ class TripletUnion:
         self._keys = np.zeros(0, dtype=np.int64)  # union entries as row * n_cols + col, sorted
         self._k_map = self._t_map = self._indptr = self._indices = None
         self.free_block = FreeBlock()  # the Newton matrix's free-dof block, same lifetime
-        self._restored = False  # _keys came from a checkpoint, for the K pattern to come
 
     def add(self, K: sp.csr_matrix, rows: NDArray, cols: NDArray,
             vals: NDArray) -> sp.csr_matrix:
         if not self._same_k(K):
-            if not self._restored:
-                self._keys = np.zeros(0, dtype=np.int64)  # a new K pattern: start afresh
-            self._restored = False
+            if self._k_key is not None:  # a new K pattern: start afresh (a first K takes up
+                self._keys = np.zeros(0, dtype=np.int64)  # the keys of a restore)
             self._build(K, rows, cols)
         elif not self._same_triplets(rows, cols):
             self._place(K, rows, cols)
@@ -47,7 +45,7 @@ class TripletUnion:
 
     def holds(self, K: sp.csr_matrix) -> bool:
         """Whether a union pattern beyond K's own was built (or restored) for K's pattern."""
-        return self._keys.size > K.nnz and (self._restored or self._same_k(K))
+        return self._keys.size > K.nnz and (self._k_key is None or self._same_k(K))
 
     @property
     def keys(self) -> NDArray:
@@ -60,7 +58,6 @@ class TripletUnion:
         which PARDISO and the static LU order differently (other round-off)."""
         self.__init__()
         self._keys = np.asarray(keys, dtype=np.int64)
-        self._restored = self._keys.size > 0
 
     def _same_k(self, K: sp.csr_matrix) -> bool:
         if self._k_key is None:
