@@ -221,3 +221,65 @@ def test_other_mesh_failures_of_an_ale_move_are_ale_motion_errors(monkeypatch):
     with pytest.raises(SimulationError, match=r"step 2 \(t = 0.02 -> 0.04\) failed after \d+ "
                        r"halvings of the step: ALE mesh motion: point .* outside the old mesh"):
         Simulation(model).run()
+
+
+def crossing_pairs(lifted: bool):
+    """The fast-sliding blocks (report's mesh) at t = 0 with two neighbouring pairs: upper
+    bottom nodes i1 < i2 over lower top nodes j1 < j2. The end-of-step prediction puts i2 on
+    j2, 1e-4 deep, and i1 0.3 of a spacing past i2: lifted 0.01 off the surface when
+    ``lifted`` (an open pair, as the neighbour of a leading corner held by friction rolls
+    over it), else 1e-4 deep too. Returns (model, base, contact, x_pred, j1, j2)."""
+    from ntncontact.contact import PairState
+    from ntncontact.engine.simulation import initial_state
+    from helpers import model_from_example
+
+    model = model_from_example("blocks_fast_sliding.toml")
+    base = initial_state(model)
+    ci = model.interfaces[0].interface
+    bottom, top = ci.surface1.nodes, ci.surface2.nodes
+    i1, i2 = (int(n) for n in bottom[bottom.size // 2: bottom.size // 2 + 2])
+    j1, j2 = (int(top[np.argmin(np.abs(base.x[top, 0] - base.x[i, 0]))]) for i in (i1, i2))
+    h = model.ale_bodies[0].motion.min_spacing
+    x_pred = base.x.copy()
+    x_pred[model.bodies[0].nodes] -= [0.0, 0.096]  # the upper block lands on the lower
+    x_pred[i2] = base.x[j2] + [0.0, -1e-4]
+    x_pred[i1] = base.x[j2] + [0.3 * h, 0.01 if lifted else -1e-4]
+    return model, base, (PairState.from_pairs([[i1, j1], [i2, j2]]),), x_pred, j1, j2
+
+
+def test_an_open_pair_whose_partner_crosses_a_neighbours_is_not_followed():
+    """Issue 17 item 1: where a node cannot follow its partner because its neighbour's
+    partner would be passed, the method does not fail. An open pair (its partner lifted off)
+    carries no force along its normal: its ALE node is respaced instead, for the rest of the
+    step (``MeshMotion.unfollowed``), and the pressed neighbour ends on its partner."""
+    model, base, contact, x_pred, j1, j2 = crossing_pairs(lifted=True)
+    motion = mesh_motion.move_meshes(model, base, contact, x_pred, 0.003, None)
+    assert motion.unfollowed == {(j1, int(contact[0].pairs[0, 0]))}
+    nodes, _, wanted = motion.requests[0]
+    assert nodes.tolist() == [j2]
+    x = motion.state.x
+    assert x[j1, 0] < x[j2, 0]  # order kept: j1 respaced, not moved past j2
+    # the decision holds for the step: the next augmentations (the ALE particles where the
+    # move put them; the lower block is at rest) move without the pair, and the mesh settles
+    # (geometrically: i1's lift tilts i2's normal, so j2 slides 2.6e-5, then 2e-6, ...)
+    rows = model.bodies[1].nodes
+    for _ in range(6):
+        x_pred[rows] = motion.state.x[rows]
+        if mesh_motion.mesh_settled(model, base, contact, x_pred, motion):
+            break
+        motion = mesh_motion.move_meshes(model, base, contact, x_pred, 0.003, motion)
+        assert motion.unfollowed == {(j1, int(contact[0].pairs[0, 0]))}
+        assert motion.requests[0][0].tolist() == [j2]
+    else:
+        raise AssertionError("the mesh motion did not settle in 6 augmentations")
+
+
+def test_pressed_pairs_whose_partners_cross_still_name_the_nodes():
+    """Both pairs pressed: no valid motion exists, and the error names the two ALE nodes."""
+    from ntncontact.ale.motion import AleCrossingError
+
+    model, base, contact, x_pred, j1, j2 = crossing_pairs(lifted=False)
+    with pytest.raises(AleCrossingError, match="would swap order") as err:
+        mesh_motion.move_meshes(model, base, contact, x_pred, 0.003, None)
+    offset = model.ale_bodies[0].node_offset
+    assert sorted(err.value.nodes) == sorted([j1 - offset, j2 - offset])

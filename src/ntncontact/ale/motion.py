@@ -169,6 +169,15 @@ class AleMotionError(MeshError):
     the step back; if that does not help, its message names the step and the time."""
 
 
+class AleCrossingError(AleMotionError):
+    """Two ALE surface nodes would swap order: the partners they follow cross. ``nodes``:
+    the two local nodes, so that the caller can tell whether one of them need not follow."""
+
+    def __init__(self, message: str, nodes: tuple[int, int]) -> None:
+        super().__init__(message)
+        self.nodes = nodes
+
+
 def _frozen(values: ArrayLike, dtype: type) -> NDArray:
     out = np.array(values, dtype=dtype, copy=True)
     out.setflags(write=False)
@@ -553,8 +562,8 @@ def _move_surface(
         body.min_spacing_ratio, _SNAP, 1.0 - tol, 1.0 / (1.0 - tol), body.respace == "local",
         _SNAP * tn.h_min)
     if bad >= 0:
-        raise AleMotionError(_crossing_message(body, tn.x, chain.nodes[idx[bad]],
-                                               chain.nodes[idx[bad + 1]]))
+        pair = (int(chain.nodes[idx[bad]]), int(chain.nodes[idx[bad + 1]]))
+        raise AleCrossingError(_crossing_message(body, tn.x, *pair), pair)
     return x, slides, clamped, float(mismatch), int(resets)
 
 

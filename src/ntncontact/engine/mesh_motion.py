@@ -14,7 +14,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 from numpy.typing import NDArray
 
-from ..ale.motion import AleMotionError, AleUpdate, move_ale_body
+from ..ale.motion import AleCrossingError, AleMotionError, AleUpdate, move_ale_body
 from ..ale.multisurface import meeting_points, move_ale_surfaces, nodal_masses, surface_of_nodes
 from ..contact import PairState, pair_gaps
 from ..jit import njit
@@ -44,6 +44,9 @@ class MeshMotion:
     #: (ALE node, partner) -> whether the pair slides as a deep one (``_request``), decided
     #: at the pair's first request of the step
     deep: dict = field(default_factory=dict)
+    #: (ALE node, partner) of the step's open pairs that are not followed: their partners
+    #: crossed a neighbour's (``_move_body``), so their nodes are respaced instead
+    unfollowed: frozenset = frozenset()
 
     @property
     def mismatch(self) -> float:
@@ -88,31 +91,64 @@ def move_meshes(
     updates, requests = [], []
     masses = _AleMasses(model, base, dict(previous.meetings) if previous is not None else {})
     deep = dict(previous.deep) if previous is not None else {}
+    unfollowed = set(previous.unfollowed) if previous is not None else set()
     for i, setup in enumerate(model.ale_bodies):
         nodes, partners = _ale_nodes_and_partners(setup, contact)
-        if nodes.size == 0:
+        prev = previous.updates[i] if previous is not None else None
+        prev_request = previous.requests[i] if previous is not None else None
+        moved = _move_body(model, setup, base, (prev, prev_request), contact, nodes, partners,
+                           x_pred, dt, (masses, deep, unfollowed))
+        if moved is None:
             updates.append(None)
             requests.append(None)
             continue
+        up, request = moved
         rows = slice(setup.node_offset, setup.node_offset + setup.n_nodes)
-        prev = previous.updates[i] if previous is not None else None
-        targets = _targets(masses, nodes, partners, x_pred, setup)
-        x_start, request = _request(model, setup, base, prev, contact, nodes, partners,
-                                    x_pred, targets, masses.is_ale[partners], deep)
-        if prev is not None and _same_request(previous.requests[i], request, setup):
-            up, request = prev, previous.requests[i]  # the move would be below its tolerance
-        else:
-            # the target as the move takes it: wanted = target - (end - start)
-            target = request[2] + x_pred[nodes] - x_start
-            up = _moved(setup, base, rows, nodes, target, x_pred[nodes], dt, x_start)
-            # momenta and energy exactly as the time loop measures them (docs/theory.md)
-            up = conserve_remap(model, setup, base.X, base.d, base.v, base.time, up,
-                                nodes - setup.node_offset)
         X[rows], d[rows], v[rows], a[rows] = up.X, up.d, up.v, up.a
         updates.append(up)
         requests.append(request)
     return MeshMotion(replace(base, X=X, d=d, v=v, a=a), tuple(updates), tuple(requests),
-                      masses.meetings, deep)
+                      masses.meetings, deep, frozenset(unfollowed))
+
+
+def _move_body(model: Model, setup: AleSetup, base: StepState, last: tuple,
+               contact: Sequence[PairState], nodes: NDArray, partners: NDArray,
+               x_pred: NDArray, dt: float, step: tuple) -> tuple[AleUpdate, tuple] | None:
+    """(update, request) of one ALE body, or None with no pair to follow. ``last``: the
+    body's previous (update, request) in this step; ``step``: the step's decisions so far
+    (masses and meeting points, deep pairs, unfollowed pairs), which this call extends.
+
+    Where the partners of two ALE nodes cross (a partner that lifts off and passes a
+    neighbour held in place, as the leading corner of a block sliding with friction), no
+    motion keeps both nodes under their partners. An open pair (predicted gap < 0) carries
+    no force along its normal, so its node need not follow: it is dropped from the move for
+    the rest of the step and respaced between the nodes that do follow (docs/theory.md,
+    "Partners at any spacing ratio"). A crossing between pressed pairs still raises."""
+    masses, deep, unfollowed = step
+    prev, prev_request = last
+    rows = slice(setup.node_offset, setup.node_offset + setup.n_nodes)
+    while True:
+        own, partner = _followed(nodes, partners, unfollowed)
+        if own.size == 0:
+            return None
+        targets = _targets(masses, own, partner, x_pred, setup)
+        x_start, request, is_open = _request(model, setup, base, prev, contact, own, partner,
+                                             x_pred, targets, masses.is_ale[partner], deep)
+        if prev is not None and _same_request(prev_request, request, setup):
+            return prev, prev_request  # the move would be below its tolerance
+        # the target as the move takes it: wanted = target - (end - start)
+        target = request[2] + x_pred[own] - x_start
+        try:
+            up = _moved(setup, base, rows, own, target, x_pred[own], dt, x_start)
+        except AleCrossingError as err:
+            crossing = np.isin(own - setup.node_offset, err.nodes) & is_open
+            if not crossing.any():
+                raise
+            unfollowed.update(zip(own[crossing].tolist(), partner[crossing].tolist(), strict=True))
+            continue
+        # momenta and energy exactly as the time loop measures them (docs/theory.md)
+        return conserve_remap(model, setup, base.X, base.d, base.v, base.time, up,
+                              own - setup.node_offset), request
 
 
 class _AleMasses:
@@ -135,6 +171,16 @@ class _AleMasses:
                 rows = slice(setup.node_offset, setup.node_offset + setup.n_nodes)
                 self._mass[rows] = nodal_masses(self.base.X[rows], setup.motion)
         return self._mass
+
+
+def _followed(nodes: NDArray, partners: NDArray, unfollowed: set | frozenset
+              ) -> tuple[NDArray, NDArray]:
+    """The (nodes, partners) of the pairs the mesh follows: all but the step's unfollowed."""
+    if not unfollowed:
+        return nodes, partners
+    follow = np.array([(int(n), int(p)) not in unfollowed
+                       for n, p in zip(nodes, partners, strict=True)], bool)
+    return nodes[follow], partners[follow]
 
 
 def _targets(masses: _AleMasses, nodes: NDArray, partners: NDArray, x_pred: NDArray,
@@ -210,9 +256,10 @@ def _surface_tangents(setup: AleSetup, nodes: NDArray, x: NDArray) -> NDArray:
 
 def _request(model: Model, setup: AleSetup, base: StepState, prev: AleUpdate | None,
              contact: Sequence[PairState], nodes: NDArray, partners: NDArray, x_pred: NDArray,
-             targets: NDArray, both_ale: NDArray, deep: dict) -> tuple[NDArray, tuple]:
+             targets: NDArray, both_ale: NDArray, deep: dict) -> tuple[NDArray, tuple, NDArray]:
     """(t_n positions of the active nodes' particles, the move's request: active nodes,
-    partners and where each node must sit at t_n so that its particle ends on its partner).
+    partners and where each node must sit at t_n so that its particle ends on its partner,
+    which pairs are open: predicted gap < 0).
 
     Node to node means no offset across the contact normal n (the pair's normal at the end
     of the step, as the contact kernel takes it); the offset along n is the gap, which
@@ -242,7 +289,7 @@ def _request(model: Model, setup: AleSetup, base: StepState, prev: AleUpdate | N
     slide = np.einsum("ij,ij->i", across, chord_end)
     wanted = x_start + slide[:, None] * chord_start
     wanted[both_ale] = x_start[both_ale] + offset[both_ale]
-    return x_start, (nodes, partners, wanted)
+    return x_start, (nodes, partners, wanted), along_n < 0.0
 
 
 def _deep_pairs(deep: dict, nodes: NDArray, partners: NDArray, now: NDArray) -> NDArray:
@@ -311,14 +358,15 @@ def mesh_settled(model: Model, base: StepState, contact: Sequence[PairState],
     deep = dict(motion.deep)
     for i, setup in enumerate(model.ale_bodies):
         nodes, partners = _ale_nodes_and_partners(setup, contact)
+        nodes, partners = _followed(nodes, partners, motion.unfollowed)
         old = motion.requests[i] if i < len(motion.requests) else None
         if old is None or nodes.size == 0:
             if nodes.size:
                 return False
             continue
         targets = _targets(masses, nodes, partners, x_pred, setup)
-        _, new = _request(model, setup, base, motion.updates[i], contact, nodes, partners,
-                          x_pred, targets, masses.is_ale[partners], deep)
+        _, new, _ = _request(model, setup, base, motion.updates[i], contact, nodes, partners,
+                             x_pred, targets, masses.is_ale[partners], deep)
         if not (np.array_equal(old[0], new[0]) and np.array_equal(old[1], new[1])):
             return False
         if float(np.abs(new[2] - old[2]).max()) > SETTLED * setup.motion.min_spacing:
