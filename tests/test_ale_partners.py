@@ -229,9 +229,10 @@ def crossing_pairs(lifted: bool):
     j2, 1e-4 deep, and i1 0.3 of a spacing past i2: lifted 0.01 off the surface when
     ``lifted`` (an open pair, as the neighbour of a leading corner held by friction rolls
     over it), else 1e-4 deep too. Returns (model, base, contact, x_pred, j1, j2)."""
+    from helpers import model_from_example
+
     from ntncontact.contact import PairState
     from ntncontact.engine.simulation import initial_state
-    from helpers import model_from_example
 
     model = model_from_example("blocks_fast_sliding.toml")
     base = initial_state(model)
