@@ -264,7 +264,7 @@ def _interface(cfg: ContactConfig, index: int, bodies: tuple[Body, ...],
     lagrangian = b1.mesh_motion == "lagrangian" and b2.mesh_motion == "lagrangian"
     share = not lagrangian if cfg.unpaired_share is None else cfg.unpaired_share
     law = ContactLaw(cfg.method, cfg.penalty_normal, cfg.penalty_tangential, cfg.friction,
-                     moment_free, cfg.gap_restoring, share)
+                     moment_free, cfg.gap_restoring, share, cfg.keep_gap)
     persistency = (cfg.law or ("persistency" if kind == "dynamic" else "gap")) == "persistency"
     aug = cfg.augmentation
     tol = AugmentationTolerances(aug.gap_tolerance, aug.slip_tolerance, aug.traction_tolerance)
