@@ -189,30 +189,3 @@ def test_moment_free_detection_takes_the_laws_objective_rate():
     kernel = evaluate_contact(x, v, 100.0, interface, PairState.from_pairs(pairs), law)
     _, _, objective = pair_gaps(x, interface, pairs, v, objective=True)
     np.testing.assert_allclose(objective, kernel.gap_rate, rtol=1e-13, atol=1e-14)
-
-
-def test_keep_gap_restores_a_held_pairs_committed_gap_only():
-    """contact.N.keep_gap: a held pair (committed gap rate) constrains gdot + (g_n - g*)/dt,
-    g_n its gap at the (ALE-moved) step start and g* its committed gap, so that the step ends
-    at g*: the move relabels the ALE particle and must not change the gap. A pair's first step
-    keeps gdot (gap_restoring decides it); without a move (g_n = g*) nothing changes."""
-    from ntncontact.contact import ContactLaw, evaluate_contact
-
-    x_start, interface = blocks(-0.03)  # the moved start: penetration 0.03
-    x = x_start + velocities(-0.5) * 0.01
-    pairs = np.column_stack((np.arange(4), np.arange(7, 3, -1)))
-    fresh = PairState.from_pairs(pairs)
-    dt = 0.02
-    law = ContactLaw("penalty", eps_N=100.0, moment_free=True, keep_gap=True)
-    plain = ContactLaw("penalty", eps_N=100.0, moment_free=True)
-
-    def measure(state, kept):
-        return evaluate_contact(x, velocities(-0.5), 2.0 / dt, interface, state,
-                                law if kept else plain, x_start=x_start).normal_measure
-
-    held = replace(fresh, gap_rate=np.zeros(4), gap=np.full(4, 0.01))  # before the move: 0.01
-    np.testing.assert_allclose(measure(held, True), 0.5 + (0.03 - 0.01) / dt, rtol=1e-13)
-    np.testing.assert_array_equal(measure(held, False), measure(fresh, False))
-    np.testing.assert_array_equal(measure(fresh, True), measure(fresh, False))
-    unmoved = replace(held, gap=np.full(4, 0.03))
-    np.testing.assert_allclose(measure(unmoved, True), 0.5, rtol=1e-12)

@@ -13,6 +13,7 @@ import pytest
 from helpers import EXAMPLES, Recorder, model_from_example
 
 from ntncontact.ale.example_mesh_motion import STAGES, mesh_motion_example
+from ntncontact.contact import pair_gaps
 from ntncontact.engine.simulation import Simulation
 from ntncontact.engine.ties import tie_violation
 from ntncontact.materials.models import Material
@@ -220,8 +221,11 @@ def test_block_sliding_final_state_does_not_depend_on_the_load_path():
 def test_block_sliding_with_corners_out_of_contact_lets_them_sink():
     """The report's wording (corners excluded from the active set): with nothing holding them,
     the block's corners sink into the foundation and tilt the normals of nodes 2 and 20 -
-    why the example keeps them in frictionless contact as Simo & Laursen do."""
-    overrides = ('contact.1.exclude=["bottom_inner","corner_bottom_left","corner_bottom_right"]',)
+    why the example keeps them in frictionless contact as Simo & Laursen do. The report's
+    normals (the block's, ``ale_normal = false``); with the ALE foundation's own normals, the
+    default, see the next test."""
+    overrides = ('contact.1.exclude=["bottom_inner","corner_bottom_left","corner_bottom_right"]',
+                 "contact.0.ale_normal=false")
     model, records, _ = run("block_sliding.toml", overrides)
     main, state = rows_at(records, 2.0, "block_foundation")
     assert len(main["node_1"]) == 19
@@ -231,6 +235,18 @@ def test_block_sliding_with_corners_out_of_contact_lets_them_sink():
     # the tilted normals turn part of the normal forces horizontal: the tangential forces
     # no longer add up to the pull
     assert main["tangential_force"].sum() > 1.1 * 10.0 * S_SIDE
+
+
+def test_block_sliding_with_the_foundations_normals_the_sunk_corners_tilt_no_force():
+    """The same corners out of contact, with the default normals: the pairs take the ALE
+    foundation's normal (``contact.N.ale_normal``), which the sinking corners do not tilt, so
+    the tangential forces add up to the pull (measured 600.000008 against 10 x 60)."""
+    overrides = ('contact.1.exclude=["bottom_inner","corner_bottom_left","corner_bottom_right"]',)
+    model, records, _ = run("block_sliding.toml", overrides)
+    main, state = rows_at(records, 2.0, "block_foundation")
+    corners = model.body("block").global_nodes("bottom")[[0, -1]]
+    assert np.all(-(state.d[corners, 1]) > 0.3)  # they still sink
+    assert main["tangential_force"].sum() == pytest.approx(10.0 * S_SIDE, rel=1e-6)
 
 
 # ----------------------------------------------------------------------------------------------
@@ -268,13 +284,10 @@ def hertz_profile(level: int, step: int, friction: float = 0.0):
     rows = {k: v[order] for k, v in rows.items()}
     rows["X"] = X[order]
     rows["p_ref"] = rows["normal_force"] / np.array([lengths[n] for n in rows["node_1"]])
-    # the vertical force on the cylinder, -L_c (t_N n + t_T e) . e_y with the body-1 normal
-    # n = rot(-90)(x_next - x_prev) / |.| of the deformed arc (e = (-n_y, n_x))
-    x = state.X + state.d
-    where = {n: i for i, n in enumerate(chain)}
-    k = np.array([where[n] for n in rows["node_1"]])
-    chord = x[chain[k + 1]] - x[chain[k - 1]]
-    n = np.column_stack([chord[:, 1], -chord[:, 0]]) / np.linalg.norm(chord, axis=1)[:, None]
+    # the vertical force on the cylinder, -L_c (t_N n + t_T e) . e_y with the pairs' normals
+    # (the ALE foundation's, which the arc faces; e = (-n_y, n_x))
+    n, _, _ = pair_gaps(state.X + state.d, model.interfaces[0].interface,
+                        np.column_stack([rows["node_1"], rows["node_2"]]))
     rows["vertical_force"] = -(rows["normal_force"] * n[:, 1] + rows["tangential_force"] * n[:, 0])
     return rows, model, state
 

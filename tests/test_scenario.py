@@ -108,8 +108,6 @@ penalty_normal = 100.0
         (("penalty_normal = 100.0", "penalty_normal = 100.0\nfriction = 0.2"),
          "penalty_tangential"),
         (('body_1 = "block"', 'body_1 = "blok"'), "no body named 'blok'"),
-        (("penalty_normal = 100.0", 'penalty_normal = 100.0\nlaw = "gap"\nkeep_gap = true'),
-         "keep_gap acts under the persistency law"),
     ],
 )
 def test_bad_contact_entries_are_clear_errors(tmp_path, replace, expected):

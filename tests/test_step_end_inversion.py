@@ -55,8 +55,12 @@ def test_check_names_the_body_its_element_and_the_time():
 # the issue's case was run with the report's mid-point rule and pair forces (the defaults since
 # are the energy-momentum integrator and moment-free pair forces, whose solve fails before the
 # inversion)
+# the report's pair normals (the ring's): with the obstacle's own normals (the default since
+# session 13) the second step's move fails first, two pressed pairs' partners crossing, which
+# test_ale_partners covers; these tests are about the inverted element
 RING_50 = ["bodies.0.initial.velocity=[0.0, -50.0]", "analysis.t_end=0.01",
-           'analysis.integrator="midpoint"', "contact.0.moment_free=false"]
+           'analysis.integrator="midpoint"', "contact.0.moment_free=false",
+           "contact.0.ale_normal=false"]
 
 
 def _attempts(monkeypatch) -> list:

@@ -274,14 +274,12 @@ def _restoring_rate(x_start, slots, i, j, rate_factor):
 
 
 @njit(cache=True)
-def evaluate_pairs(x, v, x_start, table1, table2, pairs, lambda_N, dlambda_T, t_prev, restore_to,
+def evaluate_pairs(x, v, x_start, table1, table2, pairs, lambda_N, dlambda_T, t_prev, restoring,
                    params, flags):
     """Force, COO tangent and per-pair results of the active pairs.
 
-    restore_to: per pair, NaN, or the gap g* the persistency law restores within the step: it
-    then constrains gdot + (g_n - g*)/dt (:func:`_restoring_rate`), g_n the gap at
-    ``x_start``, so that the pair ends the step at g* (0 for a pair's first step under
-    ``gap_restoring``; its gap before the ALE move for a pair held across a move).
+    restoring: per pair, non-zero where the persistency law gets the gap-restoring rate
+    g_n/dt (:func:`_restoring_rate`), g_n the gap at ``x_start``.
 
     params: (eps_N, eps_T, mu, rate_factor, dissipation time factor).
     flags: (method code, rate law, v given, x_start given, frictional, moment free).
@@ -351,9 +349,8 @@ def evaluate_pairs(x, v, x_start, table1, table2, pairs, lambda_N, dlambda_T, t_
                                             rate_factor, d_slip)
         measure, d_measure = (gap_rate, d_rate) if rate_law else (gap, d_gap)
         rate_offset = 0.0
-        if rate_law and has_start and not np.isnan(restore_to[p]):
-            rate_offset = (_restoring_rate(x_start, slots, i, j, rate_factor)
-                           - restore_to[p] * (0.5 * rate_factor))
+        if rate_law and has_start and restoring[p] != 0.0:
+            rate_offset = _restoring_rate(x_start, slots, i, j, rate_factor)
             measure += rate_offset
         t_n, dt_dm = _normal_traction(method, lambda_N[p], eps_N, measure, frictional)
         t_t, trial, stat, ds_coef, dn_coef = 0.0, 0.0, _SLIP, 0.0, 0.0
@@ -484,20 +481,6 @@ def evaluate_contact(
 _NO_ARRAY = np.zeros((0, 2))
 
 
-def _restore_to(state: PairState, law: ContactLaw) -> NDArray[np.float64]:
-    """Per pair the gap the persistency law restores in this step, NaN for none: 0 for a
-    pair's first step (no committed gap rate yet) under ``law.gap_restoring``; under
-    ``law.keep_gap`` the held pairs' committed gap, i.e. their gap before this step's ALE move
-    (docs/theory.md, "The gap across an ALE move")."""
-    out = np.full(len(state), np.nan)
-    first = np.isnan(state.gap_rate)
-    if law.gap_restoring:
-        out[first] = 0.0
-    if law.keep_gap:
-        out[~first] = state.gap[~first]
-    return out
-
-
 def _evaluate_compiled(
     x_eval: NDArray, v_eval: NDArray | None, rate_factor: float | None, interface: Interface,
     state: PairState, law: ContactLaw, x_start: NDArray | None, dt: float | None,
@@ -514,7 +497,9 @@ def _evaluate_compiled(
     if transfer is not None:  # the kernel sees each shared pair's weighted point
         x_eval, v_eval, x_start = (transfer.positions(a) for a in (x_eval, v_eval, x_start))
         table1 = transfer.surface1.kernel_table
-    restore_to = _restore_to(state, law)
+    # the pairs' first step (no committed gap rate yet) under law.gap_restoring
+    restoring = (np.isnan(state.gap_rate) if law.gap_restoring
+                 else np.zeros(len(state), bool)).astype(np.float64)
 
     def c_float(a: NDArray | None) -> NDArray:  # one compiled signature: C-contiguous float64
         return _NO_ARRAY if a is None else np.ascontiguousarray(a, dtype=np.float64)
@@ -523,7 +508,7 @@ def _evaluate_compiled(
      gradients) = evaluate_pairs(
             c_float(x_eval), c_float(v_eval), c_float(x_start), table1,
             interface.surface2.kernel_table, np.ascontiguousarray(pairs, dtype=np.int64),
-            c_float(state.lambda_N), c_float(state.dlambda_T), c_float(state.t_T), restore_to,
+            c_float(state.lambda_N), c_float(state.dlambda_T), c_float(state.t_T), restoring,
             params,
             flags)
     if code == NOT_ON_SURFACE:

@@ -33,7 +33,7 @@ def _slots(interface: Interface, pairs: NDArray[np.int64]) -> NDArray[np.int64]:
     i, j = pairs[:, 0], pairs[:, 1]
     k1 = s1.index_of(i)
     k2 = s2.index_of(j)
-    corner = s1.corner[k1]
+    corner = s1.takes_partner_normal[k1]
     a = np.where(corner, s2.next[k2], s1.prev[k1])
     b = np.where(corner, s2.prev[k2], s1.next[k1])
     return np.column_stack((i, j, a, b, s1.prev[k1], s1.next[k1]))

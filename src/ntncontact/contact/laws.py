@@ -33,9 +33,6 @@ class ContactLaw:
     unpaired_share: where one surface has nodes between two consecutive pairs that get no pair
         of their own (unequal node counts), they take their share of the pairs' forces by dual
         mortar weights (``contact/transfer.py``); False: the report's point forces on the pairs.
-    keep_gap: under the persistency law, a held pair's step ends at the gap it had before the
-        step's ALE move: the move relabels which particle of the ALE surface the pair holds,
-        and must not change the gap (docs/theory.md, "The gap across an ALE move").
     """
 
     method: Method = "augmented_lagrangian"
@@ -45,7 +42,6 @@ class ContactLaw:
     moment_free: bool = False
     gap_restoring: bool = False
     unpaired_share: bool = False
-    keep_gap: bool = False
 
     def __post_init__(self) -> None:
         if self.method not in _METHODS:

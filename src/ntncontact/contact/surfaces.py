@@ -31,12 +31,15 @@ class ContactSurface:
     """Ordered global node indices of one contact surface (body on the left when walking).
 
     ``corner`` is a boolean mask aligned with ``nodes``: True where the body surface has a kink
-    and the node takes the partner's normal (report 6.6).
+    and the node takes the partner's normal (report 6.6). ``partner_normal``: every node takes
+    the partner's normal, as a node facing an ALE surface does (docs/theory.md, "The gap across
+    an ALE move").
     """
 
     nodes: NDArray[np.int64]
     closed: bool = False
     corner: NDArray[np.bool_] | None = None
+    partner_normal: bool = False
 
     def __post_init__(self) -> None:
         nodes = _frozen(self.nodes, np.int64)
@@ -86,12 +89,19 @@ class ContactSurface:
         order = np.argsort(self.nodes)
         return self.nodes[order], order
 
+    @property
+    def takes_partner_normal(self) -> NDArray[np.bool_]:
+        """Per node: its pairs' normal is the partner's, negated (a corner, or every node with
+        ``partner_normal``)."""
+        return self.corner | self.partner_normal
+
     @cached_property
     def kernel_table(self) -> NDArray[np.int64]:
         """(5, size) lookup table of the compiled contact kernel: sorted global nodes, their
         chain positions, then prev, next and the corner flag per chain position."""
         keys, order = self._sorted
-        table = np.vstack((keys, order, self.prev, self.next, self.corner)).astype(np.int64)
+        table = np.vstack((keys, order, self.prev, self.next, self.takes_partner_normal)
+                          ).astype(np.int64)
         table.setflags(write=False)
         return table
 

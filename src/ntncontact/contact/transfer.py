@@ -214,7 +214,8 @@ def _without_inner_nodes(surface: ContactSurface, pos: NDArray,
         span = (pos[b] - pos[a]) % surface.size
         drop[(pos[a] + np.arange(1, span)) % surface.size] = True
     drop &= ~surface.corner
-    return ContactSurface(surface.nodes[~drop], surface.closed, surface.corner[~drop])
+    return ContactSurface(surface.nodes[~drop], surface.closed, surface.corner[~drop],
+                          surface.partner_normal)
 
 
 def _weights(n_nodes: int, weights: dict[int, dict[int, float]]

@@ -252,8 +252,13 @@ def _interface(cfg: ContactConfig, index: int, bodies: tuple[Body, ...],
     surface1 = ContactSurface.from_chain(chain1, b1.node_offset)
     # corners of body 1 (kinks and the ends of an open surface) take the partner's normal (6.6)
     auto = surface1.nodes[corner_mask(_xy(b1, surface1), surface1, include_ends=True)]
+    # a node facing an ALE surface takes that surface's normal: the ALE node slides along its
+    # own surface, across which the slide then changes no gap to first order (docs/theory.md,
+    # "The gap across an ALE move")
+    facing_ale = b2.mesh_motion == "ale" and b1.mesh_motion == "lagrangian"
     surface1 = ContactSurface(surface1.nodes, surface1.closed,
-                              np.isin(surface1.nodes, np.concatenate([auto, corners])))
+                              np.isin(surface1.nodes, np.concatenate([auto, corners])),
+                              facing_ale if cfg.ale_normal is None else cfg.ale_normal)
     surface2 = ContactSurface.from_chain(chain2, b2.node_offset)
     # moment-free pair forces conserve angular momentum under the mid-point rule: the default
     # of dynamic runs; static runs keep the report's forces (docs/theory.md, "Moment-free
@@ -264,7 +269,7 @@ def _interface(cfg: ContactConfig, index: int, bodies: tuple[Body, ...],
     lagrangian = b1.mesh_motion == "lagrangian" and b2.mesh_motion == "lagrangian"
     share = not lagrangian if cfg.unpaired_share is None else cfg.unpaired_share
     law = ContactLaw(cfg.method, cfg.penalty_normal, cfg.penalty_tangential, cfg.friction,
-                     moment_free, cfg.gap_restoring, share, cfg.keep_gap)
+                     moment_free, cfg.gap_restoring, share)
     persistency = (cfg.law or ("persistency" if kind == "dynamic" else "gap")) == "persistency"
     aug = cfg.augmentation
     tol = AugmentationTolerances(aug.gap_tolerance, aug.slip_tolerance, aug.traction_tolerance)

@@ -295,7 +295,7 @@ class ContactConfig(Strict):
     detection: Literal["penetration", "predicted"] | None = None
     moment_free: bool | None = None  # None: on in dynamic runs (docs/theory.md)
     gap_restoring: bool = False  # persistency law: a pair's first step closes its gap
-    keep_gap: bool = False  # persistency law: a held pair's gap survives the ALE move
+    ale_normal: bool | None = None  # None: pairs facing an ALE body take its normal
     unpaired_share: bool | None = None  # None: on beside an ALE body (docs/theory.md)
     augmentation: AugmentationConfig = AugmentationConfig()
 
@@ -307,9 +307,6 @@ class ContactConfig(Strict):
             raise ValueError(f"method '{self.method}' needs penalty_normal > 0")
         if self.friction > 0.0 and self.penalty_tangential <= 0.0:
             raise ValueError("friction > 0 needs penalty_tangential > 0")
-        if self.keep_gap and self.law == "gap":
-            raise ValueError("keep_gap acts under the persistency law; the gap law already "
-                             "restores every pair's gap")
         return self
 
 

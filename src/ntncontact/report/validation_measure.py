@@ -14,6 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..contact import pair_gaps
 from .reference import SMOOTHERS, compare
 from .validation_cases import EXAMPLES, Case
 from .validation_checks import (
@@ -147,8 +148,6 @@ def hertz_snapshots(case: Case, directory: Path, quick: bool) -> list[HertzSnaps
     chain = surface_chain(cylinder.mesh, "arc").nodes + cylinder.node_offset
     lengths = np.zeros(model.n_nodes)
     lengths[chain] = nodal_tributary_lengths(model.X0[chain], closed=False)
-    where = np.full(model.n_nodes, -1)
-    where[chain] = np.arange(len(chain))
     top = model.body("foundation").global_nodes("top")
     out = []
     for t, fraction in HERTZ_SNAPSHOTS.items():
@@ -159,11 +158,10 @@ def hertz_snapshots(case: Case, directory: Path, quick: bool) -> list[HertzSnaps
         order = np.argsort(X)
         rows = {k: v[order] for k, v in rows.items()}
         n1 = rows["node_1"]
-        # the vertical force on the cylinder, -(f_N n + f_T e) . e_y with the body-1 normal
-        # n = rot(-90)(x_next - x_prev) / |.| of the deformed arc (e = (-n_y, n_x))
-        k = where[n1]
-        chord = x[chain[k + 1]] - x[chain[k - 1]]
-        n = np.column_stack([chord[:, 1], -chord[:, 0]]) / np.linalg.norm(chord, axis=1)[:, None]
+        # the vertical force on the cylinder, -(f_N n + f_T e) . e_y with the pairs' own
+        # normals (the foundation's, as the arc faces an ALE surface; e = (-n_y, n_x))
+        n, _, _ = pair_gaps(x, model.interfaces[0].interface,
+                            np.column_stack([n1, rows["node_2"]]))
         vertical = -(rows["normal_force"] * n[:, 1] + rows["tangential_force"] * n[:, 0])
         arc = chain[~np.isin(chain, n1)]
         force = np.zeros(model.n_nodes)
