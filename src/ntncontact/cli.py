@@ -108,11 +108,29 @@ def _run_until_stopped(args: argparse.Namespace, stop: StopOnSignal) -> int:
             sim.run(progress, stop.reason)
     fields = "fields.xdmf" if model.analysis.field_format == "xdmf" else "fields.pvd"
     print(f"results written to {out} (history.csv, summary.json, {fields})")
+    _warn_off_surfaces(writer.results.summary.data)
     if args.compare:
         _print_comparison(out)
     if args.plot or args.gif or args.times:
         print("figures:", *_draw_figures(out, args), sep="\n  ")
     return 0
+
+
+#: a node off the contact surfaces inside another body deeper than this fraction of that
+#: body's element size is worth a warning
+OFF_SURFACE_WARNING = 0.01
+
+
+def _warn_off_surfaces(summary: dict) -> None:
+    """One line on stderr when a boundary node on no contact surface went inside a body it
+    has an interface with (summary.json ``max_penetration_off_surfaces``)."""
+    at = summary.get("max_penetration_off_surfaces_at")
+    depth = summary.get("max_penetration_off_surfaces") or 0.0
+    if at and depth > OFF_SURFACE_WARNING * at["element_size"]:
+        print(f"warning: node {at['node']} of body '{at['body']}', on no contact surface, went "
+              f"{depth:.3g} inside '{at['inside']}' (t = {at['time']:.6g}) where nothing "
+              "resists it: make that face a contact surface too (summary.json "
+              "max_penetration_off_surfaces)", file=sys.stderr)
 
 
 @contextlib.contextmanager

@@ -20,7 +20,13 @@ from ..fem.sparse import TripletUnion
 from ..solvers.linear import LinearSolverError
 from ..solvers.newton import FactorCache, NewtonError, NewtonSettings, newton
 from .convection import convective_terms
-from .diagnostics import Balance, balance, check_end_of_step, named_failure
+from .diagnostics import (
+    Balance,
+    PenetrationCheck,
+    balance,
+    check_end_of_step,
+    named_failure,
+)
 from .interfaces import (
     LagrangeTerm,
     augment_all,
@@ -161,6 +167,7 @@ class Simulation:
         self._supports = support_sets(model)
         self._last_reactions: dict = {}
         self._energy_multiplier = 0.0
+        self._penetration = PenetrationCheck(model) if model.interfaces else None
         # the energy-conserving solve (report 5.5) starts from each augmentation's exact one
         self._early_ratio = (0.0 if model.analysis.energy_conserving
                              else model.analysis.newton_inexact_augmentations)
@@ -610,7 +617,13 @@ class Simulation:
             "ale_remap_energy": self.ledger["ale_remap_energy"],
             "energy_multiplier": self._energy_multiplier,
             "contact_rows": contact_rows(self.model.interfaces, results, self.state.x),
-        }
+        } | self._off_surface_extra()
+
+    def _off_surface_extra(self) -> dict:
+        """The step's deepest boundary node inside another body off the contact surfaces
+        (``diagnostics.PenetrationCheck``): its depth for history.csv, and where it is."""
+        found = self._penetration.deepest(self.state.x)
+        return {"penetration_off_surfaces": found.depth, "penetration_off_surfaces_at": found}
 
     def _tie_extra(self) -> dict:
         """History columns of the ties: the resultant force each transmits to body 1 over the

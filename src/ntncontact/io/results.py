@@ -20,7 +20,7 @@ from .writers import MemoryResults, ResultsDirectory
 
 CONTACT_HISTORY = ("active_pairs", "frictional_dissipation", "contact_work", "augmentations",
                    "ale_mismatch", "energy_multiplier", "augmentations_converged",
-                   "ale_remap_energy")
+                   "ale_remap_energy", "penetration_off_surfaces")
 HISTORY_DEFAULTS = {"augmentations_converged": 1}  # of the initial row and contact-free steps
 
 
@@ -47,7 +47,8 @@ class ResultWriter:
             extra_history = extra_history + CONTACT_HISTORY
             summary_extra = {"contact_start_time": None, "contact_end_time": None,
                              "max_penetration": 0.0, "max_active_pairs": 0,
-                             "unconverged_steps": 0} | summary_extra
+                             "unconverged_steps": 0, "max_penetration_off_surfaces": 0.0,
+                             "max_penetration_off_surfaces_at": None} | summary_extra
         extra_history = extra_history + reaction_columns(model)
         if model.ties:
             extra_history = extra_history + tie_history(model)
@@ -108,6 +109,8 @@ class ResultWriter:
                                               summary.get("max_tie_violation", 0.0))
         if row.get("augmentations_converged") == 0:  # augmentation.on_limit = "accept"
             fields["unconverged_steps"] = summary["unconverged_steps"] + 1
+        fields |= self._off_surface_summary(
+            s.time, record.extra.get("penetration_off_surfaces_at"), summary)
         rows = record.extra.get("contact_rows")
         if rows is not None and len(rows["node_1"]):
             self.results.contact.write_step(s.step, s.time, rows)
@@ -130,6 +133,17 @@ class ResultWriter:
                 fields["contact_start_time"] = time - dt
             fields["contact_end_time"] = time
         return fields
+
+    @staticmethod
+    def _off_surface_summary(time: float, found, summary: dict) -> dict:
+        """The deepest boundary node inside another body off the contact surfaces so far, and
+        where (``engine.diagnostics.PenetrationCheck``)."""
+        if found is None or found.depth <= (summary.get("max_penetration_off_surfaces") or 0.0):
+            return {}
+        return {"max_penetration_off_surfaces": found.depth,
+                "max_penetration_off_surfaces_at": {"time": time, "body": found.body,
+                                                    "node": found.node, "inside": found.other,
+                                                    "element_size": found.size}}
 
     def _due(self, time: float, model: Model) -> bool:
         last = time >= model.analysis.t_end - 1e-9 * model.analysis.dt

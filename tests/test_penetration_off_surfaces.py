@@ -1,0 +1,73 @@
+"""Penetration where contact cannot see it (summary.json ``max_penetration_off_surfaces``,
+``engine.diagnostics.PenetrationCheck``): a boundary node on none of the contact surfaces
+between two bodies goes inside the other. Contact acts on its surfaces only, so nothing
+resists it; the run completes, and only this figure and the CLI's warning tell.
+
+Own case: a block slides sideways into a neighbour; the only interface joins the block's
+bottom to the neighbour's top (which never meet), so the block's right face passes into the
+neighbour. With that face a contact surface too, nothing goes inside unresisted.
+"""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+
+from ntncontact.cli import main
+
+SLIDE = """
+[analysis]
+kind = "dynamic"
+dt = 0.01
+t_end = 0.1
+
+[[bodies]]
+name = "block"
+mesh = {{ type = "rectangle", width = 0.5, height = 0.5, nx = 2, ny = 2, origin = [0.0, 0.0] }}
+material = {{ model = "neo_hookean", lambda = 115.38, mu = 76.92, density = 1.0 }}
+initial = {{ velocity = [1.0, 0.0] }}
+
+[[bodies]]
+name = "neighbour"
+mesh = {{ type = "rectangle", width = 0.5, height = 0.5, nx = 2, ny = 2, origin = [0.55, 0.0] }}
+material = {{ model = "neo_hookean", lambda = 115.38, mu = 76.92, density = 1.0 }}
+
+[[contact]]
+body_1 = "block"
+surface_1 = "{surface_1}"
+body_2 = "neighbour"
+surface_2 = "{surface_2}"
+method = "augmented_lagrangian"
+penalty_normal = 100.0
+"""
+
+
+def run(tmp_path, surface_1: str, surface_2: str, capsys) -> tuple[dict, str]:
+    path = tmp_path / f"{surface_1}.toml"
+    path.write_text(SLIDE.format(surface_1=surface_1, surface_2=surface_2))
+    out = tmp_path / surface_1
+    assert main(["run", str(path), "--out", str(out), "--quiet"]) == 0
+    return json.loads((out / "summary.json").read_text()), capsys.readouterr().err
+
+
+def test_a_face_on_no_contact_surface_that_goes_inside_is_measured_and_warned(tmp_path, capsys):
+    """The right face moves 0.1 in 0.1 s against a gap of 0.05 (the neighbour is pushed by
+    nothing): its nodes end about 0.05 inside, the figure names the block's face node, and
+    the CLI warns with the node, the depth and what to do."""
+    summary, err = run(tmp_path, "bottom", "top", capsys)
+    depth = summary["max_penetration_off_surfaces"]
+    assert depth == pytest.approx(0.05, abs=0.01)
+    at = summary["max_penetration_off_surfaces_at"]
+    assert (at["body"], at["inside"]) == ("block", "neighbour")
+    assert at["node"] in (2, 5, 8)  # the right face of a 2 x 2 rectangle (row-major nodes)
+    assert at["time"] == pytest.approx(0.1)
+    assert f"node {at['node']} of body 'block', on no contact surface, went" in err
+    assert "make that face a contact surface too" in err
+
+
+def test_with_the_face_a_contact_surface_nothing_goes_inside_unresisted(tmp_path, capsys):
+    summary, err = run(tmp_path, "right", "left", capsys)
+    assert summary["max_penetration_off_surfaces"] == 0.0
+    assert summary["max_penetration_off_surfaces_at"] is None
+    assert "warning" not in err
