@@ -17,10 +17,7 @@ import pytest
 from ntncontact.cli import main
 
 SLIDE = """
-[analysis]
-kind = "dynamic"
-dt = 0.01
-t_end = 0.1
+analysis = {{ kind = "dynamic", dt = 0.01, t_end = 0.1 }}
 
 [[bodies]]
 name = "block"
