@@ -28,6 +28,7 @@ import hashlib
 import itertools
 import json
 import sys
+import time
 import traceback
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from pathlib import Path
@@ -236,9 +237,25 @@ def _dask_client(scheduler: str | None, workers: int | None) -> Iterator[tuple[A
     try:
         with Client(cluster if cluster is not None else scheduler) as client:
             yield client, cluster
+            if cluster is not None:
+                _wait_until_workers_left(client)
     finally:
         if cluster is not None:
             cluster.close()
+
+
+#: how long the scheduler waits for the scaled-down workers to leave before it closes
+WORKERS_LEAVE_TIMEOUT_S = 60.0
+
+
+def _wait_until_workers_left(client: Any) -> None:
+    """Wait until the scheduler has no worker left (the sweep scaled its cluster to 0 while
+    it wrote the results). Closed before that, the scheduler met a retiring worker's last
+    heartbeat with a closed connection, and the worker logged an error with a traceback to
+    the user's terminal (seen on a loaded machine)."""
+    deadline = time.monotonic() + WORKERS_LEAVE_TIMEOUT_S
+    while client.scheduler_info().get("workers") and time.monotonic() < deadline:
+        time.sleep(0.05)
 
 
 def _run_cases(client: Any, own_cluster: bool, spec: SweepSpec, scenario_path: str,
