@@ -98,7 +98,8 @@ class ContactSurface:
     @cached_property
     def kernel_table(self) -> NDArray[np.int64]:
         """(5, size) lookup table of the compiled contact kernel: sorted global nodes, their
-        chain positions, then prev, next and the corner flag per chain position."""
+        chain positions, then prev, next and the flag ``takes_partner_normal`` per chain
+        position (the kernel takes the normal from the partner's chain where it is set)."""
         keys, order = self._sorted
         table = np.vstack((keys, order, self.prev, self.next, self.takes_partner_normal)
                           ).astype(np.int64)

@@ -1,5 +1,5 @@
 """Points of one body inside another: at t = 0 (bodies placed so that they overlap), and
-after every step (boundary nodes no contact pair holds, ``engine.diagnostics``).
+after every step (boundary nodes on no contact surface, ``engine.diagnostics``).
 
 Node-to-node contact only acts on pairs it detects near the surfaces; bodies that start
 interpenetrated pass through each other. The scenario builder therefore refuses them, naming
