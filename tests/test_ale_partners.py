@@ -223,10 +223,10 @@ def test_other_mesh_failures_of_an_ale_move_are_ale_motion_errors(monkeypatch):
         Simulation(model).run()
 
 
-def crossing_pairs(lifted: bool):
+def crossing_pairs(lifted: bool, past: float = 0.3):
     """The fast-sliding blocks (report's mesh) at t = 0 with two neighbouring pairs: upper
     bottom nodes i1 < i2 over lower top nodes j1 < j2. The end-of-step prediction puts i2 on
-    j2, 1e-4 deep, and i1 0.3 of a spacing past i2: lifted 0.01 off the surface when
+    j2, 1e-4 deep, and i1 ``past`` of a spacing past i2: lifted 0.01 off the surface when
     ``lifted`` (an open pair, as the neighbour of a leading corner held by friction rolls
     over it), else 1e-4 deep too. Returns (model, base, contact, x_pred, j1, j2)."""
     from helpers import model_from_example
@@ -244,7 +244,7 @@ def crossing_pairs(lifted: bool):
     x_pred = base.x.copy()
     x_pred[model.bodies[0].nodes] -= [0.0, 0.096]  # the upper block lands on the lower
     x_pred[i2] = base.x[j2] + [0.0, -1e-4]
-    x_pred[i1] = base.x[j2] + [0.3 * h, 0.01 if lifted else -1e-4]
+    x_pred[i1] = base.x[j2] + [past * h, 0.01 if lifted else -1e-4]
     return model, base, (PairState.from_pairs([[i1, j1], [i2, j2]]),), x_pred, j1, j2
 
 
@@ -284,3 +284,27 @@ def test_pressed_pairs_whose_partners_cross_still_name_the_nodes():
         mesh_motion.move_meshes(model, base, contact, x_pred, 0.003, None)
     offset = model.ale_bodies[0].node_offset
     assert sorted(err.value.nodes) == sorted([j1 - offset, j2 - offset])
+    assert "folds" not in str(err.value)  # 30 % of a spacing apart: not crushed
+
+
+def test_partners_that_cross_on_a_crushed_surface_are_named_as_a_fold():
+    """Fast sliding refined 4x with mu = 0.2 stops where the upper block's leading corner,
+    held by friction, folds: its bottom nodes 30 and 32 end 2.5 % of their reference distance
+    apart and pass each other. A finer ALE surface or a smaller dt (what the plain crossing
+    message suggests) cannot help there; the message names the partner body's nodes, how
+    crushed the surface is between them, and what to change."""
+    from ntncontact.ale.motion import AleCrossingError
+
+    model, base, contact, x_pred, j1, j2 = crossing_pairs(lifted=False, past=0.02)
+    i1, i2 = (int(i) for i in contact[0].pairs[:, 0])
+    with pytest.raises(AleCrossingError, match="would swap order") as err:
+        mesh_motion.move_meshes(model, base, contact, x_pred, 0.003, None)
+    message = str(err.value)
+    apart = np.linalg.norm(x_pred[i1] - x_pred[i2]) / np.linalg.norm(model.X0[i1] - model.X0[i2])
+    assert apart < 0.1
+    upper = model.bodies[0].node_offset
+    names = (f"nodes {i1 - upper} and {i2 - upper} of body 'upper'",
+             f"nodes {i2 - upper} and {i1 - upper} of body 'upper'")
+    assert any(name in message for name in names)
+    assert f"are {apart:.1%} of their reference distance apart" in message
+    assert "folds between them" in message and "round the corner" in message
