@@ -35,7 +35,7 @@ def _gauss_fields(body, X_e: NDArray, x_e: NDArray) -> tuple[dict[str, NDArray],
     kin = kinematics(X_e, x_e)
     F, mat = kin.F, body.material
     sigma, s33 = cauchy_stress(mat.kind, F, mat.effective_lambda, mat.mu, mat.plane_stress)
-    C = np.einsum("...kI,...kJ->...IJ", F, F)
+    C = np.swapaxes(F, -1, -2) @ F
     E = 0.5 * (C - np.eye(2))  # Green-Lagrange
     if mat.plane_stress:  # sigma_33 = 0 of linear elasticity (lambda*/(2 mu) = nu/(1-nu))
         e33 = -mat.effective_lambda / (2.0 * mat.mu) * (E[..., 0, 0] + E[..., 1, 1])

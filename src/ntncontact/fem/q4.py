@@ -60,7 +60,10 @@ def reference_gradients(X_e: NDArray) -> tuple[NDArray, NDArray]:
     ``X_e`` has shape (ne, 4, 2). Raises :class:`InvertedElementError` for the first element
     with a non-positive Jacobian at a Gauss point.
     """
-    J = np.einsum("gaj,eai->egij", DN_GP, X_e)  # dX_i/dxi_j
+    # tensordot and matmul instead of einsum: 2.5-3.5x faster at 62,500 elements (0.09 s
+    # against 0.22-0.33 s; the fields of a frame, fem.q4 being most of their cost), the same
+    # to 1e-13 relative (summation order)
+    J = np.tensordot(X_e, DN_GP, axes=([1], [1])).transpose(0, 2, 1, 3)  # dX_i/dxi_j
     det = J[..., 0, 0] * J[..., 1, 1] - J[..., 0, 1] * J[..., 1, 0]
     bad = det <= 0.0
     if bad.any():
@@ -71,13 +74,13 @@ def reference_gradients(X_e: NDArray) -> tuple[NDArray, NDArray]:
     inv[..., 1, 1] = J[..., 0, 0] / det
     inv[..., 0, 1] = -J[..., 0, 1] / det
     inv[..., 1, 0] = -J[..., 1, 0] / det
-    grad = np.einsum("gaj,egjI->egaI", DN_GP, inv)
+    grad = np.matmul(DN_GP, inv)  # (4gp, 4, 2) @ (ne, 4gp, 2, 2)
     return grad, det * GAUSS_WEIGHTS
 
 
 def deformation_gradient(grad: NDArray, x_e: NDArray) -> NDArray:
     """F_iJ = sum_a x_ai dN_a/dX_J at every Gauss point, shape (ne, 4, 2, 2)."""
-    return np.einsum("eai,egaJ->egiJ", x_e, grad)
+    return np.matmul(np.swapaxes(x_e, 1, 2)[:, None], grad)  # (ne, 1, 2, 4) @ (ne, 4gp, 4, 2)
 
 
 def kinematics(X_e: NDArray, x_e: NDArray) -> Kinematics:
