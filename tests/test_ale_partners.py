@@ -192,7 +192,7 @@ def test_an_ale_move_without_valid_motion_is_cut_back_then_named_in_one_line(
     calls = []
 
     def no_valid_motion(body, *args, **kwargs):
-        calls.append(args[-2])  # dt of the (sub-)step
+        calls.append(args[7])  # dt of the (sub-)step: X, d, v, a, nodes, targets, ends, dt
         raise AleMotionError(f"body '{body.name}': ALE surface nodes 3 and 4 would swap order: "
                              "... refine the ALE surface to at most 2x the partner surface's "
                              "spacing")

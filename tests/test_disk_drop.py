@@ -50,7 +50,8 @@ def test_the_disk_slips_then_rolls_and_friction_takes_a_third(ale_run):
     uniform disk the friction work is then a third of the initial kinetic energy, whatever the
     normal force did meanwhile (angular momentum about the contact point is kept): the elastic
     disk's vibrations and the 32-gon's moment of inertia (0.3 % below a disk's) move it by
-    the 1.5 % measured; 3 % is the bound."""
+    the 2.8 % measured (-1.9 % with the report's pair normal, ``ale_normal = false``); 3 % is
+    the bound."""
     sim, rec = ale_run
     statuses = [set(r.extra["contact_rows"]["status"]) for r in rec.records[1:]
                 if r.extra["contact_rows"]["node_1"].size]
@@ -107,3 +108,25 @@ def test_energy_balance(ale_run):
     assert error.max() <= 1e-8 * e0 and error.min() >= -0.015 * e0
     _, lagrangian = run(["bodies.1.mesh_motion=\"lagrangian\""])
     assert np.abs(energy_error(lagrangian)).max() <= 1e-8 * e0
+
+
+@pytest.mark.slow
+def test_refined_four_times_the_drop_completes_with_the_same_physics():
+    """Both bodies refined 4x (the disk 128 x 12, the block 160 x 16: spacing 0.025), dt
+    unchanged. Before the ALE kept each step's interior stage (``ale.motion._move_interior``),
+    step 68 (t = 0.268) failed: the interior nodes under the disk moved 2.8e-5 at every other
+    augmentation, and report 5.4's test cycled at 3e-6 against 1e-8. Now it completes, and the
+    coarse run's kinematic claims hold: no penetration beyond 1 % of the spacing, the pairs
+    node to node (1e-6 of the spacing). Not asserted, open (docs/examples.md, "The disk drop
+    refined"): friction takes 3.8 % more than a third of the kinetic energy here (2.8 % on the
+    coarse mesh), and the ledger gains 4e-5 E0 in two steps (27 and 29), where the remap's
+    strain-energy change exceeds what the nearly resting block's velocities can give back."""
+    spacing = SPACING / 4
+    sim, rec = run(["bodies.0.mesh.n_circ=128", "bodies.0.mesh.n_radial=12",
+                    "bodies.1.mesh.nx=160", "bodies.1.mesh.ny=16"])
+    assert rec.records[-1].state.time == pytest.approx(0.3)
+    rows = [r.extra["contact_rows"] for r in rec.records[1:]]
+    assert np.concatenate([r["gap"] for r in rows]).max() < 0.01 * spacing
+    closed = [r for r in rec.records[1:] if r.extra["contact_rows"]["node_1"].size]
+    assert np.concatenate([offsets_across_normal(sim.model, r) for r in closed]).max() \
+        <= 1e-6 * spacing

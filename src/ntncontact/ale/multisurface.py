@@ -27,7 +27,7 @@ from dataclasses import replace
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from ntncontact.ale.motion import AleBody, AleUpdate, lumped_masses, move_ale_body
+from ntncontact.ale.motion import STAGES, AleBody, AleUpdate, lumped_masses, move_ale_body
 
 __all__ = ["check_surfaces", "meeting_points", "move_ale_surfaces", "nodal_masses",
            "surface_of_nodes"]
@@ -79,6 +79,7 @@ def move_ale_surfaces(
     x_pred: ArrayLike,
     dt: float,
     x_start: ArrayLike | None = None,
+    least_interior: str = "none",
 ) -> AleUpdate:
     """:func:`move_ale_body` for a body with several contact surfaces (same arguments; the
     active nodes may lie on any of them). The surfaces move in order, each from the fields the
@@ -100,7 +101,7 @@ def move_ale_surfaces(
         if not mine.any():
             continue
         update = move_ale_body(motion, *fields, active[mine], target[mine], pred[mine], dt,
-                               start[mine])
+                               start[mine], least_interior)
         updates.append(update)
         fields = (update.X, update.d, update.v, update.a)
     if not updates:
@@ -119,10 +120,7 @@ def _combined(updates: list[AleUpdate], x_old: NDArray, dt: float) -> AleUpdate:
         mismatch=max(u.mismatch for u in updates),
         clamped=np.concatenate([u.clamped for u in updates]), momentum_change=momentum,
         resets=sum(u.resets for u in updates),
-        interior=max((u.interior for u in updates), key=_STAGES.index))
-
-
-_STAGES = ("none", "surface", "displacement", "position")
+        interior=max((u.interior for u in updates), key=STAGES.index))
 
 
 def meeting_points(x_own: NDArray, x_partner: NDArray, m_own: NDArray,

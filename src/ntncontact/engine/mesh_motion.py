@@ -139,7 +139,8 @@ def _move_body(model: Model, setup: AleSetup, base: StepState, last: tuple,
         # the target as the move takes it: wanted = target - (end - start)
         target = request[2] + x_pred[own] - x_start
         try:
-            up = _moved(setup, base, rows, own, target, x_pred[own], dt, x_start)
+            up = _moved(setup, base, rows, own, target, x_pred[own], dt, x_start,
+                        prev.interior if prev is not None else "none")
         except AleCrossingError as err:
             crossing = np.isin(own - setup.node_offset, err.nodes) & is_open
             if not crossing.any():
@@ -411,15 +412,17 @@ def mesh_settled(model: Model, base: StepState, contact: Sequence[PairState],
 
 
 def _moved(setup: AleSetup, base: StepState, rows: slice, nodes: NDArray, x_target: NDArray,
-           x_end: NDArray, dt: float, x_start: NDArray) -> AleUpdate:
+           x_end: NDArray, dt: float, x_start: NDArray, least_interior: str) -> AleUpdate:
     """``move_ale_body`` (``move_ale_surfaces`` for several contact surfaces) on the body's
-    rows; any mesh failure of the move (an inverted element, a node outside the old mesh) is
-    an AleMotionError, which the time loop cuts back."""
+    rows, its interior stage at least ``least_interior`` (the step's previous move's: the
+    augmentations cannot cycle between stages); any mesh failure of the move (an inverted
+    element, a node outside the old mesh) is an AleMotionError, which the time loop cuts
+    back."""
     move = move_ale_surfaces if setup.more_motions else move_ale_body
     try:
         return move(setup.motions if setup.more_motions else setup.motion, base.X[rows],
                     base.d[rows], base.v[rows], base.a[rows], nodes - setup.node_offset,
-                    x_target, x_end, dt, x_start)
+                    x_target, x_end, dt, x_start, least_interior)
     except AleMotionError:
         raise
     except MeshError as err:
