@@ -121,6 +121,11 @@ def _newton_updated(ci) -> bool:
     return ci.multiplier_update == "newton" and ci.law.frictionless_augmented
 
 
+def _carries_multipliers(states: tuple) -> bool:
+    """Whether any pair of the interfaces' states has a positive normal multiplier."""
+    return any(bool(np.any(state.lambda_N > 0.0)) for state in states)
+
+
 def initial_state(model: Model) -> StepState:
     """Reference configuration, each body's initial rigid velocity (translation + spin)."""
     n = model.n_nodes
@@ -263,7 +268,8 @@ class Simulation:
         """Per augmentation: the ALE mesh motion and Newton with the contact multipliers
         fixed, then the multiplier update, until report 5.4's test is met. ``start``: (d, the
         d of the state it was solved on) of an earlier solve of this step, to start from.
-        ``may_grow`` (quasi-static): an unconverged augmentation (the second or a later one)
+        ``may_grow`` (quasi-static): an unconverged augmentation (the second or a later one;
+        also the first when the pairs came with multipliers from the last step or pass)
         whose solution shows new penetrating pairs ends the solve there
         (``SolvedStep.grown``): the step's next active-set pass takes them in at once instead
         of after the augmentations converge."""
@@ -275,6 +281,7 @@ class Simulation:
         previous, before, iterations, guess, floor = None, None, 0, start, None
         factors = self._factor_cache()  # one factor serves the augmentations (modified Newton)
         sensitivities: dict = {}  # per interface and pressed set, for Newton multiplier updates
+        carried = _carries_multipliers(contact)  # the pass starts with multipliers (see grown)
         for augmentation in range(1, self.max_augmentations + 1):  # noqa: B007 (used after)
             if self.model.ale_bodies and any(len(c) for c in contact):
                 motion = move_meshes(self.model, base, contact, x_pred, dt, motion)
@@ -314,11 +321,14 @@ class Simulation:
             if not done and self._newton_updates:
                 contact = self._newton_multipliers(problem, result.y, d, used, contact, results,
                                                    factors, sensitivities)
-            # not after the first augmentation: its solution has the new pairs on penalty alone
-            # (Hertz k = 4 step 1: the pass it started went in 0.6 deep and failed)
+            # after the first augmentation only if the pass's pairs carried multipliers (from
+            # the last step or an earlier pass): with none, its solution holds the whole load
+            # on penalty pairs of a set that may be far from complete (Hertz k = 4 step 1: the
+            # pass it started went in 0.6 deep and failed); with them, the new pairs are the
+            # contact zone's next nodes (Hertz k = 4: 220 -> 196 solves, same solution)
             grown = (self._with_new_penetrations(contact, state.X + d)
-                     if may_grow and not done and not self.dynamic and augmentation > 1
-                     else None)
+                     if may_grow and not done and not self.dynamic
+                     and (augmentation > 1 or carried) else None)
             if grown is not None:
                 return SolvedStep(state, d, used, results, augmentation, iterations, 0.0,
                                   grown=grown)
