@@ -11,7 +11,7 @@ import scipy.sparse as sp
 from numpy.typing import NDArray
 
 from ..ale.motion import AleMotionError
-from ..contact import PairState, lagrange_blocks, newton_update
+from ..contact import PairState, extrapolated_update, lagrange_blocks, newton_update
 from ..dynamics.energy import EndEnergy, EnergyConsistentContact
 from ..dynamics.mass import MovingMass
 from ..dynamics.midpoint import end_of_step, midpoint_velocity, velocity_factor
@@ -318,6 +318,8 @@ class Simulation:
             result, d, used, results, contact, done, its = self._test_augmentation(
                 problem, result, split, contact, previous, last_contact, factors)
             iterations += its
+            if not done and not self.dynamic and previous is not None:
+                contact = self._extrapolated_multipliers(used, contact, results, previous)
             if not done and self._newton_updates:
                 contact = self._newton_multipliers(problem, result.y, d, used, contact, results,
                                                    factors, sensitivities)
@@ -384,6 +386,22 @@ class Simulation:
             result = newton(problem.residual, problem.jacobian, self.solve, result.y,
                             self.settings, self.length_scale, factors)
             iterations += result.iterations
+
+    def _extrapolated_multipliers(self, used: tuple, updated: tuple, results: tuple,
+                                  previous: tuple) -> tuple:
+        """Quasi-static steps: the Uzawa multipliers ``updated`` of the frictionless
+        augmented interfaces extrapolated over the rest of their sequence
+        (``contact.extrapolated_update``; Hertz k = 4: 4.9 -> 4.5 augmentations a step). Not
+        for interfaces that converged already or take Newton updates, nor in dynamic steps,
+        whose mesh moves between augmentations change the sequence."""
+        out = list(updated)
+        for index, (ci, state, res, prev) in enumerate(zip(self.model.interfaces, used, results,
+                                                           previous, strict=True)):
+            if (res is None or prev is None or not ci.law.frictionless_augmented
+                    or _newton_updated(ci) or updated[index] is state):
+                continue
+            out[index] = extrapolated_update(updated[index], res, prev, ci.law)
+        return tuple(out)
 
     def _newton_multipliers(self, problem: StepProblem, y: NDArray, d: NDArray, used: tuple,
                             updated: tuple, results: tuple, factors: FactorCache | None,
