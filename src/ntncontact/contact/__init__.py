@@ -11,6 +11,7 @@ from .augmentation import (
     augment,
     check_augmentation,
     commit_step,
+    extrapolated_update,
     newton_update,
 )
 from .detection import Detection, detect, release_mask
@@ -47,6 +48,7 @@ __all__ = [
     "corner_mask",
     "detect",
     "evaluate_contact",
+    "extrapolated_update",
     "lagrange_blocks",
     "pair_gaps",
     "newton_update",

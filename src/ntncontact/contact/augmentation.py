@@ -34,7 +34,11 @@ from .laws import ContactLaw
 from .state import PairState
 
 __all__ = ["AugmentationCheck", "AugmentationTolerances", "augment", "check_augmentation",
-           "commit_step", "newton_update"]
+           "commit_step", "extrapolated_update", "newton_update"]
+
+#: :func:`extrapolated_update` acts only on a measured contraction below this: beyond it the
+#: geometric tail rho / (1 - rho) of a step would be larger than the Uzawa step itself
+MAX_EXTRAPOLATED_RATE = 0.5
 
 
 def augment(state: PairState, result: ContactResult, law: ContactLaw) -> PairState:
@@ -59,6 +63,31 @@ def newton_update(used: PairState, uzawa: PairState, result: ContactResult,
     h = result.length[pressed] * result.normal_measure[pressed]
     lam = uzawa.lambda_N.copy()
     lam[pressed] = np.maximum(used.lambda_N[pressed] + np.linalg.solve(sensitivity, h), 0.0)
+    return replace(uzawa, lambda_N=lam)
+
+
+def extrapolated_update(uzawa: PairState, current: ContactResult, previous: ContactResult,
+                        law: ContactLaw) -> PairState:
+    """``uzawa`` (``augment`` of ``current``) with the pairs pressed in both augmentations
+    taking the rest of the Uzawa sequence at once (Aitken's extrapolation).
+
+    An Uzawa update adds eps_N m_k (m the normal measure, the gap under the gap law); while
+    one mode of the multiplier error dominates, each update is rho times the last, rho =
+    m_k . m_{k-1} / |m_{k-1}|^2 over those pairs, and the updates still to come sum to
+    eps_N m_k rho / (1 - rho). rho grows with the mesh (~E / (eps_N h): Hertz ~0.003 at
+    k = 1, ~0.027 at k = 4), which is why refined meshes need more augmentations. Applied only
+    for 0 < rho < MAX_EXTRAPOLATED_RATE; the multipliers stay >= 0, and report 5.4's test
+    decides convergence as before."""
+    if not np.array_equal(current.pairs, previous.pairs):
+        raise ValueError("augmentations of one step must share the active set")
+    both = (current.t_N > 0.0) & (previous.t_N > 0.0)
+    m, m_prev = current.normal_measure[both], previous.normal_measure[both]
+    norm_prev = float(m_prev @ m_prev)
+    rho = float(m @ m_prev) / norm_prev if norm_prev > 0.0 else 0.0
+    if not 0.0 < rho < MAX_EXTRAPOLATED_RATE:
+        return uzawa
+    lam = uzawa.lambda_N.copy()
+    lam[both] = np.maximum(lam[both] + law.eps_N * m * (rho / (1.0 - rho)), 0.0)
     return replace(uzawa, lambda_N=lam)
 
 
