@@ -70,13 +70,14 @@ def _chain_index(table, node):
 
 @njit(cache=True, inline="always")
 def _fill_slots(table1, table2, i, j, slots):
-    """Global node of every slot (kinematics._slots: corners take the partner's normal); False
-    if i or j is not on its surface."""
+    """Global node of every slot (kinematics._slots: corners and nodes facing an ALE surface
+    take the partner's normal); False if i or j is not on its surface."""
     k1, k2 = _chain_index(table1, i), _chain_index(table2, j)
     if k1 < 0 or k2 < 0:
         return False
     slots[0], slots[1] = i, j
-    if table1[4, k1]:  # corner: the partner's normal negated (report 6.6)
+    if table1[4, k1]:  # a corner (report 6.6) or a node facing an ALE surface: the partner's
+        # normal negated
         slots[2], slots[3] = table2[3, k2], table2[2, k2]
     else:
         slots[2], slots[3] = table1[2, k1], table1[3, k1]

@@ -167,7 +167,7 @@ class PenetrationCheck:
     blocks' too). The test is ``mesh.overlap.deepest_overlap``."""
 
     def __init__(self, model: Model) -> None:
-        owner = np.concatenate([np.full(b.mesh.n_nodes, i) for i, b in enumerate(model.bodies)])
+        owner = model.body_of_node()
         outline = []  # per body: its boundary nodes and edges (global), its edge size
         for body in model.bodies:
             edges = boundary_edges(body.mesh.cells) + body.node_offset

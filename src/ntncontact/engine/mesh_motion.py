@@ -175,8 +175,7 @@ def _crossing_with_partners(err: AleCrossingError, model: Model, base: StepState
     now = min(np.linalg.norm(x_start[pb] - x_start[pa]), np.linalg.norm(x_pred[pb] - x_pred[pa]))
     if not now < _CRUSHED * reference:
         return err
-    body = next(body for body in model.bodies
-                if body.node_offset <= pa < body.node_offset + body.mesh.n_nodes)
+    body = model.bodies[int(model.body_of_node()[pa])]
     where = " and ".join(f"({x_start[n, 0]:.6g}, {x_start[n, 1]:.6g})" for n in (pa, pb))
     message = (f"{err}. But their partners, nodes {pa - body.node_offset} and "
                f"{pb - body.node_offset} of body '{body.name}' (at {where}), are "

@@ -116,6 +116,10 @@ class Model:
         """Body index of each global element."""
         return np.concatenate([np.full(b.mesh.n_cells, i) for i, b in enumerate(self.bodies)])
 
+    def body_of_node(self) -> NDArray:
+        """Body index of each global node."""
+        return np.concatenate([np.full(b.mesh.n_nodes, i) for i, b in enumerate(self.bodies)])
+
 
 def stack_bodies(
     meshes: list[tuple[str, QuadMesh, Material]],

@@ -48,12 +48,11 @@ def in_elements(points: NDArray, nodes: NDArray, cells: NDArray, slack: float) -
         return found
     centroid = corners.mean(axis=1)
     reach = float(np.linalg.norm(corners - centroid[:, None], axis=-1).max()) + slack
-    near = cKDTree(centroid).query_ball_point(points, reach)
-    count = np.fromiter((len(c) for c in near), np.int64, len(points))
-    if count.sum() == 0:
+    near = cKDTree(points).sparse_distance_matrix(cKDTree(centroid), reach,
+                                                  output_type="ndarray")
+    if near.size == 0:
         return found
-    point = np.repeat(np.arange(len(points)), count)
-    cell = np.concatenate([np.asarray(c, np.int64) for c in near])
+    point, cell = near["i"], near["j"]
     quad = corners[cell]  # (k, 4, 2)
     edges = np.roll(quad, -1, axis=1) - quad
     rel = points[point, None, :] - quad
