@@ -93,15 +93,16 @@ def reference_local_slides(s, ref, idx, slide, tolerance):
     return out, resets
 
 
-def reference_anchor_targets(node_s, breaks, pos, wanted, slide_tolerance, ratio):
+def reference_anchor_targets(node_s, breaks, pos, wanted, slide_tolerance, ratio, spacing):
     """``ale.motion``'s NumPy clamping of the wanted arc lengths (``_clamp_slides``), the
-    mismatch, the anchors and the first pair of anchors out of order (-1: none)."""
+    mismatch, the anchors and the first pair of anchors out of order (-1: none); the clamp
+    keeps ``ratio`` times the stretch's smallest reference segment (``spacing``)."""
     seg = np.diff(node_s)
     near = np.minimum(seg[np.maximum(pos - 1, 0)], seg[np.minimum(pos, seg.size - 1)])
     still = np.abs(wanted - node_s[pos]) <= slide_tolerance * near
     kept = np.where(still, node_s[pos], wanted)
     brk = np.flatnonzero(breaks)
-    run_min = np.minimum.reduceat(seg, brk[:-1])
+    run_min = np.minimum.reduceat(spacing, brk[:-1])
     j = np.searchsorted(brk, pos)
     on_break = brk[np.minimum(j, brk.size - 1)] == pos
     run = np.clip(j - 1, 0, brk.size - 2)
@@ -155,15 +156,15 @@ def test_local_slides_equal_the_numpy_loop_up_to_the_order_of_sums(seed):
 def test_anchor_targets_equal_the_numpy_clamping_bit_for_bit(seed):
     rng = np.random.default_rng(100 + seed)
     for n in (4, 12, 41):
-        s, _ = random_chain(rng, n)
+        s, ref = random_chain(rng, n)
         for _ in range(30):
             breaks = rng.uniform(size=n) < 0.15
             breaks[[0, -1]] = True
             pos = rng.choice(n, rng.integers(1, min(5, n) + 1), replace=False)
             wanted = s[pos] + rng.choice([1e-12, 0.1, 1.0, 5.0]) * rng.standard_normal(pos.size)
             ratio = rng.choice([0.1, 0.25, 0.6])
-            got = surface._anchor_targets(s, breaks, pos, wanted, 1e-8, ratio, SNAP)
-            want = reference_anchor_targets(s, breaks, pos, wanted, 1e-8, ratio)
+            got = surface._anchor_targets(s, breaks, pos, wanted, 1e-8, ratio, SNAP, ref)
+            want = reference_anchor_targets(s, breaks, pos, wanted, 1e-8, ratio, ref)
             for g, w in zip(got, want, strict=True):
                 np.testing.assert_array_equal(g, w)
 

@@ -228,6 +228,28 @@ def test_corners_stay_fixed_and_slides_past_them_are_clamped():
     np.testing.assert_allclose(out.mismatch, 3.5 * h, atol=ROUND)
 
 
+def test_a_node_held_before_a_corner_step_after_step_keeps_its_reference_distance():
+    """The clamp keeps min_spacing_ratio times the stretch's smallest REFERENCE segment. With
+    the segments at t_n it ratcheted: a node held at the clamp shortens its stretch's smallest
+    segment, and the next step lets it nearer (0.0144, 0.002, 0.00012 from the corner in three
+    steps of the fast-sliding blocks with both bodies ALE, whose cell at the corner then
+    inverted). Five steps that each want the node 5 h past the corner: it stays two clamped
+    segments (2 x 0.25 h) before it."""
+    mesh, body = corner_body()
+    corner = int(mesh.node_sets["corner_top_right"][0])
+    near_corner = mesh.node_sets["top"][2]
+    X, d, v, a = fields(mesh)
+    h = 0.2
+    for _ in range(5):
+        x = X + d
+        x_target, x_pred = slide_targets(x, [near_corner], [5 * h], (1.0, 0.0), v)
+        out = move_ale_body(body, X, d, v, a, [near_corner], x_target, x_pred, DT)
+        X, d, v, a = out.X, out.d, out.v, out.a
+        np.testing.assert_allclose(out.x_mesh[near_corner], [2.0 - 2 * 0.25 * h, 0.8],
+                                   atol=ROUND)
+        np.testing.assert_array_equal(out.x_mesh[corner], [2.0, 0.8])
+
+
 def test_crossing_targets_raise_mesh_error_naming_the_body():
     mesh = rectangle(2.0, 0.8, 10, 4, name="foundation")
     body = AleBody.from_mesh(mesh, "top")

@@ -546,19 +546,24 @@ def _wanted_arc(points, bulge, node_s, t_start, t_end, breaks, pts, pos, snap, g
 
 
 @njit(cache=True)
-def _anchor_targets(node_s, breaks, pos, wanted, slide_tolerance, ratio, snap):
+def _anchor_targets(node_s, breaks, pos, wanted, slide_tolerance, ratio, snap, spacing):
     """Targets of the active nodes (the wanted arc lengths, slides below the tolerance dropped,
     clamped so that the free nodes between a node and the breaks around it keep ``ratio`` times
-    the smallest segment of that stretch) and the anchors; (targets, clamped, mismatch, anchor
-    indices, anchor slides, first pair of anchors out of order or -1)."""
+    the smallest REFERENCE segment of that stretch, ``spacing``) and the anchors; (targets,
+    clamped, mismatch, anchor indices, anchor slides, first pair of anchors out of order or
+    -1). The smallest segment at t_n would ratchet: a node held at the clamp shortens its
+    stretch's smallest segment, and the next step's clamp lets it nearer. An ALE block's
+    surface node next to a fixed corner, following a partner that slides past the corner,
+    came 0.0144, 0.002, 0.00012 from it in successive steps, and its cell inverted (the
+    fast-sliding blocks with both bodies ALE, step 27)."""
     n, k = node_s.size, pos.size
     brk = np.flatnonzero(breaks)
     n_brk = brk.size
     run_min = np.empty(max(n_brk - 1, 1))
     for r in range(n_brk - 1):
-        low = node_s[brk[r] + 1] - node_s[brk[r]]
+        low = spacing[brk[r]]
         for i in range(brk[r] + 1, brk[r + 1]):
-            low = min(low, node_s[i + 1] - node_s[i])
+            low = min(low, spacing[i])
         run_min[r] = low
     targets = np.empty(k)
     clamped = np.zeros(k, np.bool_)
@@ -725,7 +730,7 @@ def slide_chain(x, chain_nodes, points, bulge, node_s, t_start, t_end, breaks, s
     wanted = _wanted_arc(points, bulge, node_s, t_start, t_end, breaks, wanted_xy, pos, snap,
                          GAUSS_U, GAUSS_W)
     _, clamped, mismatch, idx, anchor_slide, bad = _anchor_targets(
-        node_s, breaks, pos, wanted, slide_tolerance, ratio, snap)
+        node_s, breaks, pos, wanted, slide_tolerance, ratio, snap, spacing)
     if bad >= 0:
         return x.copy(), np.zeros(node_s.size), clamped, mismatch, 0, idx, bad
     resets = 0
