@@ -126,6 +126,11 @@ def conserving_correction(mass: sp.spmatrix, x: NDArray, v: NDArray, dofs: NDArr
         elif ratio >= 0.0 and norm2 > 1e-30 * max(abs(k0), 1e-300):
             delta = delta + (np.sqrt(ratio) - 1.0) * u_free
             restored = True
+        elif ratio < 0.0 and norm2 > 0.0:
+            # K* below the least K the momenta allow: give what the motion can (the sphere's
+            # point nearest the origin, alpha = -1), so that what is still missing changes
+            # continuously with K* and the caller can hand it on (hand_over_energy)
+            delta = delta - u_free
     out = v.ravel().copy()
     out[dofs] += delta
     v_sub = v.ravel()[dofs]

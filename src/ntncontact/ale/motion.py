@@ -285,6 +285,13 @@ class AleBody:
         return boundary_node_mask(self.cells, self.n_nodes)
 
     @cached_property
+    def on_surface(self) -> NDArray[np.bool_]:
+        """Mask of the body's nodes on this contact surface chain."""
+        mask = np.zeros(self.n_nodes, bool)
+        mask[self.surface] = True
+        return mask
+
+    @cached_property
     def min_spacing(self) -> float:
         """The smallest reference surface spacing."""
         return float(self.reference_spacing.min())
@@ -483,10 +490,16 @@ class AleUpdate:
     momentum_change: tuple[NDArray[np.float64], float]  # of the plain remap (before correction)
     smoothing: SmoothingResult | None = None  # of the position smoother, when it ran
     interior: str = "none"  # stage used for the interior: none, surface, displacement, position
+    # surface nodes around which the interior moved (the moved ones and the step's earlier
+    # seeds, ``_move_interior``); None: the interior did not move
+    seeds: NDArray[np.bool_] | None = None
     resets: int = 0  # surface runs respaced in the original proportions ("local" respacing)
     # strain energy the remap changed, W after - W before (engine.remap_conservation, with
     # conserve_energy "total" or "kinetic"; 0 with "none")
     remap_strain_change: float = 0.0
+    # kinetic energy the velocity correction should have taken out (negative: put in) and
+    # could not, the body's velocities being too slow for it (engine.remap_conservation)
+    energy_left: float = 0.0
 
     @property
     def convective(self) -> NDArray[np.float64]:
@@ -592,38 +605,46 @@ STAGES = ("none", "surface", "displacement", "position")
 
 
 def _move_interior(
-    body: AleBody, tn: _TnState, x_surf: NDArray, least: str = "none"
-) -> tuple[NDArray, tuple[NDArray, NDArray, bool, bool], SmoothingResult | None, str]:
+    body: AleBody, tn: _TnState, x_surf: NDArray, least: str = "none",
+    least_seeds: NDArray[np.bool_] | None = None,
+) -> tuple[NDArray, tuple[NDArray, NDArray, bool, bool], SmoothingResult | None, str, NDArray]:
     """Interior nodes within ``smoothing_layers`` of the moved surface nodes follow them as far
-    as needed; (positions, their ``_changes``, position-smoothing result, stage used).
+    as needed; (positions, their ``_changes``, position-smoothing result, stage used, seeds:
+    the surface nodes the interior moved around).
 
-    ``least``: the stage of the step's previous augmentation, below which this one does not
-    go. Which stage a move needs is a threshold on the mesh quality, so the surface positions
-    of successive augmentations that differ by round-off can alternate between moving the
-    interior and not: a jump of the remapped fields at every other augmentation, and the
-    augmentations cycle instead of converging (disk drop refined 4x, step 68: interior nodes
-    2.8e-5 to and fro, report 5.4's test stuck at 3e-6 against 1e-8)."""
+    ``least`` and ``least_seeds``: the stage and the seeds of the step's previous move, the
+    least this one uses. Both are thresholds: which stage a move needs is one on the mesh
+    quality, and whether a surface node moves at all is one on its slide. So the surface
+    positions of successive augmentations that differ by round-off could alternate between
+    moving an interior region and not: a jump of the remapped fields at every other
+    augmentation, and the augmentations cycled instead of converging. Disk drop refined 4x:
+    at step 68 interior nodes went 2.8e-5 to and fro between stages (report 5.4's test stuck at
+    3e-6 against 1e-8); with its remap energy handed to the disk, at step 63 two surface nodes
+    moved 5e-8 at every other augmentation, the smoothed region around them changed, and the
+    interior went 5.9e-5 to and fro."""
     changes = _changes(body, tn, x_surf)
-    seeds = changes[0]
+    seeds = changes[0]  # surface nodes only: x_surf moved no other
+    if least_seeds is not None:
+        seeds = seeds | (least_seeds & body.on_surface)
     if not seeds.any():
-        return x_surf, changes, None, "none"
+        return x_surf, changes, None, "none", seeds
     floor = STAGES.index(least)
     if body.interior == "minimal" and changes[2] and floor <= STAGES.index("surface"):
-        return x_surf, changes, None, "surface"
+        return x_surf, changes, None, "surface", seeds
     free = body.within_layers(seeds, body.smoothing_layers) & ~body.boundary
     if body.smoothing_layers <= 0 or not free.any():
-        return x_surf, changes, None, "surface"
+        return x_surf, changes, None, "surface", seeds
     if body.interior != "position" and floor <= STAGES.index("displacement"):
         u = harmonic_extension(body.adjacency, x_surf - tn.x, free)
         u[np.linalg.norm(u, axis=1) <= _SNAP * tn.h_min] = 0.0
         x_new = np.where(free[:, None], tn.x + u, x_surf)
         moved = _changes(body, tn, x_new)
         if moved[2] or body.sweeps <= 0:
-            return x_new, moved, None, "displacement"
+            return x_new, moved, None, "displacement", seeds
     if body.sweeps <= 0:
-        return x_surf, changes, None, "surface"
+        return x_surf, changes, None, "surface", seeds
     result = body.smoother(free).run(x_surf, max_sweeps=body.sweeps, rel_tol=1e-6)
-    return result.nodes, _changes(body, tn, result.nodes), result, "position"
+    return result.nodes, _changes(body, tn, result.nodes), result, "position", seeds
 
 
 def _conserve_momentum(
@@ -672,6 +693,7 @@ def move_ale_body(
     dt: float,
     x_start: ArrayLike | None = None,
     least_interior: str = "none",
+    least_seeds: NDArray[np.bool_] | None = None,
 ) -> AleUpdate:
     """Move the ALE mesh of one body at t_n and remap its t_n fields (see the module doc).
 
@@ -681,8 +703,8 @@ def move_ale_body(
     ``x_start`` (k, 2; default: the active nodes' x_n). With no active node, or no slide above
     the tolerance, the input is returned unchanged. Raises MeshError (naming body and element)
     if the moved mesh or its reference image has an inverted element, or if two active nodes'
-    targets cross. ``least_interior``: the interior stage of this step's previous move of the
-    body, the least this move uses (``_move_interior``).
+    targets cross. ``least_interior`` and ``least_seeds``: the interior stage and seeds of this
+    step's previous move of the body, the least this move uses (``_move_interior``).
     """
     X, d, v, a = (np.asarray(f, dtype=float) for f in (X, d, v, a))
     active = np.asarray(active_local, dtype=np.int64).reshape(-1)
@@ -699,8 +721,8 @@ def move_ale_body(
     chain = _open_chain(body, active)
     wanted_xy = np.asarray(x_target, dtype=float).reshape(-1, 2) - increment
     x_surf, slides, clamped, mismatch, resets = _move_surface(body, tn, chain, wanted_xy)
-    x_new, (moved, touched, _, degenerate), smoothing, stage = _move_interior(
-        body, tn, x_surf, least_interior)
+    x_new, (moved, touched, _, degenerate), smoothing, stage, seeds = _move_interior(
+        body, tn, x_surf, least_interior, least_seeds)
     if not moved.any():
         return _unchanged(X, d, v, a, mismatch, active[clamped])
     if degenerate:
@@ -726,7 +748,7 @@ def move_ale_body(
         X=X_new, d=np.where(moved[:, None], x_new - X_new, d), v=v_new, a=a_new, x_mesh=x_new,
         mesh_velocity=(x_new - x_old) / dt, mismatch=mismatch, clamped=active[clamped],
         moved=moved, momentum_change=change, smoothing=smoothing, interior=stage,
-        resets=resets,
+        seeds=seeds, resets=resets,
     )
 
 

@@ -80,6 +80,7 @@ def move_ale_surfaces(
     dt: float,
     x_start: ArrayLike | None = None,
     least_interior: str = "none",
+    least_seeds: NDArray[np.bool_] | None = None,
 ) -> AleUpdate:
     """:func:`move_ale_body` for a body with several contact surfaces (same arguments; the
     active nodes may lie on any of them). The surfaces move in order, each from the fields the
@@ -101,7 +102,7 @@ def move_ale_surfaces(
         if not mine.any():
             continue
         update = move_ale_body(motion, *fields, active[mine], target[mine], pred[mine], dt,
-                               start[mine], least_interior)
+                               start[mine], least_interior, least_seeds)
         updates.append(update)
         fields = (update.X, update.d, update.v, update.a)
     if not updates:
@@ -120,7 +121,14 @@ def _combined(updates: list[AleUpdate], x_old: NDArray, dt: float) -> AleUpdate:
         mismatch=max(u.mismatch for u in updates),
         clamped=np.concatenate([u.clamped for u in updates]), momentum_change=momentum,
         resets=sum(u.resets for u in updates),
-        interior=max((u.interior for u in updates), key=STAGES.index))
+        interior=max((u.interior for u in updates), key=STAGES.index),
+        seeds=_union([u.seeds for u in updates]))
+
+
+def _union(masks: list[NDArray | None]) -> NDArray | None:
+    """Elementwise or of the masks that are not None (None if all are)."""
+    given = [m for m in masks if m is not None]
+    return np.logical_or.reduce(given) if given else None
 
 
 def meeting_points(x_own: NDArray, x_partner: NDArray, m_own: NDArray,

@@ -21,7 +21,7 @@ from ..jit import njit
 from ..mesh.quadmesh import MeshError
 from .model import AleSetup, Model
 from .problem import StepState
-from .remap_conservation import conserve_remap
+from .remap_conservation import conserve_remap, hand_over_energy
 
 #: Active ALE nodes end their step on their partners to this fraction of the surface spacing
 #: (``mesh_settled``): the augmentations go on until the mesh motion settles this far.
@@ -107,6 +107,9 @@ def move_meshes(
         X[rows], d[rows], v[rows], a[rows] = up.X, up.d, up.v, up.a
         updates.append(up)
         requests.append(request)
+    left = sum(up.energy_left for up in updates if up is not None)
+    if left != 0.0:  # an ALE body too slow to give back what its remap changed
+        v, _ = hand_over_energy(model, base.time, X, X + d, v, left)
     return MeshMotion(replace(base, X=X, d=d, v=v, a=a), tuple(updates), tuple(requests),
                       masses.meetings, deep, frozenset(unfollowed))
 
@@ -139,8 +142,7 @@ def _move_body(model: Model, setup: AleSetup, base: StepState, last: tuple,
         # the target as the move takes it: wanted = target - (end - start)
         target = request[2] + x_pred[own] - x_start
         try:
-            up = _moved(setup, base, rows, own, target, x_pred[own], dt, x_start,
-                        prev.interior if prev is not None else "none")
+            up = _moved(setup, base, rows, own, target, x_pred[own], dt, x_start, prev)
         except AleCrossingError as err:
             crossing = np.isin(own - setup.node_offset, err.nodes) & is_open
             if not crossing.any():
@@ -411,17 +413,19 @@ def mesh_settled(model: Model, base: StepState, contact: Sequence[PairState],
 
 
 def _moved(setup: AleSetup, base: StepState, rows: slice, nodes: NDArray, x_target: NDArray,
-           x_end: NDArray, dt: float, x_start: NDArray, least_interior: str) -> AleUpdate:
+           x_end: NDArray, dt: float, x_start: NDArray, previous: AleUpdate | None
+           ) -> AleUpdate:
     """``move_ale_body`` (``move_ale_surfaces`` for several contact surfaces) on the body's
-    rows, its interior stage at least ``least_interior`` (the step's previous move's: the
-    augmentations cannot cycle between stages); any mesh failure of the move (an inverted
-    element, a node outside the old mesh) is an AleMotionError, which the time loop cuts
-    back."""
+    rows, its interior stage and seeds at least those of ``previous``, the step's previous
+    move of the body (so the augmentations cannot cycle between stages or smoothed regions);
+    any mesh failure of the move (an inverted element, a node outside the old mesh) is an
+    AleMotionError, which the time loop cuts back."""
     move = move_ale_surfaces if setup.more_motions else move_ale_body
+    least = (previous.interior, previous.seeds) if previous is not None else ("none", None)
     try:
         return move(setup.motions if setup.more_motions else setup.motion, base.X[rows],
                     base.d[rows], base.v[rows], base.a[rows], nodes - setup.node_offset,
-                    x_target, x_end, dt, x_start, least_interior)
+                    x_target, x_end, dt, x_start, *least)
     except AleMotionError:
         raise
     except MeshError as err:
