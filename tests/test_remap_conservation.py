@@ -4,10 +4,10 @@ kinetic (or total) energy exact, with the least mass-norm change."""
 import numpy as np
 import pytest
 import scipy.sparse as sp
-from helpers import Recorder, model_from_example
+from helpers import Recorder, model_from_dict, model_from_example
 
 from ntncontact.ale.conservation import conserving_correction, dof_momenta, rigid_modes
-from ntncontact.engine.remap_conservation import body_mass
+from ntncontact.engine.remap_conservation import body_mass, hand_over_energy
 from ntncontact.engine.simulation import Simulation
 
 
@@ -195,3 +195,42 @@ def test_the_corrections_support_does_not_depend_on_which_active_nodes_slid(inte
     assert plain[0].sum() > plain[1].sum()
     if interior != "minimal":  # the interior nodes a small slide moves, and their cells
         assert supports[0].sum() > np.unique(motion.cells[around]).size
+
+
+def test_the_energy_an_ale_body_cannot_give_back_comes_from_its_partner_first():
+    """``hand_over_energy`` takes what an ALE body's remap left over from a Lagrangian body,
+    the ALE body's contact partners before any other (a faster body elsewhere does not pay
+    for this contact's remap), its momenta kept and its kinetic energy changed by exactly
+    the rest; with no partner named, from the body with the most kinetic energy."""
+    def body(name, origin, speed, **extra):
+        return {"name": name, "mesh": {"type": "rectangle", "width": 1.0, "height": 0.5,
+                                       "nx": 4, "ny": 2, "origin": list(origin)},
+                "material": {"model": "neo_hookean", "E": 1000.0, "nu": 0.3, "density": 1.0},
+                "initial": {"velocity": [speed, 0.0]}} | extra
+
+    model = model_from_dict({
+        "analysis": {"kind": "dynamic", "dt": 0.01, "t_end": 0.01},
+        "bodies": [body("ale", (0.0, 0.0), 0.0, mesh_motion="ale"),
+                   body("partner", (0.0, 0.6), 1.0), body("far", (3.0, 0.0), 2.0)],
+        "contact": [{"name": "c", "body_1": "partner", "surface_1": "bottom",
+                     "body_2": "ale", "surface_2": "top", "penalty_normal": 100.0}]})
+    X = model.X0.copy()
+    rng = np.random.default_rng(5)
+    v = np.repeat([[0.0, 0.0], [1.0, 0.0], [2.0, 0.0]], 15, axis=0)
+    v += 0.1 * rng.standard_normal(v.shape)
+    lumped = model.analysis.mass == "lumped"
+
+    def momenta_and_k(index, vel):
+        b = model.bodies[index]
+        rows = slice(b.node_offset, b.node_offset + b.mesh.n_nodes)
+        mass = body_mass(X[rows], b.mesh.cells, model.assembler.rho[b.cells], lumped)
+        return dof_momenta(mass, X[rows], vel[rows])
+
+    for partners, payer, idle in ((frozenset({1}), 1, 2), (frozenset(), 2, 1)):
+        out, rest = hand_over_energy(model, 0.0, X, X, v, 1e-3, partners)
+        (p0, k0), (p1, k1) = momenta_and_k(payer, v), momenta_and_k(payer, out)
+        assert rest == 0.0 and k1 == pytest.approx(k0 - 1e-3, rel=0, abs=1e-12)
+        np.testing.assert_allclose(p1, p0, rtol=0, atol=1e-12)
+        b = model.bodies[idle]
+        rows = slice(b.node_offset, b.node_offset + b.mesh.n_nodes)
+        np.testing.assert_array_equal(out[rows], v[rows])

@@ -24,7 +24,8 @@ nothing is moved that need not be.
    node keeps its position and fields bit for bit (its miss shows in ``mismatch``).
 2. Corners and chain ends stay fixed, and a node never slides past one: its slide is clamped so
    that the free nodes between it and the break keep at least ``min_spacing_ratio`` times the
-   smallest surface spacing of that stretch; clamped nodes are reported.
+   smallest reference surface spacing of that stretch (not the one at t_n, which ratchets
+   down step after step while a node is held at the clamp); clamped nodes are reported.
 3. The other surface nodes follow (``respace``):
    ``"local"`` (default): each moved anchor's slide is absorbed by the fewest neighbouring
    surface segments whose slack suffices, each shrinking or growing in proportion to its slack,

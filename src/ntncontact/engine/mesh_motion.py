@@ -109,7 +109,10 @@ def move_meshes(
         requests.append(request)
     left = sum(up.energy_left for up in updates if up is not None)
     if left != 0.0:  # an ALE body too slow to give back what its remap changed
-        v, _ = hand_over_energy(model, base.time, X, X + d, v, left)
+        owner = model.body_of_node()
+        partners = frozenset(int(b) for request in requests if request is not None
+                             for b in np.unique(owner[request[1]]))
+        v, _ = hand_over_energy(model, base.time, X, X + d, v, left, partners)
     return MeshMotion(replace(base, X=X, d=d, v=v, a=a), tuple(updates), tuple(requests),
                       masses.meetings, deep, frozenset(unfollowed))
 

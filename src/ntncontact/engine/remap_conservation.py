@@ -100,10 +100,12 @@ def conserve_remap(model: Model, setup: AleSetup, X: NDArray, d: NDArray, v: NDA
 
 
 def hand_over_energy(model: Model, time: float, X: NDArray, x: NDArray, v: NDArray,
-                     left: float) -> tuple[NDArray, float]:
+                     left: float, partners: frozenset[int] = frozenset()
+                     ) -> tuple[NDArray, float]:
     """(v, what is still left) with ``left`` (the kinetic energy the ALE bodies' remap
     corrections could not take out; negative: put in) taken from the velocities of one
-    Lagrangian body, its momenta kept (the least mass-norm change), the one with the most
+    Lagrangian body, its momenta kept (the least mass-norm change): the bodies in contact
+    with the ALE bodies (indices ``partners``) before any other, each group with the most
     kinetic energy first. A supported ALE body nearly at rest cannot give back what its remap
     added to its strain energy: the disk drop's block when a third pair's node joins the
     dimple under the rolling disk (W + 1.17e-3, the block's K 1.12e-3), and the ledger gained
@@ -117,9 +119,10 @@ def hand_over_energy(model: Model, time: float, X: NDArray, x: NDArray, v: NDArr
         rows = slice(body.node_offset, body.node_offset + body.mesh.n_nodes)
         mass = body_mass(X[rows], body.mesh.cells, model.assembler.rho[body.cells], lumped)
         momenta, kinetic = dof_momenta(mass, x[rows], v[rows])
-        candidates.append((kinetic, rows, mass, momenta, body))
+        candidates.append((index not in partners, -kinetic, index, rows, mass, momenta, body))
     out = v.copy()
-    for kinetic, rows, mass, momenta, body in sorted(candidates, key=lambda c: -c[0]):
+    for _, minus_k, _, rows, mass, momenta, body in sorted(candidates, key=lambda c: c[:3]):
+        kinetic = -minus_k
         free = _free_mask(model, body.node_offset, body.mesh.n_nodes, time)
         fixed = conserving_correction(mass, x[rows], v[rows], np.flatnonzero(free), momenta,
                                       kinetic - left)
