@@ -33,11 +33,16 @@ demo: $(WARM)
 	@echo "Ring impact (report 6.4) done. Pictures: results/ring_impact/*.png and animation.gif;"
 	@echo "ParaView: open results/ring_impact/fields.pvd; numbers: history.csv, contact.csv, summary.json"
 
+# The suite on one pytest worker per core (pytest-xdist), each test file on one worker, so
+# that a file's module fixtures (one simulation shared by its tests) run once: ~1,100 tests
+# in 10.1 min on this 2-core machine against 15 min on one worker (session 15).
+PYTEST := $(BIN)/python -m pytest -q -n auto --dist loadfile
+
 test: $(WARM)
-	$(BIN)/python -m pytest -q
+	$(PYTEST)
 
 test-fast: $(WARM)
-	$(BIN)/python -m pytest -q -m "not slow"
+	$(PYTEST) -m "not slow"
 
 bench: $(WARM)
 	$(BIN)/python -m pip install --quiet -e ".[bench,fast]"
