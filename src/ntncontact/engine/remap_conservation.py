@@ -119,11 +119,11 @@ def hand_over_energy(model: Model, time: float, X: NDArray, x: NDArray, v: NDArr
         rows = slice(body.node_offset, body.node_offset + body.mesh.n_nodes)
         mass = body_mass(X[rows], body.mesh.cells, model.assembler.rho[body.cells], lumped)
         momenta, kinetic = dof_momenta(mass, x[rows], v[rows])
-        candidates.append((index not in partners, -kinetic, index, rows, mass, momenta, body))
+        candidates.append((index, kinetic, rows, mass, momenta))
     out = v.copy()
-    for _, minus_k, _, rows, mass, momenta, body in sorted(candidates, key=lambda c: c[:3]):
-        kinetic = -minus_k
-        free = _free_mask(model, body.node_offset, body.mesh.n_nodes, time)
+    for _, kinetic, rows, mass, momenta in sorted(
+            candidates, key=lambda c: (c[0] not in partners, -c[1])):
+        free = _free_mask(model, rows.start, rows.stop - rows.start, time)
         fixed = conserving_correction(mass, x[rows], v[rows], np.flatnonzero(free), momenta,
                                       kinetic - left)
         if fixed.energy_restored:
