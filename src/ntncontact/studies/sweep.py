@@ -27,6 +27,7 @@ import contextlib
 import hashlib
 import itertools
 import json
+import logging
 import sys
 import time
 import traceback
@@ -194,6 +195,7 @@ def sweep(spec: str | Path, out: str | Path, *, scheduler: str | None = None,
         rows = _run_cases(client, cluster is not None, sweep_spec, str(scenario_path), work,
                           progress)
         if cluster is not None:
+            client.run(_quiet_worker_logs)  # every case's result is in
             cluster.scale(0)  # its workers shut down while the results are written
         table = pd.DataFrame(rows)
         table.to_csv(out / SWEEP_FILE, index=False)
@@ -242,6 +244,16 @@ def _dask_client(scheduler: str | None, workers: int | None) -> Iterator[tuple[A
     finally:
         if cluster is not None:
             cluster.close()
+
+
+def _quiet_worker_logs() -> None:
+    """Run on each worker of the sweep's own cluster once every case's result is in: its
+    Dask logs below CRITICAL are dropped. A worker whose heartbeat is in flight while the
+    scheduler drops it at the scale-down logs "Failed to communicate with scheduler during
+    heartbeat" with a traceback to the user's terminal (a race inside Distributed, seen under
+    load in test_the_sweep_command_exits_1_when_a_case_failed even with the wait below);
+    nothing a worker can report then changes the sweep's results."""
+    logging.getLogger("distributed").setLevel(logging.CRITICAL)
 
 
 #: how long the scheduler waits for the scaled-down workers to leave before it closes
