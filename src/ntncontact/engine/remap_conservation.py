@@ -109,7 +109,8 @@ def hand_over_energy(model: Model, time: float, X: NDArray, x: NDArray, v: NDArr
     kinetic energy first. A supported ALE body nearly at rest cannot give back what its remap
     added to its strain energy: the disk drop's block when a third pair's node joins the
     dimple under the rolling disk (W + 1.17e-3, the block's K 1.12e-3), and the ledger gained
-    it; the rolling disk gives it (its speeds change by ~4e-4)."""
+    it; the rolling disk gives the 7.6e-5 left (its nodal velocities change by at most 0.010,
+    0.4 % of its largest speed 2.68)."""
     ale = {setup.body_index for setup in model.ale_bodies}
     lumped = model.analysis.mass == "lumped"
     candidates = []
