@@ -109,6 +109,7 @@ def _run_until_stopped(args: argparse.Namespace, stop: StopOnSignal) -> int:
     fields = "fields.xdmf" if model.analysis.field_format == "xdmf" else "fields.pvd"
     print(f"results written to {out} (history.csv, summary.json, {fields})")
     _warn_off_surfaces(writer.results.summary.data)
+    _warn_unreturned_energy(writer.results.summary.data)
     if args.compare:
         _print_comparison(out)
     if args.plot or args.gif or args.times:
@@ -131,6 +132,29 @@ def _warn_off_surfaces(summary: dict) -> None:
               f"{depth:.3g} inside '{at['inside']}' (t = {at['time']:.6g}) where nothing "
               "resists it: make that face a contact surface too (summary.json "
               "max_penetration_off_surfaces)", file=sys.stderr)
+
+
+#: energy the ALE remaps added and no body gave back, above this fraction of the run's energy
+#: scale, is worth a warning (the ledger's own round-off is ~1e-12 of it)
+UNRETURNED_WARNING = 1e-8
+
+
+def _warn_unreturned_energy(summary: dict) -> None:
+    """One line on stderr when the ALE remaps changed the total energy by more than their
+    conservation could give back (summary.json ``ale_unreturned_energy``): the energy balance
+    error then holds it, and this names its cause."""
+    unreturned = summary.get("ale_unreturned_energy") or 0.0
+    error, relative = (summary.get("energy_balance_max_error"),
+                       summary.get("energy_balance_max_relative_error"))
+    if not unreturned or not error or not relative:
+        return
+    scale = error / relative  # the energy scale the relative error was taken against
+    if abs(unreturned) > UNRETURNED_WARNING * scale:
+        print(f"warning: the ALE remaps changed the total energy by {unreturned:.3g} "
+              f"({unreturned / scale:.2g} of its scale) that no body's velocities could give "
+              "back (no Lagrangian body, or none with the kinetic energy, where it happened; "
+              "keep a body in motion Lagrangian): summary.json ale_unreturned_energy",
+              file=sys.stderr)
 
 
 @contextlib.contextmanager

@@ -47,6 +47,9 @@ class MeshMotion:
     #: (ALE node, partner) of the step's open pairs that are not followed: their partners
     #: crossed a neighbour's (``_move_body``), so their nodes are respaced instead
     unfollowed: frozenset = frozenset()
+    #: kinetic energy the remaps' conservation could neither take from the ALE bodies nor
+    #: hand over to a Lagrangian one (``hand_over_energy``): what the total energy gained
+    unreturned_energy: float = 0.0
 
     @property
     def mismatch(self) -> float:
@@ -112,9 +115,9 @@ def move_meshes(
         owner = model.body_of_node()
         partners = frozenset(int(b) for request in requests if request is not None
                              for b in np.unique(owner[request[1]]))
-        v, _ = hand_over_energy(model, base.time, X, X + d, v, left, partners)
+        v, left = hand_over_energy(model, base.time, X, X + d, v, left, partners)
     return MeshMotion(replace(base, X=X, d=d, v=v, a=a), tuple(updates), tuple(requests),
-                      masses.meetings, deep, frozenset(unfollowed))
+                      masses.meetings, deep, frozenset(unfollowed), left)
 
 
 def _move_body(model: Model, setup: AleSetup, base: StepState, last: tuple,

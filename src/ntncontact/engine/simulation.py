@@ -74,7 +74,8 @@ class StepRecord:
 
 
 #: Energy ledger columns accumulated over the run (history.csv).
-LEDGER = ("external_work", "contact_work", "frictional_dissipation", "ale_remap_energy")
+LEDGER = ("external_work", "contact_work", "frictional_dissipation", "ale_remap_energy",
+          "ale_unreturned_energy")
 
 #: The first augmentation of a quasi-static pass whose pairs came with multipliers stops at
 #: this fraction of its starting residual to look for new penetrating pairs
@@ -102,6 +103,7 @@ class SolvedStep:
     tie_forces: dict = field(default_factory=dict)  # per tie: force on its body-1 nodes
     reactions: dict = field(default_factory=dict)  # history columns of the support reactions
     remap_energy: float = 0.0  # strain energy the ALE remaps changed
+    unreturned_energy: float = 0.0  # energy the remaps added that no body gave back
     #: quasi-static: the active sets grown by pairs that penetrate at an unconverged
     #: augmentation's solution; the step's solve stopped there to start a new pass
     grown: tuple | None = None
@@ -264,6 +266,7 @@ class Simulation:
         self._last_reactions = solved.reactions
         self._accumulate_work(s, d1, results, dt)
         self._step_work["ale_remap_energy"] += solved.remap_energy
+        self._step_work["ale_unreturned_energy"] += solved.unreturned_energy
         new = StepState(s.step + 1, s.time + dt, s.X, d1, v1, a1, committed)
         return new, iterations
 
@@ -365,12 +368,13 @@ class Simulation:
             self._augmentations_converged = False
         mismatch = motion.mismatch if motion is not None else 0.0
         strain_change = motion.remap_strain_change if motion is not None else 0.0
+        unreturned = motion.unreturned_energy if motion is not None else 0.0
         ties = tie_forces(problem.constraints, problem.multipliers(result.y)) \
             if self.model.ties else {}
         reactions = support_reactions(self._supports, problem.full_residual(result.y),
                                       state.X + d) if self._supports else {}
         return SolvedStep(state, d, used, results, augmentation, iterations, mismatch, ties,
-                          reactions, strain_change)
+                          reactions, strain_change, unreturned)
 
     def _solve_augmentation(self, problem: StepProblem, y0: NDArray,
                             factors: FactorCache | None, contact: tuple, probe: bool):
@@ -683,6 +687,7 @@ class Simulation:
             "augmentations_converged": int(self._augmentations_converged),
             "ale_mismatch": self._last_mismatch,
             "ale_remap_energy": self.ledger["ale_remap_energy"],
+            "ale_unreturned_energy": self.ledger["ale_unreturned_energy"],
             "energy_multiplier": self._energy_multiplier,
             "contact_rows": contact_rows(self.model.interfaces, results, self.state.x),
         } | self._off_surface_extra()

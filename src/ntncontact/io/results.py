@@ -20,7 +20,7 @@ from .writers import MemoryResults, ResultsDirectory
 
 CONTACT_HISTORY = ("active_pairs", "frictional_dissipation", "contact_work", "augmentations",
                    "ale_mismatch", "energy_multiplier", "augmentations_converged",
-                   "ale_remap_energy", "penetration_off_surfaces")
+                   "ale_remap_energy", "penetration_off_surfaces", "ale_unreturned_energy")
 HISTORY_DEFAULTS = {"augmentations_converged": 1}  # of the initial row and contact-free steps
 
 
@@ -48,7 +48,8 @@ class ResultWriter:
             summary_extra = {"contact_start_time": None, "contact_end_time": None,
                              "max_penetration": 0.0, "max_active_pairs": 0,
                              "unconverged_steps": 0, "max_penetration_off_surfaces": 0.0,
-                             "max_penetration_off_surfaces_at": None} | summary_extra
+                             "max_penetration_off_surfaces_at": None,
+                             "ale_unreturned_energy": 0.0} | summary_extra
         extra_history = extra_history + reaction_columns(model)
         if model.ties:
             extra_history = extra_history + tie_history(model)
@@ -107,6 +108,8 @@ class ResultWriter:
         if "tie_violation" in record.extra:
             fields["max_tie_violation"] = max(record.extra["tie_violation"],
                                               summary.get("max_tie_violation", 0.0))
+        if row.get("ale_unreturned_energy"):  # cumulative: the summary keeps the last
+            fields["ale_unreturned_energy"] = row["ale_unreturned_energy"]
         if row.get("augmentations_converged") == 0:  # augmentation.on_limit = "accept"
             fields["unconverged_steps"] = summary["unconverged_steps"] + 1
         fields |= self._off_surface_summary(
