@@ -166,3 +166,60 @@ def test_an_interrupted_run_keeps_every_frame_it_wrote(tmp_path):
     assert all(read_vtu(path).cells.shape == (72, 4) for _, path in series)
     assert json.loads((tmp_path / "summary.json").read_text())["status"] == "interrupted"
     assert not list(tmp_path.rglob("*.tmp"))
+
+
+def test_frames_written_in_the_background_are_the_synchronous_ones_byte_for_byte(tmp_path):
+    """The run folder's writer compresses a frame beside the next step: its files are the
+    same bytes as those written in the caller's thread, although the caller changes its
+    arrays in place right after each write (a von Mises array of one column, which
+    ``frame_mesh`` does not pad, included), and each frame is listed once the next write
+    (or ``entries``) returns."""
+    points, cells, point_data, cell_data = ring_like_frame()
+    writers = {mode: VtuSeriesWriter(tmp_path / mode, background=mode == "background")
+               for mode in ("synchronous", "background")}
+    for step in range(4):
+        for writer in writers.values():
+            point_data["displacement"][:] = step
+            cell_data["von_mises"][:] = 10.0 * step
+            writer.write(step, 0.5 * step, points, cells, point_data, cell_data)
+            point_data["displacement"][:] = -1.0  # the caller's next step, meanwhile
+            cell_data["von_mises"][:] = -1.0
+            assert len(writer.entries) == step + 1  # waits for the frame in flight
+    for writer in writers.values():
+        writer.close()
+    for step in range(4):
+        name = f"fields/fields_{step:05d}.vtu"
+        background = (tmp_path / "background" / name).read_bytes()
+        assert background == (tmp_path / "synchronous" / name).read_bytes()
+        frame = read_vtu(tmp_path / "background" / name)
+        assert np.all(frame.point_data["displacement"] == step)
+        assert np.all(frame.cell_data["von_mises"] == 10.0 * step)
+    assert (tmp_path / "background" / "fields.pvd").read_bytes() == \
+        (tmp_path / "synchronous" / "fields.pvd").read_bytes()
+
+
+def test_a_last_frame_that_cannot_be_written_in_the_background_fails_the_run(tmp_path,
+                                                                           monkeypatch):
+    """The last frame's writing fails after the time loop has gone on (a full disk): closing
+    the folder raises it and the summary says failed, not completed; the frames before it
+    stay listed and readable, and no temporary file is left."""
+    write = meshio.write
+    calls = []
+
+    def failing_write(path, mesh, **kwargs):
+        calls.append(1)
+        if len(calls) == 3:
+            Path(path).write_text("<VTKFile")
+            raise OSError("No space left on device")
+        return write(path, mesh, **kwargs)
+
+    monkeypatch.setattr(vtk.meshio, "write", failing_write)
+    points, cells = unit_square_mesh()
+    with pytest.raises(OSError, match="No space"), ResultsDirectory(tmp_path) as out:
+        for step in range(3):
+            out.write_history(history_row(step))
+            out.fields.write(step, float(step), points, cells, *fields(6, 2, 1.0))
+    summary = json.loads((tmp_path / "summary.json").read_text())
+    assert summary["status"] == "failed" and "No space" in summary["error"]
+    assert [t for t, _ in read_pvd(tmp_path / "fields.pvd")] == [0.0, 1.0]
+    assert not list(tmp_path.rglob("*.tmp"))

@@ -399,7 +399,9 @@ class ResultsDirectory:
             if step is not None and series is not VtuSeriesWriter:
                 raise RunFolderError("a restart continues VTU field series only "
                                      "(analysis.field_format = \"vtu\")")
-            self.fields = series(self.directory) if write_fields else None
+            # VTU frames are compressed and written beside the next step (VtuSeriesWriter)
+            self.fields = ((series(self.directory, background=True) if series is VtuSeriesWriter
+                            else series(self.directory)) if write_fields else None)
             self.history = HistoryWriter(self.directory, history_columns, step)
             if step is not None and self.history.last_step() != step:
                 raise RunFolderError(f"{self.history.path} does not reach the checkpoint's "
@@ -455,8 +457,12 @@ class ResultsDirectory:
         try:
             self.history.close()
             self.contact.close()
-            if isinstance(self.fields, XdmfSeriesWriter):
-                self.fields.close()
+            if self.fields is not None:
+                try:
+                    self.fields.close()  # a VTU frame still in flight is written first
+                except Exception as err:  # its writing failed (a full disk): the run too
+                    status, error = "failed", error or f"{type(err).__name__}: {err}"
+                    raise
         finally:
             try:
                 self.summary.finish(status, error, **summary_fields)
