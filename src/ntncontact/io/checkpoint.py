@@ -125,7 +125,7 @@ class Checkpointer:
                   "interfaces": len(state.contact), "next_checkpoint": self._next,
                   "writer": self.writer.checkpoint_state()}
         arrays = {"X": state.X, "x": state.x, "d": state.d, "v": state.v, "a": state.a,
-                  "union_keys": saved["union_keys"]}
+                  "union_keys": saved["union_keys"], "contact_force": saved["contact_force"]}
         solver_info, solver_arrays = saved["linear_solver"]
         header["linear_solver"] = solver_info
         arrays |= {f"solver_{name}": value for name, value in solver_arrays.items()}
@@ -208,6 +208,8 @@ def _resume_values(header: dict, arrays: dict[str, np.ndarray]) -> dict:
                            "last_substep": header["last_substep"],
                            # the stiffness pattern's union (checkpoints before it: none)
                            "union_keys": arrays.get("union_keys", np.zeros(0, np.int64)),
+                           # static runs' trapezoidal contact work (checkpoints before: none)
+                           "contact_force": arrays.get("contact_force"),
                            "linear_solver": (header["linear_solver"], {
                                name.removeprefix("solver_"): value
                                for name, value in arrays.items()
