@@ -29,6 +29,22 @@ def history_row(step: int) -> dict:
     return {name: float(step) for name in HISTORY_COLUMNS} | {"step": step}
 
 
+def disk_full_at_frame(index: int, monkeypatch) -> None:
+    """meshio's VTU writer fails on frame ``index`` (0-based) as a full disk would, after
+    leaving a partial file (which must never get a frame's name)."""
+    write = meshio.write
+    calls = []
+
+    def failing_write(path, mesh, **kwargs):
+        calls.append(1)
+        if len(calls) == index + 1:
+            Path(path).write_text("<VTKFile")
+            raise OSError("No space left on device")
+        return write(path, mesh, **kwargs)
+
+    monkeypatch.setattr(vtk.meshio, "write", failing_write)
+
+
 def ring_like_frame(n_points: int = 7000):
     """A frame large enough for several 32 kB compression blocks per array."""
     rng = np.random.default_rng(3)
@@ -113,24 +129,17 @@ def test_each_frame_is_on_disk_and_listed_when_write_returns(tmp_path):
     assert not list(tmp_path.rglob("*.tmp"))
 
 
+@pytest.mark.parametrize("frames", [6, 3], ids=["a later frame", "the last frame"])
 def test_a_frame_that_cannot_be_written_fails_the_run_and_keeps_the_others(tmp_path,
-                                                                             monkeypatch):
-    """Writing frame 2 fails: the error reaches the time loop, the summary says failed, the
-    frames before it stay listed and readable, and no temporary file is left."""
-    write = meshio.write
-    calls = []
-
-    def failing_write(path, mesh, **kwargs):
-        calls.append(1)
-        if len(calls) == 3:
-            Path(path).write_text("<VTKFile")  # a partial file...
-            raise OSError("No space left on device")
-        return write(path, mesh, **kwargs)
-
-    monkeypatch.setattr(vtk.meshio, "write", failing_write)
+                                                                             monkeypatch, frames):
+    """Writing frame 2 fails (a full disk). The run folder writes a frame beside the next
+    step, so the error reaches the time loop at the next frame's write, or, when it was the
+    last frame, at closing the folder: either way the summary says failed (not completed),
+    the frames before it stay listed and readable, and no temporary file is left."""
+    disk_full_at_frame(2, monkeypatch)
     points, cells = unit_square_mesh()
     with pytest.raises(OSError, match="No space"), ResultsDirectory(tmp_path) as out:
-        for step in range(6):
+        for step in range(frames):
             out.write_history(history_row(step))
             out.fields.write(step, float(step), points, cells, *fields(6, 2, 1.0))
     summary = json.loads((tmp_path / "summary.json").read_text())
@@ -138,7 +147,7 @@ def test_a_frame_that_cannot_be_written_fails_the_run_and_keeps_the_others(tmp_p
     series = read_pvd(tmp_path / "fields.pvd")
     assert [t for t, _ in series] == [0.0, 1.0]
     assert all(read_vtu(path).points.shape == (6, 2) for _, path in series)
-    assert not list(tmp_path.rglob("*.tmp"))  # ...that never got a frame's name
+    assert not list(tmp_path.rglob("*.tmp"))  # the partial file never got a frame's name
 
 
 def test_an_interrupted_run_keeps_every_frame_it_wrote(tmp_path):
@@ -197,29 +206,3 @@ def test_frames_written_in_the_background_are_the_synchronous_ones_byte_for_byte
     assert (tmp_path / "background" / "fields.pvd").read_bytes() == \
         (tmp_path / "synchronous" / "fields.pvd").read_bytes()
 
-
-def test_a_last_frame_that_cannot_be_written_in_the_background_fails_the_run(tmp_path,
-                                                                           monkeypatch):
-    """The last frame's writing fails after the time loop has gone on (a full disk): closing
-    the folder raises it and the summary says failed, not completed; the frames before it
-    stay listed and readable, and no temporary file is left."""
-    write = meshio.write
-    calls = []
-
-    def failing_write(path, mesh, **kwargs):
-        calls.append(1)
-        if len(calls) == 3:
-            Path(path).write_text("<VTKFile")
-            raise OSError("No space left on device")
-        return write(path, mesh, **kwargs)
-
-    monkeypatch.setattr(vtk.meshio, "write", failing_write)
-    points, cells = unit_square_mesh()
-    with pytest.raises(OSError, match="No space"), ResultsDirectory(tmp_path) as out:
-        for step in range(3):
-            out.write_history(history_row(step))
-            out.fields.write(step, float(step), points, cells, *fields(6, 2, 1.0))
-    summary = json.loads((tmp_path / "summary.json").read_text())
-    assert summary["status"] == "failed" and "No space" in summary["error"]
-    assert [t for t, _ in read_pvd(tmp_path / "fields.pvd")] == [0.0, 1.0]
-    assert not list(tmp_path.rglob("*.tmp"))
