@@ -26,17 +26,11 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
-from helpers import EXAMPLES, Recorder, SubStepCounting, model_from_example
+from helpers import Recorder, SubStepCounting, headline, model_from_example, refined
 
 from ntncontact.contact import PairState, pair_gaps
 from ntncontact.engine import mesh_motion
 from ntncontact.engine.simulation import Simulation, initial_state
-
-
-def refined(factor: int, t_end: float) -> list[str]:
-    return [f"bodies.0.mesh.nx={8 * factor}", f"bodies.0.mesh.ny={21 * factor}",
-            f"bodies.1.mesh.nx={36 * factor}", f"bodies.1.mesh.ny={5 * factor}",
-            f"analysis.t_end={t_end}"]
 
 
 @pytest.mark.slow
@@ -67,7 +61,7 @@ def pressed_pair(gap_fraction: float, tilt_deg: float = 15.0, ale_normal: bool =
                                [f"contact.0.ale_normal={str(ale_normal).lower()}"])
     base = initial_state(model)
     ci = model.interfaces[0].interface
-    bottom, top = ci.surface1.nodes, ci.surface2.nodes
+    bottom, top = model.bodies[0].global_nodes("bottom"), ci.surface2.nodes
     i = int(bottom[bottom.size // 2])
     j = int(top[np.argmin(np.abs(base.x[top, 0] - base.x[i, 0]))])
     h = model.ale_bodies[0].motion.min_spacing
@@ -171,7 +165,7 @@ def test_nodes_a_step_deep_are_detected_and_paired_node_to_node():
     base = initial_state(model)
     h = model.ale_bodies[0].motion.min_spacing
     ci = model.interfaces[0].interface
-    bottom, top = ci.surface1.nodes, ci.surface2.nodes
+    bottom, top = model.bodies[0].global_nodes("bottom"), ci.surface2.nodes
     d = base.d.copy()
     d[model.bodies[0].nodes] += [0.4 * h, -base.x[bottom, 1].max() - 1.1 * h]
     state = replace(base, d=d)
@@ -185,32 +179,6 @@ def test_nodes_a_step_deep_are_detected_and_paired_node_to_node():
     # the far-side rule stays: at rest (no approach in the last step) 1.1 h is too deep
     found, = detect_all(model.interfaces, none, state.x, np.zeros_like(state.v), 0.003)
     assert len(found) == 0
-
-
-def headline(k: int, friction: float) -> dict:
-    """The headline numbers of the fast-sliding blocks refined k times (dt unchanged): contact
-    start and end (summary.json's), the dissipated fraction of the initial energy, and the
-    upper block's exit velocity (its centre-of-mass velocity at t_end, free since ~0.13-0.16:
-    the consistent mass's row sums weigh the nodes exactly, rho uniform)."""
-    from ntncontact import api
-    from ntncontact.fem.element import element_mass
-
-    scenario = api.load_scenario(EXAMPLES / "blocks_fast_sliding.toml",
-                                 [*refined(k, 0.2)[:4], f"contact.0.friction={friction}",
-                                  "analysis.output_interval=0.2"])
-    results = api.run(scenario)
-    frame = results.fields(0.2)
-    cells = frame.cells_dict["quad"][frame.cell_data["body_id"][0] == 0]
-    X = frame.point_data["material_position"][:, :2]
-    weight = np.bincount(cells.ravel(), element_mass(X[cells], np.ones(len(cells)))
-                         .sum(axis=2).ravel(), len(X))
-    history = results.history
-    return {"start": results.summary["contact_start_time"],
-            "end": results.summary["contact_end_time"],
-            "dissipated": history["frictional_dissipation"].iloc[-1]
-            / history["total_energy"].iloc[0],
-            "exit": weight @ frame.point_data["velocity"][:, :2] / weight.sum(),
-            "penetration": results.summary["max_penetration"]}
 
 
 @pytest.mark.slow

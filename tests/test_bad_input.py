@@ -142,6 +142,14 @@ CASES = [
     Case("bodies_overlap", ("contact.0", "'block' and 'base' overlap at t = 0", "0.2 deep",
                             "(0, 0.8)"),
          edit=("origin = [0.0, 1.1]", "origin = [0.0, 0.8]")),
+    # a corner on two surfaces against one partner surface would be paired twice
+    Case("corner_paired_twice", ("contact.0 and contact.1", "nodes [2]", "'bottom' and 'right'",
+                                 'surface_1 = "bottom+right"'),
+         edit=("penalty_normal = 100.0", 'penalty_normal = 100.0\n\n[[contact]]\n'
+               'body_1 = "block"\nsurface_1 = "right"\nbody_2 = "base"\nsurface_2 = "top"\n'
+               "penalty_normal = 100.0")),
+    Case("joined_surface_misspelt", ("contact.0", "'rigth'", "join several with '+'"),
+         sets=('contact.0.surface_1="bottom+rigth"',)),
     # mesh-quality: say what was expected
     Case("mesh_quality_not_a_mesh", ("x.msh", "not a readable gmsh .msh file"),
          command="mesh-quality", file_name="x.msh", text="garbage\n"),

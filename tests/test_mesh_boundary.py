@@ -95,6 +95,25 @@ def test_surface_chain_unknown_set():
         surface_chain(rectangle(1.0, 1.0, 1, 1), "nope")
 
 
+def test_a_joined_surface_is_one_chain_through_the_shared_corner():
+    m = rectangle(3.0, 2.0, 3, 2)
+    chain = surface_chain(m, "bottom+right")
+    # bottom 0 -> 3, then up the right face 3 -> 7 -> 11; the corner 3 once
+    assert not chain.closed and chain.nodes.tolist() == [0, 1, 2, 3, 7, 11]
+    assert surface_chain(m, "right+bottom").nodes.tolist() == chain.nodes.tolist()
+    assert m.node_set("bottom+right").tolist() == [0, 1, 2, 3, 7, 11]
+    assert surface_chain(m, "left+bottom+right").nodes.tolist() == [8, 4, 0, 1, 2, 3, 7, 11]
+
+
+@pytest.mark.parametrize("name, message", [
+    ("bottom+top", "separate pieces"),  # not one surface
+    ("bottom+rigth", "no surface .edge set. named 'rigth'.*join several with"),
+])
+def test_a_joined_surface_that_is_no_chain_is_refused(name, message):
+    with pytest.raises(MeshError, match=message):
+        surface_chain(rectangle(3.0, 2.0, 3, 2), name)
+
+
 def test_nodal_normals_exact_on_circle_with_uneven_spacing():
     rng = np.random.default_rng(7)
     theta = np.sort(rng.uniform(0.0, 2 * np.pi, 25))

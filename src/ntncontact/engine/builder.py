@@ -147,6 +147,7 @@ def build_model(config: ScenarioConfig, base_dir: str | Path = ".") -> Model:
     interfaces = tuple(_interface(c, i, bodies, a.kind) for i, c in enumerate(config.contact))
     for i, (c, ci) in enumerate(zip(config.contact, interfaces, strict=True)):
         _check_no_overlap(i, c, ci, bodies)
+    _check_paired_once(interfaces, config.contact, bodies)
     if a.energy_conserving and a.kind != "dynamic":
         raise ScenarioError("analysis.energy_conserving: only for dynamic analyses (report 5.5)")
     ale_bodies = tuple(_ale_setup(i, body, bc, config) for i, (body, bc)
@@ -283,6 +284,28 @@ def _interface(cfg: ContactConfig, index: int, bodies: tuple[Body, ...],
                             persistency, candidates, cfg.release_steps, tol, max_aug, ordered,
                             predicted, aug.update, aug.on_limit == "accept",
                             reference_arc2=_arc_lengths(b2.mesh.nodes[chain2.nodes]))
+
+
+def _check_paired_once(interfaces: tuple[ContactInterface, ...],
+                       configs: list[ContactConfig], bodies: tuple[Body, ...]) -> None:
+    """Refuse a node of body 1 that is a candidate of two interfaces against one partner
+    surface (the corner between two faces, each its own interface): it would be paired twice,
+    its contact force counted twice, and an ALE partner surface would send two of its nodes
+    onto it. Joining the faces into one surface pairs it once."""
+    for j, (cj, ij) in enumerate(zip(configs, interfaces, strict=True)):
+        for i in range(j):
+            ci, ii = configs[i], interfaces[i]
+            facing = np.intersect1d(ii.interface.surface2.nodes, ij.interface.surface2.nodes)
+            twice = np.intersect1d(ii.candidates, ij.candidates)
+            if facing.size < 2 or twice.size == 0:  # one shared node: surfaces meeting at a corner
+                continue
+            body = next(b for b in bodies if b.name == cj.body_1)
+            raise ScenarioError(
+                f"contact.{i} and contact.{j}: nodes {(twice - body.node_offset).tolist()[:6]} "
+                f"of body '{body.name}' are on both '{ci.surface_1}' and '{cj.surface_1}', "
+                f"which face the same surface of '{cj.body_2}': they would be paired twice. "
+                f"Make one interface of both: surface_1 = \"{ci.surface_1}+{cj.surface_1}\", "
+                "or exclude those nodes from one of them (exclude = [node set])")
 
 
 def _arc_lengths(xy: np.ndarray) -> np.ndarray:

@@ -9,6 +9,9 @@ from types import MappingProxyType
 import numpy as np
 from numpy.typing import NDArray
 
+#: joins edge-set names into one surface: ``surface_1 = "bottom+right"``
+JOIN = "+"
+
 
 class MeshError(ValueError):
     """A mesh that cannot be used: bad connectivity, unknown set, inverted element."""
@@ -65,21 +68,30 @@ class QuadMesh:
         return int(self.cells.shape[0])
 
     def node_set(self, name: str) -> NDArray[np.int64]:
-        """Nodes of a node set, or of an edge set of that name (its nodes, sorted)."""
+        """Nodes of a node set, or of an edge set of that name (its nodes, sorted); a joined
+        surface ``"a+b"`` (see :meth:`edge_set`) gives the nodes of its edges."""
         if name in self.node_sets:
             return self.node_sets[name]
-        if name in self.edge_sets:
-            return np.unique(self.edge_sets[name])
+        if name in self.edge_sets or JOIN in name:
+            return np.unique(self.edge_set(name))
         known = sorted(set(self.node_sets) | set(self.edge_sets))
         raise MeshError(f"{self.name}: no node or edge set named '{name}' (known: {known})")
 
     def edge_set(self, name: str) -> NDArray[np.int64]:
-        if name not in self.edge_sets:
+        """The edges of a surface. A name ``"bottom+right"`` that is not itself a set joins
+        the named edge sets into one surface (their edges together), as a surface made of
+        several faces: a node they share, such as the corner between a block's bottom and its
+        leading face, is then one node of one surface, paired once in contact."""
+        if name in self.edge_sets:
+            return self.edge_sets[name]
+        parts = name.split(JOIN) if JOIN in name else [name]
+        missing = [p for p in parts if p not in self.edge_sets]
+        if missing:
             raise MeshError(
-                f"{self.name}: no surface (edge set) named '{name}' "
-                f"(known: {sorted(self.edge_sets)})"
+                f"{self.name}: no surface (edge set) named '{missing[0]}' "
+                f"(known: {sorted(self.edge_sets)}; join several with '{JOIN}')"
             )
-        return self.edge_sets[name]
+        return np.unique(np.vstack([self.edge_sets[p] for p in parts]), axis=0)
 
     def with_nodes(self, nodes: NDArray[np.float64]) -> QuadMesh:
         """The same topology and sets at new node coordinates."""
