@@ -42,7 +42,9 @@ def test_refined_4x_with_friction_agrees_with_2x(runs):
     exit velocity (2.254, 1.699) / (2.259, 1.694), 0.3 % of its size; contact from 0.048 on
     both. Tolerances: the 1x -> 2x test's (3 % for the fraction, 2 % for the exit velocity;
     tests/test_ale_refined.py). Not asserted: the contact end, 0.159 at 1x and 2x but 0.147 at
-    4x, where the face's landing changes which pair lets go last (not analysed)."""
+    4x. After t = 0.126 the pairs that carry traction are open ones the persistency law holds
+    by their rate (1x and 2x carry none at t = 0.132, then again to 0.159), so the last step
+    with traction is that tail's, not a touch (docs/examples.md, "Refined meshes")."""
     fine, finer = runs[2], runs[4]
     assert finer["start"] == pytest.approx(fine["start"], abs=1e-9)
     assert fine["dissipated"] > 0.2

@@ -60,11 +60,16 @@ def test_a_face_on_no_contact_surface_that_goes_inside_is_measured_and_warned(tm
     assert at["node"] in (2, 5, 8)  # the right face of a 2 x 2 rectangle (row-major nodes)
     assert at["time"] == pytest.approx(0.1)
     assert f"node {at['node']} of body 'block', on no contact surface, went" in err
-    assert "make that face a contact surface too" in err
+    assert "make that face a contact surface too, joined to the one beside it" in err
 
 
-def test_with_the_face_a_contact_surface_nothing_goes_inside_unresisted(tmp_path, capsys):
-    summary, err = run(tmp_path, "right", "left", capsys)
+@pytest.mark.parametrize("surface_1, surface_2", [("right", "left"),
+                                                   ("bottom+right", "top+left")])
+def test_with_the_face_a_contact_surface_nothing_goes_inside_unresisted(
+        tmp_path, capsys, surface_1, surface_2):
+    """The face as the surface, or joined to the bottom as the warning advises (each side
+    one chain around its corner)."""
+    summary, err = run(tmp_path, surface_1, surface_2, capsys)
     assert summary["max_penetration_off_surfaces"] == 0.0
     assert summary["max_penetration_off_surfaces_at"] is None
     assert "warning" not in err

@@ -130,7 +130,8 @@ def _warn_off_surfaces(summary: dict) -> None:
     if at and depth > OFF_SURFACE_WARNING * at["element_size"]:
         print(f"warning: node {at['node']} of body '{at['body']}', on no contact surface, went "
               f"{depth:.3g} inside '{at['inside']}' (t = {at['time']:.6g}) where nothing "
-              "resists it: make that face a contact surface too (summary.json "
+              "resists it: make that face a contact surface too, joined to the one beside it "
+              "(for example surface_1 = \"bottom+right\"; summary.json "
               "max_penetration_off_surfaces)", file=sys.stderr)
 
 
