@@ -124,18 +124,30 @@ def refined(factor: int, t_end: float) -> list[str]:
             f"analysis.t_end={t_end}"]
 
 
-def headline(k: int, friction: float) -> dict:
-    """The headline numbers of the fast-sliding blocks refined k times (dt unchanged): contact
-    start and end (summary.json's), the dissipated fraction of the initial energy, and the
-    upper block's exit velocity (its centre-of-mass velocity at t_end, free since ~0.13-0.16:
-    the consistent mass's row sums weigh the nodes exactly, rho uniform)."""
+def fast_sliding(k: int, friction: float):
+    """The fast-sliding blocks refined k times (dt unchanged), friction ``friction``, one frame
+    at t_end = 0.2 (an api Scenario)."""
     from ntncontact import api
+
+    return api.load_scenario(EXAMPLES / "blocks_fast_sliding.toml",
+                             [*refined(k, 0.2)[:4], f"contact.0.friction={friction}",
+                              "analysis.output_interval=0.2"])
+
+
+def headline(k: int, friction: float) -> dict:
+    """The headline numbers of the fast-sliding blocks refined k times (``headline_of``)."""
+    from ntncontact import api
+
+    return headline_of(api.run(fast_sliding(k, friction)))
+
+
+def headline_of(results) -> dict:
+    """Contact start and end (summary.json's), the dissipated fraction of the initial energy,
+    and the upper block's exit velocity (its centre-of-mass velocity at t_end, free since
+    ~0.13-0.16: the consistent mass's row sums weigh the nodes exactly, rho uniform) of a
+    fast-sliding run's results."""
     from ntncontact.fem.element import element_mass
 
-    scenario = api.load_scenario(EXAMPLES / "blocks_fast_sliding.toml",
-                                 [*refined(k, 0.2)[:4], f"contact.0.friction={friction}",
-                                  "analysis.output_interval=0.2"])
-    results = api.run(scenario)
     frame = results.fields(0.2)
     cells = frame.cells_dict["quad"][frame.cell_data["body_id"][0] == 0]
     X = frame.point_data["material_position"][:, :2]
