@@ -124,21 +124,21 @@ def refined(factor: int, t_end: float) -> list[str]:
             f"analysis.t_end={t_end}"]
 
 
-def fast_sliding(k: int, friction: float):
+def fast_sliding(k: int, friction: float, *overrides: str):
     """The fast-sliding blocks refined k times (dt unchanged), friction ``friction``, one frame
-    at t_end = 0.2 (an api Scenario)."""
+    at t_end = 0.2, and ``overrides`` (an api Scenario)."""
     from ntncontact import api
 
     return api.load_scenario(EXAMPLES / "blocks_fast_sliding.toml",
                              [*refined(k, 0.2)[:4], f"contact.0.friction={friction}",
-                              "analysis.output_interval=0.2"])
+                              "analysis.output_interval=0.2", *overrides])
 
 
-def headline(k: int, friction: float) -> dict:
+def headline(k: int, friction: float, *overrides: str) -> dict:
     """The headline numbers of the fast-sliding blocks refined k times (``headline_of``)."""
     from ntncontact import api
 
-    return headline_of(api.run(fast_sliding(k, friction)))
+    return headline_of(api.run(fast_sliding(k, friction, *overrides)))
 
 
 def headline_of(results) -> dict:
