@@ -292,20 +292,22 @@ def _check_paired_once(interfaces: tuple[ContactInterface, ...],
     surface (the corner between two faces, each its own interface): it would be paired twice,
     its contact force counted twice, and an ALE partner surface would send two of its nodes
     onto it. Joining the faces into one surface pairs it once."""
-    for j, (cj, ij) in enumerate(zip(configs, interfaces, strict=True)):
+    for j, (cfg_j, face_j) in enumerate(zip(configs, interfaces, strict=True)):
         for i in range(j):
-            ci, ii = configs[i], interfaces[i]
-            facing = np.intersect1d(ii.interface.surface2.nodes, ij.interface.surface2.nodes)
-            twice = np.intersect1d(ii.candidates, ij.candidates)
+            cfg_i, face_i = configs[i], interfaces[i]
+            facing = np.intersect1d(face_i.interface.surface2.nodes,
+                                    face_j.interface.surface2.nodes)
+            twice = np.intersect1d(face_i.candidates, face_j.candidates)
             if facing.size < 2 or twice.size == 0:  # one shared node: surfaces meeting at a corner
                 continue
-            body = next(b for b in bodies if b.name == cj.body_1)
+            body = next(b for b in bodies if b.name == cfg_j.body_1)
             raise ScenarioError(
                 f"contact.{i} and contact.{j}: nodes {(twice - body.node_offset).tolist()[:6]} "
-                f"of body '{body.name}' are on both '{ci.surface_1}' and '{cj.surface_1}', "
-                f"which face the same surface of '{cj.body_2}': they would be paired twice. "
-                f"Make one interface of both: surface_1 = \"{ci.surface_1}+{cj.surface_1}\", "
-                "or exclude those nodes from one of them (exclude = [node set])")
+                f"of body '{body.name}' are on both '{cfg_i.surface_1}' and "
+                f"'{cfg_j.surface_1}', which face the same surface of '{cfg_j.body_2}': they "
+                f"would be paired twice. Make one interface of both: surface_1 = "
+                f"\"{cfg_i.surface_1}+{cfg_j.surface_1}\", or exclude those nodes from one of "
+                "them (exclude = [node set])")
 
 
 def _arc_lengths(xy: np.ndarray) -> np.ndarray:

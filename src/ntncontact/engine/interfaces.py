@@ -15,6 +15,7 @@ from numpy.typing import NDArray
 
 from ..contact import (
     ContactResult,
+    Pairing,
     PairState,
     augment,
     blocks_of,
@@ -103,7 +104,8 @@ def _near_candidates(x: NDArray, v: NDArray, dt: float, ci: ContactInterface,
     return pairing.node1[keep]
 
 
-def _not_in_front(x: NDArray, ci: ContactInterface, pairing, tol: float) -> NDArray:
+def _not_in_front(x: NDArray, ci: ContactInterface, pairing: Pairing,
+                  tol: float) -> NDArray:
     """False for a candidate in front of surface 2 along that surface's own outward normal,
     where its closest point lies inside a segment. The projection gap is measured along the
     candidate's own normal n1, and on a face of body 1 that stands across surface 2 (the
