@@ -190,8 +190,10 @@ def _crossing_with_partners(err: AleCrossingError, model: Model, base: StepState
                f"{now / reference:.1%} of their reference distance apart: that body's surface "
                "folds between them and its elements there are crushed (for example a sharp "
                "corner held by friction, which folds sooner on finer meshes). If a smaller dt "
-               "fails at the same time, the fold is the body's response, not the ALE's: round "
-               "the corner, lower the friction, or use a coarser mesh there")
+               "fails at the same time, the fold is the body's response, not the ALE's: if the "
+               "face beside the corner comes down onto this body, join it to the contact "
+               "surface (for example surface_1 = \"bottom+right\"); else round the corner, "
+               "lower the friction, or use a coarser mesh there")
     return AleCrossingError(message, err.nodes)
 
 
