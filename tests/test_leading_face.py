@@ -2,8 +2,8 @@
 
 With friction the upper block's leading corner rolls over (clockwise, the friction's moment),
 and on the 4x mesh its right face comes down onto the lower block. With the bottom alone as
-the contact surface (the report's, and the example's) nothing holds the face: it goes into
-the lower block, the corner cells are crushed, and the run stops at t = 0.111 (the upper's
+the contact surface (the report's; the example's before session 18) nothing holds the face: it
+goes into the lower block, the corner cells are crushed, and the run stops at t = 0.111 (the upper's
 bottom nodes 32 and 30 at 2.5 % of their reference distance, the ALE nodes under them unable
 to keep their order), with dt, dt/2 and dt/4 alike. With the bottom and the right face joined
 into one contact surface (``surface_1 = "bottom+right"``) the face lands on the lower block,
@@ -25,7 +25,8 @@ pytestmark = pytest.mark.slow
 
 #: pairs end node to node: offset across the line of action, of the ALE surface's spacing
 NODE_TO_NODE = 1e-6
-#: the upper block's bottom and leading face as one contact surface
+#: the upper block's bottom and leading face as one contact surface (the example's own, given
+#: here so that the test keeps its meaning if the example changes)
 JOINED = 'contact.0.surface_1="bottom+right"'
 
 
