@@ -191,25 +191,67 @@ def test_moment_free_detection_takes_the_laws_objective_rate():
     np.testing.assert_allclose(objective, kernel.gap_rate, rtol=1e-13, atol=1e-14)
 
 
-@pytest.mark.parametrize("lower", ["lagrangian", "ale"])
-def test_a_face_standing_across_the_partner_is_not_paired_before_it_touches(lower):
+def test_a_face_standing_across_the_partner_is_not_paired_before_it_touches():
     """The fast-sliding blocks with the upper block's bottom and leading face joined into one
-    surface (``surface_1 = "bottom+right"``), the lower block Lagrangian or ALE, the upper
-    Lagrangian here: the bottom touches at t = 0.048. The face's nodes have a normal along the
-    lower block's top, so their projection gap along it was ~0 at any height: node 17, 0.035
-    above the lower block, was paired at t = 0.039 and pushed with a traction of 15-88 before
-    anything touched (``engine.interfaces._not_in_front``). Now nothing is paired before
-    0.048. (With the lower ALE its nodes take the ALE surface's normal, which had hidden it.)"""
+    surface (``surface_1 = "bottom+right"``), both blocks Lagrangian: the bottom touches at
+    t = 0.048. The face's nodes have a normal along the lower block's top, so their projection
+    gap along it was ~0 at any height: node 17, 0.035 above the lower block, was paired at
+    t = 0.039 and pushed with a traction of 15-88 before anything touched
+    (``engine.interfaces._not_in_front``). Now nothing is paired before 0.048. (With the lower
+    block ALE the face's nodes take the ALE surface's normal, which had hidden it.)"""
     from helpers import Recorder, model_from_example
 
     from ntncontact.engine.simulation import Simulation
 
     rec = Recorder()
     model = model_from_example("blocks_fast_sliding.toml", [
-        'contact.0.surface_1="bottom+right"', f'bodies.1.mesh_motion="{lower}"',
+        'contact.0.surface_1="bottom+right"', 'bodies.1.mesh_motion="lagrangian"',
         "analysis.t_end=0.045"])
     Simulation(model, [rec]).run()
     assert max(len(c) for r in rec.records for c in r.state.contact) == 0
+
+
+def tilted_block_over_base(drop: float, angle: float = 30.0) -> tuple:
+    """An own case in a turned frame: a 1 x 1 block (2 x 10, surface "bottom+right") over a
+    3 x 1 base (6 x 2, surface "top"), the pair turned by ``angle`` degrees about the origin,
+    the block's bottom ``0.01 - drop`` above the base's top, its right face 0.1 past a node of
+    the base, moving at 1 towards the base and at 1 along it. Returns (model, x, v)."""
+    from helpers import model_from_dict
+
+    turn = {"rotate_deg": angle, "center": [0.0, 0.0]}
+    material = {"model": "neo_hookean", "E": 10.0, "nu": 0.3, "density": 1.0}
+    model = model_from_dict({
+        "analysis": {"kind": "dynamic", "dt": 0.01, "t_end": 0.1},
+        "bodies": [
+            {"name": "block", "material": material, "mesh": {
+                "type": "rectangle", "width": 1.0, "height": 1.0, "nx": 2, "ny": 10,
+                "origin": [-0.4, 0.01], "transform": turn}},
+            {"name": "base", "material": material, "mesh": {
+                "type": "rectangle", "width": 3.0, "height": 1.0, "nx": 6, "ny": 2,
+                "origin": [-1.5, -1.0], "transform": turn}}],
+        "contact": [{"body_1": "block", "surface_1": "bottom+right", "body_2": "base",
+                     "surface_2": "top", "penalty_normal": 100.0}]})
+    c, s = np.cos(np.radians(angle)), np.sin(np.radians(angle))
+    down, forward = np.array([s, -c]), np.array([c, s])
+    x, v = model.X0.copy(), np.zeros_like(model.X0)
+    x[model.bodies[0].nodes] += drop * down
+    v[model.bodies[0].nodes] = down + forward  # sliding on as it lands
+    return model, x, v
+
+
+@pytest.mark.parametrize("angle", [0.0, 30.0, -75.0])
+def test_in_a_turned_frame_only_the_bottom_is_detected_and_only_once_it_is_in(angle):
+    """Own case (not the report's): the block's right face stands across the base and slides
+    towards its next node. With the bottom 0.01 above the base nothing is detected (before
+    ``_not_in_front``: node 5, the face node 0.11 above the base, in all three frames); with
+    it 0.002 inside, exactly the bottom's three nodes are, in any frame."""
+    from ntncontact.engine.interfaces import detect_all
+
+    none = (PairState.from_pairs(np.zeros((0, 2), np.int64)),)
+    for drop, expected in ((0.0, []), (0.012, [0, 1, 2])):
+        model, x, v = tilted_block_over_base(drop, angle)
+        found, = detect_all(model.interfaces, none, x, v, 0.01)
+        assert sorted(found.pairs[:, 0].tolist()) == expected, (angle, drop)
 
 
 def test_both_blocks_ale_with_the_leading_face_joined_keep_the_reports_dissipation():
