@@ -93,10 +93,31 @@ def reference_local_slides(s, ref, idx, slide, tolerance):
     return out, resets
 
 
-def reference_anchor_targets(node_s, breaks, pos, wanted, slide_tolerance, ratio, spacing):
+def reference_stretch_clamp(node_s, brk, pos, spacing, stretch, targets):
+    """``ale.surface._stretch_clamp`` in NumPy terms: per run between breaks, the stretch from
+    each break to the nearest active node is bounded by ``stretch`` x its reference length x
+    the run's mean stretch."""
+    cum = np.concatenate([[0.0], np.cumsum(spacing)])
+    targets = targets.copy()
+    for b0, b1 in zip(brk[:-1], brk[1:], strict=True):
+        scale = stretch * (node_s[b1] - node_s[b0]) / (cum[b1] - cum[b0])
+        inside = np.flatnonzero((pos > b0) & (pos < b1))
+        if inside.size == 0:
+            continue
+        first, last = inside[np.argmin(pos[inside])], inside[np.argmax(pos[inside])]
+        bound = node_s[b0] + scale * (cum[pos[first]] - cum[b0])
+        targets[first] = min(targets[first], max(bound, node_s[pos[first]]))
+        bound = node_s[b1] - scale * (cum[b1] - cum[pos[last]])
+        targets[last] = max(targets[last], min(bound, node_s[pos[last]]))
+    return targets
+
+
+def reference_anchor_targets(node_s, breaks, pos, wanted, slide_tolerance, ratio, spacing,
+                             stretch=np.inf):
     """``ale.motion``'s NumPy clamping of the wanted arc lengths (``_clamp_slides``), the
     mismatch, the anchors and the first pair of anchors out of order (-1: none); the clamp
-    keeps ``ratio`` times the stretch's smallest reference segment (``spacing``)."""
+    keeps ``ratio`` times the stretch's smallest reference segment (``spacing``), and no
+    stretch between anchors beyond ``stretch`` times its scaled reference length."""
     seg = np.diff(node_s)
     near = np.minimum(seg[np.maximum(pos - 1, 0)], seg[np.minimum(pos, seg.size - 1)])
     still = np.abs(wanted - node_s[pos]) <= slide_tolerance * near
@@ -112,6 +133,10 @@ def reference_anchor_targets(node_s, breaks, pos, wanted, slide_tolerance, ratio
     hi = np.maximum(node_s[b1] - (b1 - pos) * h, node_s[pos])
     targets = np.where(on_break, node_s[pos], np.clip(kept, lo, hi))
     clamped = np.abs(targets - kept) > SNAP * run_min[run]
+    if stretch < np.inf:
+        bounded = reference_stretch_clamp(node_s, brk, pos, spacing, stretch, targets)
+        clamped |= np.abs(bounded - targets) > SNAP * run_min.min()
+        targets = bounded
     mismatch = float(np.max(np.abs(wanted - targets), initial=0.0))
     anchor = breaks.copy()
     anchor[pos] = True
@@ -163,8 +188,10 @@ def test_anchor_targets_equal_the_numpy_clamping_bit_for_bit(seed):
             pos = rng.choice(n, rng.integers(1, min(5, n) + 1), replace=False)
             wanted = s[pos] + rng.choice([1e-12, 0.1, 1.0, 5.0]) * rng.standard_normal(pos.size)
             ratio = rng.choice([0.1, 0.25, 0.6])
-            got = surface._anchor_targets(s, breaks, pos, wanted, 1e-8, ratio, SNAP, ref)
-            want = reference_anchor_targets(s, breaks, pos, wanted, 1e-8, ratio, ref)
+            stretch = rng.choice([np.inf, 1.2, 2.0, 4.0])
+            got = surface._anchor_targets(s, breaks, pos, wanted, 1e-8, ratio, SNAP, ref,
+                                          stretch)
+            want = reference_anchor_targets(s, breaks, pos, wanted, 1e-8, ratio, ref, stretch)
             for g, w in zip(got, want, strict=True):
                 np.testing.assert_array_equal(g, w)
 

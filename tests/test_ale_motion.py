@@ -250,6 +250,36 @@ def test_a_node_held_before_a_corner_step_after_step_keeps_its_reference_distanc
         np.testing.assert_array_equal(out.x_mesh[corner], [2.0, 0.8])
 
 
+def test_a_node_leaving_a_corner_is_held_at_twice_its_reference_distance():
+    """The mirror of the clamp before a break: a node whose partner slides away from the
+    corner stops where the stretch between it and the corner is ``max_stretch`` (2) times its
+    reference length (scaled by the run's mean stretch, 1 here), step after step. The next
+    node behind it follows its own partner: between two active nodes the spacing is their
+    partners' (with both bodies ALE the held node's partner comes to it, ``engine.
+    mesh_motion``). Without the bound the corner cell grew without limit: the fast-sliding
+    blocks refined 4x with both blocks ALE stretched the upper block's leading cell to 9 times
+    its length and inverted its neighbour."""
+    mesh, body = corner_body()
+    corner = int(mesh.node_sets["corner_top_right"][0])
+    first, second = mesh.node_sets["top"][1], mesh.node_sets["top"][2]  # right to left
+    X, d, v, a = fields(mesh)
+    h = 0.2
+    for _ in range(2):  # a third would push the second node into the clamp before x = 0
+        x = X + d
+        x_target, x_pred = slide_targets(x, [first, second], [-3 * h, -3 * h], (1.0, 0.0), v)
+        out = move_ale_body(body, X, d, v, a, [first, second], x_target, x_pred, DT)
+        X, d, v, a = out.X, out.d, out.v, out.a
+        np.testing.assert_allclose(out.x_mesh[first], [2.0 - 2 * h, 0.8], atol=ROUND)
+        np.testing.assert_allclose(out.x_mesh[second] - x[second], [-3 * h, 0.0], atol=ROUND)
+        np.testing.assert_array_equal(out.clamped, [first])
+        np.testing.assert_array_equal(out.x_mesh[corner], [2.0, 0.8])
+    unbounded = AleBody.from_mesh(mesh, "right_top", max_stretch=np.inf)
+    X, d, v, a = fields(mesh)
+    x_target, x_pred = slide_targets(X + d, [first], [-3 * h], (1.0, 0.0), v)
+    out = move_ale_body(unbounded, X, d, v, a, [first], x_target, x_pred, DT)
+    np.testing.assert_allclose(out.x_mesh[first], [2.0 - 4 * h, 0.8], atol=ROUND)
+
+
 def test_crossing_targets_raise_mesh_error_naming_the_body():
     mesh = rectangle(2.0, 0.8, 10, 4, name="foundation")
     body = AleBody.from_mesh(mesh, "top")

@@ -25,7 +25,12 @@ nothing is moved that need not be.
 2. Corners and chain ends stay fixed, and a node never slides past one: its slide is clamped so
    that the free nodes between it and the break keep at least ``min_spacing_ratio`` times the
    smallest reference surface spacing of that stretch (not the one at t_n, which ratchets
-   down step after step while a node is held at the clamp); clamped nodes are reported.
+   down step after step while a node is held at the clamp). Nor does a node leave a break
+   behind beyond ``max_stretch`` times the reference length between them, scaled by the
+   run's mean stretch at t_n (``ale.surface._stretch_clamp``: an ALE body whose partners
+   slide away from its corner would stretch the corner cell without bound). Clamped nodes
+   are reported; a pair between two ALE bodies whose node is clamped is then followed by the
+   partner instead (``engine.mesh_motion._hold_clamped``).
 3. The other surface nodes follow (``respace``):
    ``"local"`` (default): each moved anchor's slide is absorbed by the fewest neighbouring
    surface segments whose slack suffices, each shrinking or growing in proportion to its slack,
@@ -210,6 +215,7 @@ class AleBody:
     remap: RemapMethod = "linear"
     conserve_momentum: bool = True
     min_spacing_ratio: float = 0.25
+    max_stretch: float = 2.0
     density: float | NDArray[np.float64] = 1.0
     name: str = "body"
     respace: RespaceMethod = "local"
@@ -250,6 +256,8 @@ class AleBody:
         for key in ("min_spacing_ratio", "spacing_tolerance", "min_quality"):
             if not 0.0 < getattr(self, key) < 1.0:
                 raise ValueError(f"{self.name}: {key} must lie in (0, 1)")
+        if not self.max_stretch > 1.0:
+            raise ValueError(f"{self.name}: max_stretch must exceed 1 (inf: no bound)")
         if not 0.0 <= self.slide_tolerance < 1.0:
             raise ValueError(f"{self.name}: slide_tolerance must lie in [0, 1)")
         for key, value in (("cells", cells), ("surface", surface), ("corner", corner),
@@ -574,7 +582,7 @@ def _move_surface(
         tn.x, chain.nodes, curve.points, curve.bulge, curve.node_s, t_start, t_end,
         chain.breaks, chain.spacing, wanted_xy, chain.position, body.slide_tolerance,
         body.min_spacing_ratio, _SNAP, 1.0 - tol, 1.0 / (1.0 - tol), body.respace == "local",
-        _SNAP * tn.h_min)
+        _SNAP * tn.h_min, body.max_stretch)
     if bad >= 0:
         pair = (int(chain.nodes[idx[bad]]), int(chain.nodes[idx[bad + 1]]))
         raise AleCrossingError(_crossing_message(body, tn.x, *pair), pair)

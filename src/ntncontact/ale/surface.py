@@ -546,7 +546,8 @@ def _wanted_arc(points, bulge, node_s, t_start, t_end, breaks, pts, pos, snap, g
 
 
 @njit(cache=True)
-def _anchor_targets(node_s, breaks, pos, wanted, slide_tolerance, ratio, snap, spacing):
+def _anchor_targets(node_s, breaks, pos, wanted, slide_tolerance, ratio, snap, spacing,
+                    stretch=np.inf):
     """Targets of the active nodes (the wanted arc lengths, slides below the tolerance dropped,
     clamped so that the free nodes between a node and the breaks around it keep ``ratio`` times
     the smallest REFERENCE segment of that stretch, ``spacing``) and the anchors; (targets,
@@ -587,7 +588,11 @@ def _anchor_targets(node_s, breaks, pos, wanted, slide_tolerance, ratio, snap, s
             t = min(max(w, lo), hi)
         targets[i] = t
         clamped[i] = np.abs(t - w) > snap * run_min[run]
-        miss = np.abs(wanted[i] - t)
+    if stretch < np.inf:
+        _stretch_clamp(node_s, brk, pos, spacing, stretch, snap * run_min.min(), targets,
+                       clamped)
+    for i in range(k):
+        miss = np.abs(wanted[i] - targets[i])
         if not (miss <= mismatch) and not np.isnan(mismatch):
             mismatch = miss
     anchor = breaks.copy()
@@ -605,6 +610,42 @@ def _anchor_targets(node_s, breaks, pos, wanted, slide_tolerance, ratio, snap, s
             bad = i
             break
     return targets, clamped, mismatch, idx, slide[idx], bad
+
+
+@njit(cache=True)
+def _stretch_clamp(node_s, brk, pos, spacing, stretch, snap, targets, clamped):
+    """Clamp ``targets`` (in place) so that the stretch between a break and the nearest
+    active node of its run grows no longer than ``stretch`` times its reference length,
+    scaled by the run's mean stretch at t_n; a bound never pulls a node back past where it
+    is. The mirror of the clamp before a break: an ALE body whose partners slide away from
+    its corner would otherwise leave the corner cell behind and stretch it without bound (the
+    fast-sliding blocks refined 4x with both blocks ALE: the upper block's leading cell 9
+    times its length at t = 0.096, and its neighbour inverted). Only the stretches at breaks:
+    between two active nodes the spacing is their partners', which the partner body's own
+    deformation may stretch (a bound there held nodes that had to follow, seen at 8x)."""
+    cum = np.zeros(spacing.size + 1)
+    for j in range(spacing.size):
+        cum[j + 1] = cum[j] + spacing[j]
+    for r in range(brk.size - 1):
+        b0, b1 = brk[r], brk[r + 1]
+        scale = stretch * (node_s[b1] - node_s[b0]) / (cum[b1] - cum[b0])
+        first, last = -1, -1
+        for i in range(pos.size):
+            if b0 < pos[i] < b1:
+                if first < 0 or pos[i] < pos[first]:
+                    first = i
+                if last < 0 or pos[i] > pos[last]:
+                    last = i
+        if first < 0:
+            continue
+        hi = max(node_s[b0] + scale * (cum[pos[first]] - cum[b0]), node_s[pos[first]])
+        if targets[first] > hi:
+            clamped[first] = clamped[first] or targets[first] - hi > snap
+            targets[first] = hi
+        lo = min(node_s[b1] - scale * (cum[b1] - cum[pos[last]]), node_s[pos[last]])
+        if targets[last] < lo:
+            clamped[last] = clamped[last] or lo - targets[last] > snap
+            targets[last] = lo
 
 
 @njit(cache=True)
@@ -718,7 +759,7 @@ def _slid_positions(x, chain_nodes, breaks, points, bulge, node_s, slides, snap_
 @njit(cache=True)
 def slide_chain(x, chain_nodes, points, bulge, node_s, t_start, t_end, breaks, spacing,
                 wanted_xy, pos, slide_tolerance, ratio, snap, band_lo, band_hi, local,
-                snap_length):
+                snap_length, stretch=np.inf):
     """The surface move of one ALE update (``ale.motion``, items 1-3) on the opened chain
     ``chain_nodes`` (its t_n curve: points, bulge, node_s, tangents, breaks; ``spacing`` the
     reference segment lengths): the active nodes (chain indices ``pos``) slide to the normal
@@ -730,7 +771,7 @@ def slide_chain(x, chain_nodes, points, bulge, node_s, t_start, t_end, breaks, s
     wanted = _wanted_arc(points, bulge, node_s, t_start, t_end, breaks, wanted_xy, pos, snap,
                          GAUSS_U, GAUSS_W)
     _, clamped, mismatch, idx, anchor_slide, bad = _anchor_targets(
-        node_s, breaks, pos, wanted, slide_tolerance, ratio, snap, spacing)
+        node_s, breaks, pos, wanted, slide_tolerance, ratio, snap, spacing, stretch)
     if bad >= 0:
         return x.copy(), np.zeros(node_s.size), clamped, mismatch, 0, idx, bad
     resets = 0

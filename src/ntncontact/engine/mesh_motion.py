@@ -140,9 +140,9 @@ def _move_body(model: Model, setup: AleSetup, base: StepState, last: tuple,
         own, partner = _followed(nodes, partners, unfollowed)
         if own.size == 0:
             return None
-        targets = _targets(masses, own, partner, x_pred, setup)
+        targets, meet = _targets(masses, own, partner, x_pred, setup)
         x_start, request, is_open = _request(model, setup, base, prev, contact, own, partner,
-                                             x_pred, targets, masses.is_ale[partner], deep)
+                                             x_pred, targets, meet, deep)
         if prev is not None and _same_request(prev_request, request, setup):
             return prev, prev_request  # the move would be below its tolerance
         # the target as the move takes it: wanted = target - (end - start)
@@ -156,6 +156,7 @@ def _move_body(model: Model, setup: AleSetup, base: StepState, last: tuple,
                                               partner, x_pred) from None
             unfollowed.update(zip(own[crossing].tolist(), partner[crossing].tolist(), strict=True))
             continue
+        _hold_clamped(masses, own, partner, up.clamped + setup.node_offset)
         # momenta and energy exactly as the time loop measures them (docs/theory.md)
         return conserve_remap(model, setup, base.X, base.d, base.v, base.time, up,
                               own - setup.node_offset), request
@@ -230,14 +231,23 @@ def _followed(nodes: NDArray, partners: NDArray, unfollowed: set | frozenset
 
 
 def _targets(masses: _AleMasses, nodes: NDArray, partners: NDArray, x_pred: NDArray,
-             setup: AleSetup) -> NDArray:
-    """Where each active node's particle must end: on its partner's predicted position, or,
-    when the partner is on an ALE body too, at the two particles' mass-weighted mid-point
-    (``ale.multisurface``; both bodies' nodes then meet there)."""
+             setup: AleSetup) -> tuple[NDArray, NDArray[np.bool_]]:
+    """Where each active node's particle must end, and which pairs meet at a point between two
+    ALE bodies: on its partner's predicted position, or, when the partner is on an ALE body
+    too, at the two particles' mass-weighted mid-point (``ale.multisurface``; both bodies'
+    nodes then meet there). A pair held by one of its nodes (``_hold_clamped``) is one with
+    a Lagrangian partner: the held node stays, the other follows it."""
     targets = x_pred[partners]
-    both = np.flatnonzero(masses.is_ale[partners])
+    meet = masses.is_ale[partners].copy()
+    for k in np.flatnonzero(meet):
+        held = masses.meetings.get(("held", (int(min(nodes[k], partners[k])),
+                                             int(max(nodes[k], partners[k])))))
+        if held is not None:
+            meet[k] = False
+            targets[k] = x_pred[held]
+    both = np.flatnonzero(meet)
     if both.size == 0:
-        return targets
+        return targets, meet
     # The meeting point is fixed for the step when the pair first appears (from that
     # augmentation's predictions): each body then converges to it like a single ALE body to
     # a Lagrangian partner. Recomputed from every iterate it drifted by the two bodies'
@@ -255,12 +265,24 @@ def _targets(masses: _AleMasses, nodes: NDArray, partners: NDArray, x_pred: NDAr
         for k, point in zip(new, points, strict=True):
             masses.meetings[(int(min(nodes[k], partners[k])),
                              int(max(nodes[k], partners[k])))] = point
-    targets = targets.copy()
     tangents = _surface_tangents(setup, nodes[both], x_pred)  # at the predicted step end
     for k, key, t in zip(both, keys, tangents, strict=True):
         targets[k] = _aim(masses.meetings, (int(nodes[k]), key), masses.meetings[key],
                           x_pred[nodes[k]], t)
-    return targets
+    return targets, meet
+
+
+def _hold_clamped(masses: _AleMasses, own: NDArray, partner: NDArray, clamped: NDArray
+                  ) -> None:
+    """Mark the pairs between two ALE bodies whose node on this body was clamped (before a
+    break, or by the stretch bound): for the rest of the step that node stays, as if on a
+    Lagrangian body, and its partner follows it (``_targets``), so the partner body takes
+    the slide this one cannot make and the pair stays node to node."""
+    if clamped.size == 0:
+        return
+    held = np.isin(own, clamped) & masses.is_ale[partner]
+    for a, b in zip(own[held].tolist(), partner[held].tolist(), strict=True):
+        masses.meetings.setdefault(("held", (min(a, b), max(a, b))), a)  # one side holds
 
 
 def _aim(meetings: dict, node: tuple, point: NDArray, landing: NDArray, tangent: NDArray
@@ -410,9 +432,9 @@ def mesh_settled(model: Model, base: StepState, contact: Sequence[PairState],
             if nodes.size:
                 return False
             continue
-        targets = _targets(masses, nodes, partners, x_pred, setup)
+        targets, meet = _targets(masses, nodes, partners, x_pred, setup)
         _, new, _ = _request(model, setup, base, motion.updates[i], contact, nodes, partners,
-                             x_pred, targets, masses.is_ale[partners], deep)
+                             x_pred, targets, meet, deep)
         if not (np.array_equal(old[0], new[0]) and np.array_equal(old[1], new[1])):
             return False
         if float(np.abs(new[2] - old[2]).max()) > SETTLED * setup.motion.min_spacing:
