@@ -229,7 +229,8 @@ def test_with_friction_the_dissipated_fraction_converges_to_4x():
     """mu = 0.1 refined 4x (dt unchanged) against 2x: the dissipated fraction within 1 % of
     itself and the exit velocity within 1 % of its size (measured: 14.00 / 13.99 %, the
     report's table 14.0 %; exit (2.632, 1.645) / (2.633, 1.645), 0.03 %; docs/examples.md,
-    "Refined meshes"). mu = 0.2 does not reach 4x: its leading corner sticks (same section).
+    "Refined meshes"). mu = 0.2: 4x in tests/test_leading_face.py (the joined contact
+    surface), 8x with both blocks ALE in tests/test_ale_both_refined.py.
     Tolerances: the refinement from 1x to 2x moves the fraction by 0.4 %; the end of contact,
     the last pair to stop slipping, may move by two steps."""
     dt = 0.003
