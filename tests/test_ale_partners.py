@@ -309,3 +309,4 @@ def test_partners_that_cross_on_a_crushed_surface_are_named_as_a_fold():
     assert f"are {apart:.1%} of their reference distance apart" in message
     assert "folds between them" in message and "round the corner" in message
     assert 'join it to the contact surface (for example surface_1 = "bottom+right")' in message
+    assert "make body 'upper' ALE as well" in message

@@ -193,8 +193,10 @@ def _crossing_with_partners(err: AleCrossingError, model: Model, base: StepState
                "corner held by friction, which folds sooner on finer meshes). If a smaller dt "
                "fails at the same time, the fold is the body's response, not the ALE's: if the "
                "face beside the corner comes down onto this body, join it to the contact "
-               "surface (for example surface_1 = \"bottom+right\"); else round the corner, "
-               "lower the friction, or use a coarser mesh there")
+               "surface (for example surface_1 = \"bottom+right\"); if its corner cell lies "
+               f"flat, make body '{body.name}' ALE as well (its mesh then moves too; "
+               "docs/examples.md, \"Refined meshes\"); else round the corner, lower the "
+               "friction, or use a coarser mesh there")
     return AleCrossingError(message, err.nodes)
 
 
