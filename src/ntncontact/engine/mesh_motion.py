@@ -242,8 +242,7 @@ def _targets(masses: _AleMasses, nodes: NDArray, partners: NDArray, x_pred: NDAr
     targets = x_pred[partners]
     meet = masses.is_ale[partners].copy()
     for k in np.flatnonzero(meet):
-        held = masses.meetings.get(("held", (int(min(nodes[k], partners[k])),
-                                             int(max(nodes[k], partners[k])))))
+        held = masses.meetings.get(("held", _pair_key(nodes[k], partners[k])))
         if held is not None:
             meet[k] = False
             targets[k] = x_pred[held]
@@ -256,8 +255,7 @@ def _targets(masses: _AleMasses, nodes: NDArray, partners: NDArray, x_pred: NDAr
     # landing errors (each slides along its own surface's normals) at every augmentation,
     # and the augmentations did not converge (docs/theory.md, "Several surfaces, both bodies
     # ALE").
-    keys = [(int(min(a, b)), int(max(a, b)))
-            for a, b in zip(nodes[both], partners[both], strict=True)]
+    keys = [_pair_key(a, b) for a, b in zip(nodes[both], partners[both], strict=True)]
     new = [k for k, key in zip(both, keys, strict=True) if key not in masses.meetings]
     if new:
         m = masses.mass
@@ -265,13 +263,17 @@ def _targets(masses: _AleMasses, nodes: NDArray, partners: NDArray, x_pred: NDAr
         points = meeting_points(x_pred[nodes[new]], x_pred[partners[new]], m[nodes[new]],
                                 m[partners[new]])
         for k, point in zip(new, points, strict=True):
-            masses.meetings[(int(min(nodes[k], partners[k])),
-                             int(max(nodes[k], partners[k])))] = point
+            masses.meetings[_pair_key(nodes[k], partners[k])] = point
     tangents = _surface_tangents(setup, nodes[both], x_pred)  # at the predicted step end
     for k, key, t in zip(both, keys, tangents, strict=True):
         targets[k] = _aim(masses.meetings, (int(nodes[k]), key), masses.meetings[key],
                           x_pred[nodes[k]], t)
     return targets, meet
+
+
+def _pair_key(a: int, b: int) -> tuple[int, int]:
+    """A pair's key in the step's meeting records: its two global nodes, either order."""
+    return int(min(a, b)), int(max(a, b))
 
 
 def _hold_clamped(masses: _AleMasses, own: NDArray, partner: NDArray, clamped: NDArray
@@ -284,7 +286,7 @@ def _hold_clamped(masses: _AleMasses, own: NDArray, partner: NDArray, clamped: N
         return
     held = np.isin(own, clamped) & masses.is_ale[partner]
     for a, b in zip(own[held].tolist(), partner[held].tolist(), strict=True):
-        masses.meetings.setdefault(("held", (min(a, b), max(a, b))), a)  # one side holds
+        masses.meetings.setdefault(("held", _pair_key(a, b)), a)  # one side holds
 
 
 def _aim(meetings: dict, node: tuple, point: NDArray, landing: NDArray, tangent: NDArray
