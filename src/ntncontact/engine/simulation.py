@@ -42,7 +42,7 @@ from .interfaces import (
     unconverged_interfaces,
     with_solved_multipliers,
 )
-from .mesh_motion import mesh_settled, move_meshes
+from .mesh_motion import MeshMotion, mesh_settled, move_meshes
 from .model import Model
 from .problem import StepProblem, StepState
 from .reactions import support_reactions, support_sets
@@ -341,20 +341,8 @@ class Simulation:
                 state = motion.state
             mass = self._dof_mass(state) if self.dynamic else None
             last_contact: dict = {}  # the contact terms' latest evaluation (reused below)
-            problem = StepProblem(self.model, state, dt, mass,
-                                  [*contact_terms(interfaces, contact, dt, last_contact),
-                                   *convective_terms(self.model, motion, dt)],
-                                  # ties after the contact multipliers (see TieTerm.order)
-                                  [*lagrange_terms(interfaces, contact, dt),
-                                   *tie_terms(self.model.ties)], union=self._union,
-                                  scale_floor=floor,
-                                  start_velocity=(persistent_velocities(
-                                      interfaces, contact, state.x, self._start_velocity(state))
-                                      if self.dynamic and guess is None else None))
-            y0 = problem.initial_guess()
-            if guess is not None:  # warm start: the last solution, shifted by the remap
-                d_guess = guess[0] + (state.d - guess[1]).ravel()
-                y0[: problem.free_dofs.size] = d_guess[problem.free_dofs]
+            problem, y0 = self._augmentation_problem(state, contact, dt, mass, motion, floor,
+                                                     guess, last_contact)
             # Inexact augmentations: the multiplier update and mesh move that follow change the
             # problem by far more than rtol, so the solve stops at early_ratio x its start;
             # the augmentation that meets report 5.4's test is then solved to rtol and tested
@@ -374,11 +362,9 @@ class Simulation:
             result, d, used, results, contact, done, its = self._test_augmentation(
                 problem, result, split, contact, previous, last_contact, factors)
             iterations += its
-            if not done and not self.dynamic and previous is not None:
-                contact = self._extrapolated_multipliers(used, contact, results, previous)
-            if not done and self._newton_updates:
-                contact = self._newton_multipliers(problem, result.y, d, used, contact, results,
-                                                   factors, sensitivities)
+            if not done:
+                contact = self._next_multipliers(problem, result.y, d, used, contact, results,
+                                                 previous, (factors, sensitivities))
             # after the first augmentation only if the pass's pairs carried multipliers (from
             # the last step or an earlier pass): with none, its solution holds the whole load
             # on penalty pairs of a set that may be far from complete (Hertz k = 4 step 1: the
@@ -402,15 +388,61 @@ class Simulation:
             self._require_accepted(augmentation,
                                    unconverged_interfaces(interfaces, used, before, previous))
             self._augmentations_converged = False
-        mismatch = motion.mismatch if motion is not None else 0.0
-        strain_change = motion.remap_strain_change if motion is not None else 0.0
-        unreturned = motion.unreturned_energy if motion is not None else 0.0
-        ties = tie_forces(problem.constraints, problem.multipliers(result.y)) \
-            if self.model.ties else {}
-        reactions = support_reactions(self._supports, problem.full_residual(result.y),
-                                      state.X + d) if self._supports else {}
-        return SolvedStep(state, d, used, results, augmentation, iterations, mismatch, ties,
-                          reactions, strain_change, unreturned)
+        return self._solved_step(problem, result, motion,
+                                 SolvedStep(state, d, used, results, augmentation, iterations,
+                                            0.0))
+
+    def _augmentation_problem(self, state: StepState, contact: tuple, dt: float,
+                              mass: sp.spmatrix | None, motion: MeshMotion | None,
+                              floor: float | None, guess: tuple | None,
+                              last_contact: dict) -> tuple[StepProblem, NDArray]:
+        """The step's problem with the multipliers of ``contact`` fixed, on the mesh of
+        ``state``, and its Newton start: the last augmentation's solution (``guess``: d, the
+        d of the state it was solved on) shifted by the remap, else the predictor."""
+        interfaces = self.model.interfaces
+        problem = StepProblem(self.model, state, dt, mass,
+                              [*contact_terms(interfaces, contact, dt, last_contact),
+                               *convective_terms(self.model, motion, dt)],
+                              # ties after the contact multipliers (see TieTerm.order)
+                              [*lagrange_terms(interfaces, contact, dt),
+                               *tie_terms(self.model.ties)], union=self._union,
+                              scale_floor=floor,
+                              start_velocity=(persistent_velocities(
+                                  interfaces, contact, state.x, self._start_velocity(state))
+                                  if self.dynamic and guess is None else None))
+        y0 = problem.initial_guess()
+        if guess is not None:  # warm start: the last solution, shifted by the remap
+            d_guess = guess[0] + (state.d - guess[1]).ravel()
+            y0[: problem.free_dofs.size] = d_guess[problem.free_dofs]
+        return problem, y0
+
+    def _next_multipliers(self, problem: StepProblem, y: NDArray, d: NDArray, used: tuple,
+                          updated: tuple, results: tuple, previous: tuple | None,
+                          caches: tuple) -> tuple:
+        """The multipliers of the next augmentation: the Uzawa ones ``updated``, extrapolated
+        (quasi-static) and Newton-updated where the interfaces ask for it. ``caches``: the
+        step's factor cache and multiplier sensitivities."""
+        factors, sensitivities = caches
+        if not self.dynamic and previous is not None:
+            updated = self._extrapolated_multipliers(used, updated, results, previous)
+        if self._newton_updates:
+            updated = self._newton_multipliers(problem, y, d, used, updated, results, factors,
+                                               sensitivities)
+        return updated
+
+    def _solved_step(self, problem: StepProblem, result, motion: MeshMotion | None,
+                     solved: SolvedStep) -> SolvedStep:
+        """``solved`` with what the final solve and mesh motion give beside d: the ALE
+        mismatch and energies, the tie forces and the support reactions."""
+        ties = (tie_forces(problem.constraints, problem.multipliers(result.y))
+                if self.model.ties else {})
+        reactions = (support_reactions(self._supports, problem.full_residual(result.y),
+                                       solved.state.X + solved.d) if self._supports else {})
+        if motion is None:
+            return replace(solved, tie_forces=ties, reactions=reactions)
+        return replace(solved, mismatch=motion.mismatch, tie_forces=ties, reactions=reactions,
+                       remap_energy=motion.remap_strain_change,
+                       unreturned_energy=motion.unreturned_energy)
 
     def _solve_augmentation(self, problem: StepProblem, y0: NDArray,
                             factors: FactorCache | None, contact: tuple, probe: bool):
