@@ -146,6 +146,10 @@ def child(case: str, k: int, out: Path) -> dict:
     from ntncontact.io.scenario import load_scenario
     from ntncontact.solvers.linear import LinearSolver
 
+    if os.environ.get("SCALING_ASSEMBLY_THREADS"):  # a variant of --threads
+        from ntncontact.fem import kernels_numba
+
+        kernels_numba.THREADS = int(os.environ["SCALING_ASSEMBLY_THREADS"])
     if os.environ.get("SCALING_THREADED_BLAS"):  # the A/B variant of --threads
         from ntncontact.solvers import newton
 
@@ -270,6 +274,9 @@ THREAD_VARIANTS = {
     "chosen (BLAS serial in Newton, PARDISO on pardiso_threads())": {},
     "BLAS threaded in Newton (as before)": {"SCALING_THREADED_BLAS": "1"},
     "PARDISO on 2 threads": {"MKL_NUM_THREADS": "2"},
+    "Numba assembly on 2 threads": {"SCALING_ASSEMBLY_THREADS": "2"},
+    "Numba assembly and PARDISO on 2 threads": {"SCALING_ASSEMBLY_THREADS": "2",
+                                                "MKL_NUM_THREADS": "2"},
 }
 
 
@@ -284,7 +291,8 @@ def thread_report(case: str, k: int, repeats: int, tmp: Path) -> str:
     lines = [f"Thread settings, {case} k = {k}, {repeats} interleaved runs each (load average "
              f"{os.getloadavg()[0]:.1f} at the end):", "",
              "| setting | s/step (min, all) | CPU s/step (min) | solve s/step (min) "
-             "| other s/step (min) | its/step |", "| --- | ---: | ---: | ---: | ---: | ---: |"]
+             "| assembly s/step (min) | other s/step (min) | its/step |",
+             "| --- | ---: | ---: | ---: | ---: | ---: | ---: |"]
     for name, rows in runs.items():
         ok = [r for r in rows if "s_per_step" in r]
         if not ok:
@@ -294,6 +302,7 @@ def thread_report(case: str, k: int, repeats: int, tmp: Path) -> str:
             f"| {name} | {walls[0]:.3f} ({', '.join(f'{w:.3f}' for w in walls)}) "
             f"| {min(r['cpu_per_step'] for r in ok):.3f} "
             f"| {min(r['parts_per_step']['solve'] for r in ok):.3f} "
+            f"| {min(r['parts_per_step']['assembly'] for r in ok):.3f} "
             f"| {min(r['parts_per_step']['other'] for r in ok):.3f} "
             f"| {ok[0]['its_per_step']:.1f} |")
     return "\n".join(lines)
