@@ -135,10 +135,12 @@ class _Pattern:
         self.n = A.shape[0]
         self.indptr = A.indptr.copy()
         self.indices = A.indices.copy()
-        rows = np.repeat(np.arange(self.n), np.diff(self.indptr))
-        # positions as int32 where they fit, and no int32 copy of int32 arrays: these maps are
-        # kept for the run, a few arrays of nnz entries each (issue 18, memory)
+        # positions and rows as int32 where they fit, and no int32 copy of int32 arrays: these
+        # maps are kept for the run, and the temporaries of their making were the largest
+        # transient of a Hertz k = 8 step (77 MB over 2.1 M entries with int64 and a float
+        # tracer; issue 18, memory)
         position = np.int32 if self.indices.size < 2**31 else np.int64
+        rows = np.repeat(np.arange(self.n, dtype=position), np.diff(self.indptr))
         self.transpose = _transpose_map(self.indptr, self.indices, self.n, position)
         # entries kept in symmetric mode
         self.upper = np.flatnonzero(self.indices >= rows).astype(position)
@@ -167,14 +169,15 @@ class _Pattern:
 def _transpose_map(indptr: NDArray, indices: NDArray, n: int,
                    dtype: type = np.int64) -> NDArray | None:
     """Position of entry (j, i) for each entry (i, j) of a sorted CSR pattern, or None if some
-    (j, i) is structurally absent. Transposes a matrix holding entry positions (SciPy's C++)."""
+    (j, i) is structurally absent. Transposes a matrix holding entry positions (SciPy's C++,
+    on integer data of ``dtype``: exact, and no float copy to convert)."""
     nnz = indices.size
-    tracer = sp.csr_matrix((np.arange(nnz, dtype=float), indices, indptr), shape=(n, n))
-    transposed = tracer.T.tocsr()  # sorted indices; values exact: positions < 2**53
+    tracer = sp.csr_matrix((np.arange(nnz, dtype=dtype), indices, indptr), shape=(n, n))
+    transposed = tracer.T.tocsr()  # sorted indices
     if not (np.array_equal(transposed.indptr, indptr)
             and np.array_equal(transposed.indices, indices)):
         return None
-    return transposed.data.astype(dtype)
+    return transposed.data.astype(dtype, copy=False)
 
 
 #: Below this many unknowns "auto" uses SuperLU even when PARDISO is installed: PARDISO's
