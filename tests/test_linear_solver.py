@@ -148,6 +148,22 @@ def test_symmetry_is_detected_per_matrix(backend):
     assert solver.stats.analyses == (2 if solver.backend == "pardiso" else 1)
 
 
+@pytest.mark.skipif(not pardiso_available(), reason="pypardiso not installed")
+def test_pardiso_frees_the_idle_modes_factor_and_keeps_its_analysis():
+    """Factoring in one symmetry mode frees the other mode's L and U (phase 0): at most one
+    factor is held, and the next factorization in that mode (no new analysis) gives the same
+    bits as before."""
+    solver = LinearSolver("pardiso")
+    sym, unsym = spd_matrix(), unsymmetric_matrix()
+    b = np.random.default_rng(5).standard_normal(sym.shape[0])
+    first = solver.solve(sym, b)
+    solver.solve(unsym, b)
+    assert [impl.factored for impl in solver._impls.values()] == [False, True]
+    assert np.array_equal(solver.solve(sym, b), first)
+    assert [impl.factored for impl in solver._impls.values()] == [True, False]
+    assert solver.stats.analyses == 2
+
+
 @pytest.mark.parametrize("backend", BACKENDS)
 @pytest.mark.parametrize("kind", ["linear_elastic", "neo_hookean"])
 def test_unsupported_body_is_singular(backend, kind):

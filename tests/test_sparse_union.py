@@ -161,3 +161,22 @@ def test_no_triplets_keep_the_union_pattern_and_a_restored_union_is_the_same():
         np.testing.assert_array_equal(again.toarray(), want.toarray())
     other_k = (K + sp.eye(K.shape[0], k=1)).tocsr()
     assert not union.holds(other_k)
+
+
+def test_a_grown_union_is_the_pattern_a_rebuild_gives():
+    """New triplet places are inserted into the union (``TripletUnion._grow``): the same
+    indptr, indices and values as a union built at once from K and all the triplets."""
+    rng = np.random.default_rng(6)
+    K, rows, cols, vals = _random_case(rng, n=40, m=30)
+    union = TripletUnion()
+    union.add(K, rows, cols, vals)
+    more_rows, more_cols = rng.integers(0, 40, 25), rng.integers(0, 40, 25)
+    more_vals = rng.normal(size=25)
+    grown = union.add(K, more_rows, more_cols, more_vals)
+    built = TripletUnion().add(K, np.concatenate([rows, more_rows]),
+                               np.concatenate([cols, more_cols]),
+                               np.concatenate([np.zeros_like(vals), more_vals]))
+    assert np.array_equal(grown.indptr, built.indptr)
+    assert np.array_equal(grown.indices, built.indices)
+    assert np.array_equal(grown.data, built.data)
+    assert union.keys.size == built.nnz

@@ -234,7 +234,8 @@ class StepProblem:
 
     def residual(self, y: NDArray) -> tuple[NDArray, float]:
         # without a floor, the first call also builds the tangent (for the floor and the first
-        # Newton step)
+        # Newton step); the cache is replaced, so its tangent goes first (not two alive)
+        self._cache = {}
         R, K = self._evaluate(y, need_tangent=self.scale_floor is None)
         self._cache = {"y": y.copy(), "K": K, "blocks": self._blocks,
                        "C": getattr(self, "_multiplier_block", None), "R": R}
@@ -251,6 +252,7 @@ class StepProblem:
     def jacobian(self, y: NDArray) -> sp.csr_matrix:
         if ("y" not in self._cache or not np.array_equal(self._cache["y"], y)
                 or self._cache["K"] is None):
+            self._cache = {}  # replaced: its tangent need not live beside the new one
             R, K = self._evaluate(y, need_tangent=True)
             self._cache = {"y": y.copy(), "K": K, "blocks": self._blocks,
                            "C": getattr(self, "_multiplier_block", None)}

@@ -76,22 +76,34 @@ class TripletUnion:
         found = at < self._keys.size
         found[found] = self._keys[at[found]] == keys_t[found]
         if not found.all():
-            self._build(K, rows, cols)
-            return
+            self._grow(np.unique(keys_t[~found]), K.shape)
+            at = np.searchsorted(self._keys, keys_t)
         self._t_map = at
         self._t_key = (np.array(rows, copy=True), np.array(cols, copy=True))
+
+    def _grow(self, new: NDArray, shape: tuple[int, int]) -> None:
+        """Insert keys ``new`` (sorted, none in the union) into the union for the same K: the
+        same pattern as a rebuild from K, the triplets and the old union, and each K entry's
+        place shifted by the keys inserted before it. A rebuild sorted all the keys again:
+        at Hertz refined 8x (2.1 M entries) it held ~100 MB of temporaries, the largest
+        transient of a step (issue 18); the insertion holds ~3 arrays of entries."""
+        before = np.searchsorted(self._keys, new)  # np.insert puts new[i] before index at[i]
+        self._keys = np.insert(self._keys, before, new)
+        self._indices = np.insert(self._indices, before, (new % shape[1]).astype(
+            self._indices.dtype))
+        self._indptr = _row_starts(self._keys, shape)
+        shift = np.searchsorted(before, self._k_map, side="right")
+        self._k_map = (self._k_map + shift).astype(self._k_map.dtype)
 
     def _build(self, K: sp.csr_matrix, rows: NDArray, cols: NDArray) -> None:
         """Union pattern (sorted, unique) of K, the triplets and the union so far, and each K
         entry's and triplet's place in it."""
         n_rows, n_cols = K.shape
-        k_rows = np.repeat(np.arange(n_rows), np.diff(K.indptr))
-        keys_k = k_rows.astype(np.int64) * n_cols + K.indices
+        keys_k = np.repeat(np.arange(n_rows, dtype=np.int64) * n_cols, np.diff(K.indptr))
+        keys_k += K.indices  # row * n_cols + col, built in place
         keys_t = _keys(rows, cols, n_cols)
         union = _sorted_unique(np.concatenate([keys_k, keys_t, self._keys]))
-        indptr = np.zeros(n_rows + 1, dtype=np.int64)
-        np.add.at(indptr, union // n_cols + 1, 1)
-        self._indptr = np.cumsum(indptr)
+        self._indptr = _row_starts(union, K.shape)
         self._indices = (union % n_cols).astype(K.indices.dtype)
         self._keys = union
         position = np.int32 if union.size < 2**31 else np.int64  # kept: half the bytes
@@ -101,12 +113,18 @@ class TripletUnion:
         self._t_key = (np.array(rows, copy=True), np.array(cols, copy=True))
 
 
+def _row_starts(keys: NDArray, shape: tuple[int, int]) -> NDArray:
+    """CSR indptr (int64) of sorted keys row * n_cols + col: where each row's keys start."""
+    return np.searchsorted(keys, np.arange(shape[0] + 1, dtype=np.int64) * shape[1])
+
+
 def _sorted_unique(keys: NDArray) -> NDArray:
-    """``np.unique(keys)`` by a stable sort: the concatenated keys are a few sorted runs, which
-    the stable sort merges. NumPy 2.3+'s ``np.unique`` takes a hash table instead, which on
-    these structured int64 keys took 1.2-3 s per union of the ring's 46 530-dof pattern
-    against 0.05 s (issue 18: 15 s of a 18-step k = 8 run)."""
-    keys = np.sort(keys, kind="stable")
+    """``np.unique(keys)`` by a stable sort in place (``keys`` is a temporary): the
+    concatenated keys are a few sorted runs, which the stable sort merges. NumPy 2.3+'s
+    ``np.unique`` takes a hash table instead, which on these structured int64 keys took
+    1.2-3 s per union of the ring's 46 530-dof pattern against 0.05 s (issue 18: 15 s of a
+    18-step k = 8 run)."""
+    keys.sort(kind="stable")
     first = np.empty(keys.size, dtype=bool)
     first[:1] = True
     np.not_equal(keys[1:], keys[:-1], out=first[1:])
@@ -143,14 +161,17 @@ class FreeBlock:
 
     def _build(self, K: sp.csr_matrix, free: NDArray) -> None:
         n = K.shape[0]
-        position = np.full(n, -1, dtype=np.int64)  # free dof -> its row/column in the block
+        # int32 rows and positions: the temporaries below are arrays of nnz entries (Hertz
+        # k = 8: 67 MB over 2.1 M entries with int64; issue 18, memory)
+        index = np.int32 if n < 2**31 else np.int64
+        position = np.full(n, -1, dtype=index)  # free dof -> its row/column in the block
         position[free] = np.arange(free.size)
-        rows = np.repeat(np.arange(n), np.diff(K.indptr))
+        rows = np.repeat(np.arange(n, dtype=index), np.diff(K.indptr))
         keep = (position[rows] >= 0) & (position[K.indices] >= 0)
         self._map = np.flatnonzero(keep).astype(np.int32 if K.nnz < 2**31 else np.int64)
         counts = np.bincount(position[rows[keep]], minlength=free.size)
         self._indptr = np.concatenate([[0], np.cumsum(counts)]).astype(K.indptr.dtype)
-        self._indices = position[K.indices[keep]].astype(K.indices.dtype)
+        self._indices = position[K.indices[keep]].astype(K.indices.dtype, copy=False)
         self._shape = (free.size, free.size)
         # K's pattern arrays by reference (no copy of nnz entries): the assembler's and the
         # union's patterns are replaced, never changed in place

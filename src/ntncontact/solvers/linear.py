@@ -135,10 +135,12 @@ class _Pattern:
         self.n = A.shape[0]
         self.indptr = A.indptr.copy()
         self.indices = A.indices.copy()
-        rows = np.repeat(np.arange(self.n), np.diff(self.indptr))
-        # positions as int32 where they fit, and no int32 copy of int32 arrays: these maps are
-        # kept for the run, a few arrays of nnz entries each (issue 18, memory)
+        # positions and rows as int32 where they fit, and no int32 copy of int32 arrays: these
+        # maps are kept for the run, and the temporaries of their making were the largest
+        # transient of a Hertz k = 8 step (77 MB over 2.1 M entries with int64 and a float
+        # tracer; issue 18, memory)
         position = np.int32 if self.indices.size < 2**31 else np.int64
+        rows = np.repeat(np.arange(self.n, dtype=position), np.diff(self.indptr))
         self.transpose = _transpose_map(self.indptr, self.indices, self.n, position)
         # entries kept in symmetric mode
         self.upper = np.flatnonzero(self.indices >= rows).astype(position)
@@ -167,14 +169,15 @@ class _Pattern:
 def _transpose_map(indptr: NDArray, indices: NDArray, n: int,
                    dtype: type = np.int64) -> NDArray | None:
     """Position of entry (j, i) for each entry (i, j) of a sorted CSR pattern, or None if some
-    (j, i) is structurally absent. Transposes a matrix holding entry positions (SciPy's C++)."""
+    (j, i) is structurally absent. Transposes a matrix holding entry positions (SciPy's C++,
+    on integer data of ``dtype``: exact, and no float copy to convert)."""
     nnz = indices.size
-    tracer = sp.csr_matrix((np.arange(nnz, dtype=float), indices, indptr), shape=(n, n))
-    transposed = tracer.T.tocsr()  # sorted indices; values exact: positions < 2**53
+    tracer = sp.csr_matrix((np.arange(nnz, dtype=dtype), indices, indptr), shape=(n, n))
+    transposed = tracer.T.tocsr()  # sorted indices
     if not (np.array_equal(transposed.indptr, indptr)
             and np.array_equal(transposed.indices, indices)):
         return None
-    return transposed.data.astype(dtype)
+    return transposed.data.astype(dtype, copy=False)
 
 
 #: Below this many unknowns "auto" uses SuperLU even when PARDISO is installed: PARDISO's
@@ -265,6 +268,9 @@ class LinearSolver:
         if impl is None:
             impl_class = _BACKEND_CLASSES[backend]
             impl = self._impls[symmetric] = impl_class(self._pattern, symmetric, self.stats)
+        for other in self._impls.values():
+            if other is not impl:  # its factor is dead from now on (Factorization.valid)
+                other.release_factor()
         impl.factor(A.data)
         self._generation += 1
         return Factorization(self, A.shape[0], impl.solver(),
@@ -420,6 +426,10 @@ class _SuperLUBackend:
     def release(self) -> None:
         self.lu = None
 
+    def release_factor(self) -> None:
+        """Nothing: a SuperLU or static-LU factor belongs to the Factorization that solves
+        with it, which stays valid after later factorizations."""
+
 
 class _StaticLUBackend(_SuperLUBackend):
     """The static LU (:mod:`static_lu`) on SuperLU's ordering; SuperLU factors the first
@@ -492,6 +502,7 @@ class _PardisoBackend:
                                     shape=(pattern.n, pattern.n))
         self.threads = pardiso_threads()
         self.analysed = False
+        self.factored = False  # PARDISO holds a numerical factor (L and U) of this handle
 
     def factor(self, data: NDArray) -> None:
         self.matrix.data = np.ascontiguousarray(data[self.pattern.upper] if self.symmetric
@@ -502,6 +513,7 @@ class _PardisoBackend:
             self.analysed = True
             self.stats.analyses += 1
         self._call(22)
+        self.factored = True
         self.stats.factorizations += 1
         if self._perturbed() and not fresh:
             # the reused analysis (its matching/scaling) may no longer suit the values: redo it
@@ -534,9 +546,20 @@ class _PardisoBackend:
                 raise
             raise LinearSolverError(_pardiso_message(code, phase)) from None
 
+    def release_factor(self) -> None:
+        """Free the numerical factor (phase 0) and keep the analysis, which the next
+        factorization in this mode (phase 22) reuses with the same result. Called when the
+        solver factors in the other symmetry mode: the ring refined 8x held its free-flight
+        symmetric factor (48 MB) beside the contact steps' general one (82 MB)."""
+        if self.factored:
+            self.factored = False
+            with _mkl_controller().limit(limits=self.threads):
+                self.pardiso.free_memory(everything=False)  # L and U only (phase 0)
+
     def release(self) -> None:
         if self.pardiso is None:
             return
+        self.factored = False
         if self.analysed:
             self.analysed = False
             with _mkl_controller().limit(limits=self.threads):
