@@ -30,7 +30,7 @@ from dataclasses import dataclass
 
 import numpy as np
 import scipy.sparse as sp
-from numpy.typing import NDArray
+from numpy.typing import ArrayLike, NDArray
 from scipy.sparse.linalg import splu
 
 __all__ = ["ConservingCorrection", "conserving_correction", "dof_momenta", "rigid_modes"]
@@ -75,6 +75,48 @@ def _dof_block(mass: sp.csr_matrix, dofs: NDArray) -> sp.csc_matrix:
                          shape=(dofs.size, dofs.size))
 
 
+def _momentum_change(mass: sp.csr_matrix, x: NDArray, p: NDArray, dofs: NDArray, solve,
+                     u: NDArray, momenta: ArrayLike) -> tuple[NDArray, NDArray]:
+    """(delta_0, u_free): the least mass-norm change on ``dofs`` that gives the momenta
+    (P_x, P_y, L about the origin), and u = A^-1 M v with its part along the rigid modes
+    removed (the direction an energy change may take without changing the momenta).
+    ``p`` = M v (n, 2); ``solve`` applies A^-1."""
+    m1 = mass @ np.ones(len(x))
+    mx, my = mass @ x[:, 0], mass @ x[:, 1]
+    B_full = np.zeros((2 * len(x), 3))  # (M G) on dofs: G the rigid modes
+    B_full[0::2, 0], B_full[1::2, 1] = m1, m1
+    B_full[0::2, 2], B_full[1::2, 2] = -my, mx
+    B = B_full[dofs]
+    Phi = solve(B)
+    C = B.T @ Phi
+    current = np.array([p[:, 0].sum(), p[:, 1].sum(),
+                        float(np.sum(x[:, 0] * p[:, 1] - x[:, 1] * p[:, 0]))])
+    r = np.asarray(momenta, dtype=float) - current
+    return Phi @ np.linalg.solve(C, r), u - Phi @ np.linalg.solve(C, B.T @ u)
+
+
+def _energy_change(kinetic: float, k0: float, A: sp.spmatrix, b: NDArray, delta: NDArray,
+                   u_free: NDArray) -> tuple[NDArray, bool]:
+    """(delta, restored): ``delta`` (the momentum change delta_0) plus the step along u_free
+    that brings the kinetic energy from k0 to ``kinetic``, and whether it could."""
+    # what is left to change once delta_0 is made (A delta_0 is orthogonal to u_free)
+    left = kinetic - k0 - float(b @ delta) - 0.5 * float(delta @ (A @ delta))
+    norm2 = float(b @ u_free)  # |u_N|_A^2 = u_N . A u = u_N . b
+    ratio = 1.0 + 2.0 * left / norm2 if norm2 > 0.0 else -1.0
+    if abs(left) <= 1e-14 * max(abs(kinetic), k0):
+        # nothing left to change (a body at rest: v = 0 meets K* = 0 and P* = 0), which
+        # no velocity change could do when the motion vanishes (u_N = 0)
+        return delta, True
+    if ratio >= 0.0 and norm2 > 1e-30 * max(abs(k0), 1e-300):
+        return delta + (np.sqrt(ratio) - 1.0) * u_free, True
+    if ratio < 0.0 and norm2 > 0.0:
+        # K* below the least K the momenta allow: give what the motion can (the sphere's
+        # point nearest the origin, alpha = -1), so that what is still missing changes
+        # continuously with K* and the caller can hand it on (hand_over_energy)
+        return delta - u_free, False
+    return delta, False
+
+
 def conserving_correction(mass: sp.spmatrix, x: NDArray, v: NDArray, dofs: NDArray,
                           momenta: NDArray | None, kinetic: float | None
                           ) -> ConservingCorrection:
@@ -96,41 +138,12 @@ def conserving_correction(mass: sp.spmatrix, x: NDArray, v: NDArray, dofs: NDArr
     solve = splu(A).solve
 
     u = solve(b)
-    delta = np.zeros(dofs.size)
-    u_free = u
-    if momenta is not None:
-        m1 = mass @ np.ones(len(x))
-        mx, my = mass @ x[:, 0], mass @ x[:, 1]
-        B_full = np.zeros((2 * len(x), 3))  # (M G) on dofs: G the rigid modes
-        B_full[0::2, 0], B_full[1::2, 1] = m1, m1
-        B_full[0::2, 2], B_full[1::2, 2] = -my, mx
-        B = B_full[dofs]
-        Phi = solve(B)
-        C = B.T @ Phi
-        current = np.array([p[:, 0].sum(), p[:, 1].sum(),
-                            float(np.sum(x[:, 0] * p[:, 1] - x[:, 1] * p[:, 0]))])
-        r = np.asarray(momenta, dtype=float) - current
-        delta = Phi @ np.linalg.solve(C, r)
-        u_free = u - Phi @ np.linalg.solve(C, B.T @ u)
+    delta, u_free = ((np.zeros(dofs.size), u) if momenta is None
+                     else _momentum_change(mass, x, p, dofs, solve, u, momenta))
     restored = kinetic is None
     if kinetic is not None:
-        k0 = 0.5 * float(v.ravel() @ Mv)
-        # what is left to change once delta_0 is made (A delta_0 is orthogonal to u_free)
-        left = kinetic - k0 - float(b @ delta) - 0.5 * float(delta @ (A @ delta))
-        norm2 = float(b @ u_free)  # |u_N|_A^2 = u_N . A u = u_N . b
-        ratio = 1.0 + 2.0 * left / norm2 if norm2 > 0.0 else -1.0
-        if abs(left) <= 1e-14 * max(abs(kinetic), k0):
-            # nothing left to change (a body at rest: v = 0 meets K* = 0 and P* = 0), which
-            # no velocity change could do when the motion vanishes (u_N = 0)
-            restored = True
-        elif ratio >= 0.0 and norm2 > 1e-30 * max(abs(k0), 1e-300):
-            delta = delta + (np.sqrt(ratio) - 1.0) * u_free
-            restored = True
-        elif ratio < 0.0 and norm2 > 0.0:
-            # K* below the least K the momenta allow: give what the motion can (the sphere's
-            # point nearest the origin, alpha = -1), so that what is still missing changes
-            # continuously with K* and the caller can hand it on (hand_over_energy)
-            delta = delta - u_free
+        delta, restored = _energy_change(kinetic, 0.5 * float(v.ravel() @ Mv), A, b, delta,
+                                         u_free)
     out = v.ravel().copy()
     out[dofs] += delta
     v_sub = v.ravel()[dofs]
