@@ -736,17 +736,7 @@ def move_ale_body(
         return _unchanged(X, d, v, a, mismatch, active[clamped])
     if degenerate:
         check_elements(x_new, body.cells, body.name)
-    gradients = tn.gradients if body.remap == "quadratic" else None
-    # likely old cell of every moved node: for a slid surface node the cell of the segment it
-    # landed on, otherwise a cell around its old position
-    hint = _hint_cells(body._node_cell, chain.nodes, tn.segment_cells(chain),
-                       tn.curve(chain).node_s, slides, moved)
-    values = tn.remapper.remap(tn.fields, x_new[moved], body.remap, gradients=gradients,
-                               hint=hint)
-    X_new, v_new, a_new = X.copy(), v.copy(), a.copy()
-    X_new[moved], v_new[moved], a_new[moved] = values[:, :2], values[:, 2:4], values[:, 4:]
-    if body.convection == "convective_term":  # the step's C v term convects v (item 6)
-        v_new[moved], a_new[moved] = v[moved], a[moved]
+    X_new, v_new, a_new = _remapped(body, tn, chain, slides, x_new, moved, (X, v, a))
     if min_sines_below(X_new, body.cells, touched, _DEGENERATE):
         check_elements(X_new, body.cells, f"{body.name} (reference image)")
     mass_new = tn.masses_after(X_new, touched)
@@ -760,6 +750,27 @@ def move_ale_body(
         seeds=seeds, resets=resets,
     )
 
+
+
+def _remapped(body: AleBody, tn: _TnState, chain: _Chain, slides: NDArray, x_new: NDArray,
+              moved: NDArray, fields: tuple[NDArray, NDArray, NDArray]
+              ) -> tuple[NDArray, NDArray, NDArray]:
+    """(X, v, a) on the moved mesh ``x_new``: the t_n fields ``fields`` remapped at the moved
+    nodes (``moved``), the others as they were; with the convective term v and a stay (the
+    step's C v term convects them, item 6)."""
+    X, v, a = fields
+    gradients = tn.gradients if body.remap == "quadratic" else None
+    # likely old cell of every moved node: for a slid surface node the cell of the segment it
+    # landed on, otherwise a cell around its old position
+    hint = _hint_cells(body._node_cell, chain.nodes, tn.segment_cells(chain),
+                       tn.curve(chain).node_s, slides, moved)
+    values = tn.remapper.remap(tn.fields, x_new[moved], body.remap, gradients=gradients,
+                               hint=hint)
+    X_new, v_new, a_new = X.copy(), v.copy(), a.copy()
+    X_new[moved], v_new[moved], a_new[moved] = values[:, :2], values[:, 2:4], values[:, 4:]
+    if body.convection == "convective_term":
+        v_new[moved], a_new[moved] = v[moved], a[moved]
+    return X_new, v_new, a_new
 
 # --- compiled loops of a move: remap hints, masses of the changed cells ----------------------
 
