@@ -388,9 +388,8 @@ class Simulation:
             self._require_accepted(augmentation,
                                    unconverged_interfaces(interfaces, used, before, previous))
             self._augmentations_converged = False
-        return self._solved_step(problem, result, motion,
-                                 SolvedStep(state, d, used, results, augmentation, iterations,
-                                            0.0))
+        return SolvedStep(state, d, used, results, augmentation, iterations,
+                          **self._step_figures(problem, result, motion, state.X + d))
 
     def _augmentation_problem(self, state: StepState, contact: tuple, dt: float,
                               mass: sp.spmatrix | None, motion: MeshMotion | None,
@@ -430,19 +429,20 @@ class Simulation:
                                                sensitivities)
         return updated
 
-    def _solved_step(self, problem: StepProblem, result, motion: MeshMotion | None,
-                     solved: SolvedStep) -> SolvedStep:
-        """``solved`` with what the final solve and mesh motion give beside d: the ALE
-        mismatch and energies, the tie forces and the support reactions."""
-        ties = (tie_forces(problem.constraints, problem.multipliers(result.y))
-                if self.model.ties else {})
-        reactions = (support_reactions(self._supports, problem.full_residual(result.y),
-                                       solved.state.X + solved.d) if self._supports else {})
-        if motion is None:
-            return replace(solved, tie_forces=ties, reactions=reactions)
-        return replace(solved, mismatch=motion.mismatch, tie_forces=ties, reactions=reactions,
-                       remap_energy=motion.remap_strain_change,
-                       unreturned_energy=motion.unreturned_energy)
+    def _step_figures(self, problem: StepProblem, result, motion: MeshMotion | None,
+                      x_end: NDArray) -> dict:
+        """What the final solve and the mesh motion give beside d (SolvedStep's fields): the
+        ALE mismatch and energies, the tie forces and the support reactions."""
+        figures: dict = {"mismatch": 0.0}
+        if motion is not None:
+            figures = {"mismatch": motion.mismatch, "remap_energy": motion.remap_strain_change,
+                       "unreturned_energy": motion.unreturned_energy}
+        figures["tie_forces"] = (tie_forces(problem.constraints, problem.multipliers(result.y))
+                                 if self.model.ties else {})
+        figures["reactions"] = (support_reactions(self._supports,
+                                                  problem.full_residual(result.y), x_end)
+                                if self._supports else {})
+        return figures
 
     def _solve_augmentation(self, problem: StepProblem, y0: NDArray,
                             factors: FactorCache | None, contact: tuple, probe: bool):
