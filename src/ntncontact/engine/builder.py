@@ -269,9 +269,12 @@ def _interface(cfg: ContactConfig, index: int, bodies: tuple[Body, ...],
     # to node; offset Lagrangian pairs would share them at the wrong places (docs/theory.md)
     lagrangian = b1.mesh_motion == "lagrangian" and b2.mesh_motion == "lagrangian"
     share = not lagrangian if cfg.unpaired_share is None else cfg.unpaired_share
-    law = ContactLaw(cfg.method, cfg.penalty_normal, cfg.penalty_tangential, cfg.friction,
-                     moment_free, cfg.gap_restoring, share)
     persistency = (cfg.law or ("persistency" if kind == "dynamic" else "gap")) == "persistency"
+    spacing = min(_median_spacing(b.mesh.nodes[c.nodes], c.closed)
+                  for b, c in ((b1, chain1), (b2, chain2)))
+    law = ContactLaw(cfg.method, *interface_penalties(cfg, (b1.material, b2.material), spacing,
+                                                      persistency),
+                     cfg.friction, moment_free, cfg.gap_restoring, share)
     aug = cfg.augmentation
     tol = AugmentationTolerances(aug.gap_tolerance, aug.slip_tolerance, aug.traction_tolerance)
     candidates = surface1.nodes[~np.isin(surface1.nodes, excluded)]
@@ -308,6 +311,33 @@ def _check_paired_once(interfaces: tuple[ContactInterface, ...],
                 f"would be paired twice. Make one interface of both: surface_1 = "
                 f"\"{cfg_i.surface_1}+{cfg_j.surface_1}\", or exclude those nodes from one of "
                 "them (exclude = [node set])")
+
+
+def interface_penalties(cfg: ContactConfig, materials: tuple[Material, Material],
+                        spacing: float, persistency: bool) -> tuple[float, float]:
+    """(eps_N, eps_T) of an interface: ``penalty_normal`` and ``penalty_tangential`` as given,
+    or ``penalty_factor`` f times the softer body's stiffness as docs/scenarios.md ("Choosing
+    penalty_normal") advises: under the gap law f (lambda + 2 mu) / h, the P-wave modulus of
+    the 2D model over the contact spacing h, so that a pair's spring eps_N L_c keeps its ratio
+    to the elements' stiffness, and with it the Uzawa contraction ~(lambda + 2 mu) / (eps_N h),
+    when the mesh is refined; under the persistency law f rho c, the impedance (traction per
+    velocity), which does not depend on the mesh. eps_T is eps_N unless given."""
+    if cfg.penalty_factor is None:
+        return cfg.penalty_normal, cfg.penalty_tangential
+    moduli = [m.effective_lambda + 2.0 * m.mu for m in materials]
+    if persistency:
+        stiffness = min(np.sqrt(modulus * m.density) for modulus, m in zip(moduli, materials,
+                                                                        strict=True))
+    else:
+        stiffness = min(moduli) / spacing
+    eps_N = cfg.penalty_factor * float(stiffness)
+    return eps_N, cfg.penalty_tangential or eps_N
+
+
+def _median_spacing(xy: np.ndarray, closed: bool) -> float:
+    """The median edge length of a surface chain: its contact spacing h (the median, so that
+    a few long edges away from the contact zone, as in a graded mesh, do not set it)."""
+    return float(np.median(chain_edge_lengths(xy, closed)))
 
 
 def _arc_lengths(xy: np.ndarray) -> np.ndarray:

@@ -49,7 +49,10 @@ class ResultWriter:
                              "max_penetration": 0.0, "max_active_pairs": 0,
                              "unconverged_steps": 0, "max_penetration_off_surfaces": 0.0,
                              "max_penetration_off_surfaces_at": None,
-                             "ale_unreturned_energy": 0.0} | summary_extra
+                             "ale_unreturned_energy": 0.0,
+                             "contact_penalties": {  # as used (contact.N.penalty_factor)
+                                 ci.name: {"normal": ci.law.eps_N, "tangential": ci.law.eps_T}
+                                 for ci in model.interfaces}} | summary_extra
         extra_history = extra_history + reaction_columns(model)
         if model.ties:
             extra_history = extra_history + tie_history(model)

@@ -288,6 +288,8 @@ class ContactConfig(Strict):
     law: Literal["gap", "persistency"] | None = None
     penalty_normal: NonNegative = 0.0
     penalty_tangential: NonNegative = 0.0
+    #: the penalties from the bodies and the mesh instead (engine.builder.interface_penalties)
+    penalty_factor: Positive | None = None
     friction: NonNegative = 0.0
     exclude: list[str] = []
     corners: list[str] = []
@@ -303,10 +305,15 @@ class ContactConfig(Strict):
     def _sides(self) -> ContactConfig:
         if (self.body_1, self.surface_1) == (self.body_2, self.surface_2):
             raise ValueError("the same surface cannot be on both sides of an interface")
-        if self.method != "lagrange" and self.penalty_normal <= 0.0:
-            raise ValueError(f"method '{self.method}' needs penalty_normal > 0")
-        if self.friction > 0.0 and self.penalty_tangential <= 0.0:
-            raise ValueError("friction > 0 needs penalty_tangential > 0")
+        scaled = self.penalty_factor is not None
+        if scaled and self.penalty_normal > 0.0:
+            raise ValueError("give penalty_normal or penalty_factor, not both "
+                             "(penalty_normal = 0 leaves eps_N to penalty_factor)")
+        if self.method != "lagrange" and self.penalty_normal <= 0.0 and not scaled:
+            raise ValueError(f"method '{self.method}' needs penalty_normal > 0 "
+                             "(or penalty_factor)")
+        if self.friction > 0.0 and self.penalty_tangential <= 0.0 and not scaled:
+            raise ValueError("friction > 0 needs penalty_tangential > 0 (or penalty_factor)")
         return self
 
 
