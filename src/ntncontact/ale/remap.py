@@ -44,6 +44,7 @@ from typing import Any, Literal, NamedTuple
 import numpy as np
 import scipy.sparse as sp
 from numpy.typing import ArrayLike, NDArray
+from scipy.spatial import cKDTree
 
 from ntncontact.mesh.quadmesh import MeshError
 
@@ -134,9 +135,6 @@ class Remapper:
     # the search structures are built on first use: a hinted ALE move rarely needs them
     @cached_property
     def _tree(self) -> Any:
-        # imported here: scipy.spatial costs ~0.08 s at start-up and hinted moves never ask
-        from scipy.spatial import cKDTree
-
         return cKDTree(self._cell_xy.mean(axis=1))
 
     @cached_property

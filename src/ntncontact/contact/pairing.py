@@ -15,6 +15,7 @@ from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
+from scipy.spatial import cKDTree
 
 from .kinematics import pair_gaps
 from .surfaces import Interface
@@ -60,8 +61,6 @@ def _closest_on_segments(
     """Closest segment index, local coordinate and distance for every query point."""
     if len(q) * len(a) <= BRUTE_FORCE_PAIRS:
         return _closest_of_all_segments(q, a, b)
-    from scipy.spatial import cKDTree  # only for large interfaces (~0.08 s to import)
-
     mid = 0.5 * (a + b)
     hits = cKDTree(mid).query_ball_point(q, radius)
     counts = np.fromiter((len(h) for h in hits), dtype=np.int64, count=len(hits))
@@ -94,8 +93,6 @@ def _nearest_nodes(q: NDArray, nodes: NDArray) -> tuple[NDArray, NDArray[np.int6
     """Distance to and index of the nearest of ``nodes`` for every query point; of equally
     near nodes the k-d tree may return any, the comparison of all the first."""
     if len(q) * len(nodes) > BRUTE_FORCE_PAIRS:
-        from scipy.spatial import cKDTree
-
         distance, k = cKDTree(nodes).query(q)
         return distance, np.asarray(k, dtype=np.int64)
     d2 = ((q[:, None, :] - nodes[None, :, :]) ** 2).sum(axis=2)
