@@ -107,3 +107,18 @@ def test_augmentations_do_not_grow_with_refinement_under_the_factor():
             assert history["augmentations_converged"].iloc[1:].all()
     assert counts["scaled", 4] <= counts["scaled", 1]
     assert counts["fixed", 4] >= counts["fixed", 1] + 4
+
+
+def test_finer_surface_and_softer_body_set_the_gap_law_penalty():
+    """Beyond the uniform case: the foundation meshed 3x finer along the contact sets h, and a
+    foundation in plane stress (E 50, nu 0.3: lambda + 2 mu of the 2D model is E / (1 - nu^2))
+    softer than the block sets the modulus."""
+    data = pressed_block(1, {"penalty_factor": 4.0})
+    foundation = data["bodies"][1]
+    foundation["mesh"]["nx"] = 12
+    foundation["material"] = {"model": "linear_elastic", "E": 50.0, "nu": 0.3,
+                              "density": 1.0, "plane_stress": True}
+    law = model_from_dict(data).interfaces[0].law
+    modulus = 50.0 / (1.0 - 0.3**2)
+    assert modulus < BLOCK_MODULUS
+    assert law.eps_N == pytest.approx(4.0 * modulus / (2.0 / 12), rel=1e-12)
