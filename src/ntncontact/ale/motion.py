@@ -751,7 +751,6 @@ def move_ale_body(
     )
 
 
-
 def _remapped(body: AleBody, tn: _TnState, chain: _Chain, slides: NDArray, x_new: NDArray,
               moved: NDArray, fields: tuple[NDArray, NDArray, NDArray]
               ) -> tuple[NDArray, NDArray, NDArray]:
@@ -771,6 +770,7 @@ def _remapped(body: AleBody, tn: _TnState, chain: _Chain, slides: NDArray, x_new
     if body.convection == "convective_term":
         v_new[moved], a_new[moved] = v[moved], a[moved]
     return X_new, v_new, a_new
+
 
 # --- compiled loops of a move: remap hints, masses of the changed cells ----------------------
 
