@@ -315,7 +315,7 @@ def pair_response(
                           objective=law.moment_free)
     t_N, dt_dmeasure = normal_traction(law, state.lambda_N, kin.normal_measure)
     d_t_N = dt_dmeasure[:, None, None] * kin.d_normal_measure
-    dlam = state.dlambda_T if law.uses_multipliers else np.zeros(len(state))
+    dlam = state.dlambda_T if law.method != "penalty" else np.zeros(len(state))
     rm = return_mapping(state.t_T, dlam, kin.slip_measure, t_N, law.mu, law.eps_T)
     d_t_T = rm.d_slip[:, None, None] * kin.d_slip_measure + rm.d_normal[:, None, None] * d_t_N
     return PairResponse(kin, t_N, d_t_N, rm, d_t_T)

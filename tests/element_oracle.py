@@ -10,9 +10,19 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import NDArray
 
-from ntncontact.fem.q4 import check_current_jacobian, reference_gradients
+from ntncontact.fem.q4 import InvertedElementError, reference_gradients
 
 _I2 = np.eye(2)
+
+
+def check_current_jacobian(F: NDArray) -> None:
+    """Raise :class:`InvertedElementError` if det F <= 0 at any Gauss point (the kernel's
+    own check is inside its element loop)."""
+    det = F[..., 0, 0] * F[..., 1, 1] - F[..., 0, 1] * F[..., 1, 0]
+    bad = det <= 0.0
+    if bad.any():
+        e = int(np.argwhere(bad)[0, 0])
+        raise InvertedElementError(e, float(det[e].min()), "current configuration")
 
 
 def _inv_det(F: NDArray) -> tuple[NDArray, NDArray]:

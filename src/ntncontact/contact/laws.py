@@ -61,7 +61,3 @@ class ContactLaw:
         (``evaluate._normal_traction``) and multipliers may take Newton updates
         (``augmentation.newton_update``)."""
         return self.method == "augmented_lagrangian" and not self.frictional
-
-    @property
-    def uses_multipliers(self) -> bool:
-        return self.method != "penalty"

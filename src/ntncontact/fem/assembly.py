@@ -138,11 +138,6 @@ class Assembler:
         idx = slice(None) if elements is None else elements
         return element_mass(X[self.cells[idx]], self.rho[idx])
 
-    def dof_mass(self, element_masses: NDArray, lumped: bool) -> sp.csr_matrix:
-        """Mass on dofs from all element masses, in the stiffness pattern (so that the Newton
-        matrix 4/dt^2 M + K is a sum of data arrays); lumped: row sums on the diagonal."""
-        return self.pattern_matrix(self.dof_mass_data(element_masses, lumped))
-
     def dof_mass_data(self, element_masses: NDArray, lumped: bool,
                       elements: NDArray | None = None) -> NDArray:
         """The CSR data (stiffness pattern) of the dof mass of ``elements`` (all by default)

@@ -87,12 +87,3 @@ def kinematics(X_e: NDArray, x_e: NDArray) -> Kinematics:
     """Reference gradients, weights and deformation gradient for elements (ne, 4, 2)."""
     grad, weight = reference_gradients(X_e)
     return Kinematics(grad, weight, deformation_gradient(grad, x_e))
-
-
-def check_current_jacobian(F: NDArray) -> None:
-    """Raise :class:`InvertedElementError` if det F <= 0 at any Gauss point."""
-    det = F[..., 0, 0] * F[..., 1, 1] - F[..., 0, 1] * F[..., 1, 0]
-    bad = det <= 0.0
-    if bad.any():
-        e = int(np.argwhere(bad)[0, 0])
-        raise InvertedElementError(e, float(det[e].min()), "current configuration")

@@ -97,9 +97,6 @@ class QuadMesh:
         """The same topology and sets at new node coordinates."""
         return QuadMesh(nodes, self.cells, dict(self.node_sets), dict(self.edge_sets), self.name)
 
-    def with_name(self, name: str) -> QuadMesh:
-        return QuadMesh(self.nodes, self.cells, dict(self.node_sets), dict(self.edge_sets), name)
-
     def with_sets(
         self,
         node_sets: Mapping[str, NDArray[np.int64]] | None = None,

@@ -67,11 +67,6 @@ class StaticSymbolic:
     u_ptr: NDArray[np.uint64]
     u_rows: NDArray[np.uint64]
 
-    @property
-    def flops(self) -> int:
-        """Multiply-adds of one numerical factorization."""
-        return int(np.sum(np.diff(self.l_ptr)[self.u_rows]))
-
 
 @dataclass(frozen=True)
 class StaticFactor:
