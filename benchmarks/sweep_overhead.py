@@ -152,7 +152,8 @@ def main(cases: int, workers: int, t_end: float, spec_file: str | None, warm: bo
             from dask.distributed import LocalCluster
 
             cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
-                                   dashboard_address=None)
+                                   dashboard_address=None,
+                                   scheduler_kwargs=sweep_module.SCHEDULER_HTTP)
             scheduler = cluster.scheduler_address
             module.sweep(_ring_spec(tmp, workers, 0.05, offset=10**6), tmp / "warm",
                          scheduler=scheduler, progress=False)  # imports and kernels loaded

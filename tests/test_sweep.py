@@ -2,15 +2,17 @@
 
 from __future__ import annotations
 
+import socket
 import subprocess
 import sys
+import warnings
 from pathlib import Path
 
 import pandas as pd
 import pytest
 
 from ntncontact.io.scenario import ScenarioError
-from ntncontact.studies.sweep import case_name, load_sweep, sweep
+from ntncontact.studies.sweep import SCHEDULER_HTTP, case_name, load_sweep, sweep
 
 BLOCK = """
 title = "small free block"
@@ -75,6 +77,26 @@ def test_a_sweep_runs_every_case_records_the_failure_and_skips_finished_ones_on_
     assert again.iloc[:4]["skipped"].all()  # finished: not run again
     assert not bool(again.iloc[4]["skipped"]) and again.iloc[4]["status"] == "failed"
     pd.testing.assert_series_equal(again["final_kinetic"].iloc[:4], table["final_kinetic"].iloc[:4])
+
+
+@pytest.mark.slow
+def test_a_sweep_beside_a_busy_dashboard_port_warns_nothing(tmp_path):
+    """Port 8787 taken (by another sweep or a notebook's Dask dashboard): the sweep's own
+    cluster serves its HTTP routes elsewhere, without Distributed's "already in use"."""
+    (tmp_path / "block.toml").write_text(BLOCK)
+    spec = tmp_path / "sweep.toml"
+    spec.write_text('scenario = "block.toml"\n[grid]\n"analysis.mass" = ["lumped"]\n')
+    with socket.socket() as busy:
+        try:
+            busy.bind(("127.0.0.1", 8787))
+            busy.listen()
+        except OSError:
+            pass  # already taken by something else: the case under test all the same
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            table = sweep(spec, tmp_path / "out", workers=1, progress=False)
+    assert table["status"].tolist() == ["completed"]
+    assert not [w for w in caught if "already in use" in str(w.message)]
 
 
 def test_case_folders_depend_only_on_the_overrides():
@@ -147,7 +169,8 @@ def test_the_cases_start_longest_first_and_come_back_in_the_files_order(monkeypa
     costs = [3.0, 10.0, 0.0, 10.0, 7.0]
     work = [({"a": k}, f"case{k}", cost) for k, cost in enumerate(costs)]
     with LocalCluster(n_workers=1, threads_per_worker=1, processes=False,
-                      dashboard_address=None) as cluster, Client(cluster) as client:
+                      dashboard_address=None, scheduler_kwargs=SCHEDULER_HTTP) as cluster, \
+            Client(cluster) as client:
         rows = sweep_module._run_cases(client, True, spec, "x.toml", work, progress=False)
     started = [r["case"] for r in sorted(rows, key=lambda r: r["started"])]
     assert started == ["case1", "case3", "case4", "case0", "case2"]  # ties in file order

@@ -70,6 +70,13 @@ LOCAL_DASK_CONFIG: dict[str, Any] = {
 }
 
 
+#: The scheduler serves its health and metrics routes over HTTP even without a dashboard, on
+#: port 8787 unless told otherwise: with that port taken (another sweep, a notebook's Dask
+#: dashboard) Distributed warned "Port 8787 is already in use" to the user's terminal. A free
+#: port on the loopback interface, which nothing of a sweep needs to know.
+SCHEDULER_HTTP: dict[str, Any] = {"dashboard_address": "127.0.0.1:0"}
+
+
 class _Strict(BaseModel):
     model_config = ConfigDict(extra="forbid", frozen=True)
 
@@ -235,7 +242,7 @@ def _dask_client(scheduler: str | None, workers: int | None) -> Iterator[tuple[A
     if scheduler is None:
         with dask.config.set(LOCAL_DASK_CONFIG):  # read by the scheduler, nannies, workers
             cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
-                                   dashboard_address=None)
+                                   dashboard_address=None, scheduler_kwargs=SCHEDULER_HTTP)
     try:
         with Client(cluster if cluster is not None else scheduler) as client:
             yield client, cluster
@@ -337,4 +344,5 @@ def _slug(name: str) -> str:
     return "".join(ch if ch.isalnum() else "_" for ch in name).strip("_")
 
 
-__all__ = ["LOCAL_DASK_CONFIG", "SweepSpec", "case_cost", "load_sweep", "run_case", "sweep"]
+__all__ = ["LOCAL_DASK_CONFIG", "SCHEDULER_HTTP", "SweepSpec", "case_cost", "load_sweep",
+           "run_case", "sweep"]
