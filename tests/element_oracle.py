@@ -18,15 +18,19 @@ _I2 = np.eye(2)
 def check_current_jacobian(F: NDArray) -> None:
     """Raise :class:`InvertedElementError` if det F <= 0 at any Gauss point (the kernel's
     own check is inside its element loop)."""
-    det = F[..., 0, 0] * F[..., 1, 1] - F[..., 0, 1] * F[..., 1, 0]
+    det = _det(F)
     bad = det <= 0.0
     if bad.any():
         e = int(np.argwhere(bad)[0, 0])
         raise InvertedElementError(e, float(det[e].min()), "current configuration")
 
 
+def _det(F: NDArray) -> NDArray:
+    return F[..., 0, 0] * F[..., 1, 1] - F[..., 0, 1] * F[..., 1, 0]
+
+
 def _inv_det(F: NDArray) -> tuple[NDArray, NDArray]:
-    det = F[..., 0, 0] * F[..., 1, 1] - F[..., 0, 1] * F[..., 1, 0]
+    det = _det(F)
     inv = np.empty_like(F)
     inv[..., 0, 0] = F[..., 1, 1] / det
     inv[..., 1, 1] = F[..., 0, 0] / det
