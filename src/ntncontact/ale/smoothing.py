@@ -31,7 +31,7 @@ exactly as it is where nothing pushes it: zero surface moves give zero interior 
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Literal
 
 import numpy as np
@@ -299,9 +299,39 @@ class Smoother:
         """Sweep until the largest move is below ``rel_tol`` times the mean edge length.
 
         Raises MeshError (naming element, node and body) if the result has an inverted cell.
+
+        Where the free nodes touch fewer than half of the cells (an ALE body's smoothing
+        layers), the sweeps run on the cells around them only (``_around_free``): a free
+        node's rule reads only the cells that hold it, and the other nodes keep their places,
+        so the result is the same to the bit (the local mesh keeps the node order, hence every
+        sum's order), at a cost that follows the smoothed region instead of the body. The
+        fast-sliding blocks refined 8x with both blocks ALE spent 8.9 s of a 70 s window in
+        whole-body sweeps (760 sweeps of ~12 ms) for a region of a few hundred cells.
         """
         x = np.array(nodes, dtype=float)
-        scale = np.mean(np.linalg.norm(x[self._src] - x[self._dst], axis=1))
+        scale = float(np.mean(np.linalg.norm(x[self._src] - x[self._dst], axis=1)))
+        around = self.free[self.cells].any(axis=1)
+        if np.count_nonzero(around) < 0.5 * len(self.cells):
+            local, index = self._around_free(around)
+            result = local._sweeps(x[index], max_sweeps, rel_tol, scale)
+            x[index] = result.nodes
+            result = replace(result, nodes=x)
+        else:
+            result = self._sweeps(x, max_sweeps, rel_tol, scale)
+        check_elements(result.nodes, self.cells, self.body_name)
+        return result
+
+    def _around_free(self, around: NDArray[np.bool_]) -> tuple[Smoother, NDArray[np.int64]]:
+        """The smoother of the cells ``around`` (those holding a free node), their nodes
+        numbered in the body's order, and those nodes' body indices."""
+        index, local = np.unique(self.cells[around], return_inverse=True)
+        return Smoother(local.reshape(-1, 4), index.size, ~self.free[index], self.method,
+                        self.body_name, self.max_halvings), index
+
+    def _sweeps(self, x: NDArray, max_sweeps: int, rel_tol: float,
+                scale: float) -> SmoothingResult:
+        """Jacobi sweeps from positions x until the largest move is below ``rel_tol`` x
+        ``scale`` (the whole body's mean edge length)."""
         max_move, shortened, refused = 0.0, 0, 0
         sweeps = 0
         while sweeps < max_sweeps:
@@ -311,7 +341,6 @@ class Smoother:
             x = new
             if max_move <= rel_tol * scale:
                 break
-        check_elements(x, self.cells, self.body_name)
         return SmoothingResult(x, sweeps, max_move, shortened, refused)
 
     def smooth(self, nodes: ArrayLike, max_sweeps: int = 100, rel_tol: float = 1e-6) -> NDArray:
