@@ -234,3 +234,25 @@ def test_the_energy_an_ale_body_cannot_give_back_comes_from_its_partner_first():
         b = model.bodies[idle]
         rows = slice(b.node_offset, b.node_offset + b.mesh.n_nodes)
         np.testing.assert_array_equal(out[rows], v[rows])
+
+
+@pytest.mark.parametrize("dofs", [np.arange(8, 30), np.r_[9:30, 33, 40:44]],
+                         ids=["both dofs of each node", "a node with one dof"])
+def test_the_mass_block_solver_inverts_the_dof_block(case, dofs):
+    """``_mass_solver``: with both dofs of each node it factors the scalar node block once for
+    x and y; otherwise the dof block itself. Either way A is M_SS on the dofs (M acting
+    alike on x and y) and solve applies A^-1, to a vector and to columns."""
+    from ntncontact.ale.conservation import _dof_block, _mass_solver
+
+    mass, _, _, rng = case
+    mass = sp.csr_matrix(mass)
+    A, solve = _mass_solver(mass, dofs)
+    reference = _dof_block(mass, dofs).toarray()
+    np.testing.assert_array_equal(A.toarray(), reference)
+    mixed = dofs[:, None] % 2 != dofs[None, :] % 2
+    assert not reference[mixed].any() and reference[~mixed].any()  # x and y do not couple
+    for rhs in (rng.standard_normal(dofs.size), rng.standard_normal((dofs.size, 3))):
+        x = solve(rhs)
+        assert x.shape == rhs.shape
+        np.testing.assert_allclose(reference @ x, rhs, rtol=0, atol=1e-12 * np.abs(rhs).max()
+                                   * np.linalg.cond(reference))
