@@ -38,8 +38,9 @@ demo: $(WARM)
 # in 10.1 min on this 2-core machine against 15 min on one worker (session 15). The files are
 # handed out in the order tests/conftest.py sets, those with a slow test first, so that the
 # longest file starts first and the other worker runs the rest beside it (xdist's default
-# order, most tests first, left it for last: session 23, 22.8 min of wall).
-PYTEST := $(BIN)/python -m pytest -q -n auto --dist loadfile --no-loadscope-reorder
+# order, most tests first, left it for last: session 23, 22.8 min of wall). The ten slowest
+# tests are listed at the end.
+PYTEST := $(BIN)/python -m pytest -q -n auto --dist loadfile --no-loadscope-reorder --durations=10
 
 test: $(WARM)
 	$(PYTEST)
