@@ -10,7 +10,7 @@ def pytest_collection_modifyitems(config, items):
     ``make test`` gives each pytest-xdist worker whole files (``--dist loadfile``, with
     ``--no-loadscope-reorder`` so that this order is the order the files are handed out). By
     default xdist hands out the files with the most tests first, which put the longest file
-    (tests/test_ale_both_refined.py: one test, 6-13 min) near the end: the other worker then
+    (tests/test_ale_both_refined.py: one test, 6-15 min) near the end: the other worker then
     waited for it (session 23: 22.8 min of wall for ~35 worker-minutes). Longest first, the
     other worker runs the rest beside it."""
     slow_files = {item.path for item in items if item.get_closest_marker("slow")}

@@ -8,8 +8,8 @@ Lagrangian block's Q4 corner, not the ALE (docs/examples.md, "Refined meshes"). 
 block ALE too its corner cell stays open (131 degrees at the most) once the node beside its
 leading corner is held within twice its reference distance and the lower block's node follows
 it (``ale.surface._stretch_clamp``, ``engine.mesh_motion._hold_clamped``). Slow: 22,272
-elements, 6 to 14 minutes on this 2-core machine (its speed varies from day to day; 862 s in
-session 23's `make test`, the 8x run alone 573 s), the longest file of the suite, which
+elements, 6 to 15 minutes on this 2-core machine (its speed varies from day to day; 862-889 s in
+session 23's `make test` runs, the 8x run alone 573 s), the longest file of the suite, which
 `make test` therefore starts first (tests/conftest.py).
 """
 
