@@ -173,6 +173,6 @@ def test_sweeps_around_a_few_free_nodes_match_the_whole_mesh_sweeps_to_the_bit(m
     assert (local.sweeps, local.shortened_moves, local.refused_moves) == (
         whole.sweeps, whole.shortened_moves, whole.refused_moves)
     # laplacian and angle converge (21 and 47 sweeps); weighted_angle cycles to the limit
-    assert 1 < local.sweeps < (200 if method != "weighted_angle" else 201)
+    assert (1 < local.sweeps < 200) if method != "weighted_angle" else (local.sweeps == 200)
     assert not np.array_equal(local.nodes[free], moved[free])
     np.testing.assert_array_equal(local.nodes[~free], moved[~free])
