@@ -58,6 +58,6 @@ class ContactLaw:
     @property
     def frictionless_augmented(self) -> bool:
         """Frictionless augmented Lagrangian: where pairs may be held on the pressed branch
-        (``evaluate._normal_traction``) and multipliers may take Newton updates
-        (``augmentation.newton_update``)."""
+        (``evaluate._normal_traction``) and quasi-static multipliers may be extrapolated
+        (``augmentation.extrapolated_update``)."""
         return self.method == "augmented_lagrangian" and not self.frictional

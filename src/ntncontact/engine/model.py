@@ -161,7 +161,7 @@ class ContactInterface:
     max_augmentations: int
     ordered_pairing: bool = False  # distinct partners in surface order (ALE partner surface)
     predicted_detection: bool = False  # penetration tested at x + dt v (see interfaces)
-    #: "uzawa" (report 5.4) or "newton" (augmentation.newton_update, frictionless pairs)
+    #: "uzawa" (report 5.4) or "newton" (augmentation.newton_update)
     multiplier_update: str = "uzawa"
     #: augmentation.on_limit = "accept": a step whose augmentations ran out keeps its last one
     accept_unconverged: bool = False

@@ -129,7 +129,7 @@ def default_linear_solve() -> Callable[[sp.spmatrix, NDArray], NDArray]:
 
 def _newton_updated(ci) -> bool:
     """Whether an interface's multipliers take Newton updates (``contact.newton_update``)."""
-    return ci.multiplier_update == "newton" and ci.law.frictionless_augmented
+    return ci.multiplier_update == "newton" and ci.law.method == "augmented_lagrangian"
 
 
 def _carries_multipliers(interfaces, states: tuple) -> bool:
