@@ -182,6 +182,15 @@ def test_a_step_whose_augmentations_run_out_is_cut_back_then_fails(iterations, w
     assert "failed after 2 halvings" in message
     assert f"did not converge in {iterations}" in message
     assert f"interface 'glued': {why}" in message
+    assert 'try augmentation.update = "newton"' in message  # Uzawa updates (the default)
+
+
+def test_an_interface_with_newton_updates_is_not_told_to_take_them():
+    model = _off_centre_load({"max_iterations": 1, "update": "newton"}, max_cutbacks=0)
+    with pytest.raises(SimulationError) as err:
+        Simulation(model).run()
+    message = str(err.value)
+    assert "did not converge in 1" in message and "augmentation.update" not in message
 
 
 def test_accepted_unconverged_steps_are_counted_in_the_results(tmp_path):
