@@ -585,3 +585,27 @@ def test_t_n_data_are_reused_only_for_the_same_state():
             np.testing.assert_array_equal(getattr(results[i], field), getattr(fresh, field))
     assert not np.array_equal(results[0].v, results[2].v)
     assert np.abs(x).max() > 0
+
+
+@pytest.mark.parametrize("slide", [0.03, -0.03])
+def test_a_reflex_cell_left_by_the_deformation_does_not_block_a_move_that_improves_it(slide):
+    """A top node the material pushed 0.15 down and left turns its cell's corner reflex at
+    t_n (sine -0.38); sliding the node either way along the surface makes that cell better
+    (measured -0.13 and -0.32), so the move is kept (``mesh.quality.check_move``), where every
+    move touching the cell was refused before. (A move that inverts a valid cell still raises:
+    test_slide_over_several_elements_lands_on_target_without_inversion.)"""
+    mesh = rectangle(2.0, 1.0, 8, 4)
+    X = mesh.nodes.copy()
+    node = int(np.flatnonzero(np.isclose(X[:, 0], 1.0) & np.isclose(X[:, 1], 1.0))[0])
+    d, zero = np.zeros_like(X), np.zeros_like(X)
+    d[node] = [-0.15, -0.15]
+    x = X + d
+    before = cell_min_sines(x, mesh.cells)
+    cell = int(np.argmin(before))
+    assert before[cell] < -0.3 and node in mesh.cells[cell]
+    body = AleBody.from_mesh(mesh, "top")
+    out = move_ale_body(body, X, d, zero, zero, [node], x[[node]] + [[slide, 0.0]], x[[node]],
+                        DT)
+    assert out.moved[node]
+    after = cell_min_sines(out.x_mesh, mesh.cells)
+    assert before[cell] < after[cell] < 0.0

@@ -5,7 +5,9 @@ import pytest
 
 from ntncontact.mesh.quadmesh import MeshError, QuadMesh
 from ntncontact.mesh.quality import (
+    cell_min_sines,
     check_elements,
+    check_move,
     corner_angles_deg,
     corner_jacobians,
     edge_lengths,
@@ -98,3 +100,54 @@ def test_check_elements_degenerate_and_quadmesh_name():
     mesh = QuadMesh(nodes, [[0, 1, 2, 3]], name="foundation")
     with pytest.raises(MeshError, match="body 'foundation': element 0 is degenerate"):
         check_elements(mesh)
+
+
+def test_check_move_names_the_cell_a_move_inverts():
+    old, cells = grid(3, 2)
+    new = old.copy()
+    new[5] = [2.6, 1.0]  # as above, from a valid mesh
+    with pytest.raises(MeshError, match="body 'ring': element 1 is inverted"):
+        check_move(new, old, cells, "ring")
+    with pytest.raises(MeshError, match="element 4 is inverted"):
+        check_move(new, old, cells, "ring", which=[3, 4, 5])  # numbers stay the mesh's
+
+
+def test_check_move_lets_a_reflex_cell_improve_and_refuses_to_make_it_worse():
+    """Cell 1 of a row of three has a reflex corner at node 2 before the move (the material's
+    deformation did it; sine -0.2). Moving node 2 so that it is less reflex (-0.16) is not the
+    move's doing and passes, although check_elements refuses the result; moving it the other
+    way (-0.40) is refused."""
+    old, cells = grid(3, 1)
+    old = old.copy()
+    old[2] = [1.5, 0.6]
+    assert cell_min_sines(old, cells)[1] == pytest.approx(-0.2, abs=1e-3)
+    better, worse = old.copy(), old.copy()
+    better[2], worse[2] = [1.5, 0.58], [1.5, 0.7]
+    assert cell_min_sines(old, cells)[1] < cell_min_sines(better, cells)[1] < 0.0
+    check_move(better, old, cells, "block")  # must not raise
+    with pytest.raises(MeshError, match="element 1 is inverted"):
+        check_elements(better, cells, "block")
+    with pytest.raises(MeshError, match="body 'block': element 1 is inverted"):
+        check_move(worse, old, cells, "block")
+
+
+def test_smoothing_beside_a_reflex_cell_it_does_not_touch():
+    """Smoother.run given the mesh before the move (an ALE body's t_n mesh) refuses only cells
+    made worse than there (``check_move``): with cell 0 reflex and only node 8 free (not a
+    node of cell 0), the sweep puts node 8 back at its neighbours' mean and returns; without
+    a reference the reflex cell is refused, as for a mesh to be smoothed on its own."""
+    from ntncontact.ale.smoothing import Smoother
+
+    nodes, cells = grid(4, 2)
+    nodes = nodes.copy()
+    nodes[1] = [0.4, 0.6]  # cell 0 reflex at node 1
+    nodes[8] = [3.3, 1.2]
+    assert cell_min_sines(nodes, cells)[0] < 0.0 and 8 not in cells[0]
+    fixed = np.ones(len(nodes), bool)
+    fixed[8] = False
+    smoother = Smoother(cells, len(nodes), fixed, method="laplacian")
+    result = smoother.run(nodes, max_sweeps=50, reference=nodes)
+    np.testing.assert_allclose(result.nodes[8], [3.0, 1.0], atol=1e-5)
+    np.testing.assert_array_equal(result.nodes[fixed], nodes[fixed])
+    with pytest.raises(MeshError, match="element 0 is inverted"):
+        smoother.run(nodes, max_sweeps=50)

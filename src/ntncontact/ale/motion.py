@@ -59,8 +59,10 @@ nothing is moved that need not be.
    ``"displacement"`` starts at (b), ``"position"`` always does (c) (the earlier behaviour: the
    interior moves at every update since a deformed mesh is no fixed point of the smoother).
    ``AleUpdate.interior`` tells which stage was used.
-   A final inverted element (current or reference image) raises MeshError naming the body and
-   the element, and the time loop cuts the step back.
+   A final element the move inverted (current or reference image), or left inverted and made
+   worse, raises MeshError naming the body and the element, and the time loop cuts the step
+   back (``mesh.quality.check_move``: a corner the material's own deformation turned reflex,
+   Gauss points still positive, does not block a move that does not make it worse).
 5. Remap (4.3): the fields at t_n are interpolated from the old mesh (nodes at x_n) at the new
    node positions x~_n: X_new = X(x~_n) (the material point now at the node), d = x~_n - X_new,
    v and a likewise ("linear" Q4 of (4.18) or the third-order gradient-enhanced "quadratic"
@@ -137,7 +139,7 @@ from ntncontact.mesh.quadmesh import MeshError, QuadMesh
 from ntncontact.mesh.quality import (
     cell_min_sines,
     changed_cells,
-    check_elements,
+    check_move,
     min_sines_below,
 )
 
@@ -158,7 +160,7 @@ _CONVECTION = ("remap", "convective_term")
 # evaluation, whose arc-length inversion is iterative, or of the sparse solve): such nodes keep
 # their old position exactly
 _SNAP = 1e-10
-_DEGENERATE = 1e-10  # a corner sine at most this: the cell is checked (``check_elements``)
+_DEGENERATE = 1e-10  # a corner sine at most this: the cell is checked (``check_move``)
 # 2 x 2 Gauss points (weights 1) and the Q4 corner signs
 _XI = np.array([[-1.0, -1.0], [1.0, -1.0], [1.0, 1.0], [-1.0, 1.0]])
 _GP = _XI / np.sqrt(3.0)
@@ -652,7 +654,8 @@ def _move_interior(
             return x_new, moved, None, "displacement", seeds
     if body.sweeps <= 0:
         return x_surf, changes, None, "surface", seeds
-    result = body.smoother(free).run(x_surf, max_sweeps=body.sweeps, rel_tol=1e-6)
+    result = body.smoother(free).run(x_surf, max_sweeps=body.sweeps, rel_tol=1e-6,
+                                     reference=tn.x)
     return result.nodes, _changes(body, tn, result.nodes), result, "position", seeds
 
 
@@ -711,9 +714,10 @@ def move_ale_body(
     positions, ``x_pred`` (k, 2) the predicted end positions of the particles that were at
     ``x_start`` (k, 2; default: the active nodes' x_n). With no active node, or no slide above
     the tolerance, the input is returned unchanged. Raises MeshError (naming body and element)
-    if the moved mesh or its reference image has an inverted element, or if two active nodes'
-    targets cross. ``least_interior`` and ``least_seeds``: the interior stage and seeds of this
-    step's previous move of the body, the least this move uses (``_move_interior``).
+    if the move inverts an element of the mesh or its reference image (or makes an inverted one
+    worse, ``check_move``), or if two active nodes' targets cross. ``least_interior`` and
+    ``least_seeds``: the interior stage and seeds of this step's previous move of the body,
+    the least this move uses (``_move_interior``).
     """
     X, d, v, a = (np.asarray(f, dtype=float) for f in (X, d, v, a))
     active = np.asarray(active_local, dtype=np.int64).reshape(-1)
@@ -735,10 +739,10 @@ def move_ale_body(
     if not moved.any():
         return _unchanged(X, d, v, a, mismatch, active[clamped])
     if degenerate:
-        check_elements(x_new, body.cells, body.name)
+        check_move(x_new, x_old, body.cells, body.name, touched)
     X_new, v_new, a_new = _remapped(body, tn, chain, slides, x_new, moved, (X, v, a))
     if min_sines_below(X_new, body.cells, touched, _DEGENERATE):
-        check_elements(X_new, body.cells, f"{body.name} (reference image)")
+        check_move(X_new, X, body.cells, f"{body.name} (reference image)", touched)
     mass_new = tn.masses_after(X_new, touched)
     v_fixed, change = _conserve_momentum(tn, mass_new, x_new, v_new, moved, touched)
     if body.conserve_momentum and body.convection == "remap":

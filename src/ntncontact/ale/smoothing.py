@@ -39,7 +39,7 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 from numpy.typing import ArrayLike, NDArray
 
-from ntncontact.mesh.quality import check_elements, corner_jacobians, unique_edges
+from ntncontact.mesh.quality import check_elements, check_move, corner_jacobians, unique_edges
 
 __all__ = [
     "SmoothingMethod",
@@ -294,11 +294,15 @@ class Smoother:
             factor[hit] = np.where(factor[hit] > smallest, 0.5 * factor[hit], 0.0)
 
     def run(
-        self, nodes: ArrayLike, max_sweeps: int = 100, rel_tol: float = 1e-6
+        self, nodes: ArrayLike, max_sweeps: int = 100, rel_tol: float = 1e-6,
+        reference: ArrayLike | None = None,
     ) -> SmoothingResult:
         """Sweep until the largest move is below ``rel_tol`` times the mean edge length.
 
-        Raises MeshError (naming element, node and body) if the result has an inverted cell.
+        Raises MeshError (naming element, node and body) if the result has an inverted or
+        degenerate cell; with ``reference`` (an ALE body's mesh at t_n), only if that cell is
+        also worse than it was there (``check_move``: the material's own deformation may have
+        turned a corner reflex before any mesh moved).
 
         Where the free nodes touch fewer than half of the cells (an ALE body's smoothing
         layers), the sweeps run on the cells around them only (``_around_free``): a free
@@ -318,7 +322,10 @@ class Smoother:
             result = replace(result, nodes=x)
         else:
             result = self._sweeps(x, max_sweeps, rel_tol, scale)
-        check_elements(result.nodes, self.cells, self.body_name)
+        if reference is None:
+            check_elements(result.nodes, self.cells, self.body_name)
+        else:
+            check_move(result.nodes, reference, self.cells, self.body_name)
         return result
 
     def _around_free(self, around: NDArray[np.bool_]) -> tuple[Smoother, NDArray[np.int64]]:
