@@ -322,7 +322,8 @@ def _request(model: Model, setup: AleSetup, base: StepState, prev: AleUpdate | N
     along_n = np.einsum("ij,ij->i", offset, normal)  # the predicted gap
     keep = (along_n >= 0.0) & ~_deep_pairs(deep, nodes, partners,
                                             along_n > DEEP * setup.motion.min_spacing)
-    normal[~keep | both_ale] = own[~keep | both_ale]
+    slides_own = ~keep | both_ale
+    normal[slides_own] = own[slides_own]
     across = offset - np.einsum("ij,ij->i", offset, normal)[:, None] * normal
     slide = np.einsum("ij,ij->i", across, chord_end)
     wanted = x_start + slide[:, None] * chord_start

@@ -475,7 +475,7 @@ class Simulation:
         if all(ci.accept_unconverged for ci, _ in failed):
             return
         hint = ""
-        if any(ci.multiplier_update == "uzawa" and ci.law.method == "augmented_lagrangian"
+        if any(ci.law.method == "augmented_lagrangian" and not _newton_updated(ci)
                for ci, _ in failed):
             # the fast-sliding blocks refined 8x: Uzawa contracts by 0.86 an augmentation on a
             # stiff local mode, Newton updates pass the same steps in <= 18 (docs/scenarios.md)

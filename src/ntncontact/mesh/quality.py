@@ -233,10 +233,9 @@ def check_move(new: ArrayLike, old: ArrayLike, cells: ArrayLike, body_name: str,
              else np.ascontiguousarray(which, dtype=np.int64).reshape(-1))
     new, old = (np.ascontiguousarray(x, dtype=float) for x in (new, old))
     q_new = _min_sines(new, cell_arr, which)
-    low = which[~(q_new > rel_tol)]  # NaN counts as degenerate
-    if low.size == 0:
+    low = ~(q_new > rel_tol)  # NaN counts as degenerate
+    if not low.any():
         return
-    q_low = _min_sines(new, cell_arr, low)
-    worse = low[~(q_low >= _min_sines(old, cell_arr, low))]
+    worse = which[low][~(q_new[low] >= _min_sines(old, cell_arr, which[low]))]
     if worse.size:
         check_elements(new, cell_arr, body_name, rel_tol, which=worse)
