@@ -310,3 +310,45 @@ def test_partners_that_cross_on_a_crushed_surface_are_named_as_a_fold():
     assert "folds between them" in message and "round the corner" in message
     assert 'join it to the contact surface (for example surface_1 = "bottom+right")' in message
     assert "make body 'upper' ALE as well" in message
+
+
+def test_a_node_following_a_held_node_follows_the_particle_its_slide_put_there():
+    """Both blocks ALE, the upper (light) block predicted 1.5 spacings further along the
+    lower one than at t_n: the pairs meet nearly at the heavy lower block's particles, so the
+    upper block's nodes slide back 1.5 spacings through their material; the ones before its
+    trailing corner cannot (clamped: ``_hold_clamped``) and their lower partners follow them.
+    A held node that slid part of the way carries another particle than the one x_pred
+    predicted: its partner must follow that particle's end (to first order, x_pred plus the
+    slide). Following the old particle sent it 0.7 spacings past its neighbour, which stays
+    under its own partner: an AleCrossingError at every first contact step of the 8x run with
+    both blocks ALE, and the step cut back (x_pred 1.48 spacings along there)."""
+    from helpers import model_from_example
+
+    from ntncontact.contact import PairState
+    from ntncontact.engine.simulation import initial_state
+
+    model = model_from_example("blocks_fast_sliding.toml", ['bodies.0.mesh_motion="ale"'])
+    base = initial_state(model)
+    bottom = model.bodies[0].global_nodes("bottom")
+    top = model.interfaces[0].interface.surface2.nodes
+    partner = [int(top[np.argmin(np.abs(base.x[top, 0] - base.x[i, 0]))]) for i in bottom]
+    contact = (PairState.from_pairs(np.column_stack([bottom, partner])),)
+    h = base.x[bottom[1], 0] - base.x[bottom[0], 0]  # the upper block's bottom spacing
+    x_pred = base.x.copy()
+    x_pred[model.bodies[0].nodes] += [1.5 * h, -0.096 - 1e-4]  # landed 1e-4 deep, slid on
+    motion = mesh_motion.move_meshes(model, base, contact, x_pred, 0.003, None)
+    held = {key[1]: holder for key, holder in motion.meetings.items() if key[0] == "held"}
+    upper, _ = motion.updates
+    # clamped: both corners (no slide) and the node before each, 0.75 h and h along
+    assert sorted(held.values()) == sorted(bottom[[0, 1, -2, -1]].tolist())
+    assert np.abs(upper.x_mesh[bottom[1]] - base.x[bottom[1]]).max() > 0.5 * h
+    own, partners, wanted = motion.requests[1]
+    followers = 0
+    for k, (j, i) in enumerate(zip(own.tolist(), partners.tolist(), strict=True)):
+        if held.get(mesh_motion._pair_key(i, j)) == i:  # the lower block is at rest
+            slid = upper.x_mesh[i] - base.x[i]
+            assert wanted[k, 0] == pytest.approx(x_pred[i, 0] + slid[0], abs=1e-12)
+            followers += 1
+    assert followers == 4
+    x = motion.state.x
+    assert np.all(np.diff(x[np.sort(own), 0]) > 0)  # the lower surface keeps its order
