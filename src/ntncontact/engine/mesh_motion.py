@@ -107,7 +107,6 @@ def move_meshes(
             continue
         up, request = moved
         rows = slice(setup.node_offset, setup.node_offset + setup.n_nodes)
-        masses.slid[rows] = up.x_mesh - (prev.x_mesh if prev is not None else base.x[rows])
         X[rows], d[rows], v[rows], a[rows] = up.X, up.d, up.v, up.a
         updates.append(up)
         requests.append(request)
@@ -208,10 +207,6 @@ class _AleMasses:
 
     def __init__(self, model: Model, base: StepState, meetings: dict) -> None:
         self.model, self.base, self.meetings = model, base, meetings
-        # how far this call's moves slid each node on the mesh x_pred was predicted on
-        # (zero until its body moves): a node's particle, and with it its predicted end,
-        # changes with the slide (``_targets``)
-        self.slid = np.zeros((len(base.X), 2))
         self.is_ale = np.zeros(len(base.X), bool)
         for setup in model.ale_bodies:
             self.is_ale[setup.node_offset: setup.node_offset + setup.n_nodes] = True
@@ -250,11 +245,7 @@ def _targets(masses: _AleMasses, nodes: NDArray, partners: NDArray, x_pred: NDAr
         held = masses.meetings.get(("held", _pair_key(nodes[k], partners[k])))
         if held is not None:
             meet[k] = False
-            # the particle now at the held node, if its body moved first in this call: x_pred
-            # is the end of the one there before the slide (to first order in the slide;
-            # 8x fast sliding, both ALE: a node held 0.7 spacings from where x_pred put it,
-            # its partner sent past its neighbour, and the step cut back)
-            targets[k] = x_pred[held] + masses.slid[held]
+            targets[k] = x_pred[held]
     both = np.flatnonzero(meet)
     if both.size == 0:
         return targets, meet
