@@ -1,5 +1,7 @@
 """LinearSolver: accuracy on SPD, indefinite and unsymmetric systems, reuse, singular detection."""
 
+import os
+
 import numpy as np
 import pytest
 import scipy.sparse as sp
@@ -338,3 +340,33 @@ def test_pardiso_handles_are_reused_across_patterns(monkeypatch):
     assert len(built) == 2
     del solver
     assert len(linear._IDLE_PARDISO) == 2  # released with the solver, for the next one
+
+
+@pytest.mark.skipif(not pardiso_available(), reason="pypardiso not installed")
+def test_pypardiso_is_told_where_mkl_rt_is(monkeypatch):
+    """pypardiso searches the whole environment for mkl_rt (a recursive glob, 0.2 s here) at
+    every solver it builds unless PYPARDISO_MKL_RT names it: the package sets it from the mkl
+    wheel's file list, so a new solver object searches nothing and still solves; a path the
+    user set is left as it is."""
+    import pypardiso.pardiso_wrapper as wrapper
+
+    from ntncontact.solvers import linear
+
+    monkeypatch.delenv(linear.MKL_RT_VARIABLE, raising=False)
+    linear._point_pypardiso_at_mkl_rt()
+    path = os.environ.get(linear.MKL_RT_VARIABLE)
+    assert path and "mkl_rt" in os.path.basename(path) and os.path.isfile(path)
+
+    def no_search(*args, **kwargs):
+        raise AssertionError("pypardiso searched for mkl_rt")
+
+    monkeypatch.setattr(wrapper, "find_library", no_search)
+    monkeypatch.setattr(wrapper.glob, "glob", no_search)
+    monkeypatch.setattr(linear, "_IDLE_PARDISO", [])  # a new object, built now
+    A = unsymmetric_matrix(5)
+    b = np.linspace(1.0, 2.0, A.shape[0])
+    assert_accurate(A, b, LinearSolver("pardiso").solve(A, b))
+
+    monkeypatch.setenv(linear.MKL_RT_VARIABLE, "/the/users/own/libmkl_rt.so")
+    linear._point_pypardiso_at_mkl_rt()
+    assert os.environ[linear.MKL_RT_VARIABLE] == "/the/users/own/libmkl_rt.so"

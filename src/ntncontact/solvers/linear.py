@@ -35,6 +35,7 @@ singular matrix (e.g. a body without supports in a quasi-static problem) raises
 
 from __future__ import annotations
 
+import importlib.metadata
 import os
 from dataclasses import dataclass
 from functools import lru_cache
@@ -74,11 +75,37 @@ class LinearSolverError(RuntimeError):
 @lru_cache(maxsize=1)
 def pardiso_available() -> bool:
     """True if MKL PARDISO can be loaded (``pip install pypardiso``)."""
+    _point_pypardiso_at_mkl_rt()
     try:
         import pypardiso  # noqa: F401  (it loads mkl_rt, or raises ImportError)
     except (ImportError, OSError):  # not installed, or a broken MKL installation
         return False
     return True
+
+
+#: pypardiso's own setting for where mkl_rt is (read by every ``PyPardisoSolver()``)
+MKL_RT_VARIABLE = "PYPARDISO_MKL_RT"
+
+
+def _point_pypardiso_at_mkl_rt() -> None:
+    """Set :data:`MKL_RT_VARIABLE` to the ``mkl`` wheel's mkl_rt, unless the user set it.
+
+    Why: pypardiso asks ctypes' ``find_library``, which does not see the wheel's copy (it lies
+    in the environment's ``lib/``), and then globs ``sys.prefix`` recursively, at its import
+    (it builds a solver there) and at every ``PyPardisoSolver()``: 0.2 s each in this
+    project's .venv, more in a larger environment. A run on PARDISO builds one or two, so
+    that was ~0.5 s of each (ring refined 4x, 30 steps: 6.01 -> 5.49 s a run, 3 pairs).
+    The wheel's own file list names the library (3 ms to read)."""
+    if os.environ.get(MKL_RT_VARIABLE):
+        return
+    try:
+        files = importlib.metadata.files("mkl") or []
+    except importlib.metadata.PackageNotFoundError:  # MKL from elsewhere: pypardiso searches
+        return
+    found = sorted((str(f.locate()) for f in files if "mkl_rt" in f.name), key=len)
+    found = [path for path in found if os.path.isfile(path)]
+    if found:  # the shortest first, as pypardiso orders its own matches
+        os.environ[MKL_RT_VARIABLE] = os.path.realpath(found[0])
 
 
 #: PARDISO threads on a machine with at most this many cores: one (see pardiso_threads).
@@ -569,9 +596,10 @@ class _PardisoBackend:
 
 
 #: PyPardisoSolver objects whose PARDISO memory was released, for the next pattern or solver:
-#: building one makes pypardiso search sys.prefix recursively for mkl_rt (``find_library``
-#: does not find the wheel's copy), 0.5-1.2 s per new pattern at ring k = 8 (issue 18: 8.6 s
-#: of an 18-step run with 6 analyses).
+#: building one makes pypardiso search sys.prefix recursively for mkl_rt where
+#: PYPARDISO_MKL_RT is not set (:func:`_point_pypardiso_at_mkl_rt` sets it for the mkl wheel;
+#: an MKL from elsewhere is searched for), 0.5-1.2 s per new pattern at ring k = 8 before
+#: either (issue 18: 8.6 s of an 18-step run with 6 analyses).
 _IDLE_PARDISO: list = []
 
 
