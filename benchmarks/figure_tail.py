@@ -60,7 +60,7 @@ def run_once(figure_src: str | None, out: Path) -> tuple[float, float, float, fl
     """(tail, wall, time loop, CPU) seconds of one demo run."""
     import resource
 
-    env = dict(os.environ, MPLBACKEND="Agg", NUMBA_CACHE_DIR=str(ROOT / ".numba_cache"))
+    env = dict(os.environ, MPLBACKEND="Agg")  # the package's kernel cache, as `make demo`
     env.pop("FIGURE_SRC", None)
     if figure_src:
         env["FIGURE_SRC"] = figure_src
