@@ -286,7 +286,8 @@ def _interface(cfg: ContactConfig, index: int, bodies: tuple[Body, ...],
     return ContactInterface(cfg.name or f"interface{index}", Interface(surface1, surface2), law,
                             persistency, candidates, cfg.release_steps, tol, max_aug, ordered,
                             predicted, aug.update, aug.on_limit == "accept",
-                            reference_arc2=_arc_lengths(b2.mesh.nodes[chain2.nodes]))
+                            reference_arc2=_arc_lengths(b2.mesh.nodes[chain2.nodes]),
+                            active_set_pass=cfg.active_set_pass)
 
 
 def _check_paired_once(interfaces: tuple[ContactInterface, ...],

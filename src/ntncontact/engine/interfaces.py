@@ -49,16 +49,50 @@ def detect_all(
     for ci, state in zip(interfaces, states, strict=True):
         x = x + dt * v if ci.predicted_detection else x
         tol = touch_tolerance(x, ci)
-        near = _near_candidates(x, v, dt, ci, abs(tol))
-        if ci.ordered_pairing and not ci.interface.surface2.closed:
-            candidates = _ordered_candidates(x, ci, state, near)
-        else:
-            candidates = closest_pairs(x, ci.interface, near, unique=True).pairs
+        candidates = _candidates(x, v, dt, ci, state, tol)
         found = detect(state, candidates, x, v, ci.interface, persistency=ci.persistency,
                        release_steps=ci.release_steps, gap_tol=tol,
                        objective=ci.law.moment_free)
         out.append(found.state)
     return tuple(out)
+
+
+def _candidates(x: NDArray, v: NDArray, dt: float, ci: ContactInterface, state: PairState,
+                tol: float) -> NDArray:
+    """(C, 2) candidate pairs of the surface-1 nodes on or behind surface 2."""
+    near = _near_candidates(x, v, dt, ci, abs(tol))
+    if ci.ordered_pairing and not ci.interface.surface2.closed:
+        return _ordered_candidates(x, ci, state, near)
+    return closest_pairs(x, ci.interface, near, unique=True).pairs
+
+
+def entered_at_step_end(interfaces: Sequence[ContactInterface], states: Sequence[PairState],
+                        x: NDArray, v: NDArray) -> tuple[PairState, ...] | None:
+    """The active sets of the interfaces with ``active_set_pass`` grown by the surface-1 nodes
+    that a dynamic solve ends inside surface 2 (and approaching it, under the persistency
+    law), or None if none did. Tested at the step's end positions x and velocities v as a
+    predicted detection tests them: a gap within round-off of zero is a touch still to come,
+    which the next step start takes in. The pairs already active stay as they are.
+
+    Why: detection at the step start (or at x + dt v) misses a node that the step's own
+    solution takes inside, and the persistency law then keeps that depth for the whole
+    contact (docs/examples.md, "Detection lag"). Quasi-static steps always solve again with
+    such nodes (``Simulation.advance``); this is the same pass for dynamic steps."""
+    grown, added = [], False
+    for ci, state in zip(interfaces, states, strict=True):
+        if not ci.active_set_pass:
+            grown.append(state)
+            continue
+        tol = -abs(touch_tolerance(x, ci))
+        candidates = _candidates(x, v, 0.0, ci, state, tol)
+        fresh = candidates[~np.isin(candidates[:, 0], state.pairs[:, 0])]
+        _, gap, rate = pair_gaps(x, ci.interface, fresh, v, ci.law.moment_free)
+        enter = gap >= -tol
+        if ci.persistency:
+            enter &= rate > 0.0
+        added |= bool(enter.any())
+        grown.append(state.concat(PairState.from_pairs(fresh[enter])))
+    return tuple(grown) if added else None
 
 
 def touch_tolerance(x: NDArray, ci: ContactInterface) -> float:

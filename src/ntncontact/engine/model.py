@@ -168,6 +168,9 @@ class ContactInterface:
     #: arc length of every surface-2 node along surface 2 in the original mesh: ordered
     #: pairing keeps new pairs' surface-2 nodes half their ORIGINAL distance apart
     reference_arc2: NDArray | None = None
+    #: dynamic steps: nodes a solve ends inside surface 2 (approaching) are taken in and the
+    #: step solved again (contact.active_set_pass; quasi-static steps always do)
+    active_set_pass: bool = False
 
 
 @dataclass(frozen=True)

@@ -36,6 +36,7 @@ from .interfaces import (
     contact_rows,
     contact_terms,
     detect_all,
+    entered_at_step_end,
     evaluate_all,
     lagrange_terms,
     persistent_velocities,
@@ -250,7 +251,8 @@ class Simulation:
     def advance(self, state: StepState, dt: float) -> tuple[StepState, int]:
         """One step of size dt from ``state`` (report 5.4): detection, then the augmented
         solve; quasi-static steps repeat the solve while the converged configuration shows
-        new penetrations (an active-set iteration), then the kinematic update."""
+        new penetrations (an active-set iteration), dynamic ones where an interface asks for
+        it (``active_set_pass``), then the kinematic update."""
         interfaces = self.model.interfaces
         contact = (detect_all(interfaces, state.contact, state.x, state.v, dt) if interfaces
                    else ())
@@ -260,10 +262,7 @@ class Simulation:
             solved = self._solve_step(state, contact, dt, start, may_grow=True)
             iterations += solved.iterations
             converged_passes += solved.grown is None
-            if self.dynamic or not interfaces:
-                break
-            grown = solved.grown or self._with_new_penetrations(solved.used,
-                                                                solved.state.X + solved.d)
+            grown = self._grown(solved, dt) if interfaces else None
             if grown is None:
                 break
             # the next pass starts from this one's solution, not from the step's start: the
@@ -305,6 +304,20 @@ class Simulation:
         prescribed, _ = dirichlet_values(self.model.prescribed, moved.time, dx.size)
         residual[prescribed] = 0.0
         return 0.5 * float(residual @ dx)
+
+    def _grown(self, solved: SolvedStep, dt: float) -> tuple[PairState, ...] | None:
+        """The active sets for another pass of this step, or None. Quasi-static: every pair
+        that penetrates at the solve's end. Dynamic: on the interfaces with
+        ``active_set_pass``, the nodes inside surface 2 at the end of the step (positions
+        and velocities from the mid-point solution)."""
+        if not self.dynamic:
+            return solved.grown or self._with_new_penetrations(solved.used,
+                                                               solved.state.X + solved.d)
+        if not any(ci.active_set_pass for ci in self.model.interfaces):
+            return None
+        s = solved.state
+        d1, v1, _ = end_of_step(solved.d, s.d, s.v, dt)
+        return entered_at_step_end(self.model.interfaces, solved.used, s.X + d1, v1)
 
     def _with_new_penetrations(self, contact, x_end: NDArray):
         """The active sets grown by the pairs that penetrate at x_end, or None if none do."""

@@ -297,6 +297,9 @@ class ContactConfig(Strict):
     detection: Literal["penetration", "predicted"] | None = None
     moment_free: bool | None = None  # None: on in dynamic runs (docs/theory.md)
     gap_restoring: bool = False  # persistency law: a pair's first step closes its gap
+    #: dynamic steps: nodes a solve ends inside surface 2 are taken in and the step solved
+    #: again, as quasi-static steps always do (engine.simulation, docs/scenarios.md)
+    active_set_pass: bool = False
     ale_normal: bool | None = None  # None: pairs facing an ALE body take its normal
     unpaired_share: bool | None = None  # None: on beside an ALE body (docs/theory.md)
     augmentation: AugmentationConfig = AugmentationConfig()
