@@ -71,3 +71,21 @@ def test_without_a_late_entry_the_pass_changes_nothing():
     for column in ("total_energy", "newton_iterations", "contact_work"):
         np.testing.assert_array_equal(passed.history[column], default.history[column])
     assert passed.summary["contact_start_time"] == default.summary["contact_start_time"]
+
+
+def test_a_touch_inside_a_step_keeps_no_penetration_and_the_impact_lasts_as_long():
+    """Not one of the report's cases: the rods 0.07 apart at speed 1 touch at t = 0.07, inside
+    the step 0.05-0.10. By default the contact enters at 0.10, 0.03 inside (v times the rest
+    of the step), and the persistency law keeps that for the whole impact; with the pass it
+    enters in its own step and ends with no penetration (measured 0 against 0.030). The
+    impact lasts as long either way (2.05, the analytic 2 L / c = 2 to a step), and the energy
+    to 1e-11 (measured 1.26e-12 both)."""
+    moved = "bodies.0.mesh.origin=[-10.07, 0.0]"
+    default, passed = _run("rod_impact", moved), _run("rod_impact", moved, ON)
+    assert default.summary["max_penetration"] == pytest.approx(0.03, rel=1e-6)
+    assert passed.summary["max_penetration"] < 1e-9
+    assert passed.summary["contact_start_time"] < default.summary["contact_start_time"]
+    for run in (default, passed):
+        s = run.summary
+        assert s["contact_end_time"] - s["contact_start_time"] == pytest.approx(2.05, abs=1e-9)
+        assert s["energy_max_relative_variation"] < 1e-11

@@ -14,7 +14,7 @@ from .augmentation import (
     extrapolated_update,
     newton_update,
 )
-from .detection import Detection, detect, release_mask
+from .detection import Detection, detect, entering, release_mask
 from .evaluate import ContactResult, contact_term, evaluate_contact
 from .friction import SLIP, STICK
 from .kinematics import pair_gaps
@@ -47,6 +47,7 @@ __all__ = [
     "contact_term",
     "corner_mask",
     "detect",
+    "entering",
     "evaluate_contact",
     "extrapolated_update",
     "lagrange_blocks",

@@ -21,7 +21,7 @@ from .kinematics import pair_gaps
 from .state import PairState
 from .surfaces import Interface
 
-__all__ = ["Detection", "detect", "release_mask"]
+__all__ = ["Detection", "detect", "entering", "release_mask"]
 
 
 @dataclass(frozen=True)
@@ -31,6 +31,16 @@ class Detection:
     state: PairState
     added: NDArray[np.int64]
     released: NDArray[np.int64]
+
+
+def entering(gap: NDArray[np.float64], gap_rate: NDArray[np.float64] | None,
+             persistency: bool, gap_tol: float = 0.0) -> NDArray[np.bool_]:
+    """Which candidate pairs enter the active set: penetrating (gap >= -gap_tol) and, under
+    the persistency law, approaching (gdot > 0)."""
+    enter = gap >= -gap_tol
+    if persistency:
+        enter &= gap_rate > 0.0  # type: ignore[operator]
+    return enter
 
 
 def release_mask(
@@ -75,9 +85,6 @@ def detect(
     if persistency and v is None:
         raise ValueError("detection under the persistency law needs velocities v")
     _, gap, gap_rate = pair_gaps(x, interface, fresh, v, objective)
-    enter = gap >= -gap_tol
-    if persistency:
-        enter &= gap_rate > 0.0  # type: ignore[operator]
-    new = fresh[enter]
+    new = fresh[entering(gap, gap_rate, persistency, gap_tol)]
     return Detection(kept.concat(PairState.from_pairs(new)), new[:, 0].copy(),
                      state.pairs[released, 0].copy())

@@ -23,6 +23,7 @@ from ..contact import (
     closest_pairs,
     commit_step,
     detect,
+    entering,
     evaluate_contact,
     lagrange_blocks,
     ordered_partners,
@@ -87,9 +88,7 @@ def entered_at_step_end(interfaces: Sequence[ContactInterface], states: Sequence
         candidates = _candidates(x, v, 0.0, ci, state, tol)
         fresh = candidates[~np.isin(candidates[:, 0], state.pairs[:, 0])]
         _, gap, rate = pair_gaps(x, ci.interface, fresh, v, ci.law.moment_free)
-        enter = gap >= -tol
-        if ci.persistency:
-            enter &= rate > 0.0
+        enter = entering(gap, rate, ci.persistency, tol)
         added |= bool(enter.any())
         grown.append(state.concat(PairState.from_pairs(fresh[enter])))
     return tuple(grown) if added else None
