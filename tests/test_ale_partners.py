@@ -275,6 +275,37 @@ def test_an_open_pair_whose_partner_crosses_a_neighbours_is_not_followed():
         raise AssertionError("the mesh motion did not settle in 6 augmentations")
 
 
+def test_a_pair_predicted_open_that_carries_force_is_still_followed():
+    """The open pair of the test above, but carrying traction at t_n (as a chattering corner
+    under the persistency law does, whose traction goes by its rate): it is pressed, so the
+    mesh must follow it, and with its neighbour pressed too no valid motion exists: the
+    crossing is named, not hidden by leaving a loaded pair off node to node."""
+    from dataclasses import replace
+
+    from ntncontact.ale.motion import AleCrossingError
+
+    model, base, contact, x_pred, j1, j2 = crossing_pairs(lifted=True)
+    loaded = (replace(contact[0], t_N=np.array([5.0, 0.0])),)
+    with pytest.raises(AleCrossingError, match="would swap order"):
+        mesh_motion.move_meshes(model, base, loaded, x_pred, 0.003, None)
+    carried = (replace(contact[0], lambda_N=np.array([5.0, 0.0])),)  # a multiplier alone
+    with pytest.raises(AleCrossingError, match="would swap order"):
+        mesh_motion.move_meshes(model, base, carried, x_pred, 0.003, None)
+
+
+def test_unfollowed_pairs_are_released_from_the_step():
+    """``without_unfollowed``: the active sets less the pairs the motion does not follow,
+    matched either way round (the motion keys them (ALE node, partner)); None when it
+    follows them all."""
+    model, base, contact, x_pred, j1, j2 = crossing_pairs(lifted=True)
+    motion = mesh_motion.move_meshes(model, base, contact, x_pred, 0.003, None)
+    released = mesh_motion.without_unfollowed(contact, motion.unfollowed)
+    assert released is not None
+    assert released[0].pairs.tolist() == [contact[0].pairs[1].tolist()]
+    assert mesh_motion.without_unfollowed(contact, frozenset()) is None
+    assert mesh_motion.without_unfollowed(released, motion.unfollowed) is None
+
+
 def test_pressed_pairs_whose_partners_cross_still_name_the_nodes():
     """Both pairs pressed: no valid motion exists, and the error names the two ALE nodes."""
     from ntncontact.ale.motion import AleCrossingError

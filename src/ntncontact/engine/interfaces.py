@@ -68,27 +68,41 @@ def _candidates(x: NDArray, v: NDArray, dt: float, ci: ContactInterface, state: 
 
 
 def entered_at_step_end(interfaces: Sequence[ContactInterface], states: Sequence[PairState],
-                        x: NDArray, v: NDArray) -> tuple[PairState, ...] | None:
-    """The active sets of the interfaces with ``active_set_pass`` grown by the surface-1 nodes
-    that a dynamic solve ends inside surface 2 (and approaching it, under the persistency
-    law), or None if none did. Tested at the step's end positions x and velocities v as a
-    predicted detection tests them: a gap within round-off of zero is a touch still to come,
-    which the next step start takes in. The pairs already active stay as they are.
+                        x: NDArray, v: NDArray, retake: Sequence[NDArray],
+                        let_go: Sequence[NDArray]) -> tuple[PairState, ...] | None:
+    """The active sets grown by the surface-1 nodes that a dynamic solve ends inside surface 2
+    (and approaching it, under the persistency law), or None if none did: any such node on
+    the interfaces with ``active_set_pass``, on every interface those of ``retake`` (per
+    interface, the nodes whose pairs the step released because the ALE mesh could not follow
+    them, ``mesh_motion.without_unfollowed``; these approaching or not). Never those of
+    ``let_go``, whose pairs the step's own solves released (in tension): taken in again they
+    would only leave again (a touch on a step boundary under the Lagrange gap law: 5 passes,
+    40 Newton iterations).
+    Tested at the step's end positions x and velocities v as a predicted detection tests
+    them: a gap within round-off of zero is a touch still to come, which the next step start
+    takes in. The pairs already active stay as they are.
 
     Why: detection at the step start (or at x + dt v) misses a node that the step's own
     solution takes inside, and the persistency law then keeps that depth for the whole
     contact (docs/examples.md, "Detection lag"). Quasi-static steps always solve again with
     such nodes (``Simulation.advance``); this is the same pass for dynamic steps."""
     grown, added = [], False
-    for ci, state in zip(interfaces, states, strict=True):
-        if not ci.active_set_pass:
+    for ci, state, again, out in zip(interfaces, states, retake, let_go, strict=True):
+        if not (ci.active_set_pass or again.size):
             grown.append(state)
             continue
         tol = -abs(touch_tolerance(x, ci))
         candidates = _candidates(x, v, 0.0, ci, state, tol)
-        fresh = candidates[~np.isin(candidates[:, 0], state.pairs[:, 0])]
+        node = candidates[:, 0]
+        new = ~np.isin(node, state.pairs[:, 0]) & ~np.isin(node, out)
+        if not ci.active_set_pass:
+            new &= np.isin(node, again)
+        fresh = candidates[new]
         _, gap, rate = pair_gaps(x, ci.interface, fresh, v, ci.law.moment_free)
-        enter = entering(gap, rate, ci.persistency, tol)
+        # a released pair's node comes back wherever it is inside, approaching or not: the
+        # pair was active, and the persistency law releases by the rate over release_steps
+        enter = entering(gap, rate, ci.persistency, tol) | (
+            np.isin(fresh[:, 0], again) & entering(gap, rate, False, tol))
         added |= bool(enter.any())
         grown.append(state.concat(PairState.from_pairs(fresh[enter])))
     return tuple(grown) if added else None

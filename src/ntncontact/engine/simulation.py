@@ -43,7 +43,7 @@ from .interfaces import (
     unconverged_interfaces,
     with_solved_multipliers,
 )
-from .mesh_motion import MeshMotion, mesh_settled, move_meshes
+from .mesh_motion import MeshMotion, mesh_settled, move_meshes, without_unfollowed
 from .model import Model
 from .problem import StepProblem, StepState
 from .reactions import support_reactions, support_sets
@@ -107,8 +107,18 @@ class SolvedStep:
     remap_energy: float = 0.0  # strain energy the ALE remaps changed
     unreturned_energy: float = 0.0  # energy the remaps added that no body gave back
     #: quasi-static: the active sets grown by pairs that penetrate at an unconverged
-    #: augmentation's solution; the step's solve stopped there to start a new pass
+    #: augmentation's solution; the step's solve stopped there to start a new pass. Any
+    #: step: the active sets less the pairs the mesh motion could not follow (``restart``)
     grown: tuple | None = None
+    #: the solve stopped for unfollowed pairs: the next pass starts where this one started
+    #: (``start`` of ``Simulation._solve_step``), not from ``d``
+    restart: tuple | None = None
+
+    def next_start(self) -> tuple | None:
+        """(d, the d of the state it was solved on) for the step's next pass to start from."""
+        if self.restart is not None:
+            return self.restart[0]
+        return self.d.ravel(), self.state.d
 
 
 class Observer(Protocol):
@@ -142,6 +152,13 @@ def _carries_multipliers(interfaces, states: tuple) -> bool:
     active = [(ci, state) for ci, state in zip(interfaces, states, strict=True) if len(state)]
     return (all(ci.law.method == "augmented_lagrangian" for ci, _ in active)
             and any(bool(np.any(state.lambda_N > 0.0)) for _, state in active))
+
+
+def _nodes_left(before: tuple, after: tuple, known: tuple) -> tuple:
+    """Per interface, ``known`` and the surface-1 nodes of ``before``'s pairs not in
+    ``after``'s."""
+    return tuple(np.union1d(k, np.setdiff1d(b.pairs[:, 0], a.pairs[:, 0]))
+                 for b, a, k in zip(before, after, known, strict=True))
 
 
 def initial_state(model: Model) -> StepState:
@@ -257,17 +274,24 @@ class Simulation:
         contact = (detect_all(interfaces, state.contact, state.x, state.v, dt) if interfaces
                    else ())
         iterations, start, converged_passes = 0, None, 0
+        # per interface: nodes whose pairs were released as unfollowed (taken in again if
+        # they end inside), and those the solves released (not taken in again)
+        retake = let_go = tuple(np.zeros(0, np.int64) for _ in interfaces)
         # a pass stopped early for new pairs (SolvedStep.grown) does not count: each adds pairs
         while converged_passes < ACTIVE_SET_PASSES:
             solved = self._solve_step(state, contact, dt, start, may_grow=True)
             iterations += solved.iterations
             converged_passes += solved.grown is None
-            grown = self._grown(solved, dt) if interfaces else None
+            if solved.restart is not None:
+                retake = _nodes_left(contact, solved.grown, retake)
+            elif solved.grown is None:
+                let_go = _nodes_left(contact, solved.used, let_go)
+            grown = self._grown(solved, dt, retake, let_go) if interfaces else None
             if grown is None:
                 break
             # the next pass starts from this one's solution, not from the step's start: the
             # new pairs change it locally (Hertz k = 2: 4-7 line-searched iterations saved)
-            contact, start = grown, (solved.d.ravel(), solved.state.d)
+            contact, start = grown, solved.next_start()
         s, d = solved.state, solved.d
         if self.dynamic:
             d1, v1, a1 = end_of_step(d, s.d, s.v, dt)
@@ -305,19 +329,24 @@ class Simulation:
         residual[prescribed] = 0.0
         return 0.5 * float(residual @ dx)
 
-    def _grown(self, solved: SolvedStep, dt: float) -> tuple[PairState, ...] | None:
+    def _grown(self, solved: SolvedStep, dt: float, retake: tuple, let_go: tuple
+               ) -> tuple[PairState, ...] | None:
         """The active sets for another pass of this step, or None. Quasi-static: every pair
-        that penetrates at the solve's end. Dynamic: on the interfaces with
-        ``active_set_pass``, the nodes inside surface 2 at the end of the step (positions
-        and velocities from the mid-point solution)."""
+        that penetrates at the solve's end. Dynamic: the nodes inside surface 2 at the end of
+        the step (positions and velocities from the mid-point solution) on the interfaces
+        with ``active_set_pass``, and on every interface those of ``retake``
+        (``interfaces.entered_at_step_end``)."""
+        if solved.grown is not None:
+            return solved.grown
         if not self.dynamic:
-            return solved.grown or self._with_new_penetrations(solved.used,
-                                                               solved.state.X + solved.d)
-        if not any(ci.active_set_pass for ci in self.model.interfaces):
+            return self._with_new_penetrations(solved.used, solved.state.X + solved.d)
+        if not (any(ci.active_set_pass for ci in self.model.interfaces)
+                or any(r.size for r in retake)):
             return None
         s = solved.state
         d1, v1, _ = end_of_step(solved.d, s.d, s.v, dt)
-        return entered_at_step_end(self.model.interfaces, solved.used, s.X + d1, v1)
+        return entered_at_step_end(self.model.interfaces, solved.used, s.X + d1, v1, retake,
+                                   let_go)
 
     def _with_new_penetrations(self, contact, x_end: NDArray):
         """The active sets grown by the pairs that penetrate at x_end, or None if none do."""
@@ -352,6 +381,10 @@ class Simulation:
             if self.model.ale_bodies and any(len(c) for c in contact):
                 motion = move_meshes(self.model, base, contact, x_pred, dt, motion)
                 state = motion.state
+                released = without_unfollowed(contact, motion.unfollowed)
+                if released is not None:  # the step again without them (rare: partners cross)
+                    return SolvedStep(state, np.zeros_like(state.d), contact, (), augmentation,
+                                      iterations, 0.0, grown=released, restart=(start,))
             mass = self._dof_mass(state) if self.dynamic else None
             last_contact: dict = {}  # the contact terms' latest evaluation (reused below)
             problem, y0 = self._augmentation_problem(state, contact, dt, mass, motion, floor,
