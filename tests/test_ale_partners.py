@@ -223,7 +223,7 @@ def test_other_mesh_failures_of_an_ale_move_are_ale_motion_errors(monkeypatch):
         Simulation(model).run()
 
 
-def crossing_pairs(lifted: bool, past: float = 0.3):
+def crossing_pairs(lifted: bool, past: float = 0.3, *overrides: str):
     """The fast-sliding blocks (report's mesh) at t = 0 with two neighbouring pairs: upper
     bottom nodes i1 < i2 over lower top nodes j1 < j2. The end-of-step prediction puts i2 on
     j2, 1e-4 deep, and i1 ``past`` of a spacing past i2: lifted 0.01 off the surface when
@@ -234,7 +234,7 @@ def crossing_pairs(lifted: bool, past: float = 0.3):
     from ntncontact.contact import PairState
     from ntncontact.engine.simulation import initial_state
 
-    model = model_from_example("blocks_fast_sliding.toml")
+    model = model_from_example("blocks_fast_sliding.toml", list(overrides))
     base = initial_state(model)
     ci = model.interfaces[0].interface
     bottom, top = model.bodies[0].global_nodes("bottom"), ci.surface2.nodes
@@ -291,6 +291,23 @@ def test_a_pair_predicted_open_that_carries_force_is_still_followed():
     carried = (replace(contact[0], lambda_N=np.array([5.0, 0.0])),)  # a multiplier alone
     with pytest.raises(AleCrossingError, match="would swap order"):
         mesh_motion.move_meshes(model, base, carried, x_pred, 0.003, None)
+
+
+def test_under_the_gap_law_a_lifting_pair_is_judged_by_its_gap_and_multiplier():
+    """Under the gap law the traction is <lambda + eps g>: the lifted pair, predicted open,
+    carries none whatever it carried at t_n unless a multiplier holds it, so it is not
+    followed; with a multiplier it is pressed and the crossing is named."""
+    from dataclasses import replace
+
+    from ntncontact.ale.motion import AleCrossingError
+
+    model, base, contact, x_pred, j1, j2 = crossing_pairs(True, 0.3, 'contact.0.law="gap"')
+    was_loaded = (replace(contact[0], t_N=np.array([5.0, 0.0])),)
+    motion = mesh_motion.move_meshes(model, base, was_loaded, x_pred, 0.003, None)
+    assert motion.unfollowed == {(j1, int(contact[0].pairs[0, 0]))}
+    held = (replace(contact[0], lambda_N=np.array([5.0, 0.0])),)
+    with pytest.raises(AleCrossingError, match="would swap order"):
+        mesh_motion.move_meshes(model, base, held, x_pred, 0.003, None)
 
 
 def test_unfollowed_pairs_are_released_from_the_step():

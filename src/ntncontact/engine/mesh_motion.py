@@ -171,7 +171,7 @@ def _move_body(model: Model, setup: AleSetup, base: StepState, last: tuple,
             up = _moved(setup, base, rows, own, target, x_pred[own], dt, x_start, prev)
         except AleCrossingError as err:
             crossing = (np.isin(own - setup.node_offset, err.nodes) & is_open
-                        & ~_pressed(contact, own, partner))
+                        & ~_pressed(model, contact, own, partner))
             if not crossing.any():
                 raise _crossing_with_partners(err, model, base, own - setup.node_offset,
                                               partner, x_pred) from None
@@ -188,14 +188,19 @@ def _move_body(model: Model, setup: AleSetup, base: StepState, last: tuple,
 _CRUSHED = 0.1
 
 
-def _pressed(contact: Sequence[PairState], own: NDArray, partner: NDArray) -> NDArray:
-    """Which of the pairs (own, partner) carry force: a normal traction at t_n or a
-    multiplier. A predicted gap < 0 does not tell: under the persistency law a pair's
-    traction goes by its rate, and a chattering corner's prediction misleads (the 4x fast
-    sliding, mu = 0.2, t = 0.120: the corner pair, 241 of traction, predicted 5e-3 open)."""
+def _pressed(model: Model, contact: Sequence[PairState], own: NDArray, partner: NDArray
+             ) -> NDArray:
+    """Which of the pairs (own, partner) carry force. A multiplier keeps force on a pair under
+    either law (t_N = <lambda + eps g> or <lambda + eps gdot>). Under the gap law the
+    predicted gap tells the rest; under the persistency law it does not: the traction goes by
+    the rate, so a pair with traction at t_n is pressed, and a chattering corner's prediction
+    misleads (the 4x fast sliding, mu = 0.2, t = 0.120: the corner pair, 241 of traction,
+    predicted 5e-3 open)."""
     force = {}
-    for state in contact:
-        carries = (state.t_N > 0.0) | (state.lambda_N > 0.0)
+    for ci, state in zip(model.interfaces, contact, strict=True):
+        carries = state.lambda_N > 0.0
+        if ci.persistency:
+            carries = carries | (state.t_N > 0.0)
         for (a, b), c in zip(state.pairs.tolist(), carries.tolist(), strict=True):
             force[(a, b)] = force[(b, a)] = c
     keys = zip(own.tolist(), partner.tolist(), strict=True)
