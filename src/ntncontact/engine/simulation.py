@@ -107,18 +107,11 @@ class SolvedStep:
     remap_energy: float = 0.0  # strain energy the ALE remaps changed
     unreturned_energy: float = 0.0  # energy the remaps added that no body gave back
     #: quasi-static: the active sets grown by pairs that penetrate at an unconverged
-    #: augmentation's solution; the step's solve stopped there to start a new pass. Any
-    #: step: the active sets less the pairs the mesh motion could not follow (``restart``)
+    #: augmentation's solution; the step's solve stopped there to start a new pass
     grown: tuple | None = None
-    #: the solve stopped for unfollowed pairs: the next pass starts where this one started
-    #: (``start`` of ``Simulation._solve_step``), not from ``d``
-    restart: tuple | None = None
-
-    def next_start(self) -> tuple | None:
-        """(d, the d of the state it was solved on) for the step's next pass to start from."""
-        if self.restart is not None:
-            return self.restart[0]
-        return self.d.ravel(), self.state.d
+    #: per interface, the surface-1 nodes whose pairs the solve released because the mesh
+    #: motion could not follow them (``mesh_motion.without_unfollowed``); () if none
+    released: tuple = ()
 
 
 class Observer(Protocol):
@@ -154,11 +147,17 @@ def _carries_multipliers(interfaces, states: tuple) -> bool:
             and any(bool(np.any(state.lambda_N > 0.0)) for _, state in active))
 
 
-def _nodes_left(before: tuple, after: tuple, known: tuple) -> tuple:
+def _no_nodes(interfaces) -> tuple:
+    return tuple(np.zeros(0, np.int64) for _ in interfaces)
+
+
+def _nodes_left(before: tuple, after: tuple, known: tuple, exclude: tuple | None = None
+                ) -> tuple:
     """Per interface, ``known`` and the surface-1 nodes of ``before``'s pairs not in
-    ``after``'s."""
-    return tuple(np.union1d(k, np.setdiff1d(b.pairs[:, 0], a.pairs[:, 0]))
-                 for b, a, k in zip(before, after, known, strict=True))
+    ``after``'s, less those of ``exclude``."""
+    exclude = exclude or _no_nodes(before)
+    return tuple(np.union1d(k, np.setdiff1d(np.setdiff1d(b.pairs[:, 0], a.pairs[:, 0]), e))
+                 for b, a, k, e in zip(before, after, known, exclude, strict=True))
 
 
 def initial_state(model: Model) -> StepState:
@@ -276,22 +275,23 @@ class Simulation:
         iterations, start, converged_passes = 0, None, 0
         # per interface: nodes whose pairs were released as unfollowed (taken in again if
         # they end inside), and those the solves released (not taken in again)
-        retake = let_go = tuple(np.zeros(0, np.int64) for _ in interfaces)
+        retake = let_go = _no_nodes(interfaces)
         # a pass stopped early for new pairs (SolvedStep.grown) does not count: each adds pairs
         while converged_passes < ACTIVE_SET_PASSES:
             solved = self._solve_step(state, contact, dt, start, may_grow=True)
             iterations += solved.iterations
             converged_passes += solved.grown is None
-            if solved.restart is not None:
-                retake = _nodes_left(contact, solved.grown, retake)
-            elif solved.grown is None:
-                let_go = _nodes_left(contact, solved.used, let_go)
+            if solved.released:
+                retake = tuple(np.union1d(r, n) for r, n in zip(retake, solved.released,
+                                                                 strict=True))
+            if solved.grown is None:
+                let_go = _nodes_left(contact, solved.used, let_go, exclude=retake)
             grown = self._grown(solved, dt, retake, let_go) if interfaces else None
             if grown is None:
                 break
             # the next pass starts from this one's solution, not from the step's start: the
             # new pairs change it locally (Hertz k = 2: 4-7 line-searched iterations saved)
-            contact, start = grown, solved.next_start()
+            contact, start = grown, (solved.d.ravel(), solved.state.d)
         s, d = solved.state, solved.d
         if self.dynamic:
             d1, v1, a1 = end_of_step(d, s.d, s.v, dt)
@@ -336,10 +336,9 @@ class Simulation:
         the step (positions and velocities from the mid-point solution) on the interfaces
         with ``active_set_pass``, and on every interface those of ``retake``
         (``interfaces.entered_at_step_end``)."""
-        if solved.grown is not None:
-            return solved.grown
         if not self.dynamic:
-            return self._with_new_penetrations(solved.used, solved.state.X + solved.d)
+            return solved.grown or self._with_new_penetrations(solved.used,
+                                                               solved.state.X + solved.d)
         if not (any(ci.active_set_pass for ci in self.model.interfaces)
                 or any(r.size for r in retake)):
             return None
@@ -381,10 +380,10 @@ class Simulation:
             if self.model.ale_bodies and any(len(c) for c in contact):
                 motion = move_meshes(self.model, base, contact, x_pred, dt, motion)
                 state = motion.state
-                released = without_unfollowed(contact, motion.unfollowed)
-                if released is not None:  # the step again without them (rare: partners cross)
-                    return SolvedStep(state, np.zeros_like(state.d), contact, (), augmentation,
-                                      iterations, 0.0, grown=released, restart=(start,))
+                kept = without_unfollowed(contact, motion.unfollowed)
+                if kept is not None:  # the step again without them (rare: partners cross)
+                    return self._solved_without(base, contact, kept, dt, start, may_grow,
+                                                iterations)
             mass = self._dof_mass(state) if self.dynamic else None
             last_contact: dict = {}  # the contact terms' latest evaluation (reused below)
             problem, y0 = self._augmentation_problem(state, contact, dt, mass, motion, floor,
@@ -436,6 +435,14 @@ class Simulation:
             self._augmentations_converged = False
         return SolvedStep(state, d, used, results, augmentation, iterations,
                           **self._step_figures(problem, result, motion, state.X + d))
+
+    def _solved_without(self, state: StepState, contact: tuple, kept: tuple, dt: float,
+                        start: tuple | None, may_grow: bool, iterations: int) -> SolvedStep:
+        """The step solved again from its start with the pairs ``kept`` only (the others
+        released: the mesh cannot follow them); ``iterations`` spent before count too."""
+        again = self._solve_step(state, kept, dt, start, may_grow)
+        released = _nodes_left(contact, kept, again.released or _no_nodes(contact))
+        return replace(again, iterations=again.iterations + iterations, released=released)
 
     def _augmentation_problem(self, state: StepState, contact: tuple, dt: float,
                               mass: sp.spmatrix | None, motion: MeshMotion | None,
