@@ -104,3 +104,39 @@ def test_sensitivity_is_one_solve_with_a_column_per_pressed_pair(monkeypatch):
     monkeypatch.setattr(Factorization, "__call__", counted_call)
     recorded_ring_impact("analysis.t_end=0.1")
     assert columns and max(columns) >= 3  # several pressed pairs solved in one call
+
+
+def test_sensitivity_solves_wide_contact_zones_by_blocks_of_pairs(monkeypatch):
+    """More pressed pairs than ``SENSITIVITY_COLUMNS``: one solve a block of pairs, each with
+    at most that many right-hand sides (the dense unknowns x pairs blocks stay bounded on a
+    wide contact zone), and the same S as from one solve of every column."""
+    import ntncontact.engine.simulation as simulation
+    from ntncontact.engine.simulation import Simulation
+    from ntncontact.solvers.linear import Factorization
+
+    real_sensitivity, real_call = Simulation._sensitivity, Factorization.__call__
+    widths: list = []  # right-hand sides of each solve of the current call
+    checked = []
+
+    def counted_call(self, b):
+        if np.ndim(b) == 2:  # Newton's own solves have one right-hand side
+            widths.append(np.shape(b)[1])
+        return real_call(self, b)
+
+    def checked_sensitivity(self, problem, y, d, ci, state, pressed, factors):
+        pairs = int(pressed.sum())
+        widths.clear()
+        S = real_sensitivity(self, problem, y, d, ci, state, pressed, factors)
+        assert widths == [min(2, pairs - first) for first in range(0, pairs, 2)]
+        monkeypatch.setattr(simulation, "SENSITIVITY_COLUMNS", 10_000)
+        S_whole = real_sensitivity(self, problem, y, d, ci, state, pressed, factors)
+        monkeypatch.setattr(simulation, "SENSITIVITY_COLUMNS", 2)
+        np.testing.assert_allclose(S, S_whole, rtol=1e-10, atol=1e-12 * np.abs(S).max())
+        checked.append(pairs)
+        return S
+
+    monkeypatch.setattr(simulation, "SENSITIVITY_COLUMNS", 2)
+    monkeypatch.setattr(Simulation, "_sensitivity", checked_sensitivity)
+    monkeypatch.setattr(Factorization, "__call__", counted_call)
+    recorded_ring_impact("analysis.t_end=0.1")
+    assert checked and max(checked) >= 3  # several blocks, one of them partial

@@ -86,6 +86,14 @@ LEDGER = ("external_work", "contact_work", "frictional_dissipation", "ale_remap_
 #: 1e-2 gave 8.8, since it often took a second iteration first)
 NEW_PAIR_PROBE = 0.1
 
+#: ``Simulation._sensitivity`` solves for at most this many pressed pairs at a time: one
+#: solve with a right-hand side per pair sweeps the factor once for all its columns (a
+#: 37-column PARDISO solve 12-17 ms against 33-35 ms for 37 single ones, ring k = 8), but
+#: its dense unknowns x pairs blocks grow as n^1.5 on a 2D mesh. Hertz refined 8x with
+#: Newton updates (~130 pressed pairs, 124k unknowns; load ~1.5): peak memory 1,323 -> 1,185
+#: MB, 3.98 -> 4.13 s a step (three solves a sensitivity instead of one)
+SENSITIVITY_COLUMNS = 64
+
 #: Quasi-static steps are re-solved at most this many times when new pairs penetrate at a
 #: converged solve (passes stopped at an unconverged augmentation for new pairs not counted).
 ACTIVE_SET_PASSES = 5
@@ -158,6 +166,17 @@ def _nodes_left(before: tuple, after: tuple, known: tuple, exclude: tuple | None
     exclude = exclude or _no_nodes(before)
     return tuple(np.union1d(k, np.setdiff1d(np.setdiff1d(b.pairs[:, 0], a.pairs[:, 0]), e))
                  for b, a, k, e in zip(before, after, known, exclude, strict=True))
+
+
+def _force_columns(b, keep: NDArray, position: NDArray, column: NDArray, size: int,
+                   block: slice) -> NDArray:
+    """The columns ``block`` of B (d force / d lambda of the pressed pairs) on the unknowns,
+    dense and in the column order PARDISO takes (a C-order block was copied for it)."""
+    take = keep & (column[b.b_cols] >= block.start) & (column[b.b_cols] < block.stop)
+    forces = np.zeros((size, block.stop - block.start), order="F")
+    np.add.at(forces, (position[b.b_rows[take]], column[b.b_cols[take]] - block.start),
+              b.b_vals[take])
+    return forces
 
 
 def initial_state(model: Model) -> StepState:
@@ -613,23 +632,20 @@ class Simulation:
         position = np.full(self.model.ndof, -1)
         position[problem.free_dofs] = np.arange(problem.free_dofs.size)
         column = np.cumsum(pressed) - 1  # pressed pair -> column of S
-        keep = pressed[b.b_cols] & (position[b.b_rows] >= 0)
-        # unknowns (free dofs, then multipliers) x pressed pairs, in the column order PARDISO
-        # takes (a C-order block was copied for it: one dense block fewer, 16 MB at ring k = 8)
-        forces = np.zeros((y.size, int(pressed.sum())), order="F")
-        np.add.at(forces, (position[b.b_rows[keep]], column[b.b_cols[keep]]), b.b_vals[keep])
-        # one solve with a right-hand side per pressed pair: the factor's sweeps over all
-        # columns at once (one 37-column PARDISO solve 12-17 ms against 33-35 ms for 37)
-        if factors is not None:
+        if factors is None:
+            factor = partial(self.solve, problem.jacobian(y))
+        else:
             factor = (factors.factor if factors.usable(y.size)
                       else factors.refresh(problem.jacobian(y)))
-            response = factor(forces)
-        else:
-            response = self.solve(problem.jacobian(y), forces)
-        keep = pressed[b.g_rows] & (position[b.g_cols] >= 0)
-        S = np.zeros((forces.shape[1], forces.shape[1]))
-        np.add.at(S, column[b.g_rows[keep]],
-                  b.g_vals[keep, None] * response[position[b.g_cols[keep]]])
+        b_keep = pressed[b.b_cols] & (position[b.b_rows] >= 0)
+        g_keep = pressed[b.g_rows] & (position[b.g_cols] >= 0)
+        g_row, g_at, g_val = column[b.g_rows[g_keep]], position[b.g_cols[g_keep]], b.g_vals[g_keep]
+        pairs = int(pressed.sum())
+        S = np.zeros((pairs, pairs))
+        for first in range(0, pairs, SENSITIVITY_COLUMNS):  # one solve a block of pairs
+            block = slice(first, min(first + SENSITIVITY_COLUMNS, pairs))
+            response = factor(_force_columns(b, b_keep, position, column, y.size, block))
+            np.add.at(S[:, block], g_row, g_val[:, None] * response[g_at])
         return S
 
     def _conserve_energy(self, problem: StepProblem, result, mass):
