@@ -106,7 +106,12 @@ def test_sensitivity_is_one_solve_with_a_column_per_pressed_pair(monkeypatch):
     assert columns and max(columns) >= 3  # several pressed pairs solved in one call
 
 
-def test_sensitivity_solves_wide_contact_zones_by_blocks_of_pairs(monkeypatch):
+@pytest.mark.parametrize("overrides", [
+    [],
+    # slipping pairs: their friction mu t_N is in B's columns too
+    ["contact.0.friction=0.2", "contact.0.penalty_tangential=1000.0"],
+])
+def test_sensitivity_solves_wide_contact_zones_by_blocks_of_pairs(monkeypatch, overrides):
     """More pressed pairs than ``SENSITIVITY_COLUMNS``: one solve a block of pairs, each with
     at most that many right-hand sides (the dense unknowns x pairs blocks stay bounded on a
     wide contact zone), and the same S as from one solve of every column."""
@@ -138,5 +143,5 @@ def test_sensitivity_solves_wide_contact_zones_by_blocks_of_pairs(monkeypatch):
     monkeypatch.setattr(simulation, "SENSITIVITY_COLUMNS", 2)
     monkeypatch.setattr(Simulation, "_sensitivity", checked_sensitivity)
     monkeypatch.setattr(Factorization, "__call__", counted_call)
-    recorded_ring_impact("analysis.t_end=0.1")
+    recorded_ring_impact("analysis.t_end=0.1", *overrides)
     assert checked and max(checked) >= 3  # several blocks, one of them partial

@@ -641,9 +641,11 @@ class Simulation:
         g_keep = pressed[b.g_rows] & (position[b.g_cols] >= 0)
         g_row, g_at, g_val = column[b.g_rows[g_keep]], position[b.g_cols[g_keep]], b.g_vals[g_keep]
         pairs = int(pressed.sum())
+        # blocks only with a kept factor: a plain solve would factor A again for each block
+        width = SENSITIVITY_COLUMNS if factors is not None else max(pairs, 1)
         S = np.zeros((pairs, pairs))
-        for first in range(0, pairs, SENSITIVITY_COLUMNS):  # one solve a block of pairs
-            block = slice(first, min(first + SENSITIVITY_COLUMNS, pairs))
+        for first in range(0, pairs, width):  # one solve a block of pairs
+            block = slice(first, min(first + width, pairs))
             response = factor(_force_columns(b, b_keep, position, column, y.size, block))
             np.add.at(S[:, block], g_row, g_val[:, None] * response[g_at])
         return S
