@@ -158,14 +158,12 @@ def child(case: str, k: int, out: Path) -> dict:
     from ntncontact.io.scenario import load_scenario
     from ntncontact.solvers.linear import LinearSolver
 
-    if os.environ.get("SCALING_ASSEMBLY_THREADS"):  # a variant of --threads
-        from ntncontact.fem import kernels_numba
-
-        kernels_numba.THREADS = int(os.environ["SCALING_ASSEMBLY_THREADS"])
     if os.environ.get("SCALING_THREADED_BLAS"):  # the A/B variant of --threads
-        from ntncontact.solvers import newton
+        from contextlib import nullcontext
 
-        newton.SERIAL_BLAS_FROM = sys.maxsize
+        from ntncontact.engine import simulation
+
+        simulation.serial_blas = nullcontext
     filename, t_end, refine = CASES[case]
     overrides = refine(k)
     if case.startswith("hertz"):
@@ -290,12 +288,11 @@ def report(rows: list[dict]) -> str:
 
 #: --threads: the thread settings compared (environment of the child run)
 THREAD_VARIANTS = {
-    "chosen (BLAS serial in Newton, PARDISO on pardiso_threads())": {},
-    "BLAS threaded in Newton (as before)": {"SCALING_THREADED_BLAS": "1"},
-    "PARDISO on 2 threads": {"MKL_NUM_THREADS": "2"},
-    "Numba assembly on 2 threads": {"SCALING_ASSEMBLY_THREADS": "2"},
-    "Numba assembly and PARDISO on 2 threads": {"SCALING_ASSEMBLY_THREADS": "2",
-                                                "MKL_NUM_THREADS": "2"},
+    "chosen (BLAS serial in a run, PARDISO and assembly on run_threads())": {},
+    "BLAS threaded (before session 30)": {"SCALING_THREADED_BLAS": "1"},
+    "PARDISO on 1 thread": {"MKL_NUM_THREADS": "1"},
+    "Numba assembly on 1 thread": {"NUMBA_NUM_THREADS": "1"},
+    "all on 1 thread (OMP_NUM_THREADS=1)": {"OMP_NUM_THREADS": "1"},
 }
 
 

@@ -59,12 +59,6 @@ def assert_same(reference, result):
         assert np.abs(K1.data - K0.data).max() <= RTOL * np.abs(K0.data).max()
 
 
-def test_serial_kernel_by_default():
-    _, cells = distorted_grid(100, 50, np.random.default_rng(0))
-    assert kernels_numba.THREADS == 1
-    assert NumbaAssembly("neo_hookean", cells, np.arange(len(cells))).threads == 1
-
-
 @pytest.mark.parametrize("seed", [0, 1, 2])
 @pytest.mark.parametrize("kind", ["neo_hookean", "linear_elastic"])
 def test_numba_matches_numpy_on_random_distorted_meshes(kind, seed):

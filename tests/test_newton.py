@@ -86,30 +86,3 @@ def test_early_ratio_stops_at_that_fraction_of_the_first_residual():
     # continuing from the rough answer reaches the same root
     polished = newton(residual, jacobian, solver.solve, rough.y, NewtonSettings(rtol=1e-12))
     assert np.abs(polished.y - full.y).max() <= 1e-10 * np.abs(full.y).max()
-
-
-@pytest.mark.parametrize("size", [N, 12_000])
-def test_large_newton_loops_run_with_serial_blas(size):
-    """From SERIAL_BLAS_FROM unknowns on, every residual (and so every norm) is computed with
-    the BLAS on one thread; smaller loops leave the BLAS alone; the setting is restored."""
-    from ntncontact.solvers import newton as newton_module
-
-    blas = newton_module._blas()
-    before = [lib["num_threads"] for lib in blas.info()]
-    seen = []
-    target = np.linspace(1.0, 2.0, size)
-
-    def residual(y):
-        seen.append([lib["num_threads"] for lib in blas.info()])
-        return y + y**3 - target, float(np.linalg.norm(target))
-
-    def jacobian(y):
-        return sp.diags(1.0 + 3.0 * y**2, format="csr")
-
-    result = newton(residual, jacobian, LinearSolver("superlu").solve, np.zeros(size),
-                    NewtonSettings(rtol=1e-12))
-    assert np.linalg.norm(residual(result.y)[0]) <= 1e-12 * np.linalg.norm(target)
-    inside = seen[:-1]
-    expected = [1] * len(before) if size >= newton_module.SERIAL_BLAS_FROM else before
-    assert inside and all(threads == expected for threads in inside)
-    assert [lib["num_threads"] for lib in blas.info()] == before

@@ -21,6 +21,7 @@ from ..fem.q4 import InvertedElementError
 from ..fem.sparse import TripletUnion
 from ..solvers.linear import LinearSolverError
 from ..solvers.newton import FactorCache, NewtonError, NewtonSettings, newton
+from ..threads import serial_blas
 from .convection import convective_terms
 from .diagnostics import (
     Balance,
@@ -775,26 +776,11 @@ class Simulation:
 
         ``stop_reason`` is asked before every step: a reason (not None) ends the run there with
         :class:`RunInterrupted`. A signal handler that only records the request this way
-        stops the run between steps, never inside a compiled kernel."""
-        analysis = self.model.analysis
-        n_steps = int(np.ceil(analysis.t_end / analysis.dt - 1e-9))
+        stops the run between steps, never inside a compiled kernel. NumPy's BLAS runs on one
+        thread meanwhile (:func:`ntncontact.threads.serial_blas`)."""
         try:
-            if not self._resumed:
-                self._notify(StepRecord(self.state, self.balance(self.state), 0, 0.0))
-            for k in range(self.state.step, n_steps):  # a restored run: from its step on
-                reason = stop_reason() if stop_reason is not None else None
-                if reason is not None:
-                    raise RunInterrupted(reason)
-                # target times k dt (not accumulated sums) so output times are exact
-                t_next = min((k + 1) * analysis.dt, analysis.t_end)
-                dt = t_next - self.state.time
-                self.state, its, self._last_substep = self.step_with_cutback(dt)
-                self.state = replace(self.state, time=t_next)
-                extra = (self._ledger_extra() | self._contact_extra() | self._tie_extra()
-                         | self._last_reactions)
-                self._notify(StepRecord(self.state, self.balance(self.state), its, dt, extra))
-                if progress is not None:
-                    progress(self.state.time)
+            with serial_blas():
+                self._run_steps(progress, stop_reason)
         except KeyboardInterrupt as err:
             self._finish("interrupted", str(err) or "interrupted by the user")
             raise
@@ -805,6 +791,28 @@ class Simulation:
             raise
         self._finish("completed", None)
         return self.state
+
+    def _run_steps(self, progress: Callable[[float], None] | None,
+                   stop_reason: Callable[[], str | None] | None) -> None:
+        """The time loop of :meth:`run`: every step to t_end, each told to the observers."""
+        analysis = self.model.analysis
+        n_steps = int(np.ceil(analysis.t_end / analysis.dt - 1e-9))
+        if not self._resumed:
+            self._notify(StepRecord(self.state, self.balance(self.state), 0, 0.0))
+        for k in range(self.state.step, n_steps):  # a restored run: from its step on
+            reason = stop_reason() if stop_reason is not None else None
+            if reason is not None:
+                raise RunInterrupted(reason)
+            # target times k dt (not accumulated sums) so output times are exact
+            t_next = min((k + 1) * analysis.dt, analysis.t_end)
+            dt = t_next - self.state.time
+            self.state, its, self._last_substep = self.step_with_cutback(dt)
+            self.state = replace(self.state, time=t_next)
+            extra = (self._ledger_extra() | self._contact_extra() | self._tie_extra()
+                     | self._last_reactions)
+            self._notify(StepRecord(self.state, self.balance(self.state), its, dt, extra))
+            if progress is not None:
+                progress(self.state.time)
 
     def _accumulate_work(self, s: StepState, d1: NDArray, results, dt: float) -> None:
         """Work of the external and contact forces over the step, and the frictional

@@ -23,14 +23,11 @@ from numpy.typing import NDArray
 
 from ..jit import njit
 from ..materials.models import MaterialKind
+from ..threads import run_threads
 from .q4 import DN_GP, GAUSS_WEIGHTS, InvertedElementError
 
 #: Integer codes of the constitutive models compiled into the kernel.
 MODEL_CODES: dict[str, int] = {"linear_elastic": 0, "neo_hookean": 1}
-#: Threads used by :class:`NumbaAssembly` when not given. Serial by default: two threads made
-#: assembly alone ~1.5x faster on 2 cores, but a Newton iteration is dominated by the
-#: factorization, whose MKL threads then compete with Numba's (see benchmarks/README.md).
-THREADS = 1
 #: Below this many elements per thread the serial loop is used (thread start-up dominates).
 MIN_ELEMENTS_PER_THREAD = 2000
 #: Codes of where an inverted element was found (``status[1]``).
@@ -473,9 +470,13 @@ class NumbaAssembly:
     """Force/tangent assembly of one material group with the compiled kernel.
 
     Holds the group's element list (and its thread partition), and adds into caller-owned
-    ``force`` and CSR ``data`` arrays. ``threads`` defaults to :data:`THREADS`; it is reduced
-    so that each thread has at least :data:`MIN_ELEMENTS_PER_THREAD` elements and to Numba's
-    thread count; 1 means the serial loop.
+    ``force`` and CSR ``data`` arrays. ``threads`` defaults to the run's threads
+    (:func:`ntncontact.threads.run_threads`); it is reduced so that each thread has at least
+    :data:`MIN_ELEMENTS_PER_THREAD` elements and to Numba's thread count (``NUMBA_NUM_THREADS``);
+    1 means the serial loop. The sum at each node then depends on the thread count (elements
+    on a block seam are added last), not on the run: same threads, same bits. Two threads
+    assemble the ring refined 8x in 0.129 against 0.198 s a step (2 cores; the assembly and
+    the sparse solver never run at once, see :mod:`ntncontact.threads`).
 
     The reference-configuration data (dN/dX and det J * weight at the Gauss points, 36 floats
     per element) are cached between calls with the reference coordinates they came from: X
@@ -489,10 +490,10 @@ class NumbaAssembly:
         self.model = MODEL_CODES[kind]
         self.cells = np.ascontiguousarray(cells, dtype=np.int64)
         self.elements = np.ascontiguousarray(elements, dtype=np.int64)
-        threads = THREADS if threads is None else int(threads)
+        threads = run_threads() if threads is None else int(threads)
+        threads = min(threads, self.elements.size // MIN_ELEMENTS_PER_THREAD)
         if threads > 1:  # only now start Numba's thread pool
-            threads = min(threads, numba.get_num_threads(),
-                          self.elements.size // MIN_ELEMENTS_PER_THREAD)
+            threads = min(threads, numba.get_num_threads())
         self.threads = max(threads, 1)
         if self.threads > 1:
             elems, self.starts, deferred = block_partition(self.cells, self.elements,

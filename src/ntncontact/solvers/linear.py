@@ -47,6 +47,7 @@ import scipy.sparse.linalg as spla
 from numpy.typing import NDArray
 from threadpoolctl import ThreadpoolController
 
+from ..threads import run_threads, threads_from_environment
 from . import static_lu
 
 Backend = Literal["auto", "pardiso", "superlu", "static"]
@@ -108,34 +109,20 @@ def _point_pypardiso_at_mkl_rt() -> None:
         os.environ[MKL_RT_VARIABLE] = os.path.realpath(found[0])
 
 
-#: PARDISO threads on a machine with at most this many cores: one (see pardiso_threads).
-FEW_CORES = 2
-#: The most PARDISO threads used on a larger machine (see pardiso_threads).
-MAX_PARDISO_THREADS = 8
-
-
 def pardiso_threads(cores: int | None = None) -> int:
-    """MKL threads for PARDISO: ``MKL_NUM_THREADS`` if the user set it, else one thread on a
-    machine with at most :data:`FEW_CORES` cores and half the cores, at most
-    :data:`MAX_PARDISO_THREADS`, on a larger one.
+    """MKL threads for PARDISO: ``MKL_NUM_THREADS`` if the user set it, else the run's
+    threads (:func:`ntncontact.threads.run_threads`: ``OMP_NUM_THREADS``, else every core up
+    to 8).
 
-    Why: on 2 cores, a second MKL thread competes with the Python thread's own work between
-    solves (assembly, contact, its Numba kernels) and, after each call, MKL's OpenMP workers
-    spin for up to 200 ms on the core the next BLAS or Numba call needs. Measured on this
-    2-core machine under load: a symmetric factorization of a 20 160-dof Q4 tangent 203 ms on
-    one thread against 326 ms on two, a 200 500-dof one 3.8 s against 6.1 s
-    (``benchmarks/scaling.py``, ``benchmarks/README.md``). On 16 cores, the nested-dissection
-    tree of a 2D mesh of 10^5 dofs has too few large separators to keep more than ~8 threads
-    busy, and half the cores leave room for the Numba assembly and other processes."""
-    requested = os.environ.get("MKL_NUM_THREADS", "").strip()
-    if requested.isdigit() and int(requested) > 0:
-        return int(requested)
-    if cores is None:
-        cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") \
-            else (os.cpu_count() or 1)
-    if cores <= FEW_CORES:
-        return 1
-    return min(cores // 2, MAX_PARDISO_THREADS)
+    Why every core, also on 2: the factorization and the solves run while the rest of the step
+    waits. What made a second thread look costly here before (session 15: a 20 160-dof
+    factorization 203 ms on one thread against 326 ms on two, at load 6-19) was NumPy's
+    OpenBLAS workers spinning on the second core; with the BLAS serial during a run
+    (:func:`ntncontact.threads.serial_blas`), the ring refined 8x solves in 0.284 s a step
+    on two threads against 0.416 s on one (``benchmarks/scaling.py --threads``). PARDISO's
+    results on several threads are made reproducible by its CNR mode (:func:`_pardiso_iparm`)."""
+    requested = threads_from_environment("MKL_NUM_THREADS")
+    return requested if requested is not None else run_threads(cores)
 
 
 @lru_cache(maxsize=1)
@@ -521,13 +508,13 @@ class _PardisoBackend:
     def __init__(self, pattern: _Pattern, symmetric: bool, stats: SolverStats) -> None:
         self.pattern, self.symmetric, self.stats = pattern, symmetric, stats
         self.pardiso = _pardiso_handle(mtype=-2 if symmetric else 11)
-        for one_based, value in _pardiso_iparm(symmetric).items():
+        self.threads = pardiso_threads()
+        for one_based, value in _pardiso_iparm(symmetric, self.threads).items():
             self.pardiso.set_iparm(one_based, value)
         indptr, indices = ((pattern.upper_indptr, pattern.upper_indices) if symmetric
                            else (pattern.indptr32, pattern.indices32))
         self.matrix = sp.csr_matrix((np.zeros(indices.size), indices, indptr),
                                     shape=(pattern.n, pattern.n))
-        self.threads = pardiso_threads()
         self.analysed = False
         self.factored = False  # PARDISO holds a numerical factor (L and U) of this handle
 
@@ -619,9 +606,15 @@ def _pardiso_handle(mtype: int):
     return solver
 
 
-def _pardiso_iparm(symmetric: bool) -> dict[int, int]:
+def _pardiso_iparm(symmetric: bool, threads: int) -> dict[int, int]:
     """PARDISO parameters by their 1-based number, as pypardiso's ``set_iparm`` and the MKL
-    manual count them (pypardiso passes one-based indices itself)."""
+    manual count them (pypardiso passes one-based indices itself).
+
+    On several threads PARDISO's answer changes from call to call unless its conditional
+    numerical reproducibility mode is on (parameter 34 = the thread count): 2 distinct
+    solutions in 40 factorizations of the same 45 000-unknown matrix on 2 threads without it,
+    1 with it, for +0-8 % factorization time. A restarted run must repeat its first run bit
+    for bit, so it is on."""
     return {
         1: 1,  # use the values below, not the defaults
         2: 2,  # METIS nested-dissection ordering
@@ -629,6 +622,7 @@ def _pardiso_iparm(symmetric: bool) -> dict[int, int]:
         11: 1,  # scaling ...
         13: 1,  # ... and weighted matching: robust for indefinite / unsymmetric tangents
         21: 1,  # Bunch-Kaufman pivoting (symmetric indefinite)
+        34: threads if threads > 1 else 0,  # reproducible results on `threads` threads
     }
 
 

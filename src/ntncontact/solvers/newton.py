@@ -9,41 +9,17 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from contextlib import nullcontext
 from dataclasses import dataclass, field
-from functools import lru_cache
 
 import numpy as np
 import scipy.sparse as sp
 from numpy.typing import NDArray
-from threadpoolctl import ThreadpoolController
-
-#: From this many unknowns on, the Newton loop runs with the BLAS (NumPy's OpenBLAS) on one
-#: thread. OpenBLAS threads a dot product from ~10 000 entries; on a loaded 2-core machine, or
-#: right after a PARDISO call while MKL's OpenMP threads still spin, one threaded ``np.dot`` of
-#: 46 530 entries took 1-3.6 ms against 80 us on one thread (issue 18: 27-42 % of a refined
-#: ring run). Below it BLAS calls are not threaded anyway, and setting the limit (~0.02-0.1 ms
-#: per Newton solve) would be pure cost. The sparse solver sets its own threads per call
-#: (``linear.pardiso_threads``).
-SERIAL_BLAS_FROM = 10_000
-
-
-@lru_cache(maxsize=1)
-def _blas() -> ThreadpoolController:
-    """threadpoolctl's handle on the BLAS libraries loaded (NumPy's, with NumPy)."""
-    return ThreadpoolController().select(user_api="blas")
-
-
-def serial_blas(unknowns: int):
-    """A context in which the BLAS runs on one thread, for systems of SERIAL_BLAS_FROM
-    unknowns or more (a no-op below)."""
-    return _blas().limit(limits=1) if unknowns >= SERIAL_BLAS_FROM else nullcontext()
 
 
 def norm2(v: NDArray) -> float:
     """Euclidean norm of a 1-D array: what ``np.linalg.norm`` computes (sqrt of the dot
     product), without its dispatch cost (~5 us, paid ~35 000 times in an impact run). A BLAS
-    dot: large Newton loops keep it on one thread (:func:`serial_blas`)."""
+    dot: a run keeps the BLAS on one thread (:func:`ntncontact.threads.serial_blas`)."""
     return math.sqrt(float(np.dot(v, v)))
 
 
@@ -131,11 +107,8 @@ def newton(
     With ``factors``, a kept factorization is tried first (modified Newton) and replaced by a
     fresh one as soon as its step does not contract the residual enough. ``early_ratio``: also
     return (``early=True``) once |R| <= early_ratio |R(y0)|, for callers that only need a rough
-    solution (the augmentations before the last, see ``Simulation._test_augmentation``).
-    Large systems run with the BLAS on one thread (:data:`SERIAL_BLAS_FROM`)."""
-    with serial_blas(np.size(y0)):
-        return _newton(residual, jacobian, solve, y0, settings, length_scale, factors,
-                       early_ratio)
+    solution (the augmentations before the last, see ``Simulation._test_augmentation``)."""
+    return _newton(residual, jacobian, solve, y0, settings, length_scale, factors, early_ratio)
 
 
 def _newton(residual: Residual, jacobian: Jacobian, solve: LinearSolve, y0: NDArray,

@@ -42,6 +42,7 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_valida
 from ..api import Scenario, load_scenario, override_strings, read_results, run
 from ..engine.builder import build_mesh
 from ..io.scenario import ScenarioError, read_toml
+from ..threads import single_threaded
 
 SWEEP_FILE = "sweep.csv"
 REDUCTIONS: dict[str, Callable[[np.ndarray], float]] = {
@@ -141,8 +142,6 @@ def run_case(scenario_path: str, overrides: Mapping[str, Any], folder: str,
              reductions: Mapping[str, str]) -> dict[str, Any]:
     """One case, on a worker: run it unless its folder already completed the same overrides,
     and return its sweep.csv row. Never raises: a failure becomes the row's ``error``."""
-    from threadpoolctl import threadpool_limits
-
     items = override_strings(overrides)
     row: dict[str, Any] = {"case": Path(folder).name, **overrides}
     try:
@@ -150,7 +149,7 @@ def run_case(scenario_path: str, overrides: Mapping[str, Any], folder: str,
         if done:
             results = read_results(folder)
         else:
-            with threadpool_limits(1):  # one single-threaded case per worker and core
+            with single_threaded():  # one single-threaded case per worker and core
                 results = run(load_scenario(scenario_path, list(items)), Path(folder),
                               overwrite=True)  # read back from the folder it wrote
         row |= {"skipped": done, "error": results.summary.get("error")}

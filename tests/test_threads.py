@@ -1,0 +1,80 @@
+"""The thread policy of a run (ntncontact.threads): who threads, how many, and NumPy's BLAS
+kept serial while a run steps."""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import numba
+import numpy as np
+import pytest
+
+import ntncontact
+from ntncontact import threads
+from ntncontact.fem.kernels_numba import MIN_ELEMENTS_PER_THREAD, NumbaAssembly
+from ntncontact.solvers import linear
+
+EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
+
+
+def strip_cells(n_elements: int) -> np.ndarray:
+    """Q4 cells of a strip of n_elements x 1 elements."""
+    lower = np.arange(n_elements)
+    return np.column_stack([lower, lower + 1, lower + n_elements + 2, lower + n_elements + 1])
+
+
+def test_run_threads_follow_the_machine_and_omp_num_threads(monkeypatch):
+    monkeypatch.delenv("OMP_NUM_THREADS", raising=False)
+    assert threads.run_threads(1) == 1
+    assert threads.run_threads(2) == 2
+    assert threads.run_threads(64) == threads.MAX_THREADS
+    assert threads.run_threads() == min(threads.available_cores(), threads.MAX_THREADS)
+    monkeypatch.setenv("OMP_NUM_THREADS", "3")
+    assert threads.run_threads(64) == 3
+    monkeypatch.setenv("OMP_NUM_THREADS", "")  # empty: not set
+    assert threads.run_threads(2) == 2
+
+
+def test_assembly_threads_default_to_the_runs_within_the_elements_and_numba(monkeypatch):
+    monkeypatch.setenv("OMP_NUM_THREADS", "2")
+    large = strip_cells(4 * MIN_ELEMENTS_PER_THREAD)
+    expected = min(2, numba.get_num_threads())
+    assert NumbaAssembly("neo_hookean", large, np.arange(len(large))).threads == expected
+    # fewer than MIN_ELEMENTS_PER_THREAD elements a thread: the serial loop
+    small = strip_cells(2 * MIN_ELEMENTS_PER_THREAD - 1)
+    assert NumbaAssembly("neo_hookean", small, np.arange(len(small))).threads == 1
+    monkeypatch.setenv("OMP_NUM_THREADS", "1")  # as in a Dask worker
+    assert NumbaAssembly("neo_hookean", large, np.arange(len(large))).threads == 1
+    assert NumbaAssembly("neo_hookean", large, np.arange(len(large)), threads=1).threads == 1
+
+
+def test_a_run_steps_with_numpys_blas_on_one_thread_and_restores_it():
+    """Every step (and every observer) sees the BLAS on one thread; after the run the caller's
+    setting is back. Set to 2 first, so that the test can fail on a 1-thread default."""
+    blas = threads._blas()
+    if not blas.info():
+        pytest.skip("no BLAS library seen by threadpoolctl")
+    seen = []
+    scenario = ntncontact.load_scenario(EXAMPLES / "spinning_block.toml", ["analysis.t_end=0.1"])
+    with blas.limit(limits=2):
+        before = [lib["num_threads"] for lib in blas.info()]
+        ntncontact.run(scenario, progress=lambda t: seen.append(
+            [lib["num_threads"] for lib in blas.info()]))
+        after = [lib["num_threads"] for lib in blas.info()]
+    assert len(seen) == 5 and all(step == [1] * len(before) for step in seen)
+    assert after == before
+
+
+def test_a_sweeps_case_runs_on_one_thread_in_every_part(monkeypatch):
+    """single_threaded (a sweep's case): PARDISO and the assembly get 1 thread even where
+    nothing set the environment (a worker not started by a Dask nanny); restored after."""
+    monkeypatch.delenv("OMP_NUM_THREADS", raising=False)
+    monkeypatch.setenv("MKL_NUM_THREADS", "2")
+    large = strip_cells(4 * MIN_ELEMENTS_PER_THREAD)
+    with threads.single_threaded():
+        assert linear.pardiso_threads(16) == 1
+        assert NumbaAssembly("neo_hookean", large, np.arange(len(large))).threads == 1
+        assert all(lib["num_threads"] == 1 for lib in threads._blas().info())
+    assert "OMP_NUM_THREADS" not in os.environ
+    assert os.environ["MKL_NUM_THREADS"] == "2"
