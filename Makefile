@@ -40,8 +40,8 @@ demo: $(WARM)
 # longest file starts first and the other worker runs the rest beside it (xdist's default
 # order, most tests first, left it for last: session 23, 22.8 min of wall). The ten slowest
 # tests are listed at the end. Each worker runs its tests on one thread (OMP_NUM_THREADS=1, as
-# Dask's workers do): the workers already fill the cores, and a refined run's PARDISO and
-# assembly threads on top of them took the suite from 9.3 to 11.3 min (session 30). The tests
+# Dask's workers do): the workers already fill the cores, and a refined run's assembly (and
+# PARDISO) threads on top of them took the suite from 9.3 to 11.3 min (session 30). The tests
 # of the threaded paths set their threads themselves.
 PYTEST := OMP_NUM_THREADS=1 $(BIN)/python -m pytest -q -n auto --dist loadfile \
 	--no-loadscope-reorder --durations=10

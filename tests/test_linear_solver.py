@@ -267,24 +267,25 @@ def test_a_kept_factor_solves_later_right_hand_sides(backend):
 
 
 def test_pardiso_threads_are_chosen_for_the_machine(monkeypatch):
-    """Every core up to MAX_THREADS (the factorization runs while the step waits);
-    OMP_NUM_THREADS sets it (Dask's workers set 1), MKL_NUM_THREADS wins for PARDISO."""
+    """One thread on 2 cores (a second saves ~5 % and PARDISO on two threads does not repeat
+    its answers), half the cores up to MAX_THREADS on a larger machine; MKL_NUM_THREADS,
+    else OMP_NUM_THREADS (Dask's workers set both to 1), wins if set."""
     from ntncontact import threads
     from ntncontact.solvers import linear
 
     monkeypatch.delenv("MKL_NUM_THREADS", raising=False)
     monkeypatch.delenv("OMP_NUM_THREADS", raising=False)
-    assert linear.pardiso_threads(1) == 1
-    assert linear.pardiso_threads(2) == 2
+    assert linear.pardiso_threads(1) == linear.pardiso_threads(2) == 1
+    assert linear.pardiso_threads(4) == 2
     assert linear.pardiso_threads(16) == threads.MAX_THREADS == 8
     assert linear.pardiso_threads(64) == 8
-    assert linear.pardiso_threads() == min(threads.available_cores(), 8)
-    monkeypatch.setenv("OMP_NUM_THREADS", "1")
-    assert linear.pardiso_threads(16) == 1
-    monkeypatch.setenv("MKL_NUM_THREADS", "3")
+    assert linear.pardiso_threads() >= 1
+    monkeypatch.setenv("OMP_NUM_THREADS", "3")
     assert linear.pardiso_threads(2) == 3
+    monkeypatch.setenv("MKL_NUM_THREADS", "2")
+    assert linear.pardiso_threads(16) == 2
     monkeypatch.setenv("MKL_NUM_THREADS", "zero")  # not a count: ignored
-    assert linear.pardiso_threads(16) == 1
+    assert linear.pardiso_threads(16) == 3
 
 
 @pytest.mark.skipif(not pardiso_available(), reason="pypardiso not installed")

@@ -3,6 +3,7 @@ with ``--restart`` writes what the uninterrupted run writes, number for number."
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import random
@@ -26,6 +27,7 @@ from ntncontact.io.checkpoint import (
 )
 from ntncontact.io.vtk import read_pvd, read_vtu
 from ntncontact.io.writers import read_csv_table
+from ntncontact.solvers.linear import pardiso_available
 
 EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
 TIMEOUT = 600.0  # a loaded machine (2 cores, many jobs) runs the children slowly
@@ -42,7 +44,15 @@ CASES = {
     "blocks_fast_sliding": ("blocks_fast_sliding.toml",
                             ["contact.0.friction=0.2", "analysis.t_end=0.09"], 0.012, 18, 25),
     "ring_impact": ("ring_impact.toml", ["analysis.t_end=0.12"], 0.02, 14, 19),
+    # refined 4x: 12 002 unknowns, so PARDISO, whose analysis (scaling and matching) depends
+    # on the values it was made with: the checkpoint keeps them
+    "ring_impact_4x": ("ring_impact.toml", [
+        "bodies.0.mesh.n_radial=16", "bodies.0.mesh.n_circ=192", "bodies.1.mesh.nx=160",
+        "bodies.1.mesh.ny=16", "analysis.t_end=0.12"], 0.02, 14, 19),
 }
+#: the environment of a case's runs beyond the test's: PARDISO on one thread, the default on
+#: 2 cores and what a bit-for-bit restart needs (linear.pardiso_threads)
+CASE_ENVIRONMENT = {"ring_impact_4x": {"MKL_NUM_THREADS": "1"}}
 
 
 def run_cli(scenario: Path, out: Path, overrides: list[str], *extra: str) -> int:
@@ -50,14 +60,30 @@ def run_cli(scenario: Path, out: Path, overrides: list[str], *extra: str) -> int
     return main(["run", str(scenario), "--out", str(out), "--quiet", *sets, *extra])
 
 
-def start_child(scenario: Path, out: Path, overrides: list[str], *extra: str
-                ) -> subprocess.Popen:
-    """``ntncontact run`` in a child process with this test's environment (kernel cache)."""
+def start_child(scenario: Path, out: Path, overrides: list[str], *extra: str,
+                environment: dict[str, str] | None = None) -> subprocess.Popen:
+    """``ntncontact run`` in a child process with this test's environment (kernel cache),
+    plus ``environment``."""
     sets = [item for o in overrides for item in ("--set", o)]
     command = [sys.executable, "-m", "ntncontact.cli", "run", str(scenario), "--out", str(out),
                "--quiet", *sets, *extra]
     return subprocess.Popen(command, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
-                            text=True)
+                            text=True, env=os.environ | (environment or {}))
+
+
+@contextlib.contextmanager
+def environment_set(values: dict[str, str]):
+    """os.environ with ``values`` for the duration (an in-process run reads its threads)."""
+    saved = {name: os.environ.get(name) for name in values}
+    os.environ.update(values)
+    try:
+        yield
+    finally:
+        for name, value in saved.items():
+            if value is None:
+                os.environ.pop(name, None)
+            else:
+                os.environ[name] = value
 
 
 def kill_at_step(child: subprocess.Popen, out: Path, step: int) -> None:
@@ -115,7 +141,8 @@ def reference(tmp_path_factory):
         if name not in done:
             scenario, overrides, *_ = CASES[name]
             out = tmp_path_factory.mktemp("reference") / name
-            assert run_cli(EXAMPLES / scenario, out, overrides) == 0
+            with environment_set(CASE_ENVIRONMENT.get(name, {})):
+                assert run_cli(EXAMPLES / scenario, out, overrides) == 0
             done[name] = out
         return done[name]
 
@@ -131,12 +158,15 @@ def test_a_killed_run_continued_from_its_checkpoint_matches_the_uninterrupted_on
     rng = random.Random(f"{SEED}-{name}")
     kill_step = rng.randint(first, last)
     out = tmp_path / name
-    kill_at_step(start_child(EXAMPLES / scenario, out, overrides), out, kill_step)
+    environment = CASE_ENVIRONMENT.get(name, {})
+    kill_at_step(start_child(EXAMPLES / scenario, out, overrides, environment=environment), out,
+                 kill_step)
     # the restarted run is killed too, at a step past the rows the first one left
     steps = len(history_steps(reference(name))) - 1
     again = min(history_steps(out)[-1] + rng.randint(1, 2), steps - 1)
     context = f"{name} killed at steps {kill_step} and {again} (seed {SEED})"
-    kill_at_step(start_child(EXAMPLES / scenario, out, overrides, "--restart"), out, again)
+    kill_at_step(start_child(EXAMPLES / scenario, out, overrides, "--restart",
+                             environment=environment), out, again)
     assert summary(out)["status"] == "running", context  # killed: no chance to say more
     checkpoints = checkpoint_files(out)
     assert 1 <= len(checkpoints) <= KEEP, context
@@ -145,7 +175,8 @@ def test_a_killed_run_continued_from_its_checkpoint_matches_the_uninterrupted_on
     # the frames up to the checkpoint are kept as they are, later ones are written again
     kept = {p: p.stat().st_mtime_ns for p in (out / "fields").glob("*.vtu")
             if int(p.stem.rsplit("_", 1)[-1]) <= resumed_from}
-    assert run_cli(EXAMPLES / scenario, out, overrides, "--restart") == 0, context
+    with environment_set(environment):
+        assert run_cli(EXAMPLES / scenario, out, overrides, "--restart") == 0, context
     assert kept and all(p.stat().st_mtime_ns == t for p, t in kept.items()), context
     assert not list(out.rglob("*.tmp")), f"{context}: temporary files left"
     ref = reference(name)
@@ -243,3 +274,36 @@ def test_a_restored_linear_solver_factors_like_the_one_it_was_saved_from(n):
     restored.restore_analysis(json.loads(json.dumps(info)), arrays)  # as the header keeps it
     assert np.array_equal(restored.solve(second, b), expected)
     assert restored.stats.analyses == 0
+
+
+@pytest.mark.skipif(not pardiso_available(), reason="pypardiso not installed")
+def test_a_restored_pardiso_solver_analyses_with_the_values_of_the_saved_analysis(monkeypatch):
+    """PARDISO's analysis (scaling, weighted matching) depends on the values it is made with:
+    a restored solver analyses with the saved values, not with its first matrix's, and so
+    factors that matrix to the same bits as the solver it was saved from."""
+    import scipy.sparse as sp
+
+    from ntncontact.solvers.linear import PARDISO_MIN_UNKNOWNS, LinearSolver
+
+    monkeypatch.setenv("MKL_NUM_THREADS", "1")
+    rng = np.random.default_rng(7)
+    side = int(np.ceil(np.sqrt(PARDISO_MIN_UNKNOWNS)))
+    pattern = (sp.kronsum(sp.diags([1.0, 1.0, 1.0], [-1, 0, 1], (side, side)),
+                          sp.diags([1.0, 1.0, 1.0], [-1, 0, 1], (side, side)))).tocsr()
+
+    def matrix(scale: float) -> sp.csr_matrix:  # unsymmetric, rows of very different sizes
+        values = pattern.copy()
+        values.data = rng.uniform(-1.0, 1.0, values.nnz)
+        rows = np.exp(rng.uniform(-scale, scale, pattern.shape[0]))
+        return (sp.diags(rows) @ (values + sp.diags(np.abs(values).sum(axis=1).A1 + 0.5))).tocsr()
+
+    first, second, b = matrix(3.0), matrix(3.0), rng.standard_normal(pattern.shape[0])
+    running = LinearSolver(backend="pardiso")
+    running.solve(first, b)
+    info, arrays = running.analysis_state()
+    expected = running.solve(second, b)
+    restored = LinearSolver(backend="pardiso")
+    restored.restore_analysis(json.loads(json.dumps(info)), arrays)
+    assert np.array_equal(restored.solve(second, b), expected)
+    fresh = LinearSolver(backend="pardiso")  # its own analysis of `second`: other bits
+    assert not np.array_equal(fresh.solve(second, b), expected)

@@ -1,15 +1,15 @@
 """How many threads a run uses, decided in one place for the parts that thread.
 
 A step's work runs one part at a time: the compiled assembly, then the sparse solver, then
-NumPy's own work. Each threaded part therefore gets the whole machine (:func:`run_threads`),
-and NumPy's BLAS gets none of it (:func:`serial_blas`): a run has no dense product large
-enough to gain from threads, and OpenBLAS's idle workers spin on a core after each threaded
-call. Measured on the ring impact refined 8x (46 530 unknowns, 2 cores, load ~1.5,
-``benchmarks/scaling.py --threads``): with the BLAS threaded outside Newton its workers took
-0.37 s of CPU a step, the whole second core, and neither PARDISO nor the assembly could use
-it (0.77 s a step whatever their threads); with the BLAS serial, PARDISO and the assembly on
-2 threads took 0.565 s a step against 0.765 s on one (solve 0.416 -> 0.284, assembly
-0.198 -> 0.129 s a step).
+NumPy's own work. The assembly therefore gets the whole machine (:func:`run_threads`), and
+NumPy's BLAS none of it (:func:`serial_blas`): a run has no dense product large enough to gain
+from threads, and OpenBLAS's idle workers spin on a core after each threaded call. Measured on
+the ring impact refined 8x (46 530 unknowns, 2 cores, load ~1.5, ``benchmarks/scaling.py
+--threads``): with the BLAS threaded outside Newton its workers took 0.37 s of CPU a step,
+the whole second core, and neither PARDISO nor the assembly could use it (0.77 s a step
+whatever their threads); with the BLAS serial, the assembly on 2 threads took 0.129 against
+0.198 s a step. PARDISO's threads are chosen apart (``solvers.linear.pardiso_threads``: one on
+2 cores, where a second gains ~5 % and costs bit-for-bit reproducibility).
 
 Environment, as a user of MKL or OpenMP code expects it: ``OMP_NUM_THREADS`` sets the run's
 threads; ``MKL_NUM_THREADS`` overrides it for PARDISO alone; ``NUMBA_NUM_THREADS`` caps the

@@ -47,7 +47,7 @@ import scipy.sparse.linalg as spla
 from numpy.typing import NDArray
 from threadpoolctl import ThreadpoolController
 
-from ..threads import run_threads, threads_from_environment
+from ..threads import MAX_THREADS, available_cores, threads_from_environment
 from . import static_lu
 
 Backend = Literal["auto", "pardiso", "superlu", "static"]
@@ -109,20 +109,28 @@ def _point_pypardiso_at_mkl_rt() -> None:
         os.environ[MKL_RT_VARIABLE] = os.path.realpath(found[0])
 
 
-def pardiso_threads(cores: int | None = None) -> int:
-    """MKL threads for PARDISO: ``MKL_NUM_THREADS`` if the user set it, else the run's
-    threads (:func:`ntncontact.threads.run_threads`: ``OMP_NUM_THREADS``, else every core up
-    to 8).
+#: PARDISO threads on a machine with at most this many cores: one (see pardiso_threads).
+FEW_CORES = 2
 
-    Why every core, also on 2: the factorization and the solves run while the rest of the step
-    waits. What made a second thread look costly here before (session 15: a 20 160-dof
-    factorization 203 ms on one thread against 326 ms on two, at load 6-19) was NumPy's
-    OpenBLAS workers spinning on the second core; with the BLAS serial during a run
-    (:func:`ntncontact.threads.serial_blas`), the ring refined 8x solves in 0.284 s a step
-    on two threads against 0.416 s on one (``benchmarks/scaling.py --threads``). PARDISO's
-    results on several threads are made reproducible by its CNR mode (:func:`_pardiso_iparm`)."""
-    requested = threads_from_environment("MKL_NUM_THREADS")
-    return requested if requested is not None else run_threads(cores)
+
+def pardiso_threads(cores: int | None = None) -> int:
+    """MKL threads for PARDISO: ``MKL_NUM_THREADS``, else ``OMP_NUM_THREADS`` (MKL's own
+    order), else one thread on a machine of at most :data:`FEW_CORES` cores and half the
+    cores, at most :data:`ntncontact.threads.MAX_THREADS`, on a larger one.
+
+    Why one on 2 cores: a second thread saves only ~5 % of a refined step (ring 8x 0.707 ->
+    0.671 s, Hertz 8x 2.668 -> 2.538 s, with the BLAS serial, ``benchmarks/scaling.py
+    --threads``), and PARDISO on several threads does not repeat its answers bit for bit,
+    even in its reproducible mode (:func:`_pardiso_iparm`): the ring refined 4x, killed and
+    restarted, differed from the uninterrupted run in 2 of 6 tries on two threads, in none
+    of 8 on one. On a larger machine the threads pay more (the nested-dissection tree of a
+    2D mesh of 10^5 unknowns keeps up to ~8 busy), and a bit-for-bit restart there needs
+    ``MKL_NUM_THREADS=1``."""
+    requested = threads_from_environment("MKL_NUM_THREADS", "OMP_NUM_THREADS")
+    if requested is not None:
+        return requested
+    cores = available_cores() if cores is None else cores
+    return 1 if cores <= FEW_CORES else min(cores // 2, MAX_THREADS)
 
 
 @lru_cache(maxsize=1)
@@ -293,13 +301,17 @@ class LinearSolver:
     def analysis_state(self) -> tuple[dict, dict[str, NDArray]]:
         """What decides how the next matrix is factored, for a restart checkpoint (JSON
         values, arrays): the last pattern and, per SuperLU/static-LU mode, its ordering and
-        the static LU's fallback record. Without it a restarted run would factor its first
-        matrix by SuperLU where the uninterrupted run reuses the static LU: other round-off.
-        PARDISO analyses are structural and simply redone."""
+        the static LU's fallback record, and per PARDISO mode the values its analysis was made
+        with. Without them a restarted run would factor its first matrix by SuperLU where the
+        uninterrupted run reuses the static LU, or with another PARDISO scaling: other
+        round-off."""
         if self._pattern is None:
             return {}, {}
         modes, arrays = [], {"indptr": self._pattern.indptr, "indices": self._pattern.indices}
         for key, impl in self._impls.items():
+            if isinstance(impl, _PardisoBackend) and impl.analysis_values is not None:
+                arrays[f"pardiso_values_{len(modes)}"] = impl.analysis_values
+                modes.append({"symmetric": key, "pardiso": True})
             if isinstance(impl, _SuperLUBackend) and impl.perm is not None:
                 arrays[f"perm_{len(modes)}"] = impl.perm
                 modes.append({"symmetric": key, "static": isinstance(impl, _StaticLUBackend),
@@ -317,6 +329,12 @@ class LinearSolver:
         self._pattern = _Pattern(sp.csr_matrix((np.zeros(indices.size), indices,
                                                 arrays["indptr"]), shape=(n, n)))
         for index, mode in enumerate(info["modes"]):
+            if mode.get("pardiso"):
+                if pardiso_available():  # else the run goes on with another solver
+                    impl = _PardisoBackend(self._pattern, mode["symmetric"], self.stats)
+                    impl.restored_values = np.asarray(arrays[f"pardiso_values_{index}"])
+                    self._impls[mode["symmetric"]] = impl
+                continue
             kind = _StaticLUBackend if mode["static"] else _SuperLUBackend
             impl = kind(self._pattern, mode["symmetric"], self.stats)
             impl.perm = np.asarray(arrays[f"perm_{index}"])
@@ -517,22 +535,24 @@ class _PardisoBackend:
                                     shape=(pattern.n, pattern.n))
         self.analysed = False
         self.factored = False  # PARDISO holds a numerical factor (L and U) of this handle
+        #: the values the analysis was made with (its scaling and matching depend on them), for
+        #: a restart checkpoint; and a restored run's, for its first analysis
+        self.analysis_values: NDArray | None = None
+        self.restored_values: NDArray | None = None
 
     def factor(self, data: NDArray) -> None:
-        self.matrix.data = np.ascontiguousarray(data[self.pattern.upper] if self.symmetric
-                                                else data)
+        values = np.ascontiguousarray(data[self.pattern.upper] if self.symmetric else data)
         fresh = not self.analysed
         if fresh:
-            self._call(11)  # ordering and symbolic factorization (matching uses the values)
-            self.analysed = True
-            self.stats.analyses += 1
+            restored, self.restored_values = self.restored_values, None
+            self._analyse(values if restored is None else restored)
+        self.matrix.data = values
         self._call(22)
         self.factored = True
         self.stats.factorizations += 1
         if self._perturbed() and not fresh:
             # the reused analysis (its matching/scaling) may no longer suit the values: redo it
-            self._call(11)
-            self.stats.analyses += 1
+            self._analyse(values)
             self._call(22)
             self.stats.factorizations += 1
         if self._perturbed():
@@ -542,6 +562,18 @@ class _PardisoBackend:
 
     def _perturbed(self) -> int:
         return int(self.pardiso.get_iparm(14))  # perturbed pivots of the last factorization
+
+    def _analyse(self, values: NDArray) -> None:
+        """Phase 11: the ordering and symbolic factorization, and the scaling and weighted
+        matching, which depend on the values. So the values are kept: a restarted run that
+        analysed its own first matrix instead factored with another scaling, and its
+        history differed in the last bits (the ring refined 4x, 3 restarts in 4, on one
+        thread and on two)."""
+        self.matrix.data = values
+        self._call(11)
+        self.analysis_values = np.array(values, copy=True)
+        self.analysed = True
+        self.stats.analyses += 1
 
     def solver(self):
         return self.solve
@@ -574,6 +606,7 @@ class _PardisoBackend:
         if self.pardiso is None:
             return
         self.factored = False
+        self.analysis_values = None
         if self.analysed:
             self.analysed = False
             with _mkl_controller().limit(limits=self.threads):
@@ -613,8 +646,8 @@ def _pardiso_iparm(symmetric: bool, threads: int) -> dict[int, int]:
     On several threads PARDISO's answer changes from call to call unless its conditional
     numerical reproducibility mode is on (parameter 34 = the thread count): 2 distinct
     solutions in 40 factorizations of the same 45 000-unknown matrix on 2 threads without it,
-    1 with it, for +0-8 % factorization time. A restarted run must repeat its first run bit
-    for bit, so it is on."""
+    1 with it, for +0-8 % factorization time. So it is on; it does not make a whole run
+    repeat itself bit for bit, though (see :func:`pardiso_threads`)."""
     return {
         1: 1,  # use the values below, not the defaults
         2: 2,  # METIS nested-dissection ordering
