@@ -122,8 +122,8 @@ def pardiso_threads(cores: int | None = None) -> int:
     0.671 s, Hertz 8x 2.668 -> 2.538 s, with the BLAS serial, ``benchmarks/scaling.py
     --threads``), and PARDISO on several threads does not repeat its answers bit for bit,
     even in its reproducible mode (:func:`_pardiso_iparm`): the ring refined 4x, killed and
-    restarted, differed from the uninterrupted run in 2 of 6 tries on two threads, in none
-    of 8 on one. On a larger machine the threads pay more (the nested-dissection tree of a
+    restarted, differed from the uninterrupted run in 3 of 11 tries on two threads, in 1 of
+    19 on one. On a larger machine the threads pay more (the nested-dissection tree of a
     2D mesh of 10^5 unknowns keeps up to ~8 busy), and a bit-for-bit restart there needs
     ``MKL_NUM_THREADS=1``."""
     requested = threads_from_environment("MKL_NUM_THREADS", "OMP_NUM_THREADS")
@@ -567,8 +567,8 @@ class _PardisoBackend:
         """Phase 11: the ordering and symbolic factorization, and the scaling and weighted
         matching, which depend on the values. So the values are kept: a restarted run that
         analysed its own first matrix instead factored with another scaling, and its
-        history differed in the last bits (the ring refined 4x, 3 restarts in 4, on one
-        thread and on two)."""
+        history differed in the last bits (the ring refined 4x on one thread: 1 restart in
+        3 before, 1 in 19 after)."""
         self.matrix.data = values
         self._call(11)
         self.analysis_values = np.array(values, copy=True)
