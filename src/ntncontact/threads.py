@@ -26,7 +26,7 @@ from functools import lru_cache
 
 from threadpoolctl import ThreadpoolController, threadpool_limits
 
-__all__ = ["MAX_THREADS", "run_threads", "serial_blas", "single_threaded",
+__all__ = ["MAX_THREADS", "available_cores", "run_threads", "serial_blas", "single_threaded",
            "threads_from_environment"]
 
 #: The most threads used without being asked: the nested-dissection tree of a 2D mesh of
