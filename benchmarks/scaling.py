@@ -288,9 +288,9 @@ def report(rows: list[dict]) -> str:
 
 #: --threads: the thread settings compared (environment of the child run)
 THREAD_VARIANTS = {
-    "chosen (BLAS serial in a run, PARDISO and assembly on run_threads())": {},
+    "chosen (BLAS serial in a run, assembly on run_threads(), PARDISO on pardiso_threads())": {},
     "BLAS threaded (before session 30)": {"SCALING_THREADED_BLAS": "1"},
-    "PARDISO on 1 thread": {"MKL_NUM_THREADS": "1"},
+    "PARDISO on 2 threads": {"MKL_NUM_THREADS": "2"},
     "Numba assembly on 1 thread": {"NUMBA_NUM_THREADS": "1"},
     "all on 1 thread (OMP_NUM_THREADS=1)": {"OMP_NUM_THREADS": "1"},
 }

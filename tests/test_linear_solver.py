@@ -291,8 +291,9 @@ def test_pardiso_threads_are_chosen_for_the_machine(monkeypatch):
 @pytest.mark.skipif(not pardiso_available(), reason="pypardiso not installed")
 def test_pardiso_on_two_threads_repeats_its_answer_bit_for_bit(monkeypatch):
     """Without PARDISO's reproducibility mode two threads gave 2 distinct answers in 40
-    factorizations of one 45 000-unknown matrix; a restarted run must repeat its first run,
-    so every factorization of the same matrix must give the same bits."""
+    factorizations of one 45 000-unknown matrix. With it (on for several threads) every
+    factorization of the same matrix gives the same bits (a whole run on two threads still
+    does not repeat itself: see linear.pardiso_threads)."""
     monkeypatch.setenv("MKL_NUM_THREADS", "2")
     rng = np.random.default_rng(3)
     n = 30_000  # a 2D 5-point Laplacian, unsymmetric by a convective term, plus a shift

@@ -66,7 +66,9 @@ def _blas() -> ThreadpoolController:
 
 
 def serial_blas():
-    """A context in which NumPy's BLAS runs on one thread (restored on exit)."""
+    """A context in which NumPy's BLAS runs on one thread (restored on exit). It limits every
+    BLAS threadpoolctl sees, MKL too once pypardiso loaded it; PARDISO sets its own threads
+    for each call (``solvers.linear._PardisoBackend._call``)."""
     return _blas().limit(limits=1)
 
 
