@@ -11,7 +11,7 @@ import pytest
 from helpers import EXAMPLES, model_from_dict
 
 from ntncontact import api
-from ntncontact.engine.postprocess import mesh_velocity, stress_fields
+from ntncontact.engine.postprocess import frame_fields, mesh_velocity, stress_fields
 from ntncontact.io.vtk import read_pvd, read_vtu
 
 P = 7.0  # applied pressure
@@ -125,6 +125,22 @@ def test_mesh_velocity_of_a_node_that_changes_particle():
     # x_node = phi(X(t), t): w = v + F dX/dt = (1, 2) + F (2, 0)
     assert np.allclose(mesh_velocity(v, X, X_before, 0.1, F), [[5.0, 3.0]], rtol=1e-14)
     assert np.array_equal(mesh_velocity(v, X, X, 0.1, F), v)
+
+
+def test_frame_fields_give_the_nodal_deformation_gradient_of_the_bodies_asked_for():
+    """The mesh velocity's F comes from the stress's kinematics: under an affine map x = A X
+    it is A at every node of the bodies asked for (on a graded mesh, whose cells differ),
+    and the stress fields are those of stress_fields."""
+    model = model_from_dict(_block("neo_hookean", grading=1.5))
+    A = np.array([[1.02, 0.3], [-0.1, 0.97]])
+    X = model.X0
+    x = X @ A.T
+    cell, nodal, F = frame_fields(model, X, x, [0])
+    assert np.allclose(F, A, rtol=0.0, atol=1e-14)
+    reference = stress_fields(model, X, x)
+    for got, want in ((cell, reference[0]), (nodal, reference[1])):
+        assert all(np.array_equal(got[name], want[name]) for name in want)
+    assert frame_fields(model, X, x)[2] is None  # no body asked for: no F
 
 
 def test_contact_node_fields_match_the_contact_rows_of_the_same_step(tmp_path):

@@ -10,9 +10,8 @@ from ..engine.diagnostics import EnergyAudit
 from ..engine.model import Model
 from ..engine.postprocess import (
     contact_node_fields,
+    frame_fields,
     mesh_velocity,
-    nodal_deformation_gradient,
-    stress_fields,
 )
 from ..engine.reactions import reaction_columns
 from ..engine.simulation import StepRecord
@@ -166,21 +165,17 @@ class ResultWriter:
         if self.results.fields is None:
             return
         s = record.state
-        cell, nodal = stress_fields(model, s.X, s.x)
+        moving = before is not None and record.dt > 0.0
+        F_bodies = [a.body_index for a in model.ale_bodies] if moving else []
+        cell, nodal, F = frame_fields(model, s.X, s.x, F_bodies)
+        # Lagrangian meshes (F None) move with the material: the mesh velocity is v
         point = {"displacement": s.d, "velocity": s.v, "acceleration": s.a,
-                 "mesh_velocity": self._mesh_velocity(model, record, before),
+                 "mesh_velocity": mesh_velocity(s.v, s.X, before.state.X if moving else s.X,
+                                                record.dt, F),
                  "material_position": s.X}
         point |= nodal | contact_node_fields(record.extra.get("contact_rows"), len(s.X))
         self.results.fields.write(s.step, s.time, s.X, model.cells, point_data=point,
                                   cell_data=cell | {"body_id": self._body_id})
-
-    @staticmethod
-    def _mesh_velocity(model: Model, record: StepRecord, before: StepRecord | None):
-        s = record.state
-        if not model.ale_bodies or before is None:
-            return s.v.copy()  # Lagrangian meshes move with the material
-        F = nodal_deformation_gradient(model, s.X, s.x)
-        return mesh_velocity(s.v, s.X, before.state.X, record.dt, F)
 
     def on_finish(self, status: str, error: str | None) -> None:
         """Close the files, write the final summary and release the folder (once: later calls,
