@@ -180,3 +180,36 @@ def test_a_grown_union_is_the_pattern_a_rebuild_gives():
     assert np.array_equal(grown.indices, built.indices)
     assert np.array_equal(grown.data, built.data)
     assert union.keys.size == built.nnz
+
+
+def test_reserved_entries_join_the_union_when_it_grows_and_only_then():
+    """``reserve`` is asked for only when the pattern must grow (a first build or triplets on
+    new places); its entries are explicit zeros of the union, and triplets that later fall
+    on them keep the pattern."""
+    rng = np.random.default_rng(4)
+    n = 12
+    K = (sp.random(n, n, density=0.2, random_state=rng) + 4.0 * n * sp.eye(n)).tocsr()
+    outside = np.argwhere(K.toarray() == 0.0)
+    reserved_rows, reserved_cols = outside[:6, 0], outside[:6, 1]
+    calls = []
+
+    def reserve():
+        calls.append(1)
+        return reserved_rows, reserved_cols
+
+    rows, cols = outside[6:9, 0], outside[6:9, 1]
+    union = TripletUnion()
+    first = union.add(K, rows, cols, np.ones(3), reserve)
+    assert len(calls) == 1 and first.nnz == K.nnz + 9
+    assert np.allclose(first.toarray(), (K + sp.csr_matrix(
+        (np.ones(3), (rows, cols)), shape=K.shape)).toarray())
+    # the active set moves onto reserved places: found, no growth, no call
+    moved = union.add(K, reserved_rows[:4], reserved_cols[:4], np.full(4, 2.0), reserve)
+    assert len(calls) == 1
+    assert np.array_equal(moved.indices, first.indices)
+    assert np.allclose(moved.toarray(), (K + sp.csr_matrix(
+        (np.full(4, 2.0), (reserved_rows[:4], reserved_cols[:4])), shape=K.shape)).toarray())
+    # a place neither taken nor reserved grows the union, with the reservation asked again
+    new_r, new_c = outside[9]
+    grown = union.add(K, np.append(rows, new_r), np.append(cols, new_c), np.ones(4), reserve)
+    assert len(calls) == 2 and grown.nnz == first.nnz + 1

@@ -20,7 +20,7 @@ from .friction import SLIP, STICK
 from .kinematics import pair_gaps
 from .lagrange import LagrangeBlocks, blocks_of, lagrange_blocks, release_tensile_pairs
 from .laws import ContactLaw
-from .pairing import Pairing, closest_pairs, ordered_partners
+from .pairing import Pairing, closest_pairs, neighbour_pairs, ordered_partners
 from .state import PairState
 from .surfaces import ContactSurface, Interface, chord_normals, corner_mask
 
@@ -37,6 +37,7 @@ __all__ = [
     "LagrangeBlocks",
     "PairState",
     "Pairing",
+    "neighbour_pairs",
     "ordered_partners",
     "augment",
     "blocks_of",

@@ -20,7 +20,7 @@ from scipy.spatial import cKDTree
 from .kinematics import pair_gaps
 from .surfaces import Interface
 
-__all__ = ["Pairing", "closest_pairs"]
+__all__ = ["Pairing", "closest_pairs", "neighbour_pairs"]
 
 #: Up to this many (candidate, segment) combinations the closest points are found by comparing
 #: all of them (module doc); beyond it the k-d trees, whose cost grows like C log S, win.
@@ -150,6 +150,27 @@ def closest_pairs(
 #: this fraction of their present distance along surface 2: the same band the ALE respacing
 #: keeps (``ale.motion``, spacing_tolerance = 0.5), so pairing never squeezes the ALE surface.
 MIN_MATCHED_SPACING = 0.5
+
+
+def neighbour_pairs(x: NDArray[np.float64], interface: Interface, active: ArrayLike,
+                    reach: int) -> tuple[NDArray[np.int64], ...]:
+    """The pairs that the surface-1 nodes within ``reach`` chain steps of the ``active`` ones
+    (not active themselves) would form with their nearest surface-2 node at x, and with its
+    predecessor and its successor along surface 2 (three (P, 2) arrays, each with distinct
+    surface-1 nodes): the pairs a growing contact zone takes in next, whose matrix entries
+    the union pattern reserves (``fem.sparse``). The chain neighbours stand in for the
+    partner the ALE motion or the ordered pairing may give instead of the nearest node."""
+    s1, s2 = interface.surface1, interface.surface2
+    active = np.asarray(active, dtype=np.int64)
+    if active.size == 0 or reach < 1:
+        return ()
+    around = (s1.index_of(active)[:, None] + np.arange(-reach, reach + 1)).ravel()
+    around = around % s1.size if s1.closed else around[(around >= 0) & (around < s1.size)]
+    nodes = np.setdiff1d(s1.nodes[around], active)
+    nearest = closest_pairs(x, interface, nodes).node2
+    at = s2.index_of(nearest)
+    return tuple(np.column_stack([nodes, partner]) for partner in (nearest, s2.prev[at],
+                                                                     s2.next[at]))
 
 
 def ordered_partners(

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
+from functools import partial
 from typing import Protocol
 
 import numpy as np
@@ -152,18 +153,21 @@ class StepProblem:
                 K = self._add_mass(K, inertia_factor(self.dt))
             scale = max(scale, norm2(inertia))
             v_eval, rate = midpoint_velocity(d, d_n, self.dt).reshape(-1, 2), 2.0 / self.dt
-        triplets = []
+        triplets, reserves = [], []
         for term in self.extra:
             f, coo = term(x.reshape(-1, 2), v_eval, rate, self.state.x)
             R = R + f
             scale = max(scale, norm2(f))
             triplets.append(coo)
+            if hasattr(term, "reserve"):  # entries to reserve in the union (fem.sparse)
+                reserves.append(partial(term.reserve, x.reshape(-1, 2), v_eval, rate,
+                                        self.state.x))
         h, G, B, f_c, k_c = self._constraints(x.reshape(-1, 2), v_eval, rate, y, R.size)
         if h.size:
             R = R + f_c
             triplets += k_c
         if K is not None:
-            K = _add_triplets(K, triplets, self.union)
+            K = _add_triplets(K, triplets, self.union, reserves)
             # Forces computed from positions of size L carry round-off ~ eps |K| L: never ask
             # for less. Kept from the first tangent, so residual-only calls use it too.
             self.scale_floor = FLOOR_RATIO * np.abs(K.diagonal()).max() * self.length_scale
@@ -271,9 +275,11 @@ class StepProblem:
         return self.union.free_block(K, self.free_dofs)
 
 
-def _add_triplets(K: sp.csr_matrix, triplets: list, union: TripletUnion) -> sp.csr_matrix:
+def _add_triplets(K: sp.csr_matrix, triplets: list, union: TripletUnion,
+                  reserves: Sequence[Callable[[], tuple]] = ()) -> sp.csr_matrix:
     """K plus the COO triplets (rows, cols, values) of the extra terms, in the union pattern
-    (explicit zeros kept, see :mod:`ntncontact.fem.sparse`)."""
+    (explicit zeros kept, see :mod:`ntncontact.fem.sparse`), which reserves the entries of
+    ``reserves`` (each () -> (rows, cols)) when it grows."""
     kept = [(r, c, v) for r, c, v in triplets if len(v)]
     if not kept:
         # no contact now, but once a union exists K goes on in its pattern (zeros in the
@@ -281,7 +287,12 @@ def _add_triplets(K: sp.csr_matrix, triplets: list, union: TripletUnion) -> sp.c
         # two new analyses per contact episode (issue 18)
         return union.add(K, _NONE, _NONE, _NO_VALUES) if union.holds(K) else K
     rows, cols, vals = (np.concatenate([np.asarray(t[i]) for t in kept]) for i in range(3))
-    return union.add(K, rows, cols, vals)
+    return union.add(K, rows, cols, vals, partial(_reserved, reserves) if reserves else None)
+
+
+def _reserved(reserves: Sequence[Callable[[], tuple]]) -> tuple[NDArray, NDArray]:
+    found = [reserve() for reserve in reserves]
+    return (np.concatenate([r for r, _ in found]), np.concatenate([c for _, c in found]))
 
 
 _NONE = np.zeros(0, dtype=np.int64)

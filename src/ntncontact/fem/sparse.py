@@ -10,9 +10,14 @@ long as K's pattern holds and the triplets fall on places it already has.
 The union only grows while K's pattern holds: when the active set changes, pairs that leave
 keep their (zero) entries and pairs that come back find theirs, so the solver sees a new
 pattern, and redoes its analysis, only when a pair touches dofs that no earlier pair coupled.
+When it grows, it also takes in the entries its caller reserves (``TripletUnion.add``'s
+``reserve``: the contact terms give those of the pairs a growing zone takes next), so that a
+zone growing by a pair or two a step is not a new analysis at every step.
 """
 
 from __future__ import annotations
+
+from collections.abc import Callable
 
 import numpy as np
 import scipy.sparse as sp
@@ -29,14 +34,19 @@ class TripletUnion:
         self._k_map = self._t_map = self._indptr = self._indices = None
         self.free_block = FreeBlock()  # the Newton matrix's free-dof block, same lifetime
 
-    def add(self, K: sp.csr_matrix, rows: NDArray, cols: NDArray,
-            vals: NDArray) -> sp.csr_matrix:
+    def add(self, K: sp.csr_matrix, rows: NDArray, cols: NDArray, vals: NDArray,
+            reserve: Reserve | None = None) -> sp.csr_matrix:
+        """``reserve``: called only when the pattern must grow, (rows, cols) of entries that
+        the triplets are expected to take soon, added to the union with the triplets' own
+        (a growing contact zone's next pairs: one analysis instead of one per growth)."""
         if not self._same_k(K):
             if self._k_key is not None:  # a new K pattern: start afresh (a first K takes up
                 self._keys = np.zeros(0, dtype=np.int64)  # the keys of a restore)
-            self._build(K, rows, cols)
-        elif not self._same_triplets(rows, cols):
-            self._place(K, rows, cols)
+            self._build(K)
+        if not self._same_triplets(rows, cols):
+            # placed in the union of K and the keys so far, and so grown and reserved at the
+            # same calls in a restored run as in the run it continues (bit for bit)
+            self._place(K, rows, cols, reserve)
         data = np.zeros(self._indices.size)
         data[self._k_map] = K.data
         # only the few triplets' places (a bincount to the full size took another nnz array)
@@ -66,20 +76,30 @@ class TripletUnion:
         return _same_array(K.indptr, indptr) and _same_array(K.indices, indices)
 
     def _same_triplets(self, rows: NDArray, cols: NDArray) -> bool:
+        if self._t_key is None:
+            return False
         r, c = self._t_key
         return np.array_equal(rows, r) and np.array_equal(cols, c)
 
-    def _place(self, K: sp.csr_matrix, rows: NDArray, cols: NDArray) -> None:
-        """New triplet places: found in the union (pattern kept), else the union grown."""
+    def _place(self, K: sp.csr_matrix, rows: NDArray, cols: NDArray,
+               reserve: Reserve | None) -> None:
+        """New triplet places: found in the union (pattern kept), else the union grown (by
+        the reserved entries too)."""
         keys_t = _keys(rows, cols, K.shape[1])
-        at = np.searchsorted(self._keys, keys_t)
-        found = at < self._keys.size
-        found[found] = self._keys[at[found]] == keys_t[found]
+        found = self._found(keys_t)
         if not found.all():
-            self._grow(np.unique(keys_t[~found]), K.shape)
-            at = np.searchsorted(self._keys, keys_t)
+            reserved = _reserved_keys(reserve, K.shape[1])
+            new = np.unique(np.concatenate([keys_t[~found], reserved]))
+            self._grow(new[~self._found(new)], K.shape)
+        at = np.searchsorted(self._keys, keys_t)
         self._t_map = at
         self._t_key = (np.array(rows, copy=True), np.array(cols, copy=True))
+
+    def _found(self, keys: NDArray) -> NDArray[np.bool_]:
+        at = np.searchsorted(self._keys, keys)
+        found = at < self._keys.size
+        found[found] = self._keys[at[found]] == keys[found]
+        return found
 
     def _grow(self, new: NDArray, shape: tuple[int, int]) -> None:
         """Insert keys ``new`` (sorted, none in the union) into the union for the same K: the
@@ -95,22 +115,31 @@ class TripletUnion:
         shift = np.searchsorted(before, self._k_map, side="right")
         self._k_map = (self._k_map + shift).astype(self._k_map.dtype)
 
-    def _build(self, K: sp.csr_matrix, rows: NDArray, cols: NDArray) -> None:
-        """Union pattern (sorted, unique) of K, the triplets and the union so far, and each K
-        entry's and triplet's place in it."""
+    def _build(self, K: sp.csr_matrix) -> None:
+        """Union pattern (sorted, unique) of K and the union so far (a restored one), and
+        each K entry's place in it; the triplets are placed next (:meth:`_place`)."""
         n_rows, n_cols = K.shape
         keys_k = np.repeat(np.arange(n_rows, dtype=np.int64) * n_cols, np.diff(K.indptr))
         keys_k += K.indices  # row * n_cols + col, built in place
-        keys_t = _keys(rows, cols, n_cols)
-        union = _sorted_unique(np.concatenate([keys_k, keys_t, self._keys]))
+        union = _sorted_unique(np.concatenate([keys_k, self._keys]))
         self._indptr = _row_starts(union, K.shape)
         self._indices = (union % n_cols).astype(K.indices.dtype)
         self._keys = union
         position = np.int32 if union.size < 2**31 else np.int64  # kept: half the bytes
         self._k_map = np.searchsorted(union, keys_k).astype(position)
-        self._t_map = np.searchsorted(union, keys_t)
         self._k_key = (K.indptr, K.indices)  # by reference, see FreeBlock._build
-        self._t_key = (np.array(rows, copy=True), np.array(cols, copy=True))
+        self._t_key = None
+
+
+#: () -> (rows, cols) of entries to reserve in the union pattern (``TripletUnion.add``)
+Reserve = Callable[[], tuple[NDArray, NDArray]]
+
+
+def _reserved_keys(reserve: Reserve | None, n_cols: int) -> NDArray:
+    if reserve is None:
+        return np.zeros(0, dtype=np.int64)
+    rows, cols = reserve()
+    return _keys(rows, cols, n_cols)
 
 
 def _row_starts(keys: NDArray, shape: tuple[int, int]) -> NDArray:
