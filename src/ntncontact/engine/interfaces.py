@@ -8,12 +8,13 @@ The time loop calls, per step: :func:`detect_all` at the step start, then repeat
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from numpy.typing import NDArray
 
 from ..contact import (
+    ContactLaw,
     ContactResult,
     Pairing,
     PairState,
@@ -241,21 +242,27 @@ class ContactNewtonTerm:
         34.4 s); the ring refined 8x, t <= 0.15: 10 -> 4, 20.3 -> 19.0 s; the examples'
         histories the same to round-off (1e-13 of their scales), Newton iterations equal."""
         rows, cols = [_NO_NODES], [_NO_NODES]
+        # the pairs' own entries only: the unpaired nodes' share (contact.transfer) assumes
+        # an ordered set of distinct pairs, which these sets are not
+        law = replace(self.ci.law, unpaired_share=False)
         for pairs in neighbour_pairs(x_eval, self.ci.interface, self.state.pairs[:, 0],
                                      RESERVED_REACH):
             try:
-                r = self._evaluate(x_eval, v_eval, rate, x_start, PairState.from_pairs(pairs))
+                r = self._evaluate(x_eval, v_eval, rate, x_start, PairState.from_pairs(pairs),
+                                   law)
             except ValueError:  # e.g. an undefined normal of a pair that may never form
                 continue
             rows.append(r.rows)
             cols.append(r.cols)
         return np.concatenate(rows), np.concatenate(cols)
 
-    def _evaluate(self, x_eval, v_eval, rate, x_start, state: PairState) -> ContactResult:
+    def _evaluate(self, x_eval, v_eval, rate, x_start, state: PairState,
+                  law: ContactLaw | None = None) -> ContactResult:
         ci = self.ci
         rate_eval = rate if ci.persistency else None
         return evaluate_contact(x_eval, v_eval if ci.persistency else None, rate_eval,
-                                ci.interface, state, ci.law, x_start=x_start, dt=self.dt)
+                                ci.interface, state, law or ci.law, x_start=x_start,
+                                dt=self.dt)
 
 
 _NO_NODES = np.zeros(0, dtype=np.int64)
