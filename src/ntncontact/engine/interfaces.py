@@ -211,6 +211,11 @@ def persistent_velocities(interfaces: Sequence[ContactInterface], states: Sequen
 #: partner's chain neighbours too (the two analyses left: the first pass's jump from 1 to 77
 #: pairs, and one growth).
 RESERVED_REACH = 16
+#: ... from this many dofs on, where an analysis is PARDISO's (``solvers.linear``, from
+#: 10,000 unknowns; ~0.1-0.45 s each at 46k-124k). Below it SuperLU's or the static LU's
+#: analysis costs milliseconds and the reserved entries' fill cost more: the ring impact and
+#: the disk drop examples (890 / 764 dofs) took 3-5 % more CPU with them (two runs each).
+RESERVED_FROM_DOFS = 10_000
 
 
 @dataclass
@@ -242,6 +247,8 @@ class ContactNewtonTerm:
         34.4 s); the ring refined 8x, t <= 0.15: 10 -> 4, 20.3 -> 19.0 s; the examples'
         histories the same to round-off (1e-13 of their scales), Newton iterations equal."""
         rows, cols = [_NO_NODES], [_NO_NODES]
+        if np.size(x_eval) < RESERVED_FROM_DOFS:
+            return _NO_NODES, _NO_NODES
         # the pairs' own entries only: the unpaired nodes' share (contact.transfer) assumes
         # an ordered set of distinct pairs, which these sets are not
         law = replace(self.ci.law, unpaired_share=False)
