@@ -8,13 +8,12 @@ The time loop calls, per step: :func:`detect_all` at the step start, then repeat
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
 
 from ..contact import (
-    ContactLaw,
     ContactResult,
     Pairing,
     PairState,
@@ -237,39 +236,37 @@ class ContactNewtonTerm:
         return r.force, (r.rows, r.cols, r.vals)
 
     def reserve(self, x_eval, v_eval, rate, x_start) -> tuple[NDArray, NDArray]:
-        """(rows, cols) of the tangent entries of the pairs that the surface-1 nodes within
-        :data:`RESERVED_REACH` chain steps of the active ones would form with their nearest
-        surface-2 node (``contact.neighbour_pairs``), evaluated by the same kernel: the
-        entries a growing contact zone takes next, reserved in the union pattern
-        (``fem.sparse``) so that each growth of the zone is not a new analysis of the
-        matrix. Asked for only when the pattern grows. Hertz refined 8x: 15 -> 3 analyses,
-        41.5 -> 34.6 s a run (the run's final pattern given from the start: 1 analysis,
-        34.4 s); the ring refined 8x, t <= 0.15: 10 -> 4, 20.3 -> 19.0 s; the examples'
-        histories the same to round-off (1e-13 of their scales), Newton iterations equal."""
+        """(rows, cols) of the tangent entries of the active pairs grown by those that the
+        surface-1 nodes within :data:`RESERVED_REACH` chain steps of them would form with
+        their nearest surface-2 node or its chain neighbours (``contact.neighbour_pairs``),
+        evaluated by the same kernel: the entries a growing contact zone takes next,
+        reserved in the union pattern (``fem.sparse``) so that each growth of the zone is not
+        a new analysis of the matrix. Asked for only when the pattern grows, and from
+        :data:`RESERVED_FROM_DOFS` on. Analyses, Hertz refined 8x: 15 -> 3, 41.5 -> 35 s a
+        run (the run's final pattern given from the start: 1 analysis, 34.4 s); the ring
+        refined 8x, t <= 0.15: 10 -> 3, 20.3 -> 18.9 s; 4x 8 -> 2. Histories the same to
+        round-off (1e-13 of their scales), Newton iterations equal."""
         rows, cols = [_NO_NODES], [_NO_NODES]
         if np.size(x_eval) < RESERVED_FROM_DOFS:
             return _NO_NODES, _NO_NODES
-        # the pairs' own entries only: the unpaired nodes' share (contact.transfer) assumes
-        # an ordered set of distinct pairs, which these sets are not
-        law = replace(self.ci.law, unpaired_share=False)
         for pairs in neighbour_pairs(x_eval, self.ci.interface, self.state.pairs[:, 0],
                                      RESERVED_REACH):
+            # with the active pairs: the unpaired nodes' share (contact.transfer) between
+            # consecutive pairs is that of the set the zone would grow into
+            grown = PairState.from_pairs(np.vstack([self.state.pairs, pairs]))
             try:
-                r = self._evaluate(x_eval, v_eval, rate, x_start, PairState.from_pairs(pairs),
-                                   law)
-            except ValueError:  # e.g. an undefined normal of a pair that may never form
-                continue
+                r = self._evaluate(x_eval, v_eval, rate, x_start, grown)
+            except (ValueError, FloatingPointError):  # e.g. an undefined normal of a pair
+                continue  # that may never form: no entries reserved for it
             rows.append(r.rows)
             cols.append(r.cols)
         return np.concatenate(rows), np.concatenate(cols)
 
-    def _evaluate(self, x_eval, v_eval, rate, x_start, state: PairState,
-                  law: ContactLaw | None = None) -> ContactResult:
+    def _evaluate(self, x_eval, v_eval, rate, x_start, state: PairState) -> ContactResult:
         ci = self.ci
         rate_eval = rate if ci.persistency else None
         return evaluate_contact(x_eval, v_eval if ci.persistency else None, rate_eval,
-                                ci.interface, state, law or ci.law, x_start=x_start,
-                                dt=self.dt)
+                                ci.interface, state, ci.law, x_start=x_start, dt=self.dt)
 
 
 _NO_NODES = np.zeros(0, dtype=np.int64)
