@@ -44,16 +44,22 @@ def test_no_active_pairs_reserve_nothing():
     assert neighbour_pairs(x, interface, active=np.zeros(0, np.int64), reach=4) == ()
 
 
-@pytest.mark.parametrize(("example", "analyses", "before"),
-                         [("hertz", 1, 7), ("tilted_blocks", 2, 6)])
-def test_a_growing_contact_zone_finds_its_entries_reserved(monkeypatch, example, analyses,
-                                                           before):
+RING_2X = ["bodies.0.mesh.n_radial=8", "bodies.0.mesh.n_circ=96", "bodies.1.mesh.nx=80",
+           "bodies.1.mesh.ny=8", "analysis.t_end=0.15"]  # a mesh of our own, to the rebound
+
+
+@pytest.mark.parametrize(("example", "overrides", "analyses", "before"),
+                         [("hertz", [], 1, 7), ("tilted_blocks", [], 2, 6),
+                          ("ring_impact", RING_2X, 2, 6)])
+def test_a_growing_contact_zone_finds_its_entries_reserved(monkeypatch, example, overrides,
+                                                           analyses, before):
     """With the next pairs' entries reserved at each growth of the union pattern, the Hertz
     load steps (the zone grows from 7 to 17 pairs) are one analysis of the matrix, and the
-    tilted blocks one per symmetry mode (free flight, contact); ``before`` is the count
+    tilted blocks and the ring refined 2x one per symmetry mode (free flight, contact);
+    ``before`` is the count
     without the reservation, which these small examples keep by default (below
     RESERVED_FROM_DOFS, where an analysis is cheap)."""
-    model = model_from_example(f"{example}.toml")
+    model = model_from_example(f"{example}.toml", overrides)
     assert model.ndof < interfaces.RESERVED_FROM_DOFS
     for threshold, expected in ((interfaces.RESERVED_FROM_DOFS, before), (0, analyses)):
         monkeypatch.setattr(interfaces, "RESERVED_FROM_DOFS", threshold)

@@ -246,9 +246,9 @@ class ContactNewtonTerm:
         run (the run's final pattern given from the start: 1 analysis, 34.4 s); the ring
         refined 8x, t <= 0.15: 10 -> 3, 20.3 -> 18.9 s; 4x 8 -> 2. Histories the same to
         round-off (1e-13 of their scales), Newton iterations equal."""
-        rows, cols = [_NO_NODES], [_NO_NODES]
         if np.size(x_eval) < RESERVED_FROM_DOFS:
             return _NO_NODES, _NO_NODES
+        rows, cols = [_NO_NODES], [_NO_NODES]
         for pairs in neighbour_pairs(x_eval, self.ci.interface, self.state.pairs[:, 0],
                                      RESERVED_REACH):
             # with the active pairs: the unpaired nodes' share (contact.transfer) between
