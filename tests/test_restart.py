@@ -269,10 +269,13 @@ def test_a_restored_linear_solver_factors_like_the_one_it_was_saved_from(n):
 
 
 @pytest.mark.skipif(not pardiso_available(), reason="pypardiso not installed")
-def test_a_restored_pardiso_solver_analyses_with_the_values_of_the_saved_analysis(monkeypatch):
+@pytest.mark.parametrize("precision", ["single", "double"])
+def test_a_restored_pardiso_solver_analyses_with_the_values_of_the_saved_analysis(monkeypatch,
+                                                                                 precision):
     """PARDISO's analysis (scaling, weighted matching) depends on the values it is made with:
     a restored solver analyses with the saved values, not with its first matrix's, and so
-    factors that matrix to the same bits as the solver it was saved from."""
+    factors that matrix to the same bits as the solver it was saved from. The saved mode's
+    precision is restored with it, whatever the restored solver's own setting."""
     import scipy.sparse as sp
 
     from ntncontact.solvers.linear import PARDISO_MIN_UNKNOWNS, LinearSolver
@@ -290,12 +293,14 @@ def test_a_restored_pardiso_solver_analyses_with_the_values_of_the_saved_analysi
         return (sp.diags(rows) @ (values + sp.diags(np.abs(values).sum(axis=1).A1 + 0.5))).tocsr()
 
     first, second, b = matrix(), matrix(), rng.standard_normal(pattern.shape[0])
-    running = LinearSolver(backend="pardiso")
+    running = LinearSolver(backend="pardiso", precision=precision)
     running.solve(first, b)
     info, arrays = running.analysis_state()
     expected = running.solve(second, b)
-    restored = LinearSolver(backend="pardiso")
+    other = "double" if precision == "single" else "single"
+    restored = LinearSolver(backend="pardiso", precision=other)
     restored.restore_analysis(json.loads(json.dumps(info)), arrays)
     assert np.array_equal(restored.solve(second, b), expected)
-    fresh = LinearSolver(backend="pardiso")  # its own analysis of `second`: other bits
+    assert [impl.single for impl in restored._impls.values()] == [precision == "single"]
+    fresh = LinearSolver(backend="pardiso", precision=precision)  # its own analysis: other bits
     assert not np.array_equal(fresh.solve(second, b), expected)

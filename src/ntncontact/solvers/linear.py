@@ -12,7 +12,8 @@ Three backends:
   ``_call_pardiso``. Symmetric matrices use the symmetric indefinite mode (Bunch-Kaufman),
   which is valid for the Neo-Hookean tangent away from equilibrium; unsymmetric ones
   (friction, convective terms) the general mode with scaling and weighted matching. Threads:
-  :func:`pardiso_threads`.
+  :func:`pardiso_threads`. From :data:`MIXED_MIN_UNKNOWNS` unknowns it factors in single
+  precision and refines each solution in double (:class:`_PardisoBackend`, "Precision").
 - ``"superlu"``: SciPy's SuperLU, always available. The MMD(A^T + A) column ordering is computed
   once per pattern and reused by factoring the symmetrically permuted matrix in natural order.
 - ``"static"``: for small systems, the same ordering but a compiled LU without row
@@ -51,6 +52,7 @@ from ..threads import MAX_THREADS, available_cores, threads_from_environment
 from . import static_lu
 
 Backend = Literal["auto", "pardiso", "superlu", "static"]
+Precision = Literal["auto", "single", "double"]
 
 #: |A - A^T| <= SYMMETRY_RTOL max|A| counts as symmetric (assembly round-off is ~1e-16).
 SYMMETRY_RTOL = 1e-12
@@ -148,6 +150,8 @@ class SolverStats:
     solves: int = 0
     pivot_checks: int = 0  # SuperLU factors whose pivots were inspected (see PIVOT_CHECK_GROWTH)
     fallbacks: int = 0  # static-LU factorizations redone by SuperLU (a pivot needed pivoting)
+    refinements: int = 0  # solves with a single-precision factor added by refinement sweeps
+    double_fallbacks: int = 0  # single-precision PARDISO factors redone in double
 
 
 class _Pattern:
@@ -206,6 +210,21 @@ def _transpose_map(indptr: NDArray, indices: NDArray, n: int,
 #: per-call overhead (~5 ms, threads) dominates small contact problems (ring impact: 800 dofs).
 PARDISO_MIN_UNKNOWNS = 10_000
 
+#: From this many unknowns precision "auto" factors in single precision (PARDISO only):
+#: where the factorization, not Python, is a Newton step's cost.
+MIXED_MIN_UNKNOWNS = 10_000
+#: A solution from a single-precision factor is refined in double until
+#: |b - A x| <= MIXED_RTOL |b| (per column). Why 1e-6: the strictest ratio the Newton loop
+#: works with is the inexact augmentations' 1e-4 of their start (kept-factor steps need 0.1),
+#: so the linear residual stays two orders below it. Measured at k = 8 (benchmarks/README.md,
+#: session 32): Hertz 134 -> 137 Newton iterations, the ring and the fast-sliding blocks the
+#: same counts; 1e-8 gives Hertz's 134 but a refinement sweep nearly every solve (the ring
+#: then slower than in double), no check at all 141.
+MIXED_RTOL = 1e-6
+#: Refinement sweeps before a single-precision factor is judged too inaccurate for its matrix
+#: (about cond(A) x 6e-8 >= 1): it is then factored again in double, and stays so.
+MAX_REFINEMENTS = 3
+
 
 class Factorization:
     """A factored matrix: call it with b (n,) or (n, k) for the solution of A x = b."""
@@ -240,15 +259,22 @@ class LinearSolver:
     available and the system has at least :data:`PARDISO_MIN_UNKNOWNS` unknowns, else
     SuperLU), "pardiso", "superlu" (SuperLU only) or "static" (the static LU at any size).
     ``symmetric``: None detects symmetry from the values at each call; True/False forces it
-    (True uses the upper triangle only).
+    (True uses the upper triangle only). ``precision``: how PARDISO factors, "single" (a
+    single-precision factor, each solution refined in double to a residual of
+    :data:`MIXED_RTOL` |b|), "double" (solutions at round-off), or "auto" (single from
+    :data:`MIXED_MIN_UNKNOWNS` unknowns). SuperLU and the static LU always factor in double.
     """
 
-    def __init__(self, backend: Backend = "auto", symmetric: bool | None = None) -> None:
+    def __init__(self, backend: Backend = "auto", symmetric: bool | None = None,
+                 precision: Precision = "auto") -> None:
         self._pattern: _Pattern | None = None
         # one factorization per symmetry mode (PARDISO), so alternating modes keep both analyses
         self._impls: dict[bool | None, _PardisoBackend | _SuperLUBackend] = {}
         if backend not in ("auto", "pardiso", "superlu", "static"):
             raise ValueError(f"unknown linear solver backend '{backend}'")
+        if precision not in ("auto", "single", "double"):
+            raise ValueError(f"unknown factor precision '{precision}'")
+        self.precision = precision
         self._auto = backend == "auto"
         if backend == "pardiso" and not pardiso_available():
             raise LinearSolverError("PARDISO requested but pypardiso/MKL is not installed")
@@ -288,8 +314,12 @@ class LinearSolver:
                          else self.symmetric)
         impl = self._impls.get(symmetric)
         if impl is None:
-            impl_class = _BACKEND_CLASSES[backend]
-            impl = self._impls[symmetric] = impl_class(self._pattern, symmetric, self.stats)
+            if backend == "pardiso":
+                impl = _PardisoBackend(self._pattern, symmetric, self.stats,
+                                       single=self._single_precision(A.shape[0]))
+            else:
+                impl = _BACKEND_CLASSES[backend](self._pattern, symmetric, self.stats)
+            self._impls[symmetric] = impl
         for other in self._impls.values():
             if other is not impl:  # its factor is dead from now on (Factorization.valid)
                 other.release_factor()
@@ -311,7 +341,7 @@ class LinearSolver:
         for key, impl in self._impls.items():
             if isinstance(impl, _PardisoBackend) and impl.analysis_values is not None:
                 arrays[f"pardiso_values_{len(modes)}"] = impl.analysis_values
-                modes.append({"symmetric": key, "pardiso": True})
+                modes.append({"symmetric": key, "pardiso": True, "single": impl.single})
             if isinstance(impl, _SuperLUBackend) and impl.perm is not None:
                 arrays[f"perm_{len(modes)}"] = impl.perm
                 modes.append({"symmetric": key, "static": isinstance(impl, _StaticLUBackend),
@@ -331,7 +361,8 @@ class LinearSolver:
         for index, mode in enumerate(info["modes"]):
             if mode.get("pardiso"):
                 if pardiso_available():  # else the run goes on with another solver
-                    impl = _PardisoBackend(self._pattern, mode["symmetric"], self.stats)
+                    impl = _PardisoBackend(self._pattern, mode["symmetric"], self.stats,
+                                           single=bool(mode.get("single", False)))
                     impl.restored_values = np.asarray(arrays[f"pardiso_values_{index}"])
                     self._impls[mode["symmetric"]] = impl
                 continue
@@ -345,6 +376,11 @@ class LinearSolver:
                 impl.usable = bool(mode["usable"]) and impl.symbolic is not None
                 impl.fallbacks_in_a_row = int(mode["fallbacks_in_a_row"])
             self._impls[mode["symmetric"]] = impl
+
+    def _single_precision(self, n: int) -> bool:
+        if self.precision == "auto":
+            return n >= MIXED_MIN_UNKNOWNS
+        return self.precision == "single"
 
     def _backend_for(self, n: int) -> str:
         if not self._auto:
@@ -521,13 +557,24 @@ class _PardisoBackend:
     (mtype -2). The phases are driven with ``set_phase`` and the solver's ``_call_pardiso``:
     pypardiso's ``factorize`` always runs phase 12, i.e. the METIS ordering and symbolic
     factorization again with every matrix, which doubles a Newton factorization (module doc).
-    Every call runs on :func:`pardiso_threads` MKL threads."""
+    Every call runs on :func:`pardiso_threads` MKL threads.
 
-    def __init__(self, pattern: _Pattern, symmetric: bool, stats: SolverStats) -> None:
+    Precision. With ``single``, PARDISO factors the values rounded to single precision
+    (parameter 28) and each solution is refined in double against the double matrix
+    (:meth:`_refined`, to :data:`MIXED_RTOL`); a matrix the single factor cannot solve so
+    (perturbed pivots, or no convergence in :data:`MAX_REFINEMENTS` sweeps) is factored again
+    in double, as is every later one. Measured on Hertz refined 8x (123 178 unknowns, 2.2 M
+    entries, one thread): a factorization 0.38 -> 0.25 s, the factor's memory 163 -> 81 MB,
+    a solve 29 -> 26 ms; the whole run 35.4 -> 29.4 s (ring 8x window 19.2 -> 17.3 s), with
+    one refinement sweep in about a third of Hertz's solves and few of the ring's."""
+
+    def __init__(self, pattern: _Pattern, symmetric: bool, stats: SolverStats,
+                 single: bool = False) -> None:
         self.pattern, self.symmetric, self.stats = pattern, symmetric, stats
+        self.single = single
         self.pardiso = _pardiso_handle(mtype=-2 if symmetric else 11)
         self.threads = pardiso_threads()
-        for one_based, value in _pardiso_iparm(symmetric, self.threads).items():
+        for one_based, value in _pardiso_iparm(symmetric, self.threads, single).items():
             self.pardiso.set_iparm(one_based, value)
         indptr, indices = ((pattern.upper_indptr, pattern.upper_indices) if symmetric
                            else (pattern.indptr32, pattern.indices32))
@@ -539,9 +586,16 @@ class _PardisoBackend:
         #: a restart checkpoint; and a restored run's, for its first analysis
         self.analysis_values: NDArray | None = None
         self.restored_values: NDArray | None = None
+        #: the factored matrix in double (all entries), for a single factor's refinement
+        self.factored_matrix: sp.csr_matrix | None = None
 
     def factor(self, data: NDArray) -> None:
-        values = np.ascontiguousarray(data[self.pattern.upper] if self.symmetric else data)
+        values = np.ascontiguousarray(data[self.pattern.upper] if self.symmetric else data,
+                                      dtype=np.float32 if self.single else float)
+        if self.single:  # a copy: the caller may assemble its next matrix into `data`
+            p = self.pattern
+            self.factored_matrix = sp.csr_matrix((np.array(data, dtype=float), p.indices,
+                                                  p.indptr), shape=(p.n, p.n))
         fresh = not self.analysed
         if fresh:
             restored, self.restored_values = self.restored_values, None
@@ -555,6 +609,9 @@ class _PardisoBackend:
             self._analyse(values)
             self._call(22)
             self.stats.factorizations += 1
+        if self._perturbed() and self.single:  # maybe single precision's doing
+            self._to_double()
+            return
         if self._perturbed():
             raise LinearSolverError(
                 f"matrix is numerically singular: PARDISO perturbed {self._perturbed()} "
@@ -579,7 +636,41 @@ class _PardisoBackend:
         return self.solve
 
     def solve(self, b: NDArray) -> NDArray:
+        if self.single:
+            x = self._refined(b)
+            if x is not None:
+                return x
+            self._to_double()
         return self._call(33, np.asfortranarray(b))
+
+    def _refined(self, b: NDArray) -> NDArray | None:
+        """x with |b - A x| <= MIXED_RTOL |b| in each column, from the single factor and
+        refinement sweeps x += A_single^-1 (b - A x) with the residual in double; None if
+        :data:`MAX_REFINEMENTS` sweeps do not get there."""
+        A = self.factored_matrix
+        x = self._call(33, np.asfortranarray(b, dtype=np.float32)).astype(float)
+        limit = MIXED_RTOL * np.linalg.norm(b, axis=0)
+        for sweep in range(MAX_REFINEMENTS + 1):
+            r = b - A @ x
+            if np.all(np.linalg.norm(r, axis=0) <= limit):  # False for NaN: then in double
+                return x
+            if sweep < MAX_REFINEMENTS:
+                x += self._call(33, np.asfortranarray(r, dtype=np.float32))
+                self.stats.refinements += 1
+        return None
+
+    def _to_double(self) -> None:
+        """Factor the current matrix again in double, with a new analysis (the precision is
+        fixed at the analysis), and keep double for this mode from now on."""
+        data = self.factored_matrix.data
+        self.single, self.factored_matrix = False, None
+        with _mkl_controller().limit(limits=self.threads):
+            self.pardiso.free_memory(everything=True)
+        self.pardiso.pt[:] = 0  # a fresh handle, as before PARDISO's first call
+        self.pardiso.set_iparm(28, 0)
+        self.analysed = self.factored = False
+        self.stats.double_fallbacks += 1
+        self.factor(data)
 
     def _call(self, phase: int, b: NDArray | None = None) -> NDArray:
         self.pardiso.set_phase(phase)
@@ -601,12 +692,13 @@ class _PardisoBackend:
             self.factored = False
             with _mkl_controller().limit(limits=self.threads):
                 self.pardiso.free_memory(everything=False)  # L and U only (phase 0)
+            self.factored_matrix = None
 
     def release(self) -> None:
         if self.pardiso is None:
             return
         self.factored = False
-        self.analysis_values = None
+        self.analysis_values = self.factored_matrix = None
         if self.analysed:
             self.analysed = False
             with _mkl_controller().limit(limits=self.threads):
@@ -639,7 +731,7 @@ def _pardiso_handle(mtype: int):
     return solver
 
 
-def _pardiso_iparm(symmetric: bool, threads: int) -> dict[int, int]:
+def _pardiso_iparm(symmetric: bool, threads: int, single: bool = False) -> dict[int, int]:
     """PARDISO parameters by their 1-based number, as pypardiso's ``set_iparm`` and the MKL
     manual count them (pypardiso passes one-based indices itself).
 
@@ -655,6 +747,7 @@ def _pardiso_iparm(symmetric: bool, threads: int) -> dict[int, int]:
         11: 1,  # scaling ...
         13: 1,  # ... and weighted matching: robust for indefinite / unsymmetric tangents
         21: 1,  # Bunch-Kaufman pivoting (symmetric indefinite)
+        28: 1 if single else 0,  # the values, factor and right-hand sides in single precision
         34: threads if threads > 1 else 0,  # reproducible results on `threads` threads
     }
 
@@ -671,5 +764,4 @@ def _pardiso_message(code: int, phase: int) -> str:
     return f"PARDISO failed in phase {phase} with error {code}: {what}"
 
 
-_BACKEND_CLASSES = {"pardiso": _PardisoBackend, "superlu": _SuperLUBackend,
-                    "static": _StaticLUBackend}
+_BACKEND_CLASSES = {"superlu": _SuperLUBackend, "static": _StaticLUBackend}
