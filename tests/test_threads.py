@@ -78,3 +78,44 @@ def test_a_sweeps_case_runs_on_one_thread_in_every_part(monkeypatch):
         assert all(lib["num_threads"] == 1 for lib in threads._blas().info())
     assert "OMP_NUM_THREADS" not in os.environ
     assert os.environ["MKL_NUM_THREADS"] == "2"
+
+
+ORDER_SCRIPT = """
+import hashlib, sys
+from pathlib import Path
+if sys.argv[1] == "pardiso_first":  # as a script or test that asks for PARDISO first
+    from ntncontact.solvers.linear import pardiso_available
+    assert pardiso_available()
+import ntncontact as ntc
+from threadpoolctl import threadpool_info
+scenario = ntc.load_scenario(Path(sys.argv[2]), {
+    "analysis.t_end": 0.02, "bodies.0.mesh.n_radial": 16, "bodies.0.mesh.n_circ": 192,
+    "bodies.1.mesh.nx": 160, "bodies.1.mesh.ny": 16})  # 12 002 unknowns: PARDISO
+result = ntc.run(scenario, Path(sys.argv[3]))
+layers = {i.get("threading_layer") for i in threadpool_info() if i["internal_api"] == "mkl"}
+print(result.history.to_numpy().tobytes().hex(), *sorted(layers))
+"""
+
+
+@pytest.mark.skipif(not linear.pardiso_available(), reason="pypardiso not installed")
+def test_a_run_does_not_depend_on_whether_pardiso_or_the_kernels_load_first(tmp_path):
+    """MKL picks its OpenMP layer when it loads: Intel's after a script asked for PARDISO
+    first, GNU after Numba's kernels had run. The two gave other bits (so a run begun in
+    Python and restarted by the command line differed); the package pins GNU
+    (``linear._pin_mkl_threading_layer``) and both orders give the same history. Fresh
+    processes on the default threads (no OMP_NUM_THREADS, which ``make test`` sets)."""
+    import subprocess
+    import sys
+
+    env = {k: v for k, v in os.environ.items()
+           if k not in ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "MKL_THREADING_LAYER")}
+    outputs = []
+    for order in ("pardiso_first", "kernels_first"):
+        done = subprocess.run(
+            [sys.executable, "-c", ORDER_SCRIPT, order, str(EXAMPLES / "ring_impact.toml"),
+             str(tmp_path / order)], env=env, capture_output=True, text=True, timeout=600)
+        assert done.returncode == 0, done.stderr[-2000:]
+        outputs.append(done.stdout.split())
+    (first, *first_layers), (second, *second_layers) = outputs
+    assert first_layers == second_layers == ["gnu"]
+    assert first == second
