@@ -474,3 +474,18 @@ def test_a_matrix_single_precision_cannot_solve_is_factored_again_in_double():
     assert not any(impl.single for impl in solver._impls.values())
     assert_accurate(A, b, solver.solve(A, b))  # later factorizations in double at once
     assert solver.stats.double_fallbacks == 1 and solver.stats.refinements == 3
+
+
+@pytest.mark.skipif(not pardiso_available(), reason="pypardiso not installed")
+def test_a_non_finite_right_hand_side_is_reported_and_keeps_single_precision():
+    A = unsymmetric_matrix()
+    solver = LinearSolver("pardiso", precision="single")
+    factor = solver.factorize(A)
+    b = np.ones(A.shape[0])
+    b[3] = np.nan
+    with pytest.raises(LinearSolverError, match="not finite"):
+        factor(b)
+    assert solver.stats.double_fallbacks == 0
+    assert all(impl.single for impl in solver._impls.values())
+    x = factor(np.ones(A.shape[0]))
+    assert relative_residuals(A, np.ones(A.shape[0]), x) <= linear.MIXED_RTOL

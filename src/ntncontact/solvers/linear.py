@@ -663,7 +663,7 @@ class _PardisoBackend:
         return self.solve
 
     def solve(self, b: NDArray) -> NDArray:
-        if self.single:
+        if self.single and np.all(np.isfinite(b)):  # (a NaN is no reason to leave single)
             x = self._refined(b)
             if x is not None:
                 return x
