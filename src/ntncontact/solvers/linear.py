@@ -245,8 +245,9 @@ MIXED_MIN_UNKNOWNS = 10_000
 #: works with is the inexact augmentations' 1e-4 of their start (kept-factor steps need 0.1),
 #: so the linear residual stays two orders below it. Measured at k = 8 (benchmarks/README.md,
 #: session 32): Hertz 134 -> 137 Newton iterations, the ring and the fast-sliding blocks the
-#: same counts; 1e-8 gives Hertz's 134 but a refinement sweep nearly every solve (the ring
-#: then slower than in double), no check at all 141.
+#: same counts. A single factor's first solve leaves ~2-3e-7 |b| as a rule, so 1e-7 (Hertz
+#: 134, 159 sweeps) and 1e-8 (134, 187) ask a sweep of nearly every solve and the ring then
+#: runs slower than in double (21.4 against 19.2 s); no check at all gives Hertz 141.
 MIXED_RTOL = 1e-6
 #: Refinement sweeps before a single-precision factor is judged too inaccurate for its matrix
 #: (about cond(A) x 6e-8 >= 1): it is then factored again in double, and stays so.
