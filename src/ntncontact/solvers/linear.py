@@ -664,26 +664,32 @@ class _PardisoBackend:
         return self.solve
 
     def solve(self, b: NDArray) -> NDArray:
-        if self.single and np.all(np.isfinite(b)):  # (a NaN is no reason to leave single)
-            x = self._refined(b)
-            if x is not None:
-                return x
+        if not self.single:
+            return self._call(33, np.asfortranarray(b))
+        if not np.all(np.isfinite(b)):  # no reason to leave single: reported as not finite
+            return self._single_solve(b)
+        x = self._refined(b)
+        if x is None:
             self._to_double()
-        return self._call(33, np.asfortranarray(b))
+            return self._call(33, np.asfortranarray(b))
+        return x
+
+    def _single_solve(self, b: NDArray) -> NDArray:
+        return self._call(33, np.asfortranarray(b, dtype=np.float32)).astype(float)
 
     def _refined(self, b: NDArray) -> NDArray | None:
         """x with |b - A x| <= MIXED_RTOL |b| in each column, from the single factor and
         refinement sweeps x += A_single^-1 (b - A x) with the residual in double; None if
         :data:`MAX_REFINEMENTS` sweeps do not get there."""
         A = self.factored_matrix
-        x = self._call(33, np.asfortranarray(b, dtype=np.float32)).astype(float)
+        x = self._single_solve(b)
         limit = MIXED_RTOL * np.linalg.norm(b, axis=0)
         for sweep in range(MAX_REFINEMENTS + 1):
             r = b - A @ x
             if np.all(np.linalg.norm(r, axis=0) <= limit):  # False for NaN: then in double
                 return x
             if sweep < MAX_REFINEMENTS:
-                x += self._call(33, np.asfortranarray(r, dtype=np.float32))
+                x += self._single_solve(r)
                 self.stats.refinements += 1
         return None
 
