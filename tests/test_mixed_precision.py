@@ -7,7 +7,7 @@ from 10,000 unknowns it is the default (issue 18)."""
 
 import numpy as np
 import pytest
-from helpers import Recorder, model_from_example
+from helpers import EXAMPLES, Recorder, model_from_example
 
 from ntncontact.engine.simulation import Simulation
 from ntncontact.solvers.linear import LinearSolver, pardiso_available
@@ -45,3 +45,17 @@ def test_a_run_factored_in_single_precision_matches_the_run_in_double(example, o
         worst = max(np.abs(getattr(a.state, field) - getattr(b.state, field)).max()
                     for a, b in zip(double, single, strict=True))
         assert worst <= STATE_RTOL * scale, field
+
+
+def test_the_scenario_chooses_how_pardiso_factors():
+    """``analysis.newton.factor_precision`` reaches the run's default solver; a wrong value is
+    refused with the key's name."""
+    from ntncontact.io.scenario import ScenarioError, load_scenario
+
+    for precision in ("auto", "single", "double"):
+        model = model_from_example("ring_impact.toml",
+                                   [f'analysis.newton.factor_precision="{precision}"'])
+        assert model.analysis.factor_precision == precision
+        assert Simulation(model).solve.__self__.precision == precision
+    with pytest.raises(ScenarioError, match="factor_precision"):
+        load_scenario(EXAMPLES / "ring_impact.toml", ['analysis.newton.factor_precision="half"'])

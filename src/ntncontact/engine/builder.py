@@ -156,6 +156,7 @@ def build_model(config: ScenarioConfig, base_dir: str | Path = ".") -> Model:
     analysis = AnalysisSettings(a.kind, a.dt, a.t_end, a.mass, a.output_interval,
                                 a.max_cutbacks, a.newton.rtol, a.newton.max_iterations,
                                 a.newton.inexact_augmentations,
+                                factor_precision=a.newton.factor_precision,
                                 energy_conserving=a.energy_conserving,
                                 integrator=a.integrator, field_format=a.field_format)
     fixed = np.unique(np.concatenate([p.dofs for p in prescribed] or [np.zeros(0, int)]))

@@ -66,6 +66,8 @@ class AnalysisSettings:
     newton_max_iterations: int = 25
     #: Newton of an augmentation that may not be the last stops once |R| <= this x its start
     newton_inexact_augmentations: float = 1e-4
+    #: how PARDISO factors Newton's matrices (solvers.linear.LinearSolver's ``precision``)
+    factor_precision: Literal["auto", "single", "double"] = "auto"
     energy_conserving: bool = False  # report 5.5: energy multiplier bordering the contact step
     #: dynamic runs: "energy_momentum" (Neo-Hookean internal force by a discrete gradient,
     #: docs/theory.md) or "midpoint" (the report's mid-point rule)

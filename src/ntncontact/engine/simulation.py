@@ -129,15 +129,17 @@ class Observer(Protocol):
     def on_finish(self, status: str, error: str | None) -> None: ...
 
 
-def default_linear_solve() -> Callable[[sp.spmatrix, NDArray], NDArray]:
-    """The project's sparse solver, or SuperLU (never spsolve: it may switch to UMFPACK)."""
+def default_linear_solve(precision: str = "auto") -> Callable[[sp.spmatrix, NDArray], NDArray]:
+    """The project's sparse solver (PARDISO factoring in ``precision``, see
+    :class:`~ntncontact.solvers.linear.LinearSolver`), or SuperLU (never spsolve: it may
+    switch to UMFPACK)."""
     try:
         from ..solvers.linear import LinearSolver
     except ImportError:  # pragma: no cover - only while the solver module is absent
         import scipy.sparse.linalg as spla
 
         return lambda A, b: spla.splu(sp.csc_matrix(A), permc_spec="MMD_AT_PLUS_A").solve(b)
-    return LinearSolver().solve
+    return LinearSolver(precision=precision).solve
 
 
 def _newton_updated(ci) -> bool:
@@ -200,7 +202,7 @@ class Simulation:
                  linear_solve: Callable | None = None) -> None:
         self.model = model
         self.observers = list(observers)
-        self.solve = linear_solve or default_linear_solve()
+        self.solve = linear_solve or default_linear_solve(model.analysis.factor_precision)
         self.settings = NewtonSettings(rtol=model.analysis.newton_rtol,
                                        max_iterations=model.analysis.newton_max_iterations)
         self.dynamic = model.analysis.kind == "dynamic"

@@ -233,6 +233,7 @@ class NewtonConfig(Strict):
     rtol: Positive = 1e-10
     max_iterations: Annotated[int, Field(ge=1)] = 25
     inexact_augmentations: Annotated[float, Field(ge=0.0, lt=1.0)] = 1e-4
+    factor_precision: Literal["auto", "single", "double"] = "auto"
 
 
 class AnalysisConfig(Strict):
