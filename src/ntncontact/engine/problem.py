@@ -15,7 +15,7 @@ from __future__ import annotations
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from functools import partial
-from typing import Protocol
+from typing import Protocol, runtime_checkable
 
 import numpy as np
 import scipy.sparse as sp
@@ -34,6 +34,15 @@ ExtraTerm = Callable[
     [NDArray, NDArray | None, float | None, NDArray],
     tuple[NDArray, tuple[NDArray, NDArray, NDArray]],
 ]
+
+
+@runtime_checkable
+class ReservingTerm(Protocol):
+    """An extra term that also names the tangent entries it may take next (same arguments
+    as its call), for the union pattern to reserve (``fem.sparse.TripletUnion.add``)."""
+
+    def reserve(self, x_eval: NDArray, v_eval: NDArray | None, rate: float | None,
+                x_start: NDArray) -> tuple[NDArray, NDArray]: ...
 
 
 class ConstraintTerm(Protocol):
@@ -159,7 +168,7 @@ class StepProblem:
             R = R + f
             scale = max(scale, norm2(f))
             triplets.append(coo)
-            if hasattr(term, "reserve"):  # entries to reserve in the union (fem.sparse)
+            if isinstance(term, ReservingTerm):
                 reserves.append(partial(term.reserve, x.reshape(-1, 2), v_eval, rate,
                                         self.state.x))
         h, G, B, f_c, k_c = self._constraints(x.reshape(-1, 2), v_eval, rate, y, R.size)
