@@ -7,6 +7,8 @@ Usage::
     .venv/bin/python benchmarks/scaling.py --k 1 2 4 8     # + k = 8 (make bench; ~15 min quiet)
     .venv/bin/python benchmarks/scaling.py --cases ring --k 1 2
     .venv/bin/python benchmarks/scaling.py --threads ring 4 2   # thread settings, A/B/C
+    .venv/bin/python benchmarks/scaling.py --cases hertz_factor --k 8 \
+        --set 'analysis.newton.factor_precision="double"'       # any scenario key, A/B
 
 Each (case, k) runs in a fresh process (its own peak memory) as ``ntncontact run`` does:
 results written by ``ResultWriter`` into a temporary folder. The dynamic cases run a window
@@ -45,6 +47,7 @@ import sys
 import tempfile
 import time
 from collections import defaultdict
+from collections.abc import Sequence
 from functools import wraps
 from pathlib import Path
 
@@ -150,7 +153,7 @@ def resident_kb() -> int:
         return int(f.read().split()[1]) * os.sysconf("SC_PAGE_SIZE") // 1024
 
 
-def child(case: str, k: int, out: Path) -> dict:
+def child(case: str, k: int, out: Path, sets: Sequence[str] = ()) -> dict:
     """One run in this process; returns its figures."""
     from ntncontact.engine.builder import build_model
     from ntncontact.engine.simulation import Simulation
@@ -165,7 +168,7 @@ def child(case: str, k: int, out: Path) -> dict:
 
         simulation.serial_blas = nullcontext
     filename, t_end, refine = CASES[case]
-    overrides = refine(k)
+    overrides = refine(k) + list(sets)
     if case.startswith("hertz"):
         overrides.append(f"bodies.0.mesh.file={hertz_mesh(k, out.parent)}")
     if t_end is not None:
@@ -174,7 +177,7 @@ def child(case: str, k: int, out: Path) -> dict:
     model = build_model(load_scenario(path, overrides), path.parent)
     timer = PartTimer()
     instrument(timer)
-    solver = LinearSolver()
+    solver = LinearSolver(precision=model.analysis.factor_precision)
     records = []
 
     class Counter:
@@ -225,9 +228,11 @@ def pardiso_mb(solver) -> float:
     return peak / 1024
 
 
-def run_child(case: str, k: int, tmp: Path, env: dict | None = None, tag: str = "") -> dict:
+def run_child(case: str, k: int, tmp: Path, env: dict | None = None, tag: str = "",
+              sets: Sequence[str] = ()) -> dict:
     out = tmp / f"{case}_k{k}{tag}"
-    proc = subprocess.run([sys.executable, __file__, "--child", case, str(k), str(out)],
+    command = [sys.executable, __file__, "--child", case, str(k), str(out)]
+    proc = subprocess.run(command + [arg for item in sets for arg in ("--set", item)],
                           capture_output=True, text=True, env=os.environ | (env or {}))
     if proc.returncode != 0:
         return {"case": case, "k": k, "error": proc.stderr.strip().splitlines()[-1:]}
@@ -332,11 +337,14 @@ def main() -> None:
     parser.add_argument("--out", type=Path, default=ROOT / "benchmarks" / "scaling_results.md")
     parser.add_argument("--threads", nargs=3, metavar=("CASE", "K", "REPEATS"),
                         help="only compare the thread settings on one case (interleaved runs)")
+    parser.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                        help="a scenario override for every run, e.g. "
+                             "analysis.newton.factor_precision='\"double\"' (A/B runs)")
     parser.add_argument("--child", nargs=3, help=argparse.SUPPRESS)
     args = parser.parse_args()
     if args.child:
         case, k, out = args.child
-        print(json.dumps(child(case, int(k), Path(out))))
+        print(json.dumps(child(case, int(k), Path(out), args.set)))
         return
     if args.threads:
         case, k, repeats = args.threads
@@ -348,7 +356,7 @@ def main() -> None:
         warm_up(args.cases, Path(tmp))
         for case in args.cases:
             for k in args.k:
-                rows.append(run_child(case, k, Path(tmp)))
+                rows.append(run_child(case, k, Path(tmp), sets=args.set))
                 r = rows[-1]
                 print(f"{case} k={k}: " + (f"{r['s_per_step']:.3f} s/step, "
                       f"{r['its_per_contact_step']:.1f} its/contact step"
