@@ -2,8 +2,8 @@
 ``linear.MIXED_RTOL``) against the same runs factored in double: the same steps, the same
 Newton iterations within a few, and states within the Newton tolerance's reach.
 
-Forced on meshes of the report's examples (890-2,130 unknowns), which "auto" solves in double:
-from 10,000 unknowns it is the default (issue 18)."""
+Forced on the report's examples and on meshes of our own (890-3,068 unknowns), which "auto"
+solves in double: from 10,000 unknowns it is the default (issue 18)."""
 
 import numpy as np
 import pytest
@@ -16,7 +16,9 @@ pytestmark = pytest.mark.skipif(not pardiso_available(), reason="pypardiso not i
 
 #: Both runs end every step at |R| <= 1e-10 of the force scale (NewtonSettings.rtol), so
 #: they differ by the inverse tangent times a residual of that order: measured 1.2e-12 (d)
-#: and 8.1e-11 (v) of the run's largest values on the ring, 5.5e-13 and 6.9e-12 on Hertz.
+#: and 8.1e-11 (v) of the run's largest values on the ring, 5.5e-13 and 6.9e-12 on Hertz,
+#: 1.1e-15 and 1.7e-13 on the refined frictional blocks, 2.4e-15 and 7.3e-13 with Lagrange
+#: multipliers.
 #: The bound leaves two orders for other meshes and libraries; a solve at 1e-6 without the
 #: Newton test behind it would miss it by orders.
 STATE_RTOL = 1e-8
@@ -32,6 +34,12 @@ def run(example: str, overrides: list[str], precision: str):
 @pytest.mark.parametrize("example, overrides", [
     ("ring_impact.toml", ["analysis.t_end=0.15"]),  # dynamic, ALE, the impact's 16 steps
     ("hertz.toml", []),  # quasi-static, augmented Lagrangian, active-set passes
+    # meshes of our own: refined 2x with friction (unsymmetric tangents), and Lagrange
+    # multipliers (a zero diagonal block, which single precision pivots too)
+    ("blocks_fast_sliding.toml", ["contact.0.friction=0.2", "analysis.t_end=0.08",
+                                  "bodies.0.mesh.nx=16", "bodies.0.mesh.ny=42",
+                                  "bodies.1.mesh.nx=72", "bodies.1.mesh.ny=10"]),
+    ("tilted_blocks.toml", ['contact.0.method="lagrange"', "analysis.t_end=0.09"]),
 ])
 def test_a_run_factored_in_single_precision_matches_the_run_in_double(example, overrides):
     double, double_stats = run(example, overrides, "double")

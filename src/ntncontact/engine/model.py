@@ -17,6 +17,7 @@ from ..fem.assembly import Assembler, MaterialGroup
 from ..fem.loads import LoadCase, Prescribed
 from ..materials.models import Material
 from ..mesh.quadmesh import QuadMesh
+from ..solvers.linear import Precision
 from .ties import Tie
 
 MeshMotion = Literal["lagrangian", "ale"]
@@ -67,7 +68,7 @@ class AnalysisSettings:
     #: Newton of an augmentation that may not be the last stops once |R| <= this x its start
     newton_inexact_augmentations: float = 1e-4
     #: how PARDISO factors Newton's matrices (solvers.linear.LinearSolver's ``precision``)
-    factor_precision: Literal["auto", "single", "double"] = "auto"
+    factor_precision: Precision = "auto"
     energy_conserving: bool = False  # report 5.5: energy multiplier bordering the contact step
     #: dynamic runs: "energy_momentum" (Neo-Hookean internal force by a discrete gradient,
     #: docs/theory.md) or "midpoint" (the report's mid-point rule)

@@ -19,7 +19,7 @@ from ..dynamics.midpoint import end_of_step, midpoint_velocity, velocity_factor
 from ..fem.loads import dirichlet_values
 from ..fem.q4 import InvertedElementError
 from ..fem.sparse import TripletUnion
-from ..solvers.linear import LinearSolverError
+from ..solvers.linear import LinearSolver, LinearSolverError, Precision
 from ..solvers.newton import FactorCache, NewtonError, NewtonSettings, newton
 from ..threads import serial_blas
 from .convection import convective_terms
@@ -129,16 +129,10 @@ class Observer(Protocol):
     def on_finish(self, status: str, error: str | None) -> None: ...
 
 
-def default_linear_solve(precision: str = "auto") -> Callable[[sp.spmatrix, NDArray], NDArray]:
-    """The project's sparse solver (PARDISO factoring in ``precision``, see
-    :class:`~ntncontact.solvers.linear.LinearSolver`), or SuperLU (never spsolve: it may
-    switch to UMFPACK)."""
-    try:
-        from ..solvers.linear import LinearSolver
-    except ImportError:  # pragma: no cover - only while the solver module is absent
-        import scipy.sparse.linalg as spla
-
-        return lambda A, b: spla.splu(sp.csc_matrix(A), permc_spec="MMD_AT_PLUS_A").solve(b)
+def default_linear_solve(precision: Precision = "auto"
+                         ) -> Callable[[sp.spmatrix, NDArray], NDArray]:
+    """The project's sparse solver, PARDISO factoring in ``precision`` (see
+    :class:`~ntncontact.solvers.linear.LinearSolver`)."""
     return LinearSolver(precision=precision).solve
 
 

@@ -15,6 +15,8 @@ from pydantic import (
     model_validator,
 )
 
+from ..solvers.linear import Precision
+
 if sys.version_info >= (3, 11):
     import tomllib
 else:  # pragma: no cover
@@ -233,7 +235,7 @@ class NewtonConfig(Strict):
     rtol: Positive = 1e-10
     max_iterations: Annotated[int, Field(ge=1)] = 25
     inexact_augmentations: Annotated[float, Field(ge=0.0, lt=1.0)] = 1e-4
-    factor_precision: Literal["auto", "single", "double"] = "auto"
+    factor_precision: Precision = "auto"
 
 
 class AnalysisConfig(Strict):
