@@ -119,3 +119,66 @@ def oracle_internal(asm, X: NDArray, d: NDArray, need_tangent: bool = True):
         energy += float(W.sum())
     force = np.bincount(asm.edofs.ravel(), weights=fe.ravel(), minlength=asm.ndof)
     return force, asm.pattern.matrix(Ke) if need_tangent else None, energy
+
+
+def cauchy_stress(
+    kind: str, F: NDArray, lam: NDArray, mu: NDArray, plane_stress: bool = False
+) -> tuple[NDArray, NDArray]:
+    """In-plane Cauchy stress and the out-of-plane sigma_33 at deformation gradients F (..., 2, 2).
+
+    Neo-Hookean: sigma = P F^T / J = (mu (F F^T - I) + lam ln J I) / J, sigma_33 = lam ln J / J
+    (F_33 = 1). Linear elastic: sigma = lam tr(eps) I + 2 mu eps, eps = sym(F - I), and
+    sigma_33 = lam tr(eps) in plane strain, 0 in plane stress (lam is then the effective one).
+    The package's output takes them from the compiled kernel (``kernels_numba.cell_fields``);
+    these closed forms in F check it.
+    """
+    lam = np.asarray(lam, dtype=float)
+    mu = np.asarray(mu, dtype=float)
+    if kind == "linear_elastic":
+        H = F - _I2
+        eps = 0.5 * (H + np.swapaxes(H, -1, -2))
+        tr = eps[..., 0, 0] + eps[..., 1, 1]
+        sigma = lam[..., None, None] * tr[..., None, None] * _I2 + 2.0 * mu[..., None, None] * eps
+        return sigma, np.zeros(F.shape[:-2]) if plane_stress else lam * tr
+    J = F[..., 0, 0] * F[..., 1, 1] - F[..., 0, 1] * F[..., 1, 0]
+    lnJ = np.log(J)
+    b = F @ np.swapaxes(F, -1, -2)  # matmul: 1.5x faster than einsum on 90k 2x2 matrices
+    sigma = (mu[..., None, None] * (b - _I2) + (lam * lnJ)[..., None, None] * _I2) \
+        / J[..., None, None]
+    return sigma, lam * lnJ / J
+
+
+def von_mises(sigma: NDArray, s33: NDArray) -> NDArray:
+    """Von Mises equivalent stress of (sigma_2x2, sigma_33)."""
+    sxx, syy, sxy = sigma[..., 0, 0], sigma[..., 1, 1], sigma[..., 0, 1]
+    return np.sqrt(
+        0.5 * ((sxx - syy) ** 2 + (syy - s33) ** 2 + (s33 - sxx) ** 2) + 3.0 * sxy**2
+    )
+
+
+def cell_fields(kind: str, X_e: NDArray, x_e: NDArray, lam: float, mu: float,
+                plane_stress: bool = False) -> dict[str, NDArray]:
+    """What ``kernels_numba.cell_fields`` computes, per element (ne, 4, 2) of one material:
+    Gauss-point Cauchy stress (xx, yy, zz, xy), Green-Lagrange strain (same order), von
+    Mises and pressure averaged with the current weights J w; the current area; and F
+    averaged with the reference weights w. F is formed from the positions x, and the stress
+    in F's closed forms (:func:`cauchy_stress`): the kernel takes both from H = Grad d."""
+    grad, weight = reference_gradients(X_e)
+    F = np.einsum("eai,egaJ->egiJ", x_e, grad)
+    sigma, s33 = cauchy_stress(kind, F, lam, mu, plane_stress)
+    E = 0.5 * (np.swapaxes(F, -1, -2) @ F - _I2)
+    e33 = (-lam / (2.0 * mu) * (E[..., 0, 0] + E[..., 1, 1]) if plane_stress
+           else np.zeros(E.shape[:-2]))
+    current = weight * _det(F)
+    area = current.sum(axis=1)
+    gauss = {
+        "stress": np.stack([sigma[..., 0, 0], sigma[..., 1, 1], s33, sigma[..., 0, 1]], -1),
+        "strain": np.stack([E[..., 0, 0], E[..., 1, 1], e33, E[..., 0, 1]], -1),
+        "von_mises": von_mises(sigma, s33)[..., None],
+        "pressure": (-(sigma[..., 0, 0] + sigma[..., 1, 1] + s33) / 3.0)[..., None],
+    }
+    out = {name: np.einsum("eg,egk->ek", current, v) / area[:, None]
+           for name, v in gauss.items()}
+    out["area"] = area
+    out["F"] = np.einsum("eg,egij->eij", weight, F) / weight.sum(axis=1)[:, None, None]
+    return out

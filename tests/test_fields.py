@@ -12,6 +12,7 @@ from helpers import EXAMPLES, model_from_dict
 
 from ntncontact import api
 from ntncontact.engine.postprocess import frame_fields, mesh_velocity, stress_fields
+from ntncontact.fem.q4 import InvertedElementError
 from ntncontact.io.vtk import read_pvd, read_vtu
 
 P = 7.0  # applied pressure
@@ -135,12 +136,99 @@ def test_frame_fields_give_the_nodal_deformation_gradient_of_the_bodies_asked_fo
     A = np.array([[1.02, 0.3], [-0.1, 0.97]])
     X = model.X0
     x = X @ A.T
-    cell, nodal, F = frame_fields(model, X, x, [0])
+    cell, nodal, F = frame_fields(model, X, x - X, [0])
     assert np.allclose(F, A, rtol=0.0, atol=1e-14)
     reference = stress_fields(model, X, x)
     for got, want in ((cell, reference[0]), (nodal, reference[1])):
         assert all(np.array_equal(got[name], want[name]) for name in want)
-    assert frame_fields(model, X, x)[2] is None  # no body asked for: no F
+    assert frame_fields(model, X, x - X)[2] is None  # no body asked for: no F
+
+
+def _two_blocks(kind_1: str, kind_2: str, plane_stress: bool) -> dict:
+    """Two blocks of different materials side by side (no contact: only their fields)."""
+    data = _block(kind_1, grading=1.5, plane_stress=plane_stress)
+    other = _block(kind_2, plane_stress=plane_stress)["bodies"][0]
+    other |= {"name": "other", "material": other["material"] | {"E": 250.0, "nu": 0.4}}
+    other["mesh"] = other["mesh"] | {"origin": [3.0, 0.0]}
+    return data | {"bodies": data["bodies"] + [other]}
+
+
+@pytest.mark.parametrize("kinds, plane_stress", [
+    (("neo_hookean", "linear_elastic"), False),
+    (("linear_elastic", "neo_hookean"), False),
+    (("linear_elastic", "linear_elastic"), True),
+])
+def test_compiled_cell_fields_match_the_numpy_oracle_on_a_distorted_deformed_mesh(
+        kinds, plane_stress):
+    """frame_fields (the compiled cell_fields kernel, stress from the element kernel's law in
+    H) against tests/element_oracle.py (F from the positions, Cauchy stress in F's closed
+    forms), body by body, on distorted reference cells under a finite rotation (0.4 rad) and
+    random strains of ~10 %: the same quantities in other orders of operation, so they agree
+    to the round-off of O(1) stresses, ~1e-14 of the largest value; 1e-11 leaves room and
+    still fails on a wrong sign, weight or component."""
+    import element_oracle as oracle
+
+    model = model_from_dict(_two_blocks(*kinds, plane_stress))
+    rng = np.random.default_rng(7)
+    X = model.X0 + 0.06 * rng.uniform(-1.0, 1.0, model.X0.shape)  # h = 0.25-0.4
+    c, s = np.cos(0.4), np.sin(0.4)
+    x = (X + 0.025 * rng.standard_normal(X.shape)) @ np.array([[c, -s], [s, c]]).T
+    cell, nodal, F_nodal = frame_fields(model, X, x - X, [0, 1])
+    F_want = np.zeros((len(X), 2, 2))
+    for body in model.bodies:
+        cells, mat = model.cells[body.cells], body.material
+        want = oracle.cell_fields(mat.kind, X[cells], x[cells], mat.effective_lambda, mat.mu,
+                                  plane_stress)
+        for name in ("stress", "strain"):
+            got = cell[name][body.cells]
+            assert np.all(got[:, 4:] == 0.0)
+            assert np.abs(got[:, :4] - want[name]).max() < 1e-11 * np.abs(want[name]).max()
+        for name in ("von_mises", "pressure"):
+            error = np.abs(cell[name][body.cells] - want[name][:, 0]).max()
+            assert error < 1e-11 * np.abs(want[name]).max()
+        reference_area = oracle.reference_gradients(X[cells])[1].sum(axis=1)
+        nodes = cells.ravel()
+        total = np.bincount(nodes, np.repeat(reference_area, 4), minlength=len(X))
+        for i, j in np.ndindex(2, 2):
+            share = np.repeat(reference_area * want["F"][:, i, j], 4)
+            F_want[np.unique(cells), i, j] = (np.bincount(nodes, share, minlength=len(X))
+                                              / np.maximum(total, 1e-300))[np.unique(cells)]
+        # the nodal stress: current-area averages of the cells around each node
+        share = np.repeat(want["area"], 4)
+        node_area = np.bincount(nodes, share, minlength=len(X))[np.unique(cells)]
+        yy = np.bincount(nodes, share * np.repeat(want["stress"][:, 1], 4), minlength=len(X))
+        got = nodal["stress_nodal"][np.unique(cells), 1]
+        want_yy = yy[np.unique(cells)] / node_area
+        assert np.abs(got - want_yy).max() < 1e-11 * np.abs(want_yy).max()
+    assert np.abs(F_nodal - F_want).max() < 1e-13
+
+
+def test_a_stiff_body_far_from_the_origin_keeps_the_digits_of_its_stress():
+    """Hertz's foundation in miniature: E = 2e8 at |X| ~ 400 under a strain of 1e-6. The fields
+    take d, as the internal force does: the uniform stress to 1e-12 (from positions x = X + d,
+    eps |x| / h ~ 2e-13 of round-off in the strain was ~1e-7 of this stress)."""
+    data = _block("linear_elastic")
+    data["bodies"][0]["material"] |= {"E": 2e8}
+    data["bodies"][0]["mesh"] |= {"origin": [400.0, -300.0]}
+    model = model_from_dict(data)
+    X = model.X0
+    strain = np.array([[1e-6, 3e-7], [3e-7, -2e-6]])
+    cell, _, _ = frame_fields(model, X, (X - X.mean(axis=0)) @ strain.T)
+    mat = model.bodies[0].material
+    lam, mu = mat.effective_lambda, mat.mu
+    tr = np.trace(strain)
+    exact = [lam * tr + 2 * mu * strain[0, 0], lam * tr + 2 * mu * strain[1, 1], lam * tr,
+             2 * mu * strain[0, 1]]
+    assert np.abs(cell["stress"][:, :4] - exact).max() < 1e-12 * np.abs(exact).max()
+
+
+def test_an_inverted_reference_cell_is_named_by_the_fields():
+    model = model_from_dict(_block("neo_hookean"))
+    X = model.X0.copy()
+    cells = model.cells
+    X[cells[7, [0, 2]]] = X[cells[7, [2, 0]]]  # two opposite corners swapped: inverted
+    with pytest.raises(InvertedElementError, match="element 7 is inverted in the reference"):
+        stress_fields(model, X, X)
 
 
 def test_contact_node_fields_match_the_contact_rows_of_the_same_step(tmp_path):

@@ -1,13 +1,14 @@
 """Constitutive models: derivatives by finite differences, closed-form stresses, bad input.
 
 P, A and W come from the NumPy oracle (tests/element_oracle.py) that the compiled kernel is
-compared with in test_kernels_numba.py; cauchy_stress and von_mises are the package's."""
+compared with in test_kernels_numba.py; so do cauchy_stress and von_mises, the closed forms
+that test_fields.py checks the output's compiled stresses with."""
 
 import numpy as np
 import pytest
-from element_oracle import linear_elastic, neo_hookean
+from element_oracle import cauchy_stress, linear_elastic, neo_hookean, von_mises
 
-from ntncontact.materials.models import Material, MaterialError, cauchy_stress, von_mises
+from ntncontact.materials.models import Material, MaterialError
 
 RNG = np.random.default_rng(0)
 F_SAMPLES = np.eye(2) + 0.3 * RNG.standard_normal((5, 2, 2))

@@ -10,14 +10,16 @@ from pathlib import Path
 import numpy as np
 
 import ntncontact
+from ntncontact.fem.kernels_numba import cell_fields
 from ntncontact.jit import COMPILE_NOTE
 from ntncontact.warmup import exercise
 
 
-def test_lagrangian_group_makes_contact():
+def test_lagrangian_group_makes_contact_and_computes_a_frames_fields():
     sim = exercise(ale=False)
     assert sum(len(c) for c in sim.state.contact) > 0  # the contact kernel ran
     assert not sim.model.ale_bodies
+    assert cell_fields.signatures  # the output's kernel was compiled (or loaded) too
 
 
 def test_ale_group_moves_the_mesh_and_remaps_the_fields():

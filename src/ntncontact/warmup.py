@@ -5,7 +5,8 @@ kernels, in that order, on one core). ``python -m ntncontact.warmup`` (run by ``
 installing) compiles them on two processes side by side, each through the real code paths so
 that exactly the type signatures a run uses are cached:
 
-- a small ring impact with a Lagrangian obstacle: element and contact kernels;
+- a small ring impact with a Lagrangian obstacle: element and contact kernels, and the
+  output's fields;
 - the same impact with an ALE obstacle: the ALE kernels (the larger half); the element and
   contact kernels have no other form (one implementation each), so they are compiled by
   whichever process reaches them first and loaded from the cache by the other.
@@ -24,6 +25,7 @@ from pathlib import Path
 
 from . import jit, kernel_cache_dir
 from .engine.builder import build_model
+from .engine.postprocess import frame_fields
 from .engine.simulation import Simulation
 from .io.scenario import parse_scenario
 
@@ -60,9 +62,14 @@ def _scenario(ale: bool) -> dict:
 
 
 def exercise(ale: bool) -> Simulation:
-    """Run the small impact for one kernel group (module doc) and return the finished run."""
+    """Run the small impact for one kernel group (module doc) and return the finished run;
+    the Lagrangian group also computes the output's fields of the last state (a frame's
+    kernel, which the run itself does not call without a result writer)."""
     simulation = Simulation(build_model(parse_scenario(_scenario(ale), Path("<warmup>"))))
     simulation.run()
+    if not ale:
+        state = simulation.state
+        frame_fields(simulation.model, state.X, state.d, [1])
     return simulation
 
 

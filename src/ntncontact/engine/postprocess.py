@@ -15,14 +15,11 @@ from collections.abc import Sequence
 import numpy as np
 from numpy.typing import NDArray
 
-from ..fem.q4 import Kinematics, kinematics
-from ..materials.models import cauchy_stress, von_mises
+from ..fem.kernels_numba import CELL_FIELD_COLUMNS, MODEL_CODES, cell_fields, raise_inverted
 from .model import Model
 
 #: status codes of the contact-node field ``contact_status``
 OPEN, STICK, SLIP = 0, 1, 2
-TENSOR_FIELDS = ("stress", "strain")
-SCALAR_FIELDS = ("von_mises", "pressure")
 
 
 def _symmetric6(xx: NDArray, yy: NDArray, zz: NDArray, xy: NDArray) -> NDArray:
@@ -31,75 +28,58 @@ def _symmetric6(xx: NDArray, yy: NDArray, zz: NDArray, xy: NDArray) -> NDArray:
     return np.stack([xx, yy, zz, xy, zero, zero], axis=-1)
 
 
-def _gauss_fields(body, kin: Kinematics) -> tuple[dict[str, NDArray], NDArray]:
-    """Per Gauss point (ne, ngp, ...) of ``kin``: stress, strain, von Mises, pressure; and the
-    current area weights J w (ne, ngp)."""
-    F, mat = kin.F, body.material
-    sigma, s33 = cauchy_stress(mat.kind, F, mat.effective_lambda, mat.mu, mat.plane_stress)
-    C = np.swapaxes(F, -1, -2) @ F
-    E = 0.5 * (C - np.eye(2))  # Green-Lagrange
-    if mat.plane_stress:  # sigma_33 = 0 of linear elasticity (lambda*/(2 mu) = nu/(1-nu))
-        e33 = -mat.effective_lambda / (2.0 * mat.mu) * (E[..., 0, 0] + E[..., 1, 1])
-    else:
-        e33 = np.zeros(E.shape[:-2])  # plane strain
-    J = F[..., 0, 0] * F[..., 1, 1] - F[..., 0, 1] * F[..., 1, 0]
-    values = {
-        "stress": _symmetric6(sigma[..., 0, 0], sigma[..., 1, 1], s33, sigma[..., 0, 1]),
-        "strain": _symmetric6(E[..., 0, 0], E[..., 1, 1], e33, E[..., 0, 1]),
-        "von_mises": von_mises(sigma, s33),
-        "pressure": -(sigma[..., 0, 0] + sigma[..., 1, 1] + s33) / 3.0,
-    }
-    return values, kin.weight * J
-
-
 def stress_fields(model: Model, X: NDArray, x: NDArray) -> tuple[dict, dict]:
     """(cell data, point data) of stress, strain, von Mises and pressure: cell averages over
     the Gauss points and their area-weighted nodal averages (``<name>_nodal``)."""
-    cell, nodal, _ = frame_fields(model, X, x)
+    cell, nodal, _ = frame_fields(model, X, x - X)
     return cell, nodal
 
 
-def frame_fields(model: Model, X: NDArray, x: NDArray, F_bodies: Sequence[int] = ()
+def frame_fields(model: Model, X: NDArray, d: NDArray, F_bodies: Sequence[int] = ()
                  ) -> tuple[dict, dict, NDArray | None]:
-    """:func:`stress_fields`' (cell data, point data) and, for the bodies of index
-    ``F_bodies``, the nodal deformation gradient (n, 2, 2; zero at the other bodies' nodes,
-    None without such bodies) that :func:`mesh_velocity` takes. One kinematics per body
-    serves both: computed twice, they were ~1.3 s of a 50 s Hertz run refined 8x."""
-    n_cells, n_nodes = len(model.cells), len(X)
-    cell = {name: np.zeros((n_cells, 6)) for name in TENSOR_FIELDS}
-    cell |= {name: np.zeros(n_cells) for name in SCALAR_FIELDS}
-    area = np.zeros(n_cells)
-    F_parts = []
-    for index, body in enumerate(model.bodies):  # bodies may differ in material model
-        cells = model.cells[body.cells]
-        kin = kinematics(X[cells], x[cells])
-        values, weight = _gauss_fields(body, kin)
-        area[body.cells] = weight.sum(axis=1)
-        for name, value in values.items():
-            w = weight.reshape(weight.shape + (1,) * (value.ndim - 2))
-            cell[name][body.cells] = (value * w).sum(axis=1) / area[body.cells].reshape(
-                (-1,) + (1,) * (value.ndim - 2))
-        if index in F_bodies:
-            F_parts.append((cells, _cell_deformation_gradient(kin)))
-    return cell, _nodal_averages(model.cells, area, cell, n_nodes), _nodal_F(F_parts, n_nodes)
+    """:func:`stress_fields`' (cell data, point data) at displacements d and, for the bodies
+    of index ``F_bodies``, the nodal deformation gradient (n, 2, 2; zero at the other bodies'
+    nodes, None without such bodies) that :func:`mesh_velocity` takes. The Gauss-point work
+    is the compiled :func:`~ntncontact.fem.kernels_numba.cell_fields`, with the internal
+    force's constitutive law, in d as the internal force takes it: from positions x, a stiff
+    body far from the origin got eps |x| / h of round-off into its strain (Hertz's foundation,
+    E = 2e8 at |x| ~ 400: 1.4e-10 of its largest stress)."""
+    rows = _cell_rows(model, X, d)
+    cell = {"stress": _symmetric6(*rows[:, 0:4].T), "strain": _symmetric6(*rows[:, 4:8].T),
+            "von_mises": rows[:, 8], "pressure": rows[:, 9]}
+    F_parts = [(model.cells[model.bodies[i].cells], rows[model.bodies[i].cells])
+               for i in F_bodies]
+    return (cell, _nodal_averages(model.cells, rows[:, 10], cell, len(X)),
+            _nodal_F(F_parts, len(X)))
 
 
-def _cell_deformation_gradient(kin: Kinematics) -> tuple[NDArray, NDArray]:
-    """(reference areas, reference-area averages of F over each cell's Gauss points)."""
-    weight = kin.weight
-    area = weight.sum(axis=1)
-    return area, (kin.F * weight[..., None, None]).sum(axis=1) / area[:, None, None]
+def _cell_rows(model: Model, X: NDArray, d: NDArray) -> NDArray:
+    """:data:`~ntncontact.fem.kernels_numba.CELL_FIELD_COLUMNS` of every cell, body by body
+    (bodies may differ in material model); raises InvertedElementError naming the first
+    element (its index in its body) with a reference Jacobian that is not positive."""
+    rows = np.empty((len(model.cells), len(CELL_FIELD_COLUMNS)))
+    for body in model.bodies:
+        cells, mat = model.cells[body.cells], body.material
+        out = np.empty((len(cells), len(CELL_FIELD_COLUMNS)))
+        n = len(cells)
+        bad = cell_fields(MODEL_CODES[mat.kind], X, d, cells, np.full(n, mat.effective_lambda),
+                          np.full(n, mat.mu), mat.plane_stress, out)
+        if bad >= 0:
+            raise_inverted(int(bad), X, cells)
+        rows[body.cells] = out
+    return rows
 
 
 def _nodal_F(parts: list, n_nodes: int) -> NDArray | None:
-    """Reference-area-weighted nodal averages of the cell F of ``parts`` ((cells, (areas,
-    cell F)) per body; bodies share no node), zero at the nodes of no part."""
+    """Reference-area-weighted nodal averages of the cell F of ``parts`` ((cells, cell rows)
+    per body; bodies share no node), zero at the nodes of no part."""
     if not parts:
         return None
     out = np.zeros((n_nodes, 2, 2))
-    for cells, (area, F_cell) in parts:
+    for cells, rows in parts:
         nodes = np.unique(cells)
-        out[nodes] = _nodal_averages(cells, area, {"F": F_cell}, n_nodes)["F_nodal"][nodes]
+        F_cell = {"F": rows[:, 12:16].reshape(-1, 2, 2)}
+        out[nodes] = _nodal_averages(cells, rows[:, 11], F_cell, n_nodes)["F_nodal"][nodes]
     return out
 
 

@@ -446,6 +446,89 @@ def assemble_blocks(model, order, starts, X, d0, d, ecells, lam, mu, geo, Xc, ne
     return energies.sum(), status[:, 1].any()
 
 
+#: Columns of :func:`cell_fields`' rows: Cauchy stress and Green-Lagrange strain (xx, yy, zz,
+#: xy), von Mises, pressure (current-area averages over the Gauss points), the current and the
+#: reference area, and F (00, 01, 10, 11) averaged over the reference area.
+CELL_FIELD_COLUMNS = ("stress_xx", "stress_yy", "stress_zz", "stress_xy", "strain_xx",
+                      "strain_yy", "strain_zz", "strain_xy", "von_mises", "pressure", "area",
+                      "reference_area", "F00", "F01", "F10", "F11")
+
+
+@njit(cache=True, error_model="numpy")
+def cell_fields(model, X, d, ecells, lam, mu, plane_stress, out):
+    """Fill ``out`` (ne, 16), one row per element of ``ecells``, with the fields of
+    :data:`CELL_FIELD_COLUMNS` at displacements d; return -1, or the first element whose
+    reference Jacobian is not positive (its row and the later ones are not filled).
+
+    The stress comes from :func:`_material`, the law of the internal force: sigma = P F^T / J
+    (Neo-Hookean, sigma_33 = lam ln J / J) or sigma = P (linear elasticity, sigma_33 =
+    lam tr eps in plane strain, 0 in plane stress, ``lam`` the effective one), and the strain
+    E = (H + H^T + H^T H) / 2 from H = Grad d, as the kernel forms its stress (no 1 + O(H)
+    round-off). Compiled, the fields of a frame of Hertz refined 8x (61,086 elements) take
+    ~10 ms against ~100 ms for the NumPy Gauss-point arrays they replace."""
+    for p in range(ecells.shape[0]):
+        n0, n1, n2, n3 = ecells[p, 0], ecells[p, 1], ecells[p, 2], ecells[p, 3]
+        Xx = (X[n0, 0], X[n1, 0], X[n2, 0], X[n3, 0])
+        Xy = (X[n0, 1], X[n1, 1], X[n2, 1], X[n3, 1])
+        ux = (d[n0, 0], d[n1, 0], d[n2, 0], d[n3, 0])
+        uy = (d[n0, 1], d[n1, 1], d[n2, 1], d[n3, 1])
+        acc = np.zeros(15)
+        reference_area = 0.0
+        for g in range(4):
+            dxi, deta = _DXI[g], _DETA[g]
+            J00, J01 = _dot4(Xx, dxi), _dot4(Xx, deta)
+            J10, J11 = _dot4(Xy, dxi), _dot4(Xy, deta)
+            det = J00 * J11 - J01 * J10
+            if not det > 0.0:
+                return p
+            r = 1.0 / det
+            Gx = _comb4(dxi, deta, J11 * r, -J10 * r)
+            Gy = _comb4(dxi, deta, -J01 * r, J00 * r)
+            H00, H01 = _dot4(ux, Gx), _dot4(ux, Gy)
+            H10, H11 = _dot4(uy, Gx), _dot4(uy, Gy)
+            _gauss_point_fields(model, H00, H01, H10, H11, lam[p], mu[p], plane_stress,
+                                det * _GW[g], acc)
+            reference_area += det * _GW[g]
+        out[p, :10] = acc[:10] / acc[10]
+        out[p, 10] = acc[10]
+        out[p, 11] = reference_area
+        out[p, 12:] = acc[11:] / reference_area
+    return -1
+
+
+@njit(cache=True, error_model="numpy", inline="always")
+def _gauss_point_fields(model, H00, H01, H10, H11, lam, mu, plane_stress, w, acc):
+    """Add one Gauss point's fields, times its current weight J w, to acc[:10], J w to
+    acc[10] and F w to acc[11:] (see :func:`cell_fields`)."""
+    _, P00, P01, P10, P11, _, _, _, _, _ = _material(model, H00, H01, H10, H11, lam, mu)
+    j = _jacobian_minus_one(H00, H01, H10, H11)
+    J = 1.0 + j
+    F00, F11 = 1.0 + H00, 1.0 + H11
+    if model == 1:
+        s00 = (P00 * F00 + P01 * H01) / J
+        s11 = (P10 * H10 + P11 * F11) / J
+        s01 = (P00 * H10 + P01 * F11) / J
+        s33 = lam * np.log1p(j) / J
+    else:
+        s00, s11, s01 = P00, P11, P01
+        s33 = 0.0 if plane_stress else lam * (H00 + H11)
+    E00 = H00 + 0.5 * (H00 * H00 + H10 * H10)
+    E11 = H11 + 0.5 * (H01 * H01 + H11 * H11)
+    E01 = 0.5 * (H01 + H10 + H00 * H01 + H10 * H11)
+    E33 = -lam / (2.0 * mu) * (E00 + E11) if plane_stress else 0.0
+    mises = np.sqrt(0.5 * ((s00 - s11) ** 2 + (s11 - s33) ** 2 + (s33 - s00) ** 2)
+                    + 3.0 * s01 * s01)
+    wJ = w * J
+    values = (s00, s11, s33, s01, E00, E11, E33, E01, mises, -(s00 + s11 + s33) / 3.0)
+    for k in range(10):
+        acc[k] += values[k] * wJ
+    acc[10] += wJ
+    acc[11] += F00 * w
+    acc[12] += H01 * w
+    acc[13] += H10 * w
+    acc[14] += F11 * w
+
+
 def block_partition(cells: NDArray, elements: NDArray, nblocks: int) -> tuple[NDArray, NDArray,
                                                                                  NDArray]:
     """Split ``elements`` into contiguous blocks that share no node, plus deferred elements.
@@ -550,6 +633,12 @@ class NumbaAssembly:
 _NO_DATA = np.empty(0)
 #: The ``d0`` argument of the plain kernel (no energy-momentum scheme).
 _NO_DISPLACEMENTS = np.empty((0, 2))
+
+
+def raise_inverted(e: int, X: NDArray, cells: NDArray) -> None:
+    """Raise :class:`InvertedElementError` for element e of ``cells``, inverted in the
+    reference configuration X (as :func:`cell_fields` reports it)."""
+    _raise_inverted(e, 1, X, [], cells)
 
 
 def _raise_inverted(e: int, where: int, X: NDArray, configurations: list[NDArray],

@@ -167,7 +167,7 @@ class ResultWriter:
         s = record.state
         moving = before is not None and record.dt > 0.0
         F_bodies = [a.body_index for a in model.ale_bodies] if moving else []
-        cell, nodal, F = frame_fields(model, s.X, s.x, F_bodies)
+        cell, nodal, F = frame_fields(model, s.X, s.d, F_bodies)
         # Lagrangian meshes (F None) move with the material: the mesh velocity is v
         point = {"displacement": s.d, "velocity": s.v, "acceleration": s.a,
                  "mesh_velocity": mesh_velocity(s.v, s.X, before.state.X if moving else s.X,

@@ -1,10 +1,11 @@
-"""Material parameters, and the Cauchy and von Mises stresses of the output.
+"""Material parameters.
 
 The constitutive laws (compressible Neo-Hookean, W = mu/2 (I1 - 3) - mu ln J + lam/2 (ln J)^2,
 and small-strain linear elasticity; plane strain, F_33 = 1, unless stated) are evaluated for the
 internal force, tangent and energy by the compiled element kernel (``fem/kernels_numba.py``:
 ``_material``, and ``_element_em`` for the energy-momentum integrator's algorithmic stress);
-tests/element_oracle.py holds an independent NumPy version that checks it.
+tests/element_oracle.py holds an independent NumPy version that checks it. The output's
+stresses (``fem.kernels_numba.cell_fields``) take the same ``_material``.
 """
 
 from __future__ import annotations
@@ -12,10 +13,6 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Literal
 
-import numpy as np
-from numpy.typing import NDArray
-
-_I2 = np.eye(2)
 MaterialKind = Literal["linear_elastic", "neo_hookean"]
 
 
@@ -73,37 +70,3 @@ class Material:
     @property
     def poisson(self) -> float:
         return self.lam / (2.0 * (self.lam + self.mu))
-
-
-def cauchy_stress(
-    kind: MaterialKind, F: NDArray, lam: NDArray, mu: NDArray, plane_stress: bool = False
-) -> tuple[NDArray, NDArray]:
-    """In-plane Cauchy stress and the out-of-plane sigma_33 at deformation gradients F (..., 2, 2).
-
-    Neo-Hookean: sigma = P F^T / J = (mu (F F^T - I) + lam ln J I) / J, sigma_33 = lam ln J / J
-    (F_33 = 1). Linear elastic: sigma = lam tr(eps) I + 2 mu eps, eps = sym(F - I), and
-    sigma_33 = lam tr(eps) in plane strain, 0 in plane stress (lam is then the effective one).
-    The internal force takes the same laws from the compiled kernel (fem/kernels_numba.py).
-    """
-    lam = np.asarray(lam, dtype=float)
-    mu = np.asarray(mu, dtype=float)
-    if kind == "linear_elastic":
-        H = F - _I2
-        eps = 0.5 * (H + np.swapaxes(H, -1, -2))
-        tr = eps[..., 0, 0] + eps[..., 1, 1]
-        sigma = lam[..., None, None] * tr[..., None, None] * _I2 + 2.0 * mu[..., None, None] * eps
-        return sigma, np.zeros(F.shape[:-2]) if plane_stress else lam * tr
-    J = F[..., 0, 0] * F[..., 1, 1] - F[..., 0, 1] * F[..., 1, 0]
-    lnJ = np.log(J)
-    b = F @ np.swapaxes(F, -1, -2)  # matmul: 1.5x faster than einsum on 90k 2x2 matrices
-    sigma = (mu[..., None, None] * (b - _I2) + (lam * lnJ)[..., None, None] * _I2) \
-        / J[..., None, None]
-    return sigma, lam * lnJ / J
-
-
-def von_mises(sigma: NDArray, s33: NDArray) -> NDArray:
-    """Von Mises equivalent stress of (sigma_2x2, sigma_33)."""
-    sxx, syy, sxy = sigma[..., 0, 0], sigma[..., 1, 1], sigma[..., 0, 1]
-    return np.sqrt(
-        0.5 * ((sxx - syy) ** 2 + (syy - s33) ** 2 + (s33 - sxx) ** 2) + 3.0 * sxy**2
-    )
