@@ -30,7 +30,14 @@ from dataclasses import dataclass, replace
 import numpy as np
 from numpy.typing import NDArray
 
-from ..fem.kernels_numba import _jacobian_minus_one, _material, gauss_jacobian
+from ..fem.kernels_numba import (
+    _DETA,
+    _DXI,
+    _comb4,
+    _jacobian_minus_one,
+    _material,
+    gauss_jacobian,
+)
 from ..fem.q4 import DN_GP, GAUSS_WEIGHTS
 from ..jit import njit
 
@@ -40,22 +47,6 @@ _DN = np.ascontiguousarray(DN_GP)
 _GW = np.ascontiguousarray(GAUSS_WEIGHTS, dtype=float)
 _MAX_ITERATIONS = 30
 _HALVINGS = 20
-
-
-@njit(cache=True, inline="always")
-def _gradient_row(g, i, Jp, Jq, r):
-    """(dN_a/dX_i at Gauss point g, a = 0..3) from the reference Jacobian's entries:
-    i = 0: (dxi J11 - deta J10) r with (Jp, Jq) = (J11, J10); i = 1: (-dxi J01 + deta J00) r
-    with (Jp, Jq) = (J01, J00)."""
-    if i == 0:
-        return ((_DN[g, 0, 0] * Jp - _DN[g, 0, 1] * Jq) * r,
-                (_DN[g, 1, 0] * Jp - _DN[g, 1, 1] * Jq) * r,
-                (_DN[g, 2, 0] * Jp - _DN[g, 2, 1] * Jq) * r,
-                (_DN[g, 3, 0] * Jp - _DN[g, 3, 1] * Jq) * r)
-    return ((-_DN[g, 0, 0] * Jp + _DN[g, 0, 1] * Jq) * r,
-            (-_DN[g, 1, 0] * Jp + _DN[g, 1, 1] * Jq) * r,
-            (-_DN[g, 2, 0] * Jp + _DN[g, 2, 1] * Jq) * r,
-            (-_DN[g, 3, 0] * Jp + _DN[g, 3, 1] * Jq) * r)
 
 
 @njit(cache=True, error_model="numpy")
@@ -76,8 +67,8 @@ def _energy_and_force(models, X, d, cells, which, lam, mu, want_force, force):
             r = 1.0 / det
             # tuples, not arrays: two small arrays a Gauss point were heap allocations that
             # took ~half of this kernel's time (fast sliding refined 8x)
-            Gx = _gradient_row(g, 0, J11, J10, r)
-            Gy = _gradient_row(g, 1, J01, J00, r)
+            Gx = _comb4(_DXI[g], _DETA[g], J11 * r, -J10 * r)
+            Gy = _comb4(_DXI[g], _DETA[g], -J01 * r, J00 * r)
             H00 = H01 = H10 = H11 = 0.0
             for a in range(4):
                 n = cells[e, a]
