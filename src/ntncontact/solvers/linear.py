@@ -83,9 +83,10 @@ def pardiso_available() -> bool:
     _point_pypardiso_at_mkl_rt()
     _pin_mkl_threading_layer()
     try:
-        import pypardiso  # noqa: F401  (it loads mkl_rt, or raises ImportError)
+        import pypardiso  # it loads mkl_rt, or raises ImportError
     except (ImportError, OSError):  # not installed, or a broken MKL installation
         return False
+    _select_threading_layer(getattr(getattr(pypardiso, "ps", None), "libmkl", None))
     return True
 
 
@@ -136,6 +137,26 @@ def _pin_mkl_threading_layer() -> None:
     except OSError:  # no GNU OpenMP runtime: MKL keeps its default
         return
     os.environ[MKL_THREADING_VARIABLE] = "GNU"
+
+
+#: MKL's codes of its threading layers (mkl_service.h), by their MKL_THREADING_LAYER names
+_MKL_LAYERS = {"INTEL": 0, "SEQUENTIAL": 1, "PGI": 2, "GNU": 3, "TBB": 4}
+
+
+def _select_threading_layer(library: ctypes.CDLL | None) -> None:
+    """Select :data:`MKL_THREADING_VARIABLE`'s layer in an mkl_rt that is already loaded
+    (``MKL_Set_Threading_Layer``, which holds while no MKL function has run yet).
+
+    Why: mkl_rt reads the variable when it loads, and pypardiso loads it at its import. A
+    script that imported pypardiso before asking ntncontact for PARDISO ran MKL on Intel's
+    OpenMP runtime beside Numba's GNU one: other bits (hertz_factor refined 4x: 124 against
+    125 Newton iterations) and ~30 % more CPU (15.4 against 11.8 s: two runtimes' threads)."""
+    code = _MKL_LAYERS.get(os.environ.get(MKL_THREADING_VARIABLE, "").upper())
+    select = getattr(library, "MKL_Set_Threading_Layer", None)
+    if code is None or select is None:
+        return
+    select.argtypes, select.restype = [ctypes.c_int], ctypes.c_int
+    select(code)
 
 
 #: PARDISO threads on a machine with at most this many cores: one (see pardiso_threads).
@@ -799,3 +820,12 @@ def _pardiso_message(code: int, phase: int) -> str:
 
 
 _BACKEND_CLASSES = {"superlu": _SuperLUBackend, "static": _StaticLUBackend}
+
+
+# Pinned when ntncontact is imported, not only when PARDISO is first asked for: a script may
+# load mkl_rt itself (pypardiso does at its import) after importing ntncontact, or before, and
+# the first MKL call (threadpoolctl's look at it when a run starts) fixes the layer for good.
+_pin_mkl_threading_layer()
+if "pypardiso" in sys.modules:  # loaded before the pin: select the layer in it (see above)
+    _select_threading_layer(getattr(getattr(sys.modules["pypardiso"], "ps", None), "libmkl",
+                                    None))
