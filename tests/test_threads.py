@@ -128,3 +128,25 @@ def test_a_run_does_not_depend_on_whether_pardiso_or_the_kernels_load_first(tmp_
     histories = [history for history, *_ in outputs]
     assert [layers for _, *layers in outputs] == [["gnu"]] * len(orders)
     assert histories[1:] == histories[:1] * (len(orders) - 1)
+
+
+@pytest.mark.skipif(not linear.pardiso_available(), reason="pypardiso not installed")
+def test_an_mkl_already_used_before_ntncontact_is_named_in_a_warning():
+    """Once MKL has run, its threading layer is fixed: the package cannot select GNU's and
+    says so, rather than letting the run differ from the command line's in silence."""
+    import subprocess
+    import sys
+
+    script = (
+        "import ctypes, warnings, pypardiso\n"
+        "pypardiso.ps.libmkl.MKL_Get_Max_Threads()  # any MKL call fixes the layer\n"
+        "with warnings.catch_warnings(record=True) as caught:\n"
+        "    warnings.simplefilter('always')\n"
+        "    import ntncontact.solvers.linear\n"
+        "print([str(w.message) for w in caught if w.category is RuntimeWarning])\n")
+    env = {k: v for k, v in os.environ.items() if k != "MKL_THREADING_LAYER"}
+    done = subprocess.run([sys.executable, "-c", script], env=env, capture_output=True,
+                          text=True, timeout=300)
+    assert done.returncode == 0, done.stderr[-2000:]
+    assert "MKL already runs on its INTEL threading layer" in done.stdout
+    assert "MKL_THREADING_LAYER=GNU" in done.stdout

@@ -40,8 +40,10 @@ import ctypes
 import importlib.metadata
 import os
 import sys
+import warnings
 from dataclasses import dataclass
 from functools import lru_cache
+from types import ModuleType
 from typing import Literal
 
 import numpy as np
@@ -86,7 +88,7 @@ def pardiso_available() -> bool:
         import pypardiso  # it loads mkl_rt, or raises ImportError
     except (ImportError, OSError):  # not installed, or a broken MKL installation
         return False
-    _select_threading_layer(getattr(getattr(pypardiso, "ps", None), "libmkl", None))
+    _select_threading_layer(pypardiso)
     return True
 
 
@@ -143,8 +145,8 @@ def _pin_mkl_threading_layer() -> None:
 _MKL_LAYERS = {"INTEL": 0, "SEQUENTIAL": 1, "PGI": 2, "GNU": 3, "TBB": 4}
 
 
-def _select_threading_layer(library: ctypes.CDLL | None) -> None:
-    """Select :data:`MKL_THREADING_VARIABLE`'s layer in an mkl_rt that is already loaded
+def _select_threading_layer(pypardiso: ModuleType) -> None:
+    """Select :data:`MKL_THREADING_VARIABLE`'s layer in the mkl_rt pypardiso loaded
     (``MKL_Set_Threading_Layer``, which holds while no MKL function has run yet).
 
     Why: mkl_rt reads the variable when it loads, and pypardiso loads it at its import. A
@@ -152,11 +154,21 @@ def _select_threading_layer(library: ctypes.CDLL | None) -> None:
     OpenMP runtime beside Numba's GNU one: other bits (hertz_factor refined 4x: 124 against
     125 Newton iterations) and ~30 % more CPU (15.4 against 11.8 s: two runtimes' threads)."""
     code = _MKL_LAYERS.get(os.environ.get(MKL_THREADING_VARIABLE, "").upper())
+    library = getattr(getattr(pypardiso, "ps", None), "libmkl", None)  # its module's solver
     select = getattr(library, "MKL_Set_Threading_Layer", None)
     if code is None or select is None:
         return
     select.argtypes, select.restype = [ctypes.c_int], ctypes.c_int
-    select(code)
+    in_effect = select(code)
+    if in_effect != code:  # MKL ran before: its layer is fixed for this process
+        names = {value: name for name, value in _MKL_LAYERS.items()}
+        warnings.warn(
+            f"MKL already runs on its {names.get(in_effect, in_effect)} threading layer (it was "
+            f"used before ntncontact was imported), not {MKL_THREADING_VARIABLE}="
+            f"{names[code]}: PARDISO's results may differ in the last bits from a run started "
+            "by the command line, and two OpenMP runtimes share the cores. Import ntncontact "
+            f"first, or set {MKL_THREADING_VARIABLE}=GNU before Python starts.",
+            RuntimeWarning, stacklevel=2)
 
 
 #: PARDISO threads on a machine with at most this many cores: one (see pardiso_threads).
@@ -827,5 +839,4 @@ _BACKEND_CLASSES = {"superlu": _SuperLUBackend, "static": _StaticLUBackend}
 # the first MKL call (threadpoolctl's look at it when a run starts) fixes the layer for good.
 _pin_mkl_threading_layer()
 if "pypardiso" in sys.modules:  # loaded before the pin: select the layer in it (see above)
-    _select_threading_layer(getattr(getattr(sys.modules["pypardiso"], "ps", None), "libmkl",
-                                    None))
+    _select_threading_layer(sys.modules["pypardiso"])
