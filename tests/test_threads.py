@@ -138,7 +138,7 @@ def test_an_mkl_already_used_before_ntncontact_is_named_in_a_warning():
     import sys
 
     script = (
-        "import ctypes, warnings, pypardiso\n"
+        "import warnings, pypardiso\n"
         "pypardiso.ps.libmkl.MKL_Get_Max_Threads()  # any MKL call fixes the layer\n"
         "with warnings.catch_warnings(record=True) as caught:\n"
         "    warnings.simplefilter('always')\n"

@@ -82,8 +82,7 @@ class LinearSolverError(RuntimeError):
 @lru_cache(maxsize=1)
 def pardiso_available() -> bool:
     """True if MKL PARDISO can be loaded (``pip install pypardiso``)."""
-    _point_pypardiso_at_mkl_rt()
-    _pin_mkl_threading_layer()
+    _point_pypardiso_at_mkl_rt()  # the threading layer was pinned at this module's import
     try:
         import pypardiso  # it loads mkl_rt, or raises ImportError
     except (ImportError, OSError):  # not installed, or a broken MKL installation
