@@ -339,8 +339,7 @@ class Simulation:
         dofs: there the residual is the support's reaction, whose work the ledger leaves out."""
         f_int, _, _ = self.model.assembler.internal(moved.X, d=moved.d, need_tangent=False)
         dx = (moved.X + d1 - moved.x).ravel()
-        residual = (f_int + self._contact_force
-                    - self.model.loads(moved.time, dx.size, moved.X))
+        residual = f_int + self._contact_force - self._static_start_load(moved, dx.size)
         prescribed, _ = dirichlet_values(self.model.prescribed, moved.time, dx.size)
         residual[prescribed] = 0.0
         return 0.5 * float(residual @ dx)
@@ -822,13 +821,23 @@ class Simulation:
             # the trapezoidal rule over the load step, exact where the forces change linearly
             # with the displacements (the end-of-step forces alone over-counted the work of a
             # load ramp by 1/2 of a step's share: Hertz's balance error 6 % of its scale)
-            load = 0.5 * (self.model.loads(s.time, dx.size, s.X)
+            load = 0.5 * (self._static_start_load(s, dx.size)
                           + self.model.loads(s.time + dt, dx.size, s.X))
             force, self._contact_force = 0.5 * (self._contact_force + force), force
         self._step_work["external_work"] += float(load @ dx)
         if active:
             self._step_work["contact_work"] -= float(force @ dx)
             self._step_work["frictional_dissipation"] += sum(r.dissipation for r in active)
+
+    def _static_start_load(self, s: StepState, ndof: int) -> NDArray:
+        """The external load that the state ``s`` at a static step's start balances: the
+        loads at t_n, except at the run's first step, whose undeformed initial state balances
+        none. A load that is on at full value from t = 0 is then counted as applied over the
+        first step, as a quasi-static path applies it (a linear block under a traction set at
+        t = 0: external work twice its strain energy, a balance error of 0.5 -> round-off)."""
+        if s.step == 0:
+            return np.zeros(ndof)
+        return self.model.loads(s.time, ndof, s.X)
 
     def _ledger_extra(self) -> dict:
         for key, value in self._step_work.items():
