@@ -150,6 +150,17 @@ CASES = [
                "penalty_normal = 100.0")),
     Case("joined_surface_misspelt", ("contact.0", "'rigth'", "join several with '+'"),
          sets=('contact.0.surface_1="bottom+rigth"',)),
+    # options the analysis would ignore, or that would fail only steps later (session 35)
+    Case("integrator_in_a_static_run", ("analysis.integrator", "only for dynamic analyses"),
+         sets=('analysis.kind="static"', 'analysis.integrator="midpoint"',
+               "analysis.energy_conserving=false")),
+    Case("rate_law_in_a_static_run", ("contact.0.law", "persistency", "dynamic analysis"),
+         sets=('analysis.kind="static"', 'contact.0.law="persistency"')),
+    Case("energy_variant_without_exact_gap_pairs",
+         ("analysis.energy_conserving", 'method = "lagrange"', 'law = "gap"'),
+         sets=("analysis.energy_conserving=true",)),
+    Case("checkpoints_of_an_xdmf_run", ("analysis.checkpoint_interval", "xdmf", "VTU"),
+         sets=("analysis.checkpoint_interval=0.05", 'analysis.field_format="xdmf"')),
     # mesh-quality: say what was expected
     Case("mesh_quality_not_a_mesh", ("x.msh", "not a readable gmsh .msh file"),
          command="mesh-quality", file_name="x.msh", text="garbage\n"),

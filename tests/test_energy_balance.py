@@ -143,8 +143,11 @@ loads = [{ type = "traction", set = "top", vector = [0.0, 10.0] LOADFUNCTION}]
 """  # noqa: E501 (a TOML inline table is one line)
 
 
+RAMP = ", function = { times = [0.0, 1.0], values = [0.0, 1.0] }"
+
+
 @pytest.mark.parametrize("dt", [1.0, 0.25])
-@pytest.mark.parametrize("function", ["", ", function = { times = [0.0, 1.0], values = [0.0, 1.0] }"])
+@pytest.mark.parametrize("function", ["", RAMP])
 def test_a_static_load_on_from_t0_is_counted_as_applied_over_the_first_step(tmp_path, dt,
                                                                             function):
     """A linear block pulled by a traction that is on at full value from t = 0 (no time

@@ -148,8 +148,7 @@ def build_model(config: ScenarioConfig, base_dir: str | Path = ".") -> Model:
     for i, (c, ci) in enumerate(zip(config.contact, interfaces, strict=True)):
         _check_no_overlap(i, c, ci, bodies)
     _check_paired_once(interfaces, config.contact, bodies)
-    if a.energy_conserving and a.kind != "dynamic":
-        raise ScenarioError("analysis.energy_conserving: only for dynamic analyses (report 5.5)")
+    _check_analysis_options(config)
     ale_bodies = tuple(_ale_setup(i, body, bc, config) for i, (body, bc)
                        in enumerate(zip(bodies, config.bodies, strict=True))
                        if bc.mesh_motion == "ale")
@@ -165,6 +164,33 @@ def build_model(config: ScenarioConfig, base_dir: str | Path = ".") -> Model:
     loads = LoadCase(tuple(patterns), tuple(functions), tuple(on_mesh), X0)
     return Model(bodies, analysis, loads,
                  tuple(prescribed), X0, cells, assembler, interfaces, ale_bodies, ties)
+
+
+def _check_analysis_options(config: ScenarioConfig) -> None:
+    """Options that the analysis would otherwise ignore, or that fail only steps later: each is
+    refused, naming the key (an independent user's check found them accepted in silence)."""
+    a = config.analysis
+    if a.kind == "static":
+        if a.energy_conserving:
+            raise ScenarioError("analysis.energy_conserving: only for dynamic analyses "
+                                "(report 5.5)")
+        if "integrator" in a.model_fields_set:
+            raise ScenarioError("analysis.integrator: only for dynamic analyses (a static run "
+                                "has no time integrator)")
+        for i, c in enumerate(config.contact):
+            if c.law == "persistency":  # the rate law of 2.34 needs velocities
+                raise ScenarioError(f"contact.{i}.law = \"persistency\": the rate law needs a "
+                                    "dynamic analysis; a static run takes the gap law")
+    if a.energy_conserving and not any(
+            c.method == "lagrange" and (c.law or "persistency") == "gap" for c in config.contact):
+        raise ScenarioError("analysis.energy_conserving: report 5.5's variant acts on the "
+                            "interfaces with method = \"lagrange\" and law = \"gap\", and "
+                            "this scenario has none (the persistency law conserves energy by "
+                            "itself)")
+    if a.checkpoint_interval is not None and a.field_format == "xdmf":
+        raise ScenarioError("analysis.checkpoint_interval: a restart continues VTU field "
+                            "series only; with analysis.field_format = \"xdmf\" the checkpoints "
+                            "could not be restarted (use \"vtu\" for a run to restart)")
 
 
 def _tie(cfg: TieConfig, index: int, bodies: tuple[Body, ...], fixed_dofs: np.ndarray) -> Tie:

@@ -110,6 +110,8 @@ class ResultWriter:
         if "tie_violation" in record.extra:
             fields["max_tie_violation"] = max(record.extra["tie_violation"],
                                               summary.get("max_tie_violation", 0.0))
+        if "contact_work" in row:  # cumulative: the summary keeps the last
+            fields["contact_work"] = row["contact_work"]
         if row.get("ale_unreturned_energy"):  # cumulative: the summary keeps the last
             fields["ale_unreturned_energy"] = row["ale_unreturned_energy"]
         if row.get("augmentations_converged") == 0:  # augmentation.on_limit = "accept"
