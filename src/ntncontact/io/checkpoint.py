@@ -15,7 +15,7 @@ import hashlib
 import json
 import sys
 import zipfile
-from collections.abc import Sequence
+from collections.abc import Iterable, Sequence
 from dataclasses import fields
 from pathlib import Path
 from typing import Any
@@ -49,13 +49,28 @@ class CheckpointError(RuntimeError):
 
 def run_identity(config: ScenarioConfig, overrides: Sequence[str], model: Model) -> dict:
     """What a checkpoint must match to be continued: the hash of the validated scenario (and
-    of the meshes it built, which may come from files), the overrides and the version."""
+    of the meshes it built, which may come from files), the overrides (:func:`_by_key`: the
+    order of overrides of different keys does not matter) and the version."""
     digest = hashlib.sha256(config.model_dump_json().encode())
     digest.update(np.ascontiguousarray(model.X0, dtype=float).tobytes())
     digest.update(np.ascontiguousarray(model.cells, dtype=np.int64).tobytes())
     return {"scenario_hash": digest.hexdigest(),
-            "overrides": [_normalized(item) for item in overrides],
+            "overrides": _by_key(_normalized(item) for item in overrides),
             "version": __version__}
+
+
+def _by_key(normalized: Iterable[str]) -> list[str]:
+    """Normalized overrides (:func:`_normalized`) as the run applies them: one per key, with
+    the key's last value (a later ``--set`` of a key replaces an earlier one), sorted by key.
+    Overrides of different keys then compare equal in any order; the same key set twice
+    keeps the order that matters, which value comes last. (Overlapping keys, a table and a
+    key inside it, are told apart by the scenario hash: the validated scenario differs.)
+    Checkpoints written before this kept the overrides as given: compared through it too."""
+    final: dict[str, str] = {}
+    for item in normalized:
+        key, _, value = str(item).partition("=")
+        final[key] = value
+    return [f"{key}={final[key]}" for key in sorted(final)]
 
 
 def _normalized(item: str) -> str:
@@ -181,9 +196,9 @@ def check_identity(saved: dict, current: dict, path: Path) -> None:
     """Refuse a checkpoint of another scenario, override set or package version."""
     if saved.get("version") != current["version"]:
         why = (f"ntncontact {saved.get('version')}, this is {current['version']}")
-    elif saved.get("overrides") != current["overrides"]:
-        why = (f"other overrides ({_listed(saved.get('overrides'))} there, "
-               f"{_listed(current['overrides'])} here)")
+    elif _saved_overrides(saved) != _by_key(current["overrides"]):
+        why = (f"other overrides ({_listed(_saved_overrides(saved))} there, "
+               f"{_listed(_by_key(current['overrides']))} here)")
     elif saved.get("scenario_hash") != current["scenario_hash"]:
         why = "another scenario (its validated configuration or meshes differ)"
     else:
@@ -191,6 +206,13 @@ def check_identity(saved: dict, current: dict, path: Path) -> None:
     raise CheckpointError(f"{path} belongs to another run: written by {why}; restart with the "
                           "run's own scenario and --set options, or start afresh with "
                           "--overwrite")
+
+
+def _saved_overrides(saved: dict) -> list[str] | None:
+    """A checkpoint's overrides by key (older checkpoints hold them in the order given);
+    None if the header holds no list of them (then no run's overrides match)."""
+    overrides = saved.get("overrides")
+    return _by_key(overrides) if isinstance(overrides, list) else None
 
 
 def _listed(overrides: list | None) -> str:

@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from ..io.writers import read_csv_table
-from .validation_cases import TABLE, impact_tolerance
+from .validation_cases import CASES, TABLE, impact_tolerance
 
 #: Values the report states in its text (section in the comment).
 TEXT_VALUES: dict[str, dict[str, float]] = {
@@ -358,17 +358,23 @@ def our_values(directory: Path) -> dict[str, float]:
     """The same quantities measured from a results folder.
 
     A run that ends while its bodies are still in contact (a shortened run) has no contact end
-    time, duration or final count of active pairs.
+    time, duration or final count of active pairs. A run whose energy starts at 0 (a static run,
+    or bodies at rest and unloaded) has no relative energy variation or dissipated fraction
+    (they divide by it): it has the absolute ``energy_max_change``, max |E - E0|, instead.
     """
     summary = json.loads((directory / "summary.json").read_text())
     h = read_csv_table(directory / "history.csv")
     e = h["total_energy"]
+    e0 = float(e[0])
     p = np.column_stack([h["linear_momentum_x"], h["linear_momentum_y"]])
     p0 = np.linalg.norm(p[0]) or 1.0
-    out = {
-        "energy_initial": float(e[0]),
-        "energy_max_relative_variation": float(np.abs(e - e[0]).max() / abs(e[0])),
-        "energy_dissipated_fraction": float((e[0] - e[-1]) / e[0]),
+    out = {"energy_initial": e0}
+    if e0 != 0.0:
+        out["energy_max_relative_variation"] = float(np.abs(e - e0).max() / abs(e0))
+        out["energy_dissipated_fraction"] = float((e0 - e[-1]) / e0)
+    else:  # a static run, or bodies that start at rest: relative to E0 = 0 is undefined
+        out["energy_max_change"] = float(np.abs(e - e0).max())
+    out |= {
         "linear_momentum_max_relative_variation": float(
             np.linalg.norm(p - p[0], axis=1).max() / p0),
         "angular_momentum_max": float(np.abs(h["angular_momentum"]).max()),
@@ -423,11 +429,15 @@ def compare(directory: str | Path, tolerance: float | None = None
             ) -> tuple[str, list[Comparison]]:
     """Side-by-side rows for every quantity both the report and the run have, checked as
     ``ntncontact validate`` checks the example (:func:`impact_rows`) with ``tolerance``, by
-    default the example's tolerance in ``data/validation_cases.toml``."""
+    default the example's tolerance in ``data/validation_cases.toml``.
+
+    The label names the case; a line under it for each note (:func:`_notes`): a run whose
+    energy starts at 0 (static), and why there are no rows."""
     directory = require_results_folder(directory)
     summary = json.loads((directory / "summary.json").read_text())
     example, friction, mass = _case(summary)
-    time = read_csv_table(directory / "history.csv")["time"]
+    history = read_csv_table(directory / "history.csv")
+    time = history["time"]
     report = report_values(example, friction, mass, float(time[-1]))
     ours = our_values(directory)
     rows = [Comparison(k, ours[k], v) for k, v in report.items() if k in ours]
@@ -438,8 +448,33 @@ def compare(directory: str | Path, tolerance: float | None = None
     else:
         dt = float(time[1] - time[0]) if len(time) > 1 else 0.0
         rows = impact_rows(rows, tolerance, friction, dt, _contact_onset(summary, time, dt))
-    label = f"{example} (mu = {friction:g}, {mass} mass)"
-    return label, rows
+    static = "kinetic_energy" in history and not np.any(history["kinetic_energy"])
+    label = f"{example} (mu = {friction:g}, {'static run' if static else f'{mass} mass'})"
+    return "\n".join([label, *_notes(example, summary, ours, static, bool(rows))]), rows
+
+
+def _notes(example: str, summary: dict, ours: dict[str, float], static: bool,
+           has_rows: bool) -> list[str]:
+    """What :func:`compare` says under its label: what a run whose energy starts at 0 has
+    instead of a relative energy variation, and why a run has no rows."""
+    notes = []
+    if "energy_max_change" in ours:
+        why = "a static run has no kinetic energy" if static else "the bodies start at rest"
+        balance = summary.get("energy_balance_max_relative_error")
+        notes.append(
+            f"note: the energy starts at 0 ({why}), so it has no relative variation or "
+            f"dissipated fraction; its largest change is {ours['energy_max_change']:.5g}"
+            + ("" if balance is None else
+               f", the energy balance closes to {balance:.3g} of the largest energy "
+               "(summary.json energy_balance_max_relative_error)"))
+    if not has_rows:
+        checked = sorted({c.section for c in CASES
+                          if c.kind != "impact" and Path(c.example).stem == example})
+        where = (f"`ntncontact validate` checks {example} (report {', '.join(checked)}) by its "
+                 "own measures; " if checked else "")
+        notes.append(f"note: {where}`compare` has the report's values of "
+                     f"{', '.join(sorted(TEXT_VALUES))} only")
+    return notes
 
 
 def format_value(value: float | str) -> str:
@@ -467,7 +502,7 @@ def format_comparison(label: str, rows: list[Comparison]) -> str:
                                 for i, cell in enumerate(row[:-1])) + f"  {row[-1]}".rstrip()
                        for row in cells]
     if not rows:
-        lines.append("(no reference values for this example)")
+        lines.append("(no value of the report to compare with)")
     return "\n".join(lines)
 
 
