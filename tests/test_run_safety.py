@@ -278,3 +278,28 @@ def test_signals_landing_in_compiled_kernels_give_interrupted(tmp_path, delay):
     rc, err = finish(child)
     assert rc == 130 and "Traceback" not in err, err
     assert summary(again)["status"] == "interrupted" and not (again / LOCK_FILE).exists()
+
+
+def test_a_signal_while_the_figures_are_drawn_stops_them_at_once(tmp_path):
+    """The run is complete when its figures are drawn: a SIGINT then stops the drawing at once
+    (it used to say "stopping after this step" and go on drawing until a second signal), the
+    exit code is the signal's, the status stays "completed", and stderr says what is missing."""
+    out = tmp_path / "spin"
+    command = [sys.executable, "-m", "ntncontact.cli", "run", str(SPIN), "--out", str(out),
+               "--quiet", "--set", "analysis.t_end=2.0", "--gif"]  # 100 frames to draw
+    child = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                             env=os.environ | {"PYTHONUNBUFFERED": "1"})
+    line = child.stdout.readline()
+    while line and not line.startswith("results written to"):
+        line = child.stdout.readline()
+    assert line, "the run did not complete"
+    started = time.monotonic()
+    child.send_signal(signal.SIGINT)
+    rc, err = finish(child)
+    assert time.monotonic() - started < 30.0  # not after the whole animation
+    assert rc == 130, err
+    assert "Traceback" not in err
+    assert "after the run had completed" in err and "stopping after this step" not in err
+    assert summary(out)["status"] == "completed"
+    assert not (out / "animation.gif").exists()
+    assert not (out / LOCK_FILE).exists()

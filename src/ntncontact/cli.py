@@ -24,6 +24,8 @@ class StopOnSignal:
 
     def __init__(self) -> None:
         self.signum: int | None = None
+        #: the run is complete (only figures and comparisons are left): stop at the first signal
+        self.at_once = False
         self._previous: dict[int, object] = {}
 
     def __enter__(self) -> StopOnSignal:
@@ -40,6 +42,8 @@ class StopOnSignal:
         if self.signum is not None:
             raise KeyboardInterrupt(self.reason())
         self.signum = signum
+        if self.at_once:  # drawing figures: no step to finish, and no kernel to land in
+            raise KeyboardInterrupt(self.reason())
         # os.write: print() from a signal handler can meet the stream mid-write
         os.write(2, f"\n{signal.Signals(signum).name}: stopping after this step "
                     "(again to stop at once)\n".encode())
@@ -62,7 +66,12 @@ def _run(args: argparse.Namespace) -> int:
         except BaseException:
             if stop.signum is None:
                 raise
-        print(f"{stop.reason()}: files written so far are valid", file=sys.stderr)
+        if stop.at_once:
+            print(f"{stop.reason()} after the run had completed (its results are whole; "
+                  "summary.json status \"completed\"): the figures and comparisons not yet "
+                  "written are missing", file=sys.stderr)
+        else:
+            print(f"{stop.reason()}: files written so far are valid", file=sys.stderr)
         return stop.exit_code
 
 
@@ -111,6 +120,9 @@ def _run_until_stopped(args: argparse.Namespace, stop: StopOnSignal) -> int:
     _warn_off_surfaces(writer.results.summary.data)
     _warn_unreturned_energy(writer.results.summary.data)
     _warn_contact_energy(writer.results.summary.data)
+    stop.at_once = True
+    if stop.signum is not None:  # asked to stop during the last step: no figures
+        raise RunInterrupted(stop.reason())
     if args.compare:
         _print_comparison(out)
     if args.plot or args.gif or args.times:
