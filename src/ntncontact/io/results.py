@@ -5,9 +5,10 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
+from numpy.typing import NDArray
 
 from ..engine.diagnostics import EnergyAudit
-from ..engine.model import Model
+from ..engine.model import ContactInterface, Model
 from ..engine.postprocess import (
     contact_node_fields,
     frame_fields,
@@ -15,6 +16,7 @@ from ..engine.postprocess import (
 )
 from ..engine.reactions import reaction_columns
 from ..engine.simulation import StepRecord
+from ..mesh.boundary import chain_edge_lengths
 from .writers import MemoryResults, ResultsDirectory
 
 CONTACT_HISTORY = ("active_pairs", "frictional_dissipation", "contact_work", "augmentations",
@@ -31,6 +33,12 @@ def tie_history(model: Model) -> tuple[str, ...]:
     return tuple(columns)
 
 
+def surface_spacing(X: NDArray, ci: ContactInterface) -> float:
+    """The smaller of an interface's two median surface edge lengths in the mesh X."""
+    return min(float(np.median(chain_edge_lengths(X[s.nodes], s.closed)))
+               for s in (ci.interface.surface1, ci.interface.surface2))
+
+
 class ResultWriter:
     """Writes history.csv, summary.json and fields.pvd/VTU as the simulation advances (or,
     with ``directory`` None, keeps the same results in memory: :class:`MemoryResults`)."""
@@ -45,7 +53,8 @@ class ResultWriter:
         if model.interfaces:
             extra_history = extra_history + CONTACT_HISTORY
             summary_extra = {"contact_start_time": None, "contact_end_time": None,
-                             "max_penetration": 0.0, "max_active_pairs": 0,
+                             "max_penetration": 0.0, "max_penetration_at": None,
+                             "max_active_pairs": 0,
                              "unconverged_steps": 0, "max_penetration_off_surfaces": 0.0,
                              "max_penetration_off_surfaces_at": None,
                              "ale_unreturned_energy": 0.0,
@@ -72,6 +81,7 @@ class ResultWriter:
         self.interval = model.analysis.output_interval
         self._next_output = 0.0
         self._body_id = model.body_of_cell().astype(float)
+        self._spacing = {ci.name: surface_spacing(model.X0, ci) for ci in model.interfaces}
         self._last: StepRecord | None = None
         if resume is not None:
             self._resume(resume)
@@ -122,6 +132,7 @@ class ResultWriter:
         if rows is not None and len(rows["node_1"]):
             self.results.contact.write_step(s.step, s.time, rows)
             fields |= self._contact_summary(s.time, record.dt, rows, summary)
+            fields |= self._deepest_pair(s.time, rows, summary)
         self.results.write_history(row, **fields)
         before, self._last = self._last, record
         if self._due(s.time, model):
@@ -140,6 +151,20 @@ class ResultWriter:
                 fields["contact_start_time"] = time - dt
             fields["contact_end_time"] = time
         return fields
+
+    def _deepest_pair(self, time: float, rows: dict, summary: dict) -> dict:
+        """Where ``max_penetration`` is (when this step set it): the time, the interface, its
+        surface-1 node and the interface's surface spacing, which ``ntncontact run`` compares
+        it with."""
+        deepest = int(np.argmax(rows["gap"]))
+        at = summary.get("max_penetration_at")
+        if rows["gap"][deepest] <= 0.0 or (at and rows["gap"][deepest] <= at["depth"]):
+            return {}
+        name = str(rows["interface"][deepest])
+        return {"max_penetration_at": {"time": time, "interface": name,
+                                       "node": int(rows["node_1"][deepest]),
+                                       "depth": float(rows["gap"][deepest]),
+                                       "element_size": self._spacing[name]}}
 
     @staticmethod
     def _off_surface_summary(time: float, found, summary: dict) -> dict:
