@@ -384,13 +384,19 @@ def _check_no_overlap(index: int, cfg: ContactConfig, ci: ContactInterface,
              (by_name[cfg.body_2], ci.interface.surface2, by_name[cfg.body_1]))
     for body, surface, other in sides:
         local = surface.nodes - body.node_offset
-        found = deepest_overlap(body.mesh.nodes[local], other.mesh.nodes, other.mesh.cells)
+        if surface.closed:  # the closing edge's side is tested too
+            local = np.append(local, local[0])
+        found = deepest_overlap(body.mesh.nodes[local], other.mesh.nodes, other.mesh.cells,
+                                chain=True)
         if found is not None:
             x, y = found.position
+            where = (f"the face from node {int(local[found.point])} of '{body.name}' at "
+                     f"({x:.6g}, {y:.6g}) lies {found.depth:.3g} inside" if found.edge else
+                     f"node {int(local[found.point])} of '{body.name}' at ({x:.6g}, {y:.6g}) "
+                     f"is {found.depth:.3g} deep inside")
             raise ScenarioError(
                 f"contact.{index}: bodies '{body.name}' and '{other.name}' overlap at t = 0: "
-                f"node {int(local[found.point])} of '{body.name}' at ({x:.6g}, {y:.6g}) is "
-                f"{found.depth:.3g} deep inside '{other.name}'; place the bodies apart "
+                f"{where} '{other.name}'; place the bodies apart "
                 "(bodies.*.mesh origin, center or transform)")
 
 
