@@ -1,11 +1,13 @@
 """Newton-Raphson: full and modified (kept factor) iterations reach the same root."""
 
+import warnings
+
 import numpy as np
 import pytest
 import scipy.sparse as sp
 
 from ntncontact.solvers.linear import LinearSolver
-from ntncontact.solvers.newton import FactorCache, NewtonSettings, newton
+from ntncontact.solvers.newton import FactorCache, NewtonSettings, newton, norm2
 
 N = 40
 
@@ -86,3 +88,13 @@ def test_early_ratio_stops_at_that_fraction_of_the_first_residual():
     # continuing from the rough answer reaches the same root
     polished = newton(residual, jacobian, solver.solve, rough.y, NewtonSettings(rtol=1e-12))
     assert np.abs(polished.y - full.y).max() <= 1e-10 * np.abs(full.y).max()
+
+
+def test_norm2_of_entries_whose_squares_overflow_is_finite_and_silent():
+    """A residual of ~1e200 (a body with density 1e300) squared overflows: the norm is still
+    the Euclidean norm, and no NumPy RuntimeWarning is printed (it reached the user before)."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert norm2(np.array([3e200, -4e200, 0.0])) == pytest.approx(5e200, rel=1e-15)
+        assert norm2(np.array([3.0, 4.0])) == 5.0
+        assert norm2(np.array([1e300, np.inf])) == np.inf
