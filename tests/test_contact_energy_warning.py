@@ -1,4 +1,5 @@
-"""Energy that contact adds is named (an independent user's check, session 35).
+"""Energy that contact adds is named, and penetration is measured where the frames show the
+pairs (an independent user's check, session 35).
 
 The rods of report 3.2 under the gap law in a dynamic run, which does not conserve energy
 (report 5.5): the run ends with ~7x its energy. The energy balance closes (the ledger counts
@@ -12,7 +13,14 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+import numpy as np
+import pytest
+from helpers import model_from_example
+
 from ntncontact.cli import CONTACT_GAIN_WARNING, main
+from ntncontact.contact import pair_gaps
+from ntncontact.io.vtk import read_pvd, read_vtu
+from ntncontact.io.writers import read_csv_table
 
 ROD = Path(__file__).resolve().parents[1] / "examples" / "rod_impact.toml"
 
@@ -41,3 +49,23 @@ def test_the_persistency_law_adds_none_and_nothing_is_said(tmp_path, capsys):
     scale = summary["energy_balance_max_error"] / summary["energy_balance_max_relative_error"]
     assert abs(summary["contact_work"]) < 1e-6 * CONTACT_GAIN_WARNING * scale
     assert "warning" not in err
+
+
+def test_max_penetration_is_measured_where_the_frames_show_the_pairs(tmp_path, capsys):
+    """contact.csv's ``gap`` is the law's, at t_{n+1/2} in a dynamic step: the gap law holds it
+    at ~0 while the step-end positions swing about it (a node 0.05 inside the rod at one step
+    end, as far out at the next). ``end_gap`` is the gap at the step's end, computed from the
+    frame's positions, and ``max_penetration`` is its largest value (it was 2e-12)."""
+    summary, _ = _run(tmp_path, capsys, 'contact.0.law="gap"', "contact.0.penalty_normal=1e5")
+    rows = read_csv_table(tmp_path / "out" / "contact.csv")
+    assert rows["gap"].max() < 1e-9  # the constraint at mid-step
+    assert summary["max_penetration"] == rows["end_gap"].max() > 0.01
+    # the deepest row again, from the frame of its step
+    deepest = int(rows["end_gap"].argmax())
+    frames = read_pvd(tmp_path / "out" / "fields.pvd")
+    frame = read_vtu(min(frames, key=lambda f: abs(f[0] - rows["time"][deepest]))[1])
+    x = frame.points[:, :2] + frame.point_data["displacement"][:, :2]
+    model = model_from_example("rod_impact.toml")
+    pair = np.array([[rows["node_1"][deepest], rows["node_2"][deepest]]])
+    gap = pair_gaps(x, model.interfaces[0].interface, pair)[1][0]
+    assert gap == pytest.approx(rows["end_gap"][deepest], rel=1e-9)

@@ -47,6 +47,7 @@ def contact_pairs(n: int) -> dict:
         "normal_force": rng.standard_normal(n),
         "tangential_force": rng.standard_normal(n),
         "status": np.array(["stick", "slip"] * (n // 2) + ["stick"] * (n % 2)),
+        "end_gap": -rng.random(n) * 1e-9,
     }
 
 

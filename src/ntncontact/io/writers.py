@@ -64,6 +64,7 @@ CONTACT_COLUMNS = (
     "normal_force",
     "tangential_force",
     "status",
+    "end_gap",
 )
 SUMMARY_STATUSES = ("running", "completed", "failed", "interrupted")
 _STOP_SIGNALS = {signal.SIGINT, signal.SIGTERM}
