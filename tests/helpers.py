@@ -159,7 +159,8 @@ def headline_of(results) -> dict:
             "dissipated": history["frictional_dissipation"].iloc[-1]
             / history["total_energy"].iloc[0],
             "exit": weight @ frame.point_data["velocity"][:, :2] / weight.sum(),
-            "penetration": results.summary["max_penetration"],
+            "penetration": results.summary["max_penetration"],  # at the step ends
+            "law_penetration": float(results.contact["gap"].max()),  # mid-step (dynamic)
             "off_surfaces": results.summary["max_penetration_off_surfaces"],
             "ledger": results.summary["energy_balance_max_relative_error"],
             "status": results.summary["status"]}

@@ -44,14 +44,17 @@ def runs(tmp_path_factory) -> dict:
 
 def test_refined_4x_with_friction_completes_and_keeps_its_ledger(runs):
     """Measured: completed, ledger 1.0e-11 of the energy scale, largest pair penetration
-    9.0e-4 (the persistency law's drift), nothing off the contact surfaces (before: the right
-    face went in unseen). Bounds: the ledger to 1e-8 (Newton's tolerance is 1e-10 of the
-    scale a step, over 67 steps); the penetration below a quarter of the 4x contact row's
-    thickness (0.01714 / 4 = 4.3e-3), the bound of the 8x mu = 0.1 test."""
+    9.0e-4 in the law's (mid-step) gaps (the persistency law's drift) and 1.35e-3 at the step
+    ends (summary.json ``max_penetration`` since session 35), nothing off the contact surfaces
+    (before: the right face went in unseen). Bounds: the ledger to 1e-8 (Newton's tolerance is
+    1e-10 of the scale a step, over 67 steps); the law's penetration below a quarter of the 4x
+    contact row's thickness (0.01714 / 4 = 4.3e-3), the bound of the 8x mu = 0.1 test, and
+    the step ends' below half of it."""
     fine = runs[4]
     assert fine["status"] == "completed"
     assert fine["ledger"] < 1e-8
-    assert fine["penetration"] < 0.25 * 0.01714 / 4
+    assert fine["law_penetration"] < 0.25 * 0.01714 / 4
+    assert fine["penetration"] < 0.5 * 0.01714 / 4
     assert fine["off_surfaces"] == 0.0
 
 

@@ -64,7 +64,7 @@ def write_run(folder: Path) -> None:
                     "normal_traction": -step * (1.0 - (x - 0.5) ** 2),
                     "tangential_traction": 0.1 * step * (x - 0.5),
                     "normal_force": -np.ones(3), "tangential_force": np.zeros(3),
-                    "status": ["stick", "slip", "stick"],
+                    "status": ["stick", "slip", "stick"], "end_gap": np.zeros(3),
                 })
 
 

@@ -115,13 +115,13 @@ def _run_until_stopped(args: argparse.Namespace, stop: StopOnSignal) -> int:
                 bar.update(t - bar.n)
 
             sim.run(progress, stop.reason)
+    stop.at_once = True  # the run is complete: a signal from here on stops at once
     fields = "fields.xdmf" if model.analysis.field_format == "xdmf" else "fields.pvd"
     print(f"results written to {out} (history.csv, summary.json, {fields})")
     _warn_off_surfaces(writer.results.summary.data)
     _warn_unreturned_energy(writer.results.summary.data)
     _warn_contact_energy(writer.results.summary.data)
     _warn_penetration(writer.results.summary.data)
-    stop.at_once = True
     if stop.signum is not None:  # asked to stop during the last step: no figures
         raise RunInterrupted(stop.reason())
     if args.compare:
