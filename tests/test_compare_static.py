@@ -74,6 +74,10 @@ def test_a_dynamic_run_from_rest_has_no_relative_energy_rows(tmp_path):
     names = {r.quantity for r in rows}
     assert "energy_initial" in names and "contact_start_time" in names
     assert "energy_max_relative_variation" not in names
+    # the momentum starts at 0 too: its change, not a "relative" one divided by 1
+    ours = our_values(tmp_path)
+    assert "linear_momentum_max_relative_variation" not in ours
+    assert ours["linear_momentum_max_change"] == 0.5
     assert label.splitlines()[0] == "ring_impact (mu = 0, consistent mass)"
     assert "the energy starts at 0 (the bodies start at rest)" in label
     assert "largest change is 0.5" in label

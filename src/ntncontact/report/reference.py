@@ -360,25 +360,27 @@ def our_values(directory: Path) -> dict[str, float]:
     A run that ends while its bodies are still in contact (a shortened run) has no contact end
     time, duration or final count of active pairs. A run whose energy starts at 0 (a static run,
     or bodies at rest and unloaded) has no relative energy variation or dissipated fraction
-    (they divide by it): it has the absolute ``energy_max_change``, max |E - E0|, instead.
+    (they divide by it): it has the absolute ``energy_max_change``, max |E - E0|, instead;
+    likewise ``linear_momentum_max_change`` where the linear momentum starts at 0.
     """
     summary = json.loads((directory / "summary.json").read_text())
     h = read_csv_table(directory / "history.csv")
     e = h["total_energy"]
     e0 = float(e[0])
     p = np.column_stack([h["linear_momentum_x"], h["linear_momentum_y"]])
-    p0 = np.linalg.norm(p[0]) or 1.0
+    p0 = float(np.linalg.norm(p[0]))
+    p_change = float(np.linalg.norm(p - p[0], axis=1).max())
     out = {"energy_initial": e0}
     if e0 != 0.0:
         out["energy_max_relative_variation"] = float(np.abs(e - e0).max() / abs(e0))
         out["energy_dissipated_fraction"] = float((e0 - e[-1]) / e0)
     else:  # a static run, or bodies that start at rest: relative to E0 = 0 is undefined
         out["energy_max_change"] = float(np.abs(e - e0).max())
-    out |= {
-        "linear_momentum_max_relative_variation": float(
-            np.linalg.norm(p - p[0], axis=1).max() / p0),
-        "angular_momentum_max": float(np.abs(h["angular_momentum"]).max()),
-    }
+    if p0 > 0.0:
+        out["linear_momentum_max_relative_variation"] = p_change / p0
+    else:  # at rest at first: the change itself, not a "relative" one divided by 1
+        out["linear_momentum_max_change"] = p_change
+    out["angular_momentum_max"] = float(np.abs(h["angular_momentum"]).max())
     for key in ("contact_start_time", "contact_end_time", "max_penetration", "max_active_pairs"):
         if summary.get(key) is not None:
             out[key] = float(summary[key])
