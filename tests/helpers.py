@@ -18,6 +18,20 @@ from ntncontact.io.writers import read_csv_table
 EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
 
 
+def run_example(name: str, out: Path, capsys, *sets: str) -> tuple[dict, str]:
+    """``ntncontact run`` of examples/``name`` into ``out`` with ``--set`` overrides ``sets``:
+    (summary.json, what it wrote on stderr)."""
+    import json
+
+    from ntncontact.cli import main
+
+    args = ["run", str(EXAMPLES / name), "--out", str(out), "--quiet"]
+    for item in sets:
+        args += ["--set", item]
+    assert main(args) == 0
+    return json.loads((out / "summary.json").read_text()), capsys.readouterr().err
+
+
 def model_from_dict(data: dict, base: Path = Path(".")) -> Model:
     return build_model(parse_scenario(data, Path("test.toml")), base)
 

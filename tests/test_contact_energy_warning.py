@@ -10,28 +10,20 @@ the contact work is round-off and nothing is said.
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 import numpy as np
 import pytest
-from helpers import model_from_example
+from helpers import model_from_example, run_example
 
-from ntncontact.cli import CONTACT_GAIN_WARNING, main
+from ntncontact.cli import CONTACT_GAIN_WARNING
 from ntncontact.contact import pair_gaps
 from ntncontact.io.vtk import read_pvd, read_vtu
 from ntncontact.io.writers import read_csv_table
 
-ROD = Path(__file__).resolve().parents[1] / "examples" / "rod_impact.toml"
-
 
 def _run(tmp_path: Path, capsys, *sets: str) -> tuple[dict, str]:
-    out = tmp_path / "out"
-    args = ["run", str(ROD), "--out", str(out), "--quiet", "--set", "analysis.t_end=2.5"]
-    for item in sets:
-        args += ["--set", item]
-    assert main(args) == 0
-    return json.loads((out / "summary.json").read_text()), capsys.readouterr().err
+    return run_example("rod_impact.toml", tmp_path / "out", capsys, "analysis.t_end=2.5", *sets)
 
 
 def test_the_gap_law_in_a_dynamic_run_adds_energy_and_the_run_says_so(tmp_path, capsys):

@@ -7,23 +7,16 @@ run completed without a word. summary.json now says where (``max_penetration_at`
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 import pytest
+from helpers import run_example
 
-from ntncontact.cli import PENETRATION_WARNING, main
-
-DISK = Path(__file__).resolve().parents[1] / "examples" / "disk_drop.toml"
+from ntncontact.cli import PENETRATION_WARNING
 
 
 def _run(tmp_path: Path, capsys, *sets: str) -> tuple[dict, str]:
-    out = tmp_path / "out"
-    args = ["run", str(DISK), "--out", str(out), "--quiet", "--set", "analysis.t_end=0.1"]
-    for item in sets:
-        args += ["--set", item]
-    assert main(args) == 0
-    return json.loads((out / "summary.json").read_text()), capsys.readouterr().err
+    return run_example("disk_drop.toml", tmp_path / "out", capsys, "analysis.t_end=0.1", *sets)
 
 
 def test_a_deep_pair_is_located_and_warned(tmp_path, capsys):

@@ -314,7 +314,7 @@ def _interface(cfg: ContactConfig, index: int, bodies: tuple[Body, ...],
                             persistency, candidates, cfg.release_steps, tol, max_aug, ordered,
                             predicted, aug.update, aug.on_limit == "accept",
                             reference_arc2=_arc_lengths(b2.mesh.nodes[chain2.nodes]),
-                            active_set_pass=cfg.active_set_pass)
+                            active_set_pass=cfg.active_set_pass, spacing=spacing)
 
 
 def _check_paired_once(interfaces: tuple[ContactInterface, ...],

@@ -174,6 +174,9 @@ class ContactInterface:
     #: dynamic steps: nodes a solve ends inside surface 2 (approaching) are taken in and the
     #: step solved again (contact.active_set_pass; quasi-static steps always do)
     active_set_pass: bool = False
+    #: the smaller of the two surfaces' median edge lengths in the original mesh: the contact
+    #: spacing h of ``penalty_factor`` and of the penetration warning (summary.json)
+    spacing: float = float("nan")
 
 
 @dataclass(frozen=True)

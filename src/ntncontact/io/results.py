@@ -5,10 +5,9 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
-from numpy.typing import NDArray
 
 from ..engine.diagnostics import EnergyAudit
-from ..engine.model import ContactInterface, Model
+from ..engine.model import Model
 from ..engine.postprocess import (
     contact_node_fields,
     frame_fields,
@@ -16,7 +15,6 @@ from ..engine.postprocess import (
 )
 from ..engine.reactions import reaction_columns
 from ..engine.simulation import StepRecord
-from ..mesh.boundary import chain_edge_lengths
 from .writers import MemoryResults, ResultsDirectory
 
 CONTACT_HISTORY = ("active_pairs", "frictional_dissipation", "contact_work", "augmentations",
@@ -31,12 +29,6 @@ def tie_history(model: Model) -> tuple[str, ...]:
     for tie in model.ties:
         columns += [f"tie_{tie.name}_force_x", f"tie_{tie.name}_force_y"]
     return tuple(columns)
-
-
-def surface_spacing(X: NDArray, ci: ContactInterface) -> float:
-    """The smaller of an interface's two median surface edge lengths in the mesh X."""
-    return min(float(np.median(chain_edge_lengths(X[s.nodes], s.closed)))
-               for s in (ci.interface.surface1, ci.interface.surface2))
 
 
 class ResultWriter:
@@ -81,7 +73,7 @@ class ResultWriter:
         self.interval = model.analysis.output_interval
         self._next_output = 0.0
         self._body_id = model.body_of_cell().astype(float)
-        self._spacing = {ci.name: surface_spacing(model.X0, ci) for ci in model.interfaces}
+        self._spacing = {ci.name: ci.spacing for ci in model.interfaces}
         self._last: StepRecord | None = None
         if resume is not None:
             self._resume(resume)
@@ -132,7 +124,7 @@ class ResultWriter:
         if rows is not None and len(rows["node_1"]):
             self.results.contact.write_step(s.step, s.time, rows)
             fields |= self._contact_summary(s.time, record.dt, rows, summary)
-            fields |= self._deepest_pair(s.time, rows, summary)
+            fields |= self._deepest_pair(s.time, rows, summary)  # max_penetration(_at)
         self.results.write_history(row, **fields)
         before, self._last = self._last, record
         if self._due(s.time, model):
@@ -143,11 +135,7 @@ class ResultWriter:
         """The contact summary after a step with contact rows. Contact lasts from the start of
         the first step that carried a positive normal traction to the end of the last such
         step."""
-        # at the step's end, as the frame shows it (the law's gap is at t_{n+1/2} in a dynamic
-        # step: the gap law's rod impact 2e-12 there, 0.058 at the step ends)
-        penetration = max(float(np.max(rows["end_gap"])), summary.get("max_penetration") or 0.0)
-        fields = {"max_penetration": penetration,
-                  "max_active_pairs": max(len(rows["node_1"]), summary["max_active_pairs"])}
+        fields = {"max_active_pairs": max(len(rows["node_1"]), summary["max_active_pairs"])}
         if np.any(rows["normal_traction"] > 0.0):
             if summary.get("contact_start_time") is None:
                 fields["contact_start_time"] = time - dt
@@ -155,16 +143,18 @@ class ResultWriter:
         return fields
 
     def _deepest_pair(self, time: float, rows: dict, summary: dict) -> dict:
-        """Where ``max_penetration`` is (when this step set it): the time, the interface, its
-        surface-1 node and the interface's surface spacing, which ``ntncontact run`` compares
-        it with."""
+        """``max_penetration`` and where it is, when this step's deepest pair is the deepest
+        so far: the time, the interface, its surface-1 node and the interface's surface
+        spacing, which ``ntncontact run`` compares it with. Measured at the step's end, as the
+        frame shows it (the law's gap is at t_{n+1/2} in a dynamic step: the gap law's rod
+        impact 2e-12 there, 0.058 at the step ends)."""
         depth = rows["end_gap"]
         deepest = int(np.argmax(depth))
-        at = summary.get("max_penetration_at")
-        if depth[deepest] <= 0.0 or (at and depth[deepest] <= at["depth"]):
+        if depth[deepest] <= (summary.get("max_penetration") or 0.0):
             return {}
         name = str(rows["interface"][deepest])
-        return {"max_penetration_at": {"time": time, "interface": name,
+        return {"max_penetration": float(depth[deepest]),
+                "max_penetration_at": {"time": time, "interface": name,
                                        "node": int(rows["node_1"][deepest]),
                                        "depth": float(depth[deepest]),
                                        "element_size": self._spacing[name]}}
