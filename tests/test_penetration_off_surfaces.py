@@ -73,3 +73,68 @@ def test_with_the_face_a_contact_surface_nothing_goes_inside_unresisted(
     assert summary["max_penetration_off_surfaces"] == 0.0
     assert summary["max_penetration_off_surfaces_at"] is None
     assert "warning" not in err
+
+
+TWO_BODIES = """
+analysis = {{ kind = "dynamic", dt = 0.01, t_end = 0.1 }}
+
+[[bodies]]
+name = "block"
+mesh = {{ type = "rectangle", width = 0.5, height = 0.5, nx = 2, ny = 2, origin = [0.0, 0.0] }}
+material = {{ model = "neo_hookean", lambda = 115.38, mu = 76.92, density = 1.0 }}
+initial = {{ velocity = [{speed}, 0.0] }}
+
+[[bodies]]
+name = "neighbour"
+mesh = {{ type = "rectangle", width = 0.5, height = 0.5, nx = 2, ny = 2, origin = [{x2}, 0.0] }}
+material = {{ model = "neo_hookean", lambda = 115.38, mu = 76.92, density = 1.0 }}
+{joint}
+"""
+
+TIE = """
+[[tie]]
+name = "bond"
+body_1 = "block"
+surface_1 = "right"
+body_2 = "neighbour"
+surface_2 = "left"
+"""
+
+
+def run_two_bodies(tmp_path, capsys, name: str, **values) -> tuple[dict, str, str]:
+    path = tmp_path / f"{name}.toml"
+    path.write_text(TWO_BODIES.format(**values))
+    out = tmp_path / name
+    assert main(["run", str(path), "--out", str(out), "--quiet"]) == 0
+    history = (out / "history.csv").read_text()
+    return json.loads((out / "summary.json").read_text()), capsys.readouterr().err, history
+
+
+def test_bodies_no_interface_joins_are_measured_and_warned(tmp_path, capsys):
+    """Two bodies with no [[contact]] between them (a body named in the wrong interface, or
+    the interface forgotten): the block's right face passes 0.05 into the neighbour, and the
+    figure, its history column and the warning name the missing interface."""
+    summary, err, history = run_two_bodies(tmp_path, capsys, "apart", speed=1.0, x2=0.55,
+                                           joint="")
+    assert summary["max_penetration_off_surfaces"] == pytest.approx(0.05, abs=0.01)
+    at = summary["max_penetration_off_surfaces_at"]
+    assert (at["body"], at["inside"], at["joined"]) == ("block", "neighbour", False)
+    assert at["node"] in (2, 5, 8)
+    assert "penetration_off_surfaces" in history.splitlines()[0].split(",")
+    assert "no [[contact]] joins 'block' and 'neighbour'" in err
+
+
+def test_tied_bodies_are_not_reported(tmp_path, capsys):
+    """Tied bodies share their tied face (depth 0 on each other's boundary): a tied pair
+    moving together, pushed by the block's speed, reports nothing."""
+    summary, err, _ = run_two_bodies(tmp_path, capsys, "tied", speed=1.0, x2=0.5, joint=TIE)
+    assert summary["max_penetration_off_surfaces"] == 0.0
+    assert summary["max_penetration_off_surfaces_at"] is None
+    assert "warning" not in err
+
+
+def test_bodies_apart_that_stay_apart_report_nothing(tmp_path, capsys):
+    summary, err, history = run_two_bodies(tmp_path, capsys, "slow", speed=0.1, x2=0.55,
+                                           joint="")
+    assert summary["max_penetration_off_surfaces"] == 0.0
+    assert "warning" not in err

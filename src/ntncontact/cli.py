@@ -137,16 +137,19 @@ OFF_SURFACE_WARNING = 0.01
 
 
 def _warn_off_surfaces(summary: dict) -> None:
-    """One line on stderr when a boundary node on no contact surface went inside a body it
-    has an interface with (summary.json ``max_penetration_off_surfaces``)."""
+    """One line on stderr when a boundary node on no contact surface went inside another
+    body (summary.json ``max_penetration_off_surfaces``)."""
     at = summary.get("max_penetration_off_surfaces_at")
     depth = summary.get("max_penetration_off_surfaces") or 0.0
-    if at and depth > OFF_SURFACE_WARNING * at["element_size"]:
-        print(f"warning: node {at['node']} of body '{at['body']}', on no contact surface, went "
-              f"{depth:.3g} inside '{at['inside']}' (t = {at['time']:.6g}) where nothing "
-              "resists it: make that face a contact surface too, joined to the one beside it "
-              "(for example surface_1 = \"bottom+right\"; summary.json "
-              "max_penetration_off_surfaces)", file=sys.stderr)
+    if not at or depth <= OFF_SURFACE_WARNING * at["element_size"]:
+        return
+    cure = ("make that face a contact surface too, joined to the one beside it (for example "
+            "surface_1 = \"bottom+right\"")
+    if not at.get("joined", True):
+        cure = f"no [[contact]] joins '{at['body']}' and '{at['inside']}' (add one"
+    print(f"warning: node {at['node']} of body '{at['body']}', on no contact surface, went "
+          f"{depth:.3g} inside '{at['inside']}' (t = {at['time']:.6g}) where nothing resists "
+          f"it: {cure}; summary.json max_penetration_off_surfaces)", file=sys.stderr)
 
 
 #: a pair's penetration above this fraction of its interface's surface spacing is worth a

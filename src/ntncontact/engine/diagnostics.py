@@ -144,55 +144,79 @@ def named_failure(model: Model, err: BaseException) -> str:
     return str(err)
 
 
+NO_NODES = np.zeros(0, np.int64)
+
+
 @dataclass(frozen=True)
 class OffSurfacePenetration:
-    """The deepest boundary node of a body inside a body it has an interface with, among the
-    nodes on none of that pair of bodies' contact surfaces (depth 0.0 and no node when none)."""
+    """The deepest boundary node of a body inside another body, among the nodes on none of
+    that pair of bodies' contact surfaces (depth 0.0 and no node when none)."""
 
     depth: float = 0.0
     body: str = ""
     node: int = -1  # local to ``body``
     other: str = ""
     size: float = 1.0  # the other body's median boundary edge (reference): depth's scale
+    joined: bool = True  # False: no contact interface joins the two bodies
 
 
 class PenetrationCheck:
     """Finds what contact cannot see (summary.json ``max_penetration_off_surfaces``): a
-    boundary node of one body inside a body it has an interface with, while the node is on
-    none of the contact surfaces between the two. Contact acts on its surfaces only, so such a
-    node passes through unresisted: a face that is no contact surface rolling into the partner
-    (the fast-sliding blocks refined 2x with mu = 0.3: the leading face 0.023 deep, a run that
-    otherwise completes). Penetration at the surfaces is the pairs' (``max_penetration``).
-    Measured cost: 0.13 ms a step on the ring impact, 0.7 % of its run (of the fast-sliding
-    blocks' too). The test is ``mesh.overlap.deepest_overlap``."""
+    boundary node of one body inside another body, while the node is on none of the contact
+    surfaces between the two. Contact acts on its surfaces only, so such a node passes
+    through unresisted: a face that is no contact surface rolling into the partner (the
+    fast-sliding blocks refined 2x with mu = 0.3: the leading face 0.023 deep, a run that
+    otherwise completes), or two bodies that no interface joins at all (a body named in the
+    wrong ``[[contact]]``). Tied bodies are joined, not checked. Penetration at the surfaces is
+    the pairs' (``max_penetration``). Measured cost: 0.13 ms a step on the ring impact, 0.7 %
+    of its run (of the fast-sliding blocks' too); a pair of bodies apart costs a bounding-box
+    test. The test is ``mesh.overlap.deepest_overlap``."""
 
     def __init__(self, model: Model) -> None:
-        owner = model.body_of_node()
         outline = []  # per body: its boundary nodes and edges (global), its edge size
         for body in model.bodies:
             edges = boundary_edges(body.mesh.cells) + body.node_offset
             outline.append((np.unique(edges), edges, edge_size(model.X0, edges)))
-        covered: dict[tuple[int, int], list] = {}  # (body, partner) -> surface nodes
-        for ci in model.interfaces:
-            s1, s2 = ci.interface.surface1.nodes, ci.interface.surface2.nodes
-            b1, b2 = int(owner[s1[0]]), int(owner[s2[0]])
-            covered.setdefault((b1, b2), []).append(s1)
-            covered.setdefault((b2, b1), []).append(s2)
-        # (body, partner, its nodes on no surface facing the partner, partner edges and size)
-        self._tests = [(model.bodies[a], model.bodies[b],
-                        np.setdiff1d(outline[a][0], np.concatenate(nodes)), *outline[b][1:])
-                       for (a, b), nodes in covered.items()]
+        covered = _surfaces_between(model)
+        self._tests = []  # (body, partner, its nodes on no surface facing the partner,
+        for a, b in _pairs_to_check(model, covered):  # partner edges and size, joined by an interface)
+            facing = np.concatenate(covered.get((a, b), [NO_NODES]))
+            self._tests.append((model.bodies[a], model.bodies[b],
+                                np.setdiff1d(outline[a][0], facing), *outline[b][1:],
+                                (a, b) in covered))
         self._cells = model.cells
 
     def deepest(self, x: NDArray) -> OffSurfacePenetration:
         """The deepest such node at the positions ``x``."""
         worst = OffSurfacePenetration()
-        for body, partner, nodes, edges, size in self._tests:
+        for body, partner, nodes, edges, size, joined in self._tests:
             if nodes.size == 0:
                 continue
             found = deepest_overlap(x[nodes], x, self._cells[partner.cells], edges, size)
             if found is not None and found.depth > worst.depth:
                 worst = OffSurfacePenetration(found.depth, body.name,
                                               int(nodes[found.point]) - body.node_offset,
-                                              partner.name, size)
+                                              partner.name, size, joined)
         return worst
+
+
+def _surfaces_between(model: Model) -> dict[tuple[int, int], list]:
+    """(body, partner) -> the body's contact-surface nodes facing the partner, per interface."""
+    owner = model.body_of_node()
+    covered: dict[tuple[int, int], list] = {}
+    for ci in model.interfaces:
+        s1, s2 = ci.interface.surface1.nodes, ci.interface.surface2.nodes
+        b1, b2 = int(owner[s1[0]]), int(owner[s2[0]])
+        covered.setdefault((b1, b2), []).append(s1)
+        covered.setdefault((b2, b1), []).append(s2)
+    return covered
+
+
+def _pairs_to_check(model: Model, covered: dict) -> list[tuple[int, int]]:
+    """Every ordered pair of distinct bodies but those tied and joined by no interface
+    (their boundaries meet along the tie)."""
+    index = {body.name: k for k, body in enumerate(model.bodies)}
+    tied = {(index[t.body_1], index[t.body_2]) for t in model.ties}
+    tied |= {(b, a) for a, b in tied}
+    return [(a, b) for a in range(len(model.bodies)) for b in range(len(model.bodies))
+            if a != b and ((a, b) in covered or (a, b) not in tied)]

@@ -228,7 +228,7 @@ class Simulation:
         self._supports = support_sets(model)
         self._last_reactions: dict = {}
         self._energy_multiplier = 0.0
-        self._penetration = PenetrationCheck(model) if model.interfaces else None
+        self._penetration = PenetrationCheck(model) if len(model.bodies) > 1 else None
         # the energy-conserving solve (report 5.5) starts from each augmentation's exact one
         self._early_ratio = (0.0 if model.analysis.energy_conserving
                              else model.analysis.newton_inexact_augmentations)
@@ -803,8 +803,8 @@ class Simulation:
             dt = t_next - self.state.time
             self.state, its, self._last_substep = self.step_with_cutback(dt)
             self.state = replace(self.state, time=t_next)
-            extra = (self._ledger_extra() | self._contact_extra() | self._tie_extra()
-                     | self._last_reactions)
+            extra = (self._ledger_extra() | self._contact_extra() | self._off_surface_extra()
+                     | self._tie_extra() | self._last_reactions)
             self._notify(StepRecord(self.state, self.balance(self.state), its, dt, extra))
             if progress is not None:
                 progress(self.state.time)
@@ -860,11 +860,13 @@ class Simulation:
             "ale_unreturned_energy": self.ledger["ale_unreturned_energy"],
             "energy_multiplier": self._energy_multiplier,
             "contact_rows": contact_rows(self.model.interfaces, results, self.state.x),
-        } | self._off_surface_extra()
+        }
 
     def _off_surface_extra(self) -> dict:
         """The step's deepest boundary node inside another body off the contact surfaces
         (``diagnostics.PenetrationCheck``): its depth for history.csv, and where it is."""
+        if self._penetration is None:
+            return {}
         found = self._penetration.deepest(self.state.x)
         return {"penetration_off_surfaces": found.depth, "penetration_off_surfaces_at": found}
 

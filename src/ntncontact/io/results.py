@@ -20,6 +20,10 @@ from .writers import MemoryResults, ResultsDirectory
 CONTACT_HISTORY = ("active_pairs", "frictional_dissipation", "contact_work", "augmentations",
                    "ale_mismatch", "energy_multiplier", "augmentations_converged",
                    "ale_remap_energy", "penetration_off_surfaces", "ale_unreturned_energy")
+#: without interfaces, runs of several bodies still measure one body going inside another
+OFF_SURFACE_HISTORY = ("penetration_off_surfaces",)
+OFF_SURFACE_SUMMARY = {"max_penetration_off_surfaces": 0.0,
+                       "max_penetration_off_surfaces_at": None}
 HISTORY_DEFAULTS = {"augmentations_converged": 1}  # of the initial row and contact-free steps
 
 
@@ -42,14 +46,15 @@ class ResultWriter:
         """``resume``: a restart from a checkpoint (``checkpoint_state``'s values, with the
         state it was taken at under "state"): the folder's files are cut back to it."""
         extra_history = ("external_work",) + extra_history
+        if len(model.bodies) > 1 and not model.interfaces:  # bodies no interface joins
+            extra_history = extra_history + OFF_SURFACE_HISTORY
+            summary_extra = OFF_SURFACE_SUMMARY | summary_extra
         if model.interfaces:
             extra_history = extra_history + CONTACT_HISTORY
             summary_extra = {"contact_start_time": None, "contact_end_time": None,
                              "max_penetration": 0.0, "max_penetration_at": None,
-                             "max_active_pairs": 0,
-                             "unconverged_steps": 0, "max_penetration_off_surfaces": 0.0,
-                             "max_penetration_off_surfaces_at": None,
-                             "ale_unreturned_energy": 0.0,
+                             "max_active_pairs": 0, "unconverged_steps": 0,
+                             **OFF_SURFACE_SUMMARY, "ale_unreturned_energy": 0.0,
                              "contact_penalties": {  # as used (contact.N.penalty_factor)
                                  ci.name: {"normal": ci.law.eps_N, "tangential": ci.law.eps_T}
                                  for ci in model.interfaces}} | summary_extra
@@ -168,7 +173,8 @@ class ResultWriter:
         return {"max_penetration_off_surfaces": found.depth,
                 "max_penetration_off_surfaces_at": {"time": time, "body": found.body,
                                                     "node": found.node, "inside": found.other,
-                                                    "element_size": found.size}}
+                                                    "element_size": found.size,
+                                                    "joined": found.joined}}
 
     def _due(self, time: float, model: Model) -> bool:
         last = time >= model.analysis.t_end - 1e-9 * model.analysis.dt
