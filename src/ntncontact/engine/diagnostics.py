@@ -178,8 +178,10 @@ class PenetrationCheck:
             edges = boundary_edges(body.mesh.cells) + body.node_offset
             outline.append((np.unique(edges), edges, edge_size(model.X0, edges)))
         covered = _surfaces_between(model)
-        self._tests = []  # (body, partner, its nodes on no surface facing the partner,
-        for a, b in _pairs_to_check(model, covered):  # partner edges and size, joined by an interface)
+        # (body, partner, its nodes on no surface facing the partner, the partner's edges and
+        # edge size, whether an interface joins the two)
+        self._tests = []
+        for a, b in _pairs_to_check(model, covered):
             facing = np.concatenate(covered.get((a, b), [NO_NODES]))
             self._tests.append((model.bodies[a], model.bodies[b],
                                 np.setdiff1d(outline[a][0], facing), *outline[b][1:],
