@@ -63,8 +63,15 @@ SYMMETRY_RTOL = 1e-12
 #: A pivot below PIVOT_RTOL times the largest one marks SuperLU's factor as singular: rigid
 #: modes give ~1e-15, while penalty/stiffness contrasts of 1e8 stay far above it.
 PIVOT_RTOL = 1e-12
-#: SuperLU's pivots are only checked when a solution grows like the inverse of a tiny pivot,
-#: |x| max|A| > PIVOT_CHECK_GROWTH |b| (see ``_SuperLUBackend.solver``).
+#: SuperLU's pivots are checked at the first factorization of a pattern, at a factorization
+#: whose pivots the static LU rejected, and when a solution grows like the inverse of a tiny
+#: pivot, |x| max|A| > PIVOT_CHECK_GROWTH |b| (see ``_SuperLUBackend.solver``). The growth
+#: alone missed a static body free to slide under a self-balanced load (a right-hand side
+#: orthogonal to the rigid mode: the run completed, the body shifted by round-off); the
+#: examples' smallest pivots are 1.5e-8 (block sliding) to 9e-3 of the largest, that body's
+#: 2e-16. Small systems have every SuperLU factor checked (the static LU's fallbacks, and
+#: patterns it leaves to SuperLU: ties and Lagrange multipliers): the delamination example's
+#: 946 checks cost 0.16 of 7.6 s of CPU.
 PIVOT_CHECK_GROWTH = 1e6
 #: SuperLU keeps a diagonal pivot at least this fraction of the largest entry of its column
 #: (partial pivoting otherwise); the static LU accepts a pivot on the same test, so it takes
@@ -207,7 +214,7 @@ class SolverStats:
     analyses: int = 0
     factorizations: int = 0
     solves: int = 0
-    pivot_checks: int = 0  # SuperLU factors whose pivots were inspected (see PIVOT_CHECK_GROWTH)
+    pivot_checks: int = 0  # SuperLU factors whose pivots were inspected (PIVOT_CHECK_GROWTH)
     fallbacks: int = 0  # static-LU factorizations redone by SuperLU (a pivot needed pivoting)
     refinements: int = 0  # solves with a single-precision factor added by refinement sweeps
     double_fallbacks: int = 0  # single-precision PARDISO factors redone in double
@@ -494,6 +501,7 @@ class _SuperLUBackend:
         self.lu: spla.SuperLU | None = None
         self.lu_is_permuted = False
         self.scale = 0.0  # max |A| of the current factor
+        self.unchecked = False  # the factor's pivots are to be checked before its first use
 
     def factor(self, data: NDArray) -> None:
         p = self.pattern
@@ -509,6 +517,7 @@ class _SuperLUBackend:
                 self.permuted = self._permutation_map()
                 self.lu_is_permuted = False
                 self.stats.analyses += 1
+                self.unchecked = True
             else:
                 indptr, indices, gather = self.permuted
                 Ap = sp.csc_matrix((data[gather], indices, indptr), shape=(p.n, p.n))
@@ -533,8 +542,13 @@ class _SuperLUBackend:
 
         Its pivots are checked (at most once) when a solution grows like the inverse of a tiny
         pivot: reading them costs ~0.4 ms (SciPy copies U into a matrix), a third of a small
-        factorization, and a well-conditioned solve cannot hide one."""
+        factorization, and a well-conditioned solve cannot hide one. They are checked before
+        the first use of a factor that ``unchecked`` marks (see PIVOT_CHECK_GROWTH)."""
         lu, perm, scale, stats = self.lu, self.perm, self.scale, self.stats
+        if self.unchecked:
+            self.unchecked = False
+            stats.pivot_checks += 1
+            _check_pivots(lu)  # raises for a singular factor
         permuted, checked = self.lu_is_permuted, []
 
         def solve(b: NDArray) -> NDArray:
@@ -592,6 +606,7 @@ class _StaticLUBackend(_SuperLUBackend):
             self.fallbacks_in_a_row += 1
             self.usable = self.fallbacks_in_a_row < MAX_CONSECUTIVE_FALLBACKS
         super().factor(data)
+        self.unchecked = True  # a rejected pivot, or a pattern left to SuperLU: maybe singular
 
     def solver(self):
         return super().solver() if self.static is None else self.static.solve
@@ -607,7 +622,8 @@ def _check_pivots(lu: spla.SuperLU) -> None:
     if small.size:
         raise LinearSolverError(
             f"matrix is numerically singular: {small.size} pivot(s) below "
-            f"{PIVOT_RTOL:g} x the largest (unsupported body or mechanism?)")
+            f"{PIVOT_RTOL:g} x the largest (a body whose supports leave a rigid motion free, "
+            "a mechanism, or coincident nodes that split a mesh?)")
 
 
 class _PardisoBackend:
@@ -675,7 +691,8 @@ class _PardisoBackend:
         if self._perturbed():
             raise LinearSolverError(
                 f"matrix is numerically singular: PARDISO perturbed {self._perturbed()} "
-                "pivot(s) (unsupported body or mechanism?)")
+                "pivot(s) (a body whose supports leave a rigid motion free, a mechanism, or "
+                "coincident nodes that split a mesh?)")
 
     def _perturbed(self) -> int:
         return int(self.pardiso.get_iparm(14))  # perturbed pivots of the last factorization
