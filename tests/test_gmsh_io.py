@@ -164,3 +164,23 @@ def test_non_planar_mesh_is_rejected(tmp_path):
     meshio.write(path, mesh, file_format="gmsh22", binary=False)
     with pytest.raises(MeshError, match="plane"):
         read_msh(path)
+
+
+def test_coincident_nodes_are_refused(tmp_path):
+    """Two quads side by side whose shared edge has its nodes twice (parts meshed apart and
+    not merged): the cells are not joined, a crack. Before, the file was read and a pressed
+    block ran as two halves overlapping by 0.0125; now it is refused, with where and what
+    to do. The same quads on shared nodes are read."""
+    points = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0],
+                       [1, 0, 0], [2, 0, 0], [2, 1, 0], [1, 1, 0]], dtype=float)
+    apart = np.array([[0, 1, 2, 3], [4, 5, 6, 7]])
+    joined = np.array([[0, 1, 2, 3], [1, 5, 6, 2]])
+    for name, quads in (("apart", apart), ("joined", joined)):
+        mesh = meshio.Mesh(points, [("quad", quads)],
+                           cell_data={"gmsh:physical": [np.array([1, 1])],
+                                      "gmsh:geometrical": [np.array([1, 1])]})
+        meshio.write(tmp_path / f"{name}.msh", mesh, file_format="gmsh22", binary=False)
+    with pytest.raises(MeshError, match=r"apart\.msh: 2 pair\(s\) of nodes coincide, the first "
+                                        r"at \(1, 0\).*Coherence"):
+        read_msh(tmp_path / "apart.msh")
+    assert read_msh(tmp_path / "joined.msh").n_nodes == 6

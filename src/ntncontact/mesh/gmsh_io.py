@@ -13,6 +13,7 @@ from pathlib import Path
 import meshio
 import numpy as np
 from numpy.typing import NDArray
+from scipy.spatial import cKDTree
 
 from ntncontact.mesh.boundary import boundary_edges
 from ntncontact.mesh.quadmesh import MeshError, QuadMesh
@@ -29,7 +30,8 @@ def read_msh(path: str | Path, name: str | None = None) -> QuadMesh:
     Unused nodes are dropped and the rest renumbered in file order; clockwise cells are
     flipped to counter-clockwise. ``name`` defaults to the file stem. Raises
     :class:`MeshError` (naming the file) for triangles, higher-order or 3D cells, a
-    non-planar mesh, degenerate cells, or a line group not on the boundary.
+    non-planar mesh, coincident nodes, degenerate cells, or a line group not on the
+    boundary.
     """
     path = Path(path)
     raw = _read_meshio(path)
@@ -46,6 +48,7 @@ def read_msh(path: str | Path, name: str | None = None) -> QuadMesh:
     used = np.unique(quads)
     renumber = np.full(xy.shape[0], -1, dtype=np.int64)
     renumber[used] = np.arange(used.size)
+    _check_distinct(xy[used], label)
     cells = _counter_clockwise(xy[used], renumber[quads], label)
     mesh = QuadMesh(xy[used], cells, name=name or path.stem)
     groups = _physical_groups(raw, blocks, label)
@@ -85,6 +88,27 @@ def _planar_points(points: NDArray[np.float64], label: str) -> NDArray[np.float6
             raise MeshError(f"{label}: nodes do not lie in a plane z = const (z spread "
                             f"{np.ptp(z):.3g}); only 2D meshes are supported")
     return np.ascontiguousarray(points[:, :2])
+
+
+#: nodes closer than this fraction of the mesh's extent are the same point (gmsh's own
+#: Geometry.Tolerance default, as the ties' coincidence test)
+COINCIDENT_RTOL = 1e-8
+
+
+def _check_distinct(xy: NDArray, label: str) -> None:
+    """Refuses coincident nodes: the cells on either side of them are not joined, so the mesh
+    holds a crack whose faces nothing keeps apart (parts meshed separately and not merged:
+    the run completed with the two halves of a pressed block overlapping by 0.0125)."""
+    tolerance = COINCIDENT_RTOL * float(np.ptp(xy, axis=0).max())
+    pairs = cKDTree(xy).query_pairs(tolerance, output_type="ndarray")
+    if len(pairs) == 0:
+        return
+    x, y = xy[int(pairs[:, 0].min())]
+    raise MeshError(
+        f"{label}: {len(pairs)} pair(s) of nodes coincide, the first at ({x:.6g}, {y:.6g}): "
+        "the cells on either side are not joined (a crack). Merge them (gmsh: Coherence "
+        "Mesh, Geometry.AutoCoherence), or make the parts separate bodies joined by a "
+        "[[tie]] or a [[contact]]")
 
 
 def _counter_clockwise(xy: NDArray, cells: NDArray[np.int64], label: str) -> NDArray[np.int64]:
