@@ -3,6 +3,7 @@
 import json
 
 import numpy as np
+import pytest
 from helpers import EXAMPLES
 
 from ntncontact.cli import main
@@ -94,6 +95,18 @@ def test_mesh_quality_command_and_summary(tmp_path, capsys):
     assert 45.0 < quality["min_angle_deg"] < 90.0 < quality["max_angle_deg"] < 135.0
     vtu = sorted((res / "fields").glob("*.vtu"))[-1]
     assert main(["mesh-quality", str(vtu)]) == 0
+
+
+@pytest.mark.parametrize("content", [b"garbage", b"<VTKFile type=\"UnstructuredGrid\""])
+def test_mesh_quality_of_a_corrupt_vtu_is_one_error_line(tmp_path, capsys, content):
+    """A frame that is not VTU, or cut short: before, meshio's ReadError or the XML parser's
+    error reached the user as a traceback."""
+    bad = tmp_path / "frame.vtu"
+    bad.write_bytes(content)
+    assert main(["mesh-quality", str(bad)]) == 1
+    err = capsys.readouterr().err
+    assert err.startswith(f"error: {bad} is not a readable VTU file")
+    assert len(err.strip().splitlines()) == 1
 
 
 def test_run_with_compare_prints_and_writes_the_comparison(tmp_path, capsys):

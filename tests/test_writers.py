@@ -275,10 +275,11 @@ def test_results_directory_marks_interrupt(tmp_path):
 
 
 def test_read_vtu_raises_on_corrupt_file(tmp_path):
-    # meshio.read() would sys.exit here; callers need an exception they can catch.
+    """meshio.read() would sys.exit here; callers need an exception they can catch, and one
+    that names the file (meshio's ReadError has an empty message)."""
     bad = tmp_path / "half.vtu"
     bad.write_text("<VTKFile")
-    with pytest.raises(meshio.ReadError):
+    with pytest.raises(ValueError, match=f"{bad} is not a readable VTU file"):
         read_vtu(bad)
 
 

@@ -8,6 +8,7 @@ import os
 import signal
 import sys
 import threading
+import warnings
 from pathlib import Path
 
 from . import __version__
@@ -420,7 +421,9 @@ def _figure_options(parser: argparse.ArgumentParser, note: str = "") -> None:
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     try:
-        return int(args.func(args))
+        with warnings.catch_warnings():
+            warnings.showwarning = _show_warning
+            return int(args.func(args))
     except KeyboardInterrupt:
         print("interrupted: files written so far are valid", file=sys.stderr)
         return 130
@@ -441,6 +444,12 @@ def _with_source(err: BaseException, args: argparse.Namespace) -> str:
     if isinstance(err, ScenarioError) and source and not text.startswith(str(source)):
         text = f"{source}: {text}"
     return text
+
+
+def _show_warning(message: Warning | str, *_: object, **__: object) -> None:
+    """A warning as the command's other warnings are: one line, without the source line
+    Python's default format shows (``warning: skipping unreadable ...``)."""
+    print(f"warning: {_one_line(str(message))}", file=sys.stderr)
 
 
 def _one_line(text: str) -> str:

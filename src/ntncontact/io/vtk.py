@@ -228,11 +228,24 @@ def read_pvd(pvd_path: str | os.PathLike) -> list[tuple[float, Path]]:
 def read_vtu(path: str | os.PathLike, time: float = float("nan")) -> VtuFrame:
     """Read a VTU of Q4 cells (as :class:`VtuSeriesWriter` writes) back into 2D arrays.
 
-    Raises ``meshio.ReadError`` (or ``xml.etree.ElementTree.ParseError``) on a corrupt file,
-    and ``ValueError`` when it holds no quadrilaterals.
+    Raises ``ValueError`` naming the file when it is not a readable VTU (corrupt, cut short)
+    or holds no quadrilaterals.
     """
-    # meshio.read() calls sys.exit on a corrupt file; the format reader raises ReadError instead.
-    return _frame_of(meshio.vtu.read(os.fspath(path)), time, Path(path))
+    return _frame_of(_read_vtu_mesh(path), time, Path(path))
+
+
+def _read_vtu_mesh(path: str | os.PathLike) -> meshio.Mesh:
+    """meshio's VTU reader, its errors as one ValueError that names the file (meshio.read()
+    calls sys.exit on a corrupt file; the format reader raises ReadError, ParseError,
+    zlib.error, ... with no file name, some with an empty message)."""
+    try:
+        return meshio.vtu.read(os.fspath(path))
+    except OSError:
+        raise
+    except Exception as error:  # noqa: BLE001 (whatever a corrupt file makes the parser raise)
+        raise ValueError(f"{path} is not a readable VTU file, corrupt or cut short "
+                         f"({type(error).__name__}{': ' + str(error) if str(error) else ''})"
+                         ) from None
 
 
 def _frame_of(mesh: meshio.Mesh, time: float, path: Path) -> VtuFrame:
@@ -430,7 +443,7 @@ def read_frame_mesh(source: FrameSource) -> meshio.Mesh:
     """One frame of a field series as the meshio Mesh of its VTU (see :class:`XdmfSeries`)."""
     if isinstance(source, XdmfStep):
         return source.mesh()
-    return meshio.vtu.read(os.fspath(source))
+    return _read_vtu_mesh(source)
 
 
 def read_xdmf(path: str | os.PathLike) -> list[VtuFrame]:
