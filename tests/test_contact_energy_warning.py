@@ -74,8 +74,11 @@ name = "top"
 mesh = { type = "rectangle", width = 1.0, height = 0.5, nx = 7, ny = 4, origin = [0.5, 1.0] }
 material = { model = "linear_elastic", E = 100.0, nu = 0.3, density = 1.0 }
 supports = [ { set = "corner_top_left", x = 0.0 } ]
-loads = [ { type = "pressure", set = "top", value = 3.0,
-            function = { times = [0.0, 1.0], values = [0.0, 1.0] } } ]
+[[bodies.loads]]
+type = "pressure"
+set = "top"
+value = 3.0
+function = { times = [0.0, 1.0], values = [0.0, 1.0] }
 [[bodies]]
 name = "base"
 mesh = { type = "rectangle", width = 2.0, height = 1.0, nx = 10, ny = 5 }
