@@ -184,3 +184,25 @@ def test_coincident_nodes_are_refused(tmp_path):
                                         r"at \(1, 0\).*Coherence"):
         read_msh(tmp_path / "apart.msh")
     assert read_msh(tmp_path / "joined.msh").n_nodes == 6
+
+
+def test_unnamed_physical_groups_are_sets_by_number(tmp_path):
+    """gmsh writes a physical group without a name when the name went to another group
+    already (two lines both named "top"), and legacy .geo files number them only. Before,
+    such a group was dropped without a word (a tester's top pressure acted on half the top);
+    now it is the set "5", with a warning. Tag 0 (no group) makes no set."""
+    points = np.array([[0, 0, 0], [1, 0, 0], [2, 0, 0], [0, 1, 0], [1, 1, 0], [2, 1, 0]],
+                      dtype=float)
+    quads = np.array([[0, 1, 4, 3], [1, 2, 5, 4]])
+    lines = np.array([[5, 4], [4, 3], [0, 1]])  # the top, right to left, then a bottom edge
+    mesh = meshio.Mesh(points, [("quad", quads), ("line", lines)],
+                       cell_data={"gmsh:physical": [np.array([1, 1]), np.array([4, 5, 0])],
+                                  "gmsh:geometrical": [np.array([1, 1]), np.array([1, 2, 3])]},
+                       field_data={"body": np.array([1, 2]), "top": np.array([4, 1])})
+    meshio.write(tmp_path / "numbered.msh", mesh, file_format="gmsh22", binary=False)
+    with pytest.warns(UserWarning, match=r'physical group 5 \(lines\) has no name; it is the '
+                                         r'set "5"'):
+        out = read_msh(tmp_path / "numbered.msh")
+    assert sorted(out.edge_sets) == ["5", "top"]
+    assert np.allclose(out.nodes[out.edge_sets["5"][0]], [[1.0, 1.0], [0.0, 1.0]], atol=0.0)
+    assert "0" not in out.node_sets

@@ -7,6 +7,7 @@ first-order quads are accepted: a triangle would need a different element in eve
 
 from __future__ import annotations
 
+import warnings
 from collections.abc import Mapping
 from pathlib import Path
 
@@ -141,6 +142,32 @@ def _physical_groups(raw: meshio.Mesh, blocks: list[tuple[str, NDArray]], label:
                 raise MeshError(f"{label}: physical group '{group_name}' has no cell data")
             members.append(data[index])
         groups[group_name] = (dim, members)
+    return groups | _unnamed_groups(raw, blocks, label, groups)
+
+
+def _unnamed_groups(raw: meshio.Mesh, blocks: list[tuple[str, NDArray]], label: str,
+                    named: Mapping[str, tuple[int, list[NDArray]]]
+                    ) -> dict[str, tuple[int, list[NDArray]]]:
+    """Physical line and point groups without a name, each under its number (``set = "5"``),
+    with a warning: gmsh writes a group without a name when its name was given to another
+    group already (the second of two lines named "top"), and legacy .geo files number them
+    only (``Physical Line(5) = {...}``). Ignoring them silently halved a tester's top
+    pressure."""
+    tags = raw.cell_data.get("gmsh:physical")
+    if tags is None:
+        return {}
+    known = {(int(v[1]), int(v[0])) for v in raw.field_data.values()}  # (dimension, tag)
+    groups: dict[str, tuple[int, list[NDArray]]] = {}
+    for (kind, data), block_tags in zip(blocks, tags, strict=True):
+        block_tags, dim = np.asarray(block_tags), _DIMENSION[kind]
+        for tag in np.unique(block_tags):
+            if tag <= 0 or dim == 2 or (dim, int(tag)) in known or str(tag) in named:
+                continue  # 0: in no group (Mesh.SaveAll); a numbered surface saves the quads
+            members = groups.setdefault(str(tag), (dim, []))[1]
+            members.append(data[block_tags == tag])
+    for name, (dim, _) in groups.items():
+        warnings.warn(f"{label}: physical group {name} ({('points', 'lines')[dim]}) has no "
+                      f"name; it is the set \"{name}\"", stacklevel=4)
     return groups
 
 
