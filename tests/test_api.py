@@ -59,6 +59,13 @@ def test_a_value_toml_cannot_hold_is_refused():
         toml_value(object())
 
 
+def test_run_of_a_dict_names_the_function_that_takes_one():
+    """A dict is not a scenario yet (its mesh files need a base folder): the error names
+    scenario_from_dict, where it said "expected str, bytes or os.PathLike object"."""
+    with pytest.raises(TypeError, match="scenario_from_dict"):
+        ntc.run({"analysis": {"kind": "dynamic"}})
+
+
 @pytest.fixture(scope="module")
 def spin_results(tmp_path_factory):
     out = tmp_path_factory.mktemp("spin")

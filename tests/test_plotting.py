@@ -251,3 +251,14 @@ def test_every_time_asked_for_is_drawn_under_its_own_title(results, tmp_path, mo
     titles = [ax.get_title() for ax in drawn[0].axes if ax.get_visible() and ax.get_title()]
     assert titles == ["t = 0", "t = 0.05 (interpolated)", "t = 0.1", "t = 0.15 (interpolated)",
                       "t = 0.4", "t = 0.333 (interpolated)", "t = 0.2"]
+
+
+def test_the_pair_history_leaves_out_the_steps_without_contact():
+    """A pair in contact at steps 3-4 and again at 7: its line breaks between 4 and 7 (it
+    was drawn straight across the steps the pair was apart)."""
+    from ntncontact.report.plotting import broken_at_gaps
+
+    time, value = broken_at_gaps(np.array([3, 4, 7]), np.array([0.3, 0.4, 0.7]),
+                                 np.array([1.0, 2.0, 3.0]))
+    assert np.array_equal(time, [0.3, 0.4, np.nan, 0.7], equal_nan=True)
+    assert np.array_equal(value, [1.0, 2.0, np.nan, 3.0], equal_nan=True)

@@ -179,6 +179,9 @@ def run(scenario: Scenario | str | Path, out: str | Path | None = None, *,
     ``restart``: continue the killed run in ``out`` from its last checkpoint
     (``analysis.checkpoint_interval``; the scenario and overrides must be the run's). A
     failed step raises (``SimulationError``) after the folder's summary says ``failed``."""
+    if isinstance(scenario, Mapping):
+        raise TypeError("run takes a Scenario or the path of a scenario file; make a Scenario "
+                        "of a dict with ntc.scenario_from_dict(data)")
     if not isinstance(scenario, Scenario):
         scenario = load_scenario(scenario)
     if out is None:

@@ -352,6 +352,13 @@ def plot_contact_tractions(
     return _save(fig, Path(path) if path else folder / "contact_tractions.png")
 
 
+def broken_at_gaps(steps: NDArray, *columns: NDArray) -> list[NDArray]:
+    """The columns with a NaN between rows whose steps are not consecutive, so that a line
+    plot leaves out the steps the pair was not in contact (it drew across them)."""
+    gaps = np.flatnonzero(np.diff(steps) > 1) + 1
+    return [np.insert(np.asarray(c, dtype=float), gaps, np.nan) for c in columns]
+
+
 def plot_pair_history(
     directory: str | os.PathLike, path: str | os.PathLike | None = None
 ) -> Path:
@@ -367,7 +374,8 @@ def plot_pair_history(
     fig, axes = _new_figure(*PAIR_SHAPE)
     tn = contact["normal_traction"][rows]
     peak = np.abs(tn).max() or 1.0
-    axes[0, 0].plot(contact["time"][rows], tn / peak, "o-", ms=3)
+    axes[0, 0].plot(*broken_at_gaps(contact["step"][rows], contact["time"][rows], tn / peak),
+                    "o-", ms=3)
     axes[0, 0].set_ylabel(f"normal traction / {peak:.4g}")
     axes[0, 0].set_title(f"pair ({node_1}, {node_2})")
     try:
