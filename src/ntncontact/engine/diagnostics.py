@@ -187,12 +187,15 @@ class PenetrationCheck:
                                 np.setdiff1d(outline[a][0], facing), *outline[b][1:],
                                 (a, b) in covered))
         self._cells = model.cells
+        self._outline = {body.name: nodes for body, (nodes, _, _) in zip(model.bodies, outline,
+                                                                        strict=True)}
 
     def deepest(self, x: NDArray) -> OffSurfacePenetration:
         """The deepest such node at the positions ``x``."""
         worst = OffSurfacePenetration()
+        boxes = {}  # per body: the bounding box of its boundary nodes at x
         for body, partner, nodes, edges, size, joined in self._tests:
-            if nodes.size == 0:
+            if nodes.size == 0 or not _boxes_meet(boxes, body, partner, x, self._outline):
                 continue
             found = deepest_overlap(x[nodes], x, self._cells[partner.cells], edges, size)
             if found is not None and found.depth > worst.depth:
@@ -200,6 +203,17 @@ class PenetrationCheck:
                                               int(nodes[found.point]) - body.node_offset,
                                               partner.name, size, joined)
         return worst
+
+
+def _boxes_meet(boxes: dict, body, partner, x: NDArray, outline: dict) -> bool:
+    """Whether the bounding boxes of the two bodies' boundary nodes at ``x`` overlap: bodies
+    apart cost this test only (many bodies make many pairs)."""
+    for b in (body, partner):
+        if b.name not in boxes:
+            points = x[outline[b.name]]
+            boxes[b.name] = (points.min(axis=0), points.max(axis=0))
+    (low_1, high_1), (low_2, high_2) = boxes[body.name], boxes[partner.name]
+    return bool(np.all(low_1 <= high_2) and np.all(low_2 <= high_1))
 
 
 def _surfaces_between(model: Model) -> dict[tuple[int, int], list]:
