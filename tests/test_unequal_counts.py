@@ -233,3 +233,20 @@ def test_transfer_on_its_rows_equals_the_full_map(n1, n2):
     G = sp.coo_matrix((vals[:30], (g_rows, cols[:30])), shape=(3, n)).toarray()
     np.testing.assert_allclose(sp.coo_matrix((v, (r, c)), shape=(3, n)).toarray(), G @ S,
                                rtol=0, atol=1e-13)
+
+
+@pytest.mark.parametrize("order", [(0, 1), (1, 0)])
+def test_two_pairs_across_a_closed_surfaces_start_share_nothing(order):
+    """A disk (closed surface 1, 24 nodes) touching a flat surface with two pairs at its chain
+    positions 0 and 23, neighbours across the chain's start, whose partners are neighbours:
+    nothing lies between them. Before, the long arc's 22 nodes were taken as unpaired between
+    the pairs and the surface left without them failed ("a contact surface needs >= 2 nodes"):
+    a spinning disk on an ALE block stopped at its first contact step (a tester's case)."""
+    angle = -np.pi / 2 + 2 * np.pi * np.arange(24) / 24  # the lowest node first
+    disk = np.column_stack([np.cos(angle), 1.0 + np.sin(angle)])
+    flat = np.column_stack([np.linspace(-1.0, 1.0, 9), np.zeros(9)])
+    x = np.vstack([disk, flat])
+    interface = Interface(ContactSurface(np.arange(24), closed=True),
+                          ContactSurface(24 + np.arange(9)))
+    pairs = np.array([[0, 24 + 4], [23, 24 + 3]])[list(order)]
+    assert unpaired_share(x, interface, pairs) is None

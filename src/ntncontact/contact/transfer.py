@@ -147,6 +147,11 @@ def _shared_segments(pos_s: NDArray, pos_o: NDArray, n_s: int, n_o: int, closed_
     a, b = order[:-1], order[1:]
     if closed_s and order.size > 2:
         a, b = np.append(a, order[-1]), np.append(b, order[0])
+    elif closed_s and order.size == 2 and (pos_s[b] - pos_s[a]) % n_s > n_s // 2:
+        # two pairs on a closed surface have two arcs between them: the short one faces the
+        # partner (pairs at a disk's chain positions 0 and 23 of 24 are neighbours across
+        # the chain's start; the long arc's 22 nodes were taken as unpaired between them)
+        a, b = b, a
     between = (pos_s[b] - pos_s[a]) % n_s
     step = np.abs(pos_o[b] - pos_o[a])
     neighbours = (step == 1) | (closed_o & (step == n_o - 1))
