@@ -123,6 +123,7 @@ def _run_until_stopped(args: argparse.Namespace, stop: StopOnSignal) -> int:
     _warn_unreturned_energy(writer.results.summary.data)
     _warn_contact_energy(writer.results.summary.data, model.analysis.kind == "static")
     _warn_penetration(writer.results.summary.data)
+    _warn_mismatch(writer.results.summary.data)
     if stop.signum is not None:  # asked to stop during the last step: no figures
         raise RunInterrupted(stop.reason())
     if args.compare:
@@ -171,6 +172,27 @@ def _warn_penetration(summary: dict) -> None:
           "penalty (penalty_normal or penalty_factor), a smaller dt, or surfaces of similar "
           "spacing keep the pairs closer (node-to-node pairs hold the nodes of the coarser "
           "surface)", file=sys.stderr)
+
+
+#: an ALE node ending farther than this fraction of the surface spacing from its partner's
+#: place is a pair the mesh motion did not follow: ~1e-9 of it where the motion follows
+MISMATCH_WARNING = 0.1
+
+
+def _warn_mismatch(summary: dict) -> None:
+    """One line on stderr when an ALE node ended far from its partner's place (summary.json
+    ``max_ale_mismatch``): the pair is then no longer node to node."""
+    at = summary.get("max_ale_mismatch_at")
+    if not at or summary["max_ale_mismatch"] <= MISMATCH_WARNING * at["element_size"]:
+        return
+    mismatch = summary["max_ale_mismatch"]
+    print(f"warning: an ALE contact node ended {mismatch:.3g} from its partner's place "
+          f"({mismatch / at['element_size']:.2g} of the surface spacing, t = "
+          f"{at['time']:.6g}; summary.json max_ale_mismatch): the mesh motion did not follow "
+          "that pair, which is no longer node to node. An ALE surface longer than the slide "
+          "(its ends stay fixed), ale.respace = \"reference\" or more smoothing layers may "
+          "let it follow",
+          file=sys.stderr)
 
 
 #: net positive work of the contact forces (energy contact added) above this fraction of the
