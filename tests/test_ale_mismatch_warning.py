@@ -2,7 +2,9 @@
 ``max_ale_mismatch``, ``ntncontact run``'s warning): the pair is then no longer node to node,
 which nothing said before (an independent tester, session 36: a block sliding off the end of
 an ALE base, whose end nodes stay fixed, left its pairs 1.85 from their ALE nodes, and a
-slide over a locally respaced base 0.265, 2.1 spacings, both runs "completed" in silence).
+slide over a locally respaced base 0.265, 2.1 spacings, both runs "completed" in silence;
+pairs beyond the surface's end are now released, and a pair reaches 0.66 of a spacing at
+the fixed end before its release).
 Where the motion follows its pairs, the mismatch is round-off: the examples' largest are
 2e-15 (ring impact) and 9e-10 (disk drop)."""
 

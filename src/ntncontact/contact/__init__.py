@@ -20,7 +20,7 @@ from .friction import SLIP, STICK
 from .kinematics import pair_gaps
 from .lagrange import LagrangeBlocks, blocks_of, lagrange_blocks, release_tensile_pairs
 from .laws import ContactLaw
-from .pairing import Pairing, closest_pairs, neighbour_pairs, ordered_partners
+from .pairing import Pairing, beyond_ends, closest_pairs, neighbour_pairs, ordered_partners
 from .state import PairState
 from .surfaces import ContactSurface, Interface, chord_normals, corner_mask
 
@@ -43,6 +43,7 @@ __all__ = [
     "blocks_of",
     "check_augmentation",
     "chord_normals",
+    "beyond_ends",
     "closest_pairs",
     "commit_step",
     "contact_term",

@@ -20,7 +20,7 @@ from scipy.spatial import cKDTree
 from .kinematics import pair_gaps
 from .surfaces import Interface
 
-__all__ = ["Pairing", "closest_pairs", "neighbour_pairs"]
+__all__ = ["Pairing", "beyond_ends", "closest_pairs", "neighbour_pairs"]
 
 #: Up to this many (candidate, segment) combinations the closest points are found by comparing
 #: all of them (module doc); beyond it the k-d trees, whose cost grows like C log S, win.
@@ -98,6 +98,32 @@ def _nearest_nodes(q: NDArray, nodes: NDArray) -> tuple[NDArray, NDArray[np.int6
     d2 = ((q[:, None, :] - nodes[None, :, :]) ** 2).sum(axis=2)
     k = np.argmin(d2, axis=1)
     return np.sqrt(d2[np.arange(len(q)), k]), k
+
+
+#: a node whose closest point on an open surface 2 is one of its ends, and which lies beyond
+#: that end by more than this fraction of the end segment, faces no part of the surface
+BEYOND_END = 0.5
+
+
+def beyond_ends(x: NDArray[np.float64], interface: Interface, pairing: Pairing
+                ) -> NDArray[np.bool_]:
+    """Which of the pairing's surface-1 nodes lie beyond an end of an open surface 2 (along
+    the end segment, by more than BEYOND_END of it): they face nothing that can hold them.
+    A pair kept there held a block that had slid off its base 1.5 past the end (an
+    independent tester's case: its nodes rested on base nodes 2 away)."""
+    s2 = interface.surface2
+    if s2.closed or len(pairing.node1) == 0:
+        return np.zeros(len(pairing.node1), bool)
+    edges = s2.edges()
+    last = len(edges) - 1
+    at_start = (pairing.segment == 0) & (pairing.xi <= 0.0)
+    at_end = (pairing.segment == last) & (pairing.xi >= 1.0)
+    a, b = x[edges[pairing.segment, 0]], x[edges[pairing.segment, 1]]
+    along = np.einsum("ij,ij->i", x[pairing.node1] - pairing.point, b - a)
+    length2 = np.einsum("ij,ij->i", b - a, b - a)
+    # along / |b - a| is the distance beyond the end point, negative beyond the start
+    return ((at_start & (along < -BEYOND_END * length2))
+            | (at_end & (along > BEYOND_END * length2)))
 
 
 def _empty_pairing() -> Pairing:

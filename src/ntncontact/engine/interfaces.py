@@ -8,7 +8,7 @@ The time loop calls, per step: :func:`detect_all` at the step start, then repeat
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from numpy.typing import NDArray
@@ -18,6 +18,7 @@ from ..contact import (
     Pairing,
     PairState,
     augment,
+    beyond_ends,
     blocks_of,
     check_augmentation,
     closest_pairs,
@@ -51,12 +52,29 @@ def detect_all(
     for ci, state in zip(interfaces, states, strict=True):
         x = x + dt * v if ci.predicted_detection else x
         tol = touch_tolerance(x, ci)
+        state = _kept_where_they_face(x, ci, state)
         candidates = _candidates(x, v, dt, ci, state, tol)
         found = detect(state, candidates, x, v, ci.interface, persistency=ci.persistency,
                        release_steps=ci.release_steps, gap_tol=tol,
                        objective=ci.law.moment_free)
         out.append(found.state)
     return tuple(out)
+
+
+def _kept_where_they_face(x: NDArray, ci: ContactInterface, state: PairState) -> PairState:
+    """The pairs kept from the last step, at the positions ``x``: released where the surface-1
+    node lies beyond an end of an open surface 2 (``contact.beyond_ends``: it faces nothing),
+    and between Lagrangian bodies each paired with its nearest surface-2 node, with its
+    history. Nothing moves a Lagrangian partner with its node, and a pair kept where it
+    entered held a sliding block by base nodes up to 2 away, and on past the base's end (an
+    independent tester's case); an ALE partner follows its node (the mesh motion), so ALE
+    pairs keep their partners."""
+    if len(state) == 0:
+        return state
+    pairing = closest_pairs(x, ci.interface, state.pairs[:, 0])
+    if not ci.ordered_pairing:
+        state = replace(state, pairs=pairing.pairs)
+    return state.take(~beyond_ends(x, ci.interface, pairing))
 
 
 def _candidates(x: NDArray, v: NDArray, dt: float, ci: ContactInterface, state: PairState,
@@ -148,7 +166,7 @@ def _near_candidates(x: NDArray, v: NDArray, dt: float, ci: ContactInterface,
     radius = max(np.linalg.norm(x[e[:, 1]] - x[e[:, 0]], axis=1).max() for e in edges)
     approach = dt * np.linalg.norm(v[pairing.node1] - v[pairing.node2], axis=1)
     keep = ((pairing.projection_gap >= -tol) & _not_in_front(x, ci, pairing, tol)
-            & (pairing.distance <= radius + approach))
+            & (pairing.distance <= radius + approach) & ~beyond_ends(x, ci.interface, pairing))
     return pairing.node1[keep]
 
 
