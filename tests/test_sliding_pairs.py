@@ -79,9 +79,11 @@ def test_a_block_sliding_off_a_ledge_falls(tmp_path, motion):
 
 def test_lagrangian_pairs_follow_the_nearest_node_while_they_slide(tmp_path):
     """While the block slides over the base (0.5 in 0.25 s, four base segments), every
-    pressed pair's nodes are at most half a segment apart along the surface, plus the
-    step's own slide (2 dt v = 0.02: a pair is taken at the step start, the frames show its
-    end; before, 0.18 apart on a disk dropped on a Lagrangian block)."""
+    pressed pair's nodes are at most a segment apart along the surface (a pair keeps its
+    partner while the node faces one of the partner's segments), or a segment and a half at
+    the base's end (a node up to half the end segment beyond it is kept), plus the step's own
+    slide (2 dt v = 0.02: a pair is taken at the step start, the frames show its end; before,
+    0.18 apart on a disk dropped on a Lagrangian block, and 2 here)."""
     run(tmp_path, "lagrangian", 0.25)
     contact = read_csv_table(tmp_path / "lagrangian" / "contact.csv")
     worst = 0.0
@@ -91,4 +93,4 @@ def test_lagrangian_pairs_follow_the_nearest_node_while_they_slide(tmp_path):
             x = read_vtu(path, t).deformed_points
             offset = x[contact["node_1"][rows].astype(int)] - x[contact["node_2"][rows].astype(int)]
             worst = max(worst, np.abs(offset[:, 0]).max())
-    assert 0.0 < worst <= 0.5 * SPACING + 2 * 0.005 * 2.0
+    assert 0.0 < worst <= 1.5 * SPACING + 2 * 0.005 * 2.0

@@ -64,16 +64,19 @@ def detect_all(
 def _kept_where_they_face(x: NDArray, ci: ContactInterface, state: PairState) -> PairState:
     """The pairs kept from the last step, at the positions ``x``: released where the surface-1
     node lies beyond an end of an open surface 2 (``contact.beyond_ends``: it faces nothing),
-    and between Lagrangian bodies each paired with its nearest surface-2 node, with its
-    history. Nothing moves a Lagrangian partner with its node, and a pair kept where it
-    entered held a sliding block by base nodes up to 2 away, and on past the base's end (an
-    independent tester's case); an ALE partner follows its node (the mesh motion), so ALE
-    pairs keep their partners."""
+    and between Lagrangian bodies paired again, with their history, with the nearest
+    surface-2 node where the node no longer faces a segment of its partner. Nothing moves a
+    Lagrangian partner with its node, and a pair kept where it entered held a sliding block
+    by base nodes up to 2 away, and on past the base's end (an independent tester's case);
+    an ALE partner follows its node (the mesh motion), so ALE pairs keep their partners."""
     if len(state) == 0:
         return state
     pairing = closest_pairs(x, ci.interface, state.pairs[:, 0])
     if not ci.ordered_pairing:
-        state = replace(state, pairs=pairing.pairs)
+        facing = ci.interface.surface2.edges()[pairing.segment]
+        moved = ~np.any(facing == state.pairs[:, 1:2], axis=1)
+        partners = np.where(moved, pairing.node2, state.pairs[:, 1])
+        state = replace(state, pairs=np.column_stack([state.pairs[:, 0], partners]))
     return state.take(~beyond_ends(x, ci.interface, pairing))
 
 
