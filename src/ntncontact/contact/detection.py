@@ -36,13 +36,15 @@ class Detection:
 def entering(gap: NDArray[np.float64], gap_rate: NDArray[np.float64] | None,
              persistency: bool, gap_tol: float = 0.0) -> NDArray[np.bool_]:
     """Which candidate pairs enter the active set: penetrating (gap >= -gap_tol) and, under
-    the persistency law, approaching (gdot > 0) or at rest on the surface (gdot = 0 exactly:
-    bodies placed touching at t = 0 with no velocity, which a load then presses together;
-    taken one step late, a block resting under gravity kept the step's fall, g dt^2 / 2, as
-    penetration for the whole run)."""
+    the persistency law, approaching (gdot > 0) or touching at rest (|gap| <= gap_tol and
+    gdot = 0 exactly: bodies placed touching at t = 0 with no velocity, which a load then
+    presses together; taken one step late, a block resting under gravity kept the step's
+    fall, g dt^2 / 2, as penetration for the whole run). A node deeper than that with no
+    approach is not taken: the far side of a ring lies "behind" its partner surface too."""
     enter = gap >= -gap_tol
     if persistency:
-        enter &= gap_rate >= 0.0  # type: ignore[operator]
+        at_rest = (gap_rate == 0.0) & (gap <= gap_tol)  # type: ignore[operator]
+        enter &= (gap_rate > 0.0) | at_rest  # type: ignore[operator]
     return enter
 
 
