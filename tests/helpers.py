@@ -17,6 +17,39 @@ from ntncontact.io.writers import read_csv_table
 
 EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
 
+#: A block sliding at 2 off the right end of a base under gravity (frictionless); the base's
+#: ``motion`` (lagrangian or ale) and ``t_end`` to fill in (tests/test_sliding_pairs.py,
+#: tests/test_ale_mismatch_warning.py)
+LEDGE = """
+[analysis]
+kind = "dynamic"
+dt = 0.005
+t_end = {t_end}
+output_interval = 0.05
+
+[[bodies]]
+name = "block"
+mesh = {{ type = "rectangle", width = 0.5, height = 0.25, nx = 4, ny = 2, origin = [-0.5, 0.0] }}
+material = {{ model = "neo_hookean", E = 1000.0, nu = 0.3, density = 1.0 }}
+initial = {{ velocity = [2.0, 0.0] }}
+loads = [ {{ type = "gravity", vector = [0.0, -10.0] }} ]
+
+[[bodies]]
+name = "base"
+mesh_motion = "{motion}"
+mesh = {{ type = "rectangle", width = 1.0, height = 0.25, nx = 8, ny = 2, origin = [-1.0, -0.25] }}
+material = {{ model = "neo_hookean", E = 10000.0, nu = 0.3, density = 5.0 }}
+supports = [ {{ set = "bottom", x = 0.0, y = 0.0 }} ]
+
+[[contact]]
+body_1 = "block"
+surface_1 = "bottom"
+body_2 = "base"
+surface_2 = "top"
+method = "augmented_lagrangian"
+penalty_normal = 2000.0
+"""
+
 
 def run_example(name: str, out: Path, capsys, *sets: str) -> tuple[dict, str]:
     """``ntncontact run`` of examples/``name`` into ``out`` with ``--set`` overrides ``sets``:

@@ -13,44 +13,14 @@ from __future__ import annotations
 import json
 
 import pytest
-from helpers import run_example
+from helpers import LEDGE, run_example
 
 from ntncontact.cli import MISMATCH_WARNING, main
-
-LEDGE = """
-[analysis]
-kind = "dynamic"
-dt = 0.005
-t_end = 0.5
-output_interval = 0.1
-
-[[bodies]]
-name = "block"
-mesh = { type = "rectangle", width = 0.5, height = 0.25, nx = 4, ny = 2, origin = [-0.5, 0.0] }
-material = { model = "neo_hookean", E = 1000.0, nu = 0.3, density = 1.0 }
-initial = { velocity = [2.0, 0.0] }
-loads = [ { type = "gravity", vector = [0.0, -10.0] } ]
-
-[[bodies]]
-name = "base"
-mesh_motion = "ale"
-mesh = { type = "rectangle", width = 1.0, height = 0.25, nx = 8, ny = 2, origin = [-1.0, -0.25] }
-material = { model = "neo_hookean", E = 10000.0, nu = 0.3, density = 5.0 }
-supports = [ { set = "bottom", x = 0.0, y = 0.0 } ]
-
-[[contact]]
-body_1 = "block"
-surface_1 = "bottom"
-body_2 = "base"
-surface_2 = "top"
-method = "augmented_lagrangian"
-penalty_normal = 2000.0
-"""
 
 
 def test_a_slide_past_the_ale_surfaces_end_is_named(tmp_path, capsys):
     path = tmp_path / "ledge.toml"
-    path.write_text(LEDGE)
+    path.write_text(LEDGE.format(motion="ale", t_end=0.5))
     assert main(["run", str(path), "--out", str(tmp_path / "out"), "--quiet"]) == 0
     summary = json.loads((tmp_path / "out" / "summary.json").read_text())
     at = summary["max_ale_mismatch_at"]

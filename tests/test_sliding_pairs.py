@@ -14,40 +14,11 @@ import json
 
 import numpy as np
 import pytest
+from helpers import LEDGE
 
 from ntncontact.cli import main
 from ntncontact.io.vtk import read_pvd, read_vtu
 from ntncontact.io.writers import read_csv_table
-
-LEDGE = """
-[analysis]
-kind = "dynamic"
-dt = 0.005
-t_end = {t_end}
-output_interval = 0.05
-
-[[bodies]]
-name = "block"
-mesh = {{ type = "rectangle", width = 0.5, height = 0.25, nx = 4, ny = 2, origin = [-0.5, 0.0] }}
-material = {{ model = "neo_hookean", E = 1000.0, nu = 0.3, density = 1.0 }}
-initial = {{ velocity = [2.0, 0.0] }}
-loads = [ {{ type = "gravity", vector = [0.0, -10.0] }} ]
-
-[[bodies]]
-name = "base"
-mesh_motion = "{motion}"
-mesh = {{ type = "rectangle", width = 1.0, height = 0.25, nx = 8, ny = 2, origin = [-1.0, -0.25] }}
-material = {{ model = "neo_hookean", E = 10000.0, nu = 0.3, density = 5.0 }}
-supports = [ {{ set = "bottom", x = 0.0, y = 0.0 }} ]
-
-[[contact]]
-body_1 = "block"
-surface_1 = "bottom"
-body_2 = "base"
-surface_2 = "top"
-method = "augmented_lagrangian"
-penalty_normal = 2000.0
-"""
 
 BLOCK_MASS = 0.5 * 0.25 * 1.0
 SPACING = 0.125  # the base's surface segments
