@@ -190,8 +190,9 @@ def _warn_mismatch(summary: dict) -> None:
           f"({mismatch / at['element_size']:.2g} of the surface spacing, t = "
           f"{at['time']:.6g}; summary.json max_ale_mismatch): the mesh motion did not follow "
           "that pair, which is no longer node to node. An ALE surface longer than the slide "
-          "(its ends stay fixed), ale.respace = \"reference\" or more smoothing layers may "
-          "let it follow",
+          "(its ends stay fixed), a larger ale.max_stretch (a node leaves a fixed end behind "
+          "by at most that times their original distance) or ale.respace = \"reference\" "
+          "may let it follow",
           file=sys.stderr)
 
 

@@ -252,7 +252,8 @@ def _ale_setup(index: int, body: Body, cfg: BodyConfig, config: ScenarioConfig) 
         AleBody.from_mesh(body.mesh, surface, smoothing=opts.smoothing,
                           smoothing_layers=opts.smoothing_layers, sweeps=opts.sweeps,
                           remap=opts.remap, conserve_momentum=False,
-                          respace=opts.respace, interior=opts.interior,
+                          respace=opts.respace, max_stretch=opts.max_stretch,
+                          interior=opts.interior,
                           slide_tolerance=opts.slide_tolerance, convection=opts.convection,
                           density=body.material.density, name=body.name)
         for surface in surfaces)

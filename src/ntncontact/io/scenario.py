@@ -214,6 +214,8 @@ class AleConfig(Strict):
     # strain energy: docs/theory.md, "The strain energy the remap changes"
     restore_strain_energy: bool = True
     respace: Literal["local", "reference"] = "local"
+    # a surface node leaves a fixed end behind by at most this times their reference distance
+    max_stretch: Annotated[float, Field(gt=1.0)] = 2.0
     interior: Literal["minimal", "displacement", "position"] = "minimal"
     slide_tolerance: Positive = 1e-8
     # "convective_term": remap only X and d, and add the report's C v to the step (5.7)
