@@ -202,6 +202,14 @@ def _warn_mismatch(summary: dict) -> None:
 CONTACT_GAIN_WARNING = 1e-3
 
 
+def _energy_scale(summary: dict) -> float | None:
+    """The energy scale the summary's relative balance error was taken against (None when
+    the balance error is zero or missing)."""
+    error, relative = (summary.get("energy_balance_max_error"),
+                       summary.get("energy_balance_max_relative_error"))
+    return error / relative if error and relative else None
+
+
 def _warn_contact_energy(summary: dict, static: bool) -> None:
     """One line on stderr when the contact forces did net positive work on the bodies
     (summary.json ``contact_work``): the energy balance closes, since the ledger counts that
@@ -210,12 +218,8 @@ def _warn_contact_energy(summary: dict, static: bool) -> None:
     whose nodes do not face each other (a tester's press of a 7-element block on a
     10-element base, both Lagrangian: 0.0038 of the energy scale; 0 with matching nodes)."""
     gain = summary.get("contact_work") or 0.0
-    error, relative = (summary.get("energy_balance_max_error"),
-                       summary.get("energy_balance_max_relative_error"))
-    if gain <= 0.0 or not error or not relative:
-        return
-    scale = error / relative  # the energy scale the relative error was taken against
-    if gain <= CONTACT_GAIN_WARNING * scale:
+    scale = _energy_scale(summary)
+    if gain <= 0.0 or not scale or gain <= CONTACT_GAIN_WARNING * scale:
         return
     cause = ("the gap law does so in a dynamic run (report 5.5); the persistency law, or "
              "method = \"lagrange\" with analysis.energy_conserving = true, conserves it")
@@ -239,12 +243,8 @@ def _warn_unreturned_energy(summary: dict) -> None:
     conservation could give back (summary.json ``ale_unreturned_energy``): the energy balance
     error then holds it, and this names its cause."""
     unreturned = summary.get("ale_unreturned_energy") or 0.0
-    error, relative = (summary.get("energy_balance_max_error"),
-                       summary.get("energy_balance_max_relative_error"))
-    if not unreturned or not error or not relative:
-        return
-    scale = error / relative  # the energy scale the relative error was taken against
-    if abs(unreturned) > UNRETURNED_WARNING * scale:
+    scale = _energy_scale(summary)
+    if unreturned and scale and abs(unreturned) > UNRETURNED_WARNING * scale:
         print(f"warning: the ALE remaps changed the total energy by {unreturned:.3g} "
               f"({unreturned / scale:.2g} of its scale) that no body's velocities could give "
               "back (no Lagrangian body, or none with the kinetic energy, where it happened; "

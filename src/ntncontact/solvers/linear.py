@@ -73,6 +73,9 @@ PIVOT_RTOL = 1e-12
 #: patterns it leaves to SuperLU: ties and Lagrange multipliers): the delamination example's
 #: 946 checks cost 0.16 of 7.6 s of CPU.
 PIVOT_CHECK_GROWTH = 1e6
+#: what a singular matrix usually means, for the error both backends raise
+SINGULAR_CAUSES = ("(a body whose supports leave a rigid motion free, a mechanism, or "
+                   "coincident nodes that split a mesh?)")
 #: SuperLU keeps a diagonal pivot at least this fraction of the largest entry of its column
 #: (partial pivoting otherwise); the static LU accepts a pivot on the same test, so it takes
 #: the pivots SuperLU would and falls back to SuperLU where SuperLU would interchange rows.
@@ -622,8 +625,7 @@ def _check_pivots(lu: spla.SuperLU) -> None:
     if small.size:
         raise LinearSolverError(
             f"matrix is numerically singular: {small.size} pivot(s) below "
-            f"{PIVOT_RTOL:g} x the largest (a body whose supports leave a rigid motion free, "
-            "a mechanism, or coincident nodes that split a mesh?)")
+            f"{PIVOT_RTOL:g} x the largest {SINGULAR_CAUSES}")
 
 
 class _PardisoBackend:
@@ -691,8 +693,7 @@ class _PardisoBackend:
         if self._perturbed():
             raise LinearSolverError(
                 f"matrix is numerically singular: PARDISO perturbed {self._perturbed()} "
-                "pivot(s) (a body whose supports leave a rigid motion free, a mechanism, or "
-                "coincident nodes that split a mesh?)")
+                f"pivot(s) {SINGULAR_CAUSES}")
 
     def _perturbed(self) -> int:
         return int(self.pardiso.get_iparm(14))  # perturbed pivots of the last factorization
