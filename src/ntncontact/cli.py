@@ -223,6 +223,11 @@ def _warn_contact_energy(summary: dict, static: bool) -> None:
         return
     cause = ("the gap law does so in a dynamic run (report 5.5); the persistency law, or "
              "method = \"lagrange\" with analysis.energy_conserving = true, conserves it")
+    unmet = summary.get("energy_equation_unmet_steps")
+    if unmet:  # analysis.energy_conserving is on, and could not conserve at these steps
+        cause = (f"report 5.5's energy equation had no root at {unmet} step(s) (summary.json "
+                 "energy_equation_unmet_steps), where no relaxation of the gaps conserves the "
+                 "energy; the persistency law conserves it")
     if static:
         cause = ("node-to-node pairs whose nodes do not face each other (non-matching "
                  "Lagrangian surfaces) do so, their forces along surface 1's normal at nodes "

@@ -60,6 +60,8 @@ class ResultWriter:
                              "contact_penalties": {  # as used (contact.N.penalty_factor)
                                  ci.name: {"normal": ci.law.eps_N, "tangential": ci.law.eps_T}
                                  for ci in model.interfaces}} | summary_extra
+        if model.analysis.energy_conserving:  # steps whose energy equation had no root
+            summary_extra = {"energy_equation_unmet_steps": 0} | summary_extra
         extra_history = extra_history + reaction_columns(model)
         if model.ties:
             extra_history = extra_history + tie_history(model)
@@ -123,6 +125,8 @@ class ResultWriter:
             fields["contact_work"] = row["contact_work"]
         if row.get("ale_unreturned_energy"):  # cumulative: the summary keeps the last
             fields["ale_unreturned_energy"] = row["ale_unreturned_energy"]
+        if record.extra.get("energy_equation_unmet"):  # report 5.5: no theta conserves
+            fields["energy_equation_unmet_steps"] = summary["energy_equation_unmet_steps"] + 1
         if row.get("augmentations_converged") == 0:  # augmentation.on_limit = "accept"
             fields["unconverged_steps"] = summary["unconverged_steps"] + 1
         fields |= self._off_surface_summary(
