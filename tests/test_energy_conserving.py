@@ -5,13 +5,13 @@ import pytest
 from helpers import Recorder, model_from_example
 
 import ntncontact as ntc
-from ntncontact.io.scenario import ScenarioError
 from ntncontact.contact import PairState
 from ntncontact.dynamics.energy import EndEnergy, EnergyConsistentContact
 from ntncontact.dynamics.midpoint import end_of_step
 from ntncontact.engine.interfaces import contact_terms, lagrange_terms
 from ntncontact.engine.problem import StepProblem, StepState
 from ntncontact.engine.simulation import Simulation
+from ntncontact.io.scenario import ScenarioError
 
 LAGRANGE_GAP = ['contact.0.method="lagrange"', 'contact.0.law="gap"']
 
