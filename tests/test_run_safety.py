@@ -303,3 +303,35 @@ def test_a_signal_while_the_figures_are_drawn_stops_them_at_once(tmp_path):
     assert summary(out)["status"] == "completed"
     assert not (out / "animation.gif").exists()
     assert not (out / LOCK_FILE).exists()
+
+
+@pytest.mark.parametrize("limit, failing", [(40_000, "contact.csv"), (30_000, "fields_0")])
+def test_a_file_that_cannot_grow_fails_the_run_with_whole_rows_and_names_the_file(
+        tmp_path, limit, failing):
+    """A file-size limit (as a full disk) stops the run: a tester's contact.csv ended inside a
+    number, which pandas read as that row's value, the summary stayed "running" (status
+    "stale") when no new file could be made, and the error named no file. Now the rows stay
+    whole, the summary says failed, and the error names what could not be written."""
+    import resource
+
+    def limited() -> None:
+        resource.setrlimit(resource.RLIMIT_FSIZE, (limit, limit))
+
+    out = tmp_path / "ring"
+    interval = "10.0" if failing == "contact.csv" else "0.025"  # frames or contact rows first
+    done = subprocess.run([sys.executable, "-m", "ntncontact.cli", "run",
+                           str(EXAMPLES / "ring_impact.toml"), "--out", str(out), "--quiet",
+                           "--set", f"analysis.output_interval={interval}"],
+                          preexec_fn=limited, capture_output=True, text=True, timeout=300)
+    assert done.returncode == 1 and "Traceback" not in done.stderr
+    assert "File too large" in done.stderr and failing in done.stderr
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["status"] == "failed" and failing in summary["error"]
+    for name in ("history.csv", "contact.csv"):
+        text = (out / name).read_text()
+        assert text.endswith("\n")
+        widths = {line.count(",") for line in text.splitlines()}
+        assert len(widths) == 1, (name, widths)  # every row whole
+    if failing == "contact.csv":  # its rows up to the last whole step
+        contact = read_csv_table(out / "contact.csv")
+        assert contact["step"].size > 0 and contact["step"].max() <= summary["steps"] + 1

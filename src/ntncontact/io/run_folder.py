@@ -82,9 +82,12 @@ def replace_atomically(path: Path, write: Callable[[Path], None], sync: bool = F
             with open(tmp, "rb") as handle:
                 os.fsync(handle.fileno())
         os.replace(tmp, path)
-    except BaseException:
+    except BaseException as err:
         with contextlib.suppress(OSError):
             tmp.unlink()
+        if isinstance(err, OSError) and err.errno is not None and err.filename is None:
+            # a failed write of the file's data names no file ("[Errno 28] No space left")
+            raise OSError(err.errno, err.strerror, str(path)) from None
         raise
 
 

@@ -122,17 +122,18 @@ class _CsvWriter:
         path.parent.mkdir(parents=True, exist_ok=True)
         if resume_step is not None:
             self._file = _truncated_to_step(path, columns, resume_step)
-            self._csv = csv.writer(self._file, lineterminator="\n")
             return
         self._file = create_new_text(path)
-        self._csv = csv.writer(self._file, lineterminator="\n")
         self._write_rows([list(columns)])
 
     def _write_rows(self, rows: Sequence[Sequence[str]]) -> None:
+        """Append ``rows`` whole or not at all (the file object's own buffer is never used:
+        a write it failed to flush would be retried, cut, at the next write or at close)."""
         if self._file.closed:
             raise ValueError(f"{self.path} is already closed")
-        self._csv.writerows(rows)
-        self._file.flush()
+        text = io.StringIO()
+        csv.writer(text, lineterminator="\n").writerows(rows)
+        _append_whole(self._file.fileno(), text.getvalue().encode("utf-8"), self.path)
 
     def close(self) -> None:
         self._file.close()
@@ -142,6 +143,21 @@ class _CsvWriter:
 
     def __exit__(self, *exc_info: object) -> None:
         self.close()
+
+
+def _append_whole(fd: int, data: bytes, path: Path) -> None:
+    """Append ``data`` to the file of ``fd``, all or nothing: a write that fails part-way (a
+    full disk, a file-size limit) is cut back to the size before it, so that CSV rows stay
+    whole (a tester's full disk left contact.csv's last row cut inside a number, which pandas
+    read as that row's value), and the error names the file."""
+    start = os.lseek(fd, 0, os.SEEK_END)
+    view = memoryview(data)
+    try:
+        while view:
+            view = view[os.write(fd, view):]
+    except OSError as err:
+        os.ftruncate(fd, start)
+        raise OSError(err.errno, err.strerror, str(path)) from None
 
 
 def _truncated_to_step(path: Path, columns: tuple[str, ...], step: int) -> io.TextIOWrapper:
@@ -342,10 +358,23 @@ class SummaryWriter:
         elif status == "running":
             self._write_in_place(text.encode())
         else:
-            self.close()
+            self._write_final(text)
+        self._data = merged
+
+    def _write_final(self, text: str) -> None:
+        """The final summary as a new file renamed over the old one, or, where no new file
+        can be made (a full disk, a folder that takes no new file), written in place as while
+        running: a tester's run stopped by a full disk left summary.json at "running", which
+        ``ntncontact status`` called a killed run."""
+        try:
             replace_atomically(self.path, lambda tmp: tmp.write_text(text, encoding="utf-8"),
                                sync=True)
-        self._data = merged
+        except OSError:
+            if self._file is None:
+                raise
+            self._write_in_place(text.encode())
+        finally:
+            self.close()
 
     def finish(self, status: str = "completed", error: str | None = None, **fields: Any) -> None:
         """Record the final status (and error message) of the run."""
