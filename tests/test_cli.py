@@ -97,6 +97,21 @@ def test_mesh_quality_command_and_summary(tmp_path, capsys):
     assert main(["mesh-quality", str(vtu)]) == 0
 
 
+def test_mesh_quality_of_a_plain_vtu_mesh_reads_its_points(tmp_path, capsys):
+    """A VTU that is not a results frame (no displacement field) is a mesh: its points are
+    measured (a tester's plain quad mesh gave a KeyError traceback)."""
+    import meshio
+    import numpy as np
+
+    points = np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [1.0, 1.0, 0.0], [0.0, 1.0, 0.0],
+                       [2.0, 0.0, 0.0], [2.0, 1.0, 0.0]])
+    path = tmp_path / "plain.vtu"
+    meshio.write(path, meshio.Mesh(points, [("quad", np.array([[0, 1, 2, 3], [1, 4, 5, 2]]))]))
+    assert main(["mesh-quality", str(path)]) == 0
+    out = capsys.readouterr().out
+    assert "plain.vtu" in out and "90" in out  # unit squares: every angle 90 degrees
+
+
 @pytest.mark.parametrize("content", [b"garbage", b"<VTKFile type=\"UnstructuredGrid\""])
 def test_mesh_quality_of_a_corrupt_vtu_is_one_error_line(tmp_path, capsys, content):
     """A frame that is not VTU, or cut short: before, meshio's ReadError or the XML parser's

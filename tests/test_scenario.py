@@ -230,3 +230,15 @@ def test_a_disk_mesh_builds_with_its_sets(tmp_path):
 def test_bad_disk_keys_are_clear_errors(tmp_path, replace, expected):
     with pytest.raises(ScenarioError, match=expected):
         build_model(load_scenario(write(tmp_path, DISK.replace(*replace))), tmp_path)
+
+
+def test_contact_names_must_be_unique(tmp_path):
+    """contact.csv's rows and summary.json's penalties are told apart by the interfaces'
+    names: a tester's second interface named as the first lost the first's penalty."""
+    text = (EXAMPLES / "tilted_blocks.toml").read_text()
+    contact = text[text.index("[[contact]]"):]
+    assert "\n[[" not in contact.strip()[2:]  # the file's last table
+    path = tmp_path / "twice.toml"
+    path.write_text(text + "\n" + contact)
+    with pytest.raises(ScenarioError, match="contact names must be unique"):
+        load_scenario(path)

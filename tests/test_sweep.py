@@ -198,3 +198,11 @@ def test_the_sweeps_own_cluster_runs_with_the_sweeps_dask_settings():
         assert server["tick"] == 1000 and server["monitor"] == 5000
     assert worker["memory_monitor"] == nanny["memory_monitor"] == 1000
     assert {key: dask.config.get(key) for key in LOCAL_DASK_CONFIG} == before  # not leaked
+
+
+@pytest.mark.parametrize("workers", [0, -1])
+def test_a_sweep_of_no_workers_is_refused_before_anything_starts(sweep_file, tmp_path, workers):
+    """A LocalCluster of no workers waited for ever, silently (a tester's `--workers 0`)."""
+    with pytest.raises(ValueError, match="workers must be >= 1"):
+        sweep(sweep_file, tmp_path / "out", workers=workers, progress=False)
+    assert not (tmp_path / "out").exists()

@@ -315,7 +315,10 @@ def _mesh_quality(args: argparse.Namespace) -> int:
         from .io.vtk import read_vtu
 
         frame = read_vtu(path)
-        tables = {path.name: quality_statistics(frame.deformed_points, frame.cells)}
+        # a results frame: its current configuration; a plain quad mesh: its points
+        points = (frame.deformed_points if "displacement" in frame.point_data
+                  else frame.points)
+        tables = {path.name: quality_statistics(points, frame.cells)}
     elif path.suffix == ".msh":
         from .mesh.gmsh_io import read_msh
 

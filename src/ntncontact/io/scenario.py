@@ -360,6 +360,10 @@ class ScenarioConfig(Strict):
         ties = [t.name for t in self.tie]
         if len(set(ties)) != len(ties):
             raise ValueError(f"tie names must be unique, got {ties}")
+        # contact.csv's rows and summary.json's penalties are told apart by these names
+        interfaces = [c.name for c in self.contact]
+        if len(set(interfaces)) != len(interfaces):
+            raise ValueError(f"contact names must be unique, got {interfaces}")
         return self
 
 

@@ -187,6 +187,8 @@ def sweep(spec: str | Path, out: str | Path, *, scheduler: str | None = None,
     """Run every case of the sweep file ``spec`` on Dask into ``out`` and return the table
     written to ``out/sweep.csv``. ``scheduler``: the address of a running Dask scheduler;
     default a LocalCluster with ``workers`` single-threaded worker processes (one per core)."""
+    if workers is not None and workers < 1:  # a LocalCluster of none waits for ever
+        raise ValueError(f"workers must be >= 1, got {workers}")
     sweep_spec, scenario_path = load_sweep(spec)
     load_scenario(scenario_path)  # a broken scenario fails here, once, not in every case
     cases = sweep_spec.case_overrides()
