@@ -230,6 +230,7 @@ class Simulation:
         self._last_tie_forces: dict = {}
         self._supports = support_sets(model)
         self._last_reactions: dict = {}
+        self._cut_back = False  # the last step was solved in sub-steps
         self._energy_multiplier = 0.0
         self._energy_unmet = False  # the energy equation had no root (report 5.5)
         self._penetration = PenetrationCheck(model) if len(model.bodies) > 1 else None
@@ -792,11 +793,13 @@ class Simulation:
         self._step_work = dict.fromkeys(LEDGER, 0.0)  # summed over the accepted sub-steps
         self._augmentations_converged = True
         self._state_substep = self._last_substep
+        substeps: list[tuple[float, dict, dict]] = []  # each one's length, reactions, tie forces
         while remaining > 1e-12 * dt:
             h = min(h, remaining)
             try:
                 before = dict(self._step_work)
                 state, its = self.advance(state, h)
+                substeps.append((h, self._last_reactions, self._last_tie_forces))
             except (NewtonError, InvertedElementError, AleMotionError, np.linalg.LinAlgError,
                     RuntimeError) as err:
                 cuts += 1
@@ -812,6 +815,9 @@ class Simulation:
             iterations += its
             remaining -= h
             self._state_substep = h
+        self._cut_back = len(substeps) > 1
+        if self.dynamic and self._cut_back:
+            self._last_reactions, self._last_tie_forces = _mean_forces(substeps, dt)
         return replace(state, step=self.state.step + 1, time=self.state.time + dt), iterations, h
 
     def run(self, progress: Callable[[float], None] | None = None,
@@ -853,7 +859,7 @@ class Simulation:
             self.state, its, self._last_substep = self.step_with_cutback(dt)
             self.state = replace(self.state, time=t_next)
             extra = (self._ledger_extra() | self._contact_extra() | self._off_surface_extra()
-                     | self._tie_extra() | self._last_reactions)
+                     | self._tie_extra() | self._last_reactions | {"cut_back": self._cut_back})
             self._notify(StepRecord(self.state, self.balance(self.state), its, dt, extra))
             if progress is not None:
                 progress(self.state.time)
@@ -946,3 +952,12 @@ class Simulation:
         for obs in self.observers:
             obs.on_finish(status, error)
 
+
+def _mean_forces(substeps: list[tuple[float, dict, dict]], dt: float) -> tuple[dict, dict]:
+    """A cut-back dynamic step's support reactions and tie forces as the means over its
+    sub-steps, weighted by their lengths: the history row's force times dt is then the step's
+    impulse, which the momentum's change equals (a tester's cut-back steps, where the last
+    sub-step's forces were reported, missed it by up to 6 % of the largest momentum)."""
+    reactions = {key: sum(h * r[key] for h, r, _ in substeps) / dt for key in substeps[-1][1]}
+    ties = {name: sum(h * t[name] for h, _, t in substeps) / dt for name in substeps[-1][2]}
+    return reactions, ties

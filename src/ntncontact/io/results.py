@@ -67,6 +67,7 @@ class ResultWriter:
             extra_history = extra_history + tie_history(model)
             summary_extra = {"max_tie_violation": 0.0} | summary_extra
         summary_extra = dict.fromkeys(EnergyAudit.KEYS) | summary_extra  # energy balance
+        summary_extra = {"cut_back_steps": 0} | summary_extra  # steps solved in sub-steps
         self._energy = EnergyAudit()
         self.results: ResultsDirectory | MemoryResults
         if directory is None:  # ntncontact.run(out=None): nothing written
@@ -125,6 +126,8 @@ class ResultWriter:
             fields["contact_work"] = row["contact_work"]
         if row.get("ale_unreturned_energy"):  # cumulative: the summary keeps the last
             fields["ale_unreturned_energy"] = row["ale_unreturned_energy"]
+        if record.extra.get("cut_back"):
+            fields["cut_back_steps"] = summary["cut_back_steps"] + 1
         if record.extra.get("energy_equation_unmet"):  # report 5.5: no theta conserves
             fields["energy_equation_unmet_steps"] = summary["energy_equation_unmet_steps"] + 1
         if row.get("augmentations_converged") == 0:  # augmentation.on_limit = "accept"
