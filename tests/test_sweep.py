@@ -78,6 +78,15 @@ def test_a_sweep_runs_every_case_records_the_failure_and_skips_finished_ones_on_
     assert not bool(again.iloc[4]["skipped"]) and again.iloc[4]["status"] == "failed"
     pd.testing.assert_series_equal(again["final_kinetic"].iloc[:4], table["final_kinetic"].iloc[:4])
 
+    # the base scenario edited: its completed cases are no longer this sweep's (a tester's
+    # rerun after E 100 -> 400 reused the old results as the new ones)
+    block = sweep_file.parent / "block.toml"
+    block.write_text(block.read_text().replace("E = 100.0", "E = 400.0"))
+    edited = sweep(sweep_file, out, workers=2, progress=False)
+    assert not edited.iloc[:4]["skipped"].any()
+    assert (edited["status"].iloc[:4] == "completed").all()
+    assert (edited["final_kinetic"].iloc[:4] != table["final_kinetic"].iloc[:4]).all()
+
 
 @pytest.mark.slow
 def test_a_sweep_beside_a_busy_dashboard_port_warns_nothing(tmp_path):

@@ -194,7 +194,8 @@ def run(scenario: Scenario | str | Path, out: str | Path | None = None, *,
     resume = checkpoint.load_latest(out, identity) if restart else None
     writer = ResultWriter(Path(out), model, overwrite=overwrite,
                           resume=resume and resume["writer"], scenario=scenario.source,
-                          title=scenario.config.title, overrides=list(scenario.overrides))
+                          title=scenario.config.title, overrides=list(scenario.overrides),
+                          scenario_hash=identity["scenario_hash"])
     simulation = Simulation(model, [writer])
     checkpoint.attach(simulation, writer, out, scenario.config.analysis.checkpoint_interval,
                       identity, resume)

@@ -102,7 +102,8 @@ def _run_until_stopped(args: argparse.Namespace, stop: StopOnSignal) -> int:
     resume = checkpoint.load_latest(out, identity) if args.restart else None
     writer = ResultWriter(out, model, overwrite=args.overwrite,
                           resume=resume and resume["writer"], scenario=str(scenario),
-                          title=config.title, overrides=list(args.set or []))
+                          title=config.title, overrides=list(args.set or []),
+                          scenario_hash=identity["scenario_hash"])
     with _finished_on_error(writer, stop):
         sim = Simulation(model, [writer])
         checkpoint.attach(sim, writer, out, config.analysis.checkpoint_interval, identity,

@@ -17,8 +17,8 @@ A sweep file (TOML; docs/api.md)::
     by = "analysis.mass"
 
 Each case runs in ``OUT/cases/case-<hash of its overrides>/``: a rerun skips a case whose folder
-says ``completed`` for the same overrides, and a failing case is recorded with its error
-without stopping the others.
+says ``completed`` for the same overrides and scenario (``scenario_hash``), and a failing case
+is recorded with its error without stopping the others.
 """
 
 from __future__ import annotations
@@ -40,7 +40,8 @@ import pandas as pd
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
 from ..api import Scenario, load_scenario, override_strings, read_results, run
-from ..engine.builder import build_mesh
+from ..engine.builder import build_mesh, build_model
+from ..io.checkpoint import run_identity
 from ..io.scenario import ScenarioError, read_toml
 from ..threads import single_threaded
 
@@ -145,13 +146,13 @@ def run_case(scenario_path: str, overrides: Mapping[str, Any], folder: str,
     items = override_strings(overrides)
     row: dict[str, Any] = {"case": Path(folder).name, **overrides}
     try:
-        done = _completed(Path(folder), items)
+        scenario = load_scenario(scenario_path, list(items))
+        done = _completed(Path(folder), scenario)
         if done:
             results = read_results(folder)
         else:
             with single_threaded():  # one single-threaded case per worker and core
-                results = run(load_scenario(scenario_path, list(items)), Path(folder),
-                              overwrite=True)  # read back from the folder it wrote
+                results = run(scenario, Path(folder), overwrite=True)  # read back from it
         row |= {"skipped": done, "error": results.summary.get("error")}
         row |= {k: results.summary.get(k) for k in HEADLINE if k in results.summary}
         if row.get("contact_end_time") is not None and row.get("contact_start_time") is not None:
@@ -165,12 +166,28 @@ def run_case(scenario_path: str, overrides: Mapping[str, Any], folder: str,
     return row
 
 
-def _completed(folder: Path, items: Sequence[str]) -> bool:
+def _completed(folder: Path, scenario: Scenario) -> bool:
+    """Whether ``folder`` holds a completed run of this case: the same overrides, and the
+    same validated scenario and meshes (``scenario_hash``, as a checkpoint is matched). A
+    tester's sweep rerun after an edit of its base scenario (E 100 -> 400) reused the old
+    results as the new ones."""
+    data = _completed_summary(folder, scenario.overrides)
+    if data is None:
+        return False
+    model = build_model(scenario.config, scenario.base_dir)
+    identity = run_identity(scenario.config, scenario.overrides, model)
+    return data.get("scenario_hash") == identity["scenario_hash"]
+
+
+def _completed_summary(folder: Path, items: Sequence[str]) -> dict | None:
+    """The summary of a completed run of these overrides in ``folder``, else None."""
     summary = folder / "summary.json"
     if not summary.is_file():
-        return False
+        return None
     data = json.loads(summary.read_text(encoding="utf-8"))
-    return data.get("status") == "completed" and list(data.get("overrides", [])) == list(items)
+    if data.get("status") != "completed" or list(data.get("overrides", [])) != list(items):
+        return None
+    return data
 
 
 def _reduce(history: pd.DataFrame, reductions: Mapping[str, str]) -> dict[str, float | None]:
@@ -216,7 +233,7 @@ def case_cost(scenario: Scenario, folder: Path, meshes: dict[str, int] | None = 
     steps times its elements; 0 for a case its folder says completed (a rerun only reads
     it) and for one whose meshes cannot be built (it fails on its worker, recorded there).
     ``meshes`` caches element counts by mesh settings (a grid repeats the same meshes)."""
-    if _completed(folder, scenario.overrides):
+    if _completed_summary(folder, scenario.overrides) is not None:  # an order, not a check
         return 0.0
     meshes = {} if meshes is None else meshes
     cells = 0
