@@ -148,3 +148,15 @@ def test_a_run_in_memory_keeps_contact_rows_like_contact_csv(tmp_path):
 def test_checkpoints_need_a_folder(tmp_path):
     with pytest.raises(ScenarioError, match="need a results folder"):
         ntc.run(ntc.load_scenario(SPIN, SHORT | {"analysis.checkpoint_interval": 0.05}))
+
+
+def test_frames_fall_on_the_first_steps_past_each_multiple_of_the_output_interval():
+    """An interval that is not a multiple of dt: frames at the first steps at or past 0.03,
+    0.06, 0.09 (and the last step), as Abaqus and FEBio schedule them; counted from each
+    frame's time the schedule drifted onto the dt grid (a tester's interval 0.3 at dt 0.25
+    gave frames at 0, 0.5, 1.0)."""
+    scenario = ntc.load_scenario(EXAMPLES / "spinning_block.toml",
+                                 {"analysis.dt": 0.02, "analysis.t_end": 0.12,
+                                  "analysis.output_interval": 0.03})
+    times = ntc.run(scenario, out=None).times
+    np.testing.assert_allclose(times, [0.0, 0.04, 0.06, 0.10, 0.12], atol=1e-12)

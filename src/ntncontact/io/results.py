@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 
 import numpy as np
@@ -200,8 +201,11 @@ class ResultWriter:
     def _due(self, time: float, model: Model) -> bool:
         last = time >= model.analysis.t_end - 1e-9 * model.analysis.dt
         if self.interval is None or last or time >= self._next_output - 1e-9 * model.analysis.dt:
-            if self.interval is not None:
-                self._next_output = time + self.interval
+            if self.interval is not None:  # the next multiple of the interval: a schedule
+                # from the last frame's time drifted to the dt grid (a tester's interval 0.3
+                # at dt 0.25 gave frames at 0, 0.5, 1.0 instead of the first steps past 0.3,
+                # 0.6, 0.9)
+                self._next_output = (math.floor(time / self.interval + 1e-6) + 1) * self.interval
             return True
         return False
 
