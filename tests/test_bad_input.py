@@ -148,6 +148,19 @@ CASES = [
          edit=("penalty_normal = 100.0", 'penalty_normal = 100.0\n\n[[contact]]\n'
                'body_1 = "block"\nsurface_1 = "right"\nbody_2 = "base"\nsurface_2 = "top"\n'
                "penalty_normal = 100.0")),
+    # accepted in silence before session 37 (an independent tester's cases)
+    Case("interface_both_ways", ("contact.0 and contact.1", "roles of the bodies swapped"),
+         edit=("penalty_normal = 100.0", 'penalty_normal = 100.0\n\n[[contact]]\n'
+               'body_1 = "base"\nsurface_1 = "top"\nbody_2 = "block"\nsurface_2 = "bottom"\n'
+               "penalty_normal = 100.0")),
+    Case("surface_part_twice", ("contact.0", "'bottom+bottom'", "names a part twice"),
+         sets=('contact.0.surface_1="bottom+bottom"',)),
+    Case("excluded_set_off_the_surface", ("contact.0.exclude", "'corner_top_left'",
+                                          "no node on surface_1 'bottom'"),
+         sets=('contact.0.exclude=["corner_top_left"]',)),
+    Case("vector_on_a_pressure", ("bodies.1.loads.0", "pressure", "not 'vector'"),
+         sets=('bodies.1.loads=[{ type = "pressure", set = "top", value = 1.0, '
+               'vector = [0.0, -1.0] }]',)),
     Case("joined_surface_misspelt", ("contact.0", "'rigth'", "join several with '+'"),
          sets=('contact.0.surface_1="bottom+rigth"',)),
     # options the analysis would ignore, or that would fail only steps later (session 35)

@@ -184,8 +184,12 @@ class LoadConfig(Strict):
     def _fields(self) -> LoadConfig:
         if self.type == "pressure" and self.value is None:
             raise ValueError("a pressure load needs 'value'")
+        if self.type == "pressure" and self.vector is not None:  # it was ignored
+            raise ValueError("a pressure load takes 'value' (normal to its edges), not 'vector'")
         if self.type != "pressure" and self.vector is None:
             raise ValueError(f"a {self.type} load needs 'vector'")
+        if self.type != "pressure" and self.value is not None:
+            raise ValueError(f"a {self.type} load takes 'vector', not 'value'")
         if self.type in ("body_force", "gravity") and self.set is not None:
             raise ValueError(f"a {self.type} load acts on the whole body: remove 'set'")
         if self.type not in ("body_force", "gravity") and self.set is None:
@@ -361,10 +365,11 @@ class ScenarioConfig(Strict):
         if len(set(ties)) != len(ties):
             raise ValueError(f"tie names must be unique, got {ties}")
         # contact.csv's rows and summary.json's penalties are told apart by these names
-        interfaces = [c.name for c in self.contact]
+        interfaces = [c.name or f"interface{i}" for i, c in enumerate(self.contact)]
         if len(set(interfaces)) != len(interfaces):
             raise ValueError(f"contact names must be unique, got {interfaces}")
         return self
+
 
 
 def _format_error(path: Path, err: ValidationError) -> str:

@@ -86,6 +86,8 @@ class QuadMesh:
             return self.edge_sets[name]
         parts = name.split(JOIN) if JOIN in name else [name]
         missing = [p for p in parts if p not in self.edge_sets]
+        if len(set(parts)) < len(parts):  # a typo for another face, most likely
+            raise MeshError(f"{self.name}: surface '{name}' names a part twice")
         if missing:
             raise MeshError(
                 f"{self.name}: no surface (edge set) named '{missing[0]}' "
