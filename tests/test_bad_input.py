@@ -153,6 +153,8 @@ CASES = [
          edit=("penalty_normal = 100.0", 'penalty_normal = 100.0\n\n[[contact]]\n'
                'body_1 = "base"\nsurface_1 = "top"\nbody_2 = "block"\nsurface_2 = "bottom"\n'
                "penalty_normal = 100.0")),
+    Case("self_contact", ("contact.0", "the same body 'block'", "self-contact"),
+         sets=('contact.0.body_2="block"', 'contact.0.surface_2="top"')),
     Case("surface_part_twice", ("contact.0", "'bottom+bottom'", "names a part twice"),
          sets=('contact.0.surface_1="bottom+bottom"',)),
     Case("excluded_set_off_the_surface", ("contact.0.exclude", "'corner_top_left'",

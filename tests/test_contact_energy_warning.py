@@ -143,3 +143,18 @@ def test_the_energy_variant_counts_its_unmet_steps_and_does_not_advise_itself(tm
     assert "warning: the contact forces added" in err
     assert "energy_equation_unmet_steps" in err
     assert "analysis.energy_conserving = true, conserves it" not in err
+
+
+def test_a_failed_run_prints_its_warnings_before_its_error(tmp_path, capsys):
+    """The gap law in a dynamic run with exact multipliers: a tester's block between two walls
+    gained 37 times its energy until an element inverted, and the run said only that."""
+    from ntncontact.cli import main
+
+    path = Path(__file__).parent / "data" / "block_between_walls_gap_law.toml"
+    out = tmp_path / "out"
+    assert main(["run", str(path), "--out", str(out), "--quiet"]) == 1
+    err = capsys.readouterr().err
+    assert "warning: the contact forces added" in err and "inverted" in err
+    assert err.index("warning: the contact forces added") < err.index("error:")
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["status"] == "failed" and summary["energy_max_relative_variation"] > 10

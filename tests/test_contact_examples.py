@@ -168,7 +168,7 @@ def test_augmentations_shrink_the_penetration_towards_the_lagrange_solution():
 
 @pytest.mark.parametrize(("iterations", "why"), [
     (1, "one augmentation only, and the test compares two"),
-    (3, "change of the normal rate"),
+    (3, "change of the gap"),  # the gap law's test (it said "normal rate")
 ])
 def test_a_step_whose_augmentations_run_out_is_cut_back_then_fails(iterations, why):
     """By default the limit of augmentations is a failed step (not a silently accepted one):

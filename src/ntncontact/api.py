@@ -210,8 +210,10 @@ def _run_in_memory(scenario: Scenario, progress: Callable[[float], None] | None,
         raise ScenarioError(f"{scenario.source}: checkpoints and restarts need a results "
                             "folder: give out=...")
     model = build_model(scenario.config, scenario.base_dir)
+    identity = checkpoint.run_identity(scenario.config, scenario.overrides, model)
     writer = ResultWriter(None, model, scenario=scenario.source,
-                          title=scenario.config.title, overrides=list(scenario.overrides))
+                          title=scenario.config.title, overrides=list(scenario.overrides),
+                          scenario_hash=identity["scenario_hash"])
     Simulation(model, [writer]).run(progress)  # a failed step raises, as with a folder
     return _results_of(writer.results)
 

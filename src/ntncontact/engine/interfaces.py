@@ -440,7 +440,8 @@ def _augmentation_failure(ci: ContactInterface, prev: ContactResult | None,
     if check.converged:
         return ""
     tol = ci.tolerances
-    out = [f"change of the normal rate {check.normal_change:.3g} (gap_tolerance {tol.normal:.3g})"]
+    measure = "normal rate" if ci.persistency else "gap"  # report 5.4's test of each law
+    out = [f"change of the {measure} {check.normal_change:.3g} (gap_tolerance {tol.normal:.3g})"]
     if ci.law.frictional:
         out += [f"change of the slip {check.tangential_change:.3g} "
                 f"(slip_tolerance {tol.tangential:.3g})",

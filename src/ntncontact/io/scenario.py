@@ -315,8 +315,9 @@ class ContactConfig(Strict):
 
     @model_validator(mode="after")
     def _sides(self) -> ContactConfig:
-        if (self.body_1, self.surface_1) == (self.body_2, self.surface_2):
-            raise ValueError("the same surface cannot be on both sides of an interface")
+        if self.body_1 == self.body_2:  # each pair's surfaces are checked apart at t = 0
+            raise ValueError(f"body_1 and body_2 are the same body '{self.body_1}': contact of "
+                             "a body with itself (self-contact) is not supported")
         scaled = self.penalty_factor is not None
         if scaled and self.penalty_normal > 0.0:
             raise ValueError("give penalty_normal or penalty_factor, not both "

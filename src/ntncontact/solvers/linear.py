@@ -74,8 +74,10 @@ PIVOT_RTOL = 1e-12
 #: 946 checks cost 0.16 of 7.6 s of CPU.
 PIVOT_CHECK_GROWTH = 1e6
 #: what a singular matrix usually means, for the error both backends raise
-SINGULAR_CAUSES = ("(a body whose supports leave a rigid motion free, a mechanism, or "
-                   "coincident nodes that split a mesh?)")
+SINGULAR_CAUSES = ("(a body whose supports leave a rigid motion free, in a static run also "
+                   "one held only by contact pairs that all slip, as under a tangential load "
+                   "above the friction's limit; a mechanism, or coincident nodes that split a "
+                   "mesh?)")
 #: SuperLU keeps a diagonal pivot at least this fraction of the largest entry of its column
 #: (partial pivoting otherwise); the static LU accepts a pivot on the same test, so it takes
 #: the pivots SuperLU would and falls back to SuperLU where SuperLU would interchange rows.
