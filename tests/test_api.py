@@ -160,3 +160,18 @@ def test_frames_fall_on_the_first_steps_past_each_multiple_of_the_output_interva
                                   "analysis.output_interval": 0.03})
     times = ntc.run(scenario, out=None).times
     np.testing.assert_allclose(times, [0.0, 0.04, 0.06, 0.10, 0.12], atol=1e-12)
+
+
+def test_a_scenario_dict_takes_numpy_numbers():
+    """Studies build values with np.arange and np.linspace: an np.int64 mesh count was refused
+    while an np.float64 modulus passed (a tester's case)."""
+    scenario = ntc.load_scenario(EXAMPLES / "spinning_block.toml")
+    raw = scenario.data | {}
+    raw["bodies"] = [dict(b) for b in raw["bodies"]]
+    raw["bodies"][0]["mesh"] = dict(raw["bodies"][0]["mesh"]) | {"nx": np.int64(3)}
+    raw["bodies"][0]["material"] = dict(raw["bodies"][0]["material"]) | {"E": np.float64(50.0)}
+    raw["bodies"][0]["initial"] = dict(raw["bodies"][0].get("initial", {})) | {
+        "velocity": np.array([0.5, 0.0])}
+    built = ntc.scenario_from_dict(raw, base_dir=EXAMPLES)
+    assert built.config.bodies[0].mesh.nx == 3
+    assert built.config.bodies[0].material.E == 50.0

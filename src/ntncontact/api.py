@@ -61,8 +61,22 @@ def load_scenario(path: str | Path, overrides: Overrides = None) -> Scenario:
 def scenario_from_dict(data: Mapping[str, Any], base_dir: str | Path = ".",
                        overrides: Overrides = None) -> Scenario:
     """A scenario from a plain mapping with the keys of a scenario file (docs/scenarios.md);
-    mesh files are looked up relative to ``base_dir``."""
-    return _build(copy.deepcopy(dict(data)), Path(base_dir), "<dict>", (), overrides)
+    mesh files are looked up relative to ``base_dir``. NumPy scalars and arrays are taken as
+    the Python numbers and lists they hold (``np.int64(8)`` for a mesh's ``nx`` was refused
+    while ``np.float64`` passed, since NumPy's floats are Python floats and its integers are
+    not Python ints)."""
+    return _build(_plain(data), Path(base_dir), "<dict>", (), overrides)
+
+
+def _plain(value: Any) -> Any:
+    """``value`` with NumPy scalars and arrays replaced by Python numbers and lists."""
+    if isinstance(value, np.generic | np.ndarray):
+        return value.tolist()
+    if isinstance(value, Mapping):
+        return {key: _plain(item) for key, item in value.items()}
+    if isinstance(value, list | tuple):
+        return [_plain(item) for item in value]
+    return copy.deepcopy(value)
 
 
 def _build(data: Mapping[str, Any], base_dir: Path, source: str, applied: tuple[str, ...],
