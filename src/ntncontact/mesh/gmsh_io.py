@@ -187,13 +187,18 @@ def _named_sets(mesh: QuadMesh, groups: Mapping[str, tuple[int, list[NDArray]]],
             nodes = np.union1d(node_sets[group_name], nodes)
         node_sets[group_name] = nodes
         if dim == 1:
-            edge_sets[group_name] = _orient_on_boundary(mesh, cells, group_name, label)
+            edges = _orient_on_boundary(mesh, cells, group_name, label)
+            if edges is not None:
+                edge_sets[group_name] = edges
     return node_sets, edge_sets
 
 
 def _orient_on_boundary(mesh: QuadMesh, edges: NDArray[np.int64], group_name: str,
-                        label: str) -> NDArray[np.int64]:
-    """The group's edges (file order) with the orientation of the matching boundary edge."""
+                        label: str) -> NDArray[np.int64] | None:
+    """The group's edges (file order) with the orientation of the matching boundary edge;
+    None, with a warning, for a line inside the mesh (a material boundary, a line kept for
+    post-processing): a node set only, since surfaces and edge loads need boundary curves. A
+    tester's mesh with an unused interior line was refused as a whole."""
     boundary = boundary_edges(mesh)
     n = np.int64(mesh.n_nodes)
     boundary_keys = np.sort(boundary, axis=1) @ np.array([n, 1])
@@ -203,6 +208,8 @@ def _orient_on_boundary(mesh: QuadMesh, edges: NDArray[np.int64], group_name: st
     found = boundary_keys[order[pos]] == keys
     if not np.all(found):
         a, b = edges[np.argmin(found)]
-        raise MeshError(f"{label}: line group '{group_name}' has edge ({a}, {b}) that is not on "
-                        "the boundary of the quad mesh; surfaces must be boundary curves")
+        warnings.warn(f"{label}: line group '{group_name}' has edge ({a}, {b}) inside the quad "
+                      "mesh: it is a node set only (surfaces and edge loads need boundary "
+                      "curves)", stacklevel=5)
+        return None
     return boundary[order[pos]]
