@@ -150,9 +150,11 @@ def test_a_case_costs_its_steps_times_its_elements_and_nothing_once_completed(
     assert base == 4 * 2 * round(0.06 / 0.02)  # 4 x 2 elements, 3 steps
     finer = load_scenario(block, {"bodies.0.mesh.nx": 12, "analysis.dt": 0.005})
     assert case_cost(finer, tmp_path / "b") == pytest.approx(12 * 2 * 12)
-    # a mesh that cannot be built costs nothing here: the case fails on its worker
+    # a mesh that cannot be built stops the sweep before any case runs (it used to cost
+    # nothing here and fail on its worker after the other cases had run)
     broken = load_scenario(block, {"bodies.0.mesh": {"type": "gmsh", "file": "missing.msh"}})
-    assert case_cost(broken, tmp_path / "c") == 0.0
+    with pytest.raises(ScenarioError, match="mesh file not found"):
+        case_cost(broken, tmp_path / "c")
     done = tmp_path / "done"
     done.mkdir()
     (done / "summary.json").write_text(
@@ -215,3 +217,19 @@ def test_a_sweep_of_no_workers_is_refused_before_anything_starts(sweep_file, tmp
     with pytest.raises(ValueError, match="workers must be >= 1"):
         sweep(sweep_file, tmp_path / "out", workers=workers, progress=False)
     assert not (tmp_path / "out").exists()
+
+
+def test_a_case_whose_mesh_cannot_be_built_stops_the_sweep_before_any_case_runs(tmp_path):
+    """docs/api.md: every case is checked before any runs. A tester's case with a missing mesh
+    file failed on its worker after the valid case had run, and a bad key in [[cases]] was
+    reported as the base scenario's, naming neither the case nor the sweep file."""
+    (tmp_path / "block.toml").write_text(BLOCK)
+    spec = tmp_path / "sweep.toml"
+    spec.write_text('scenario = "block.toml"\n[[cases]]\n"analysis.dt" = 0.02\n[[cases]]\n'
+                    '"bodies.0.mesh" = { type = "gmsh", file = "missing.msh" }\n')
+    with pytest.raises(ScenarioError, match=r"sweep\.toml: case 1 .*mesh file not found"):
+        sweep(spec, tmp_path / "out", workers=1, progress=False)
+    assert not (tmp_path / "out" / "cases").exists()
+    spec.write_text('scenario = "block.toml"\n[[cases]]\n"analysis.dtt" = 0.02\n')
+    with pytest.raises(ScenarioError, match=r"sweep\.toml: case 0 \(analysis\.dtt=0\.02\)"):
+        sweep(spec, tmp_path / "out", workers=1, progress=False)

@@ -212,8 +212,8 @@ def sweep(spec: str | Path, out: str | Path, *, scheduler: str | None = None,
     out = Path(out)
     folders = [str(out / "cases" / case_name(override_strings(c))) for c in cases]
     meshes: dict[str, int] = {}
-    costs = [case_cost(load_scenario(scenario_path, case), Path(folder), meshes)  # every
-             for case, folder in zip(cases, folders, strict=True)]  # override checked here
+    costs = [_checked_cost(spec, k, case, scenario_path, Path(folder), meshes)
+             for k, (case, folder) in enumerate(zip(cases, folders, strict=True))]
     (out / "cases").mkdir(parents=True, exist_ok=True)
     work = [(case, folder, cost) for case, folder, cost in zip(cases, folders, costs, strict=True)]
     with _dask_client(scheduler, workers) as (client, cluster):
@@ -228,11 +228,24 @@ def sweep(spec: str | Path, out: str | Path, *, scheduler: str | None = None,
     return table
 
 
+def _checked_cost(spec: str | Path, k: int, case: Mapping[str, Any], scenario_path: Path,
+                  folder: Path, meshes: dict[str, int]) -> float:
+    """:func:`case_cost` of case ``k``, whose scenario and meshes are checked here, before any
+    case runs; an error names the sweep file and the case (a tester's bad key in ``[[cases]]``
+    was reported as the base scenario's, and a missing mesh file failed only on its worker
+    after the other cases had run)."""
+    try:
+        return case_cost(load_scenario(scenario_path, case), folder, meshes)
+    except (ScenarioError, ValueError, OSError) as err:
+        raise ScenarioError(f"{spec}: case {k} ({', '.join(override_strings(case))}): "
+                            f"{err}") from None
+
+
 def case_cost(scenario: Scenario, folder: Path, meshes: dict[str, int] | None = None) -> float:
     """A case's expected run time up to a constant, to start the longest cases first: its
     steps times its elements; 0 for a case its folder says completed (a rerun only reads
-    it) and for one whose meshes cannot be built (it fails on its worker, recorded there).
-    ``meshes`` caches element counts by mesh settings (a grid repeats the same meshes)."""
+    it). ``meshes`` caches element counts by mesh settings (a grid repeats the same meshes);
+    a mesh that cannot be built raises."""
     if _completed_summary(folder, scenario.overrides) is not None:  # an order, not a check
         return 0.0
     meshes = {} if meshes is None else meshes
@@ -240,10 +253,7 @@ def case_cost(scenario: Scenario, folder: Path, meshes: dict[str, int] | None = 
     for body in scenario.config.bodies:
         key = body.mesh.model_dump_json()
         if key not in meshes:
-            try:
-                meshes[key] = len(build_mesh(body.mesh, body.name, scenario.base_dir).cells)
-            except Exception:  # noqa: BLE001 - any error here is the case's own, on its worker
-                meshes[key] = 0
+            meshes[key] = len(build_mesh(body.mesh, body.name, scenario.base_dir).cells)
         cells += meshes[key]
     analysis = scenario.config.analysis
     return cells * analysis.t_end / analysis.dt
