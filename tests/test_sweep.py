@@ -2,9 +2,11 @@
 
 from __future__ import annotations
 
+import signal
 import socket
 import subprocess
 import sys
+import time
 import warnings
 from pathlib import Path
 
@@ -182,7 +184,8 @@ def test_the_cases_start_longest_first_and_come_back_in_the_files_order(monkeypa
     with LocalCluster(n_workers=1, threads_per_worker=1, processes=False,
                       dashboard_address=None, scheduler_kwargs=SCHEDULER_HTTP) as cluster, \
             Client(cluster) as client:
-        rows = sweep_module._run_cases(client, True, spec, "x.toml", work, progress=False)
+        rows = [None] * len(work)
+        sweep_module._run_cases(client, True, spec, "x.toml", work, False, rows)
     started = [r["case"] for r in sorted(rows, key=lambda r: r["started"])]
     assert started == ["case1", "case3", "case4", "case0", "case2"]  # ties in file order
     assert [r["case"] for r in rows] == [f"case{k}" for k in range(5)]
@@ -233,3 +236,30 @@ def test_a_case_whose_mesh_cannot_be_built_stops_the_sweep_before_any_case_runs(
     spec.write_text('scenario = "block.toml"\n[[cases]]\n"analysis.dtt" = 0.02\n')
     with pytest.raises(ScenarioError, match=r"sweep\.toml: case 0 \(analysis\.dtt=0\.02\)"):
         sweep(spec, tmp_path / "out", workers=1, progress=False)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("signum", [signal.SIGTERM, signal.SIGINT])
+def test_a_signalled_sweep_stops_and_keeps_the_cases_done(sweep_file, tmp_path, signum):
+    """A tester's sweep started with SIGINT ignored (a script's background job) ran on
+    through a SIGINT, and SIGTERM ended it without a word or a sweep.csv. Now either stops the
+    sweep with one line, keeps the cases done in sweep.csv, and a rerun runs the rest."""
+    out = tmp_path / "out"
+    child = subprocess.Popen(
+        [sys.executable, "-m", "ntncontact.cli", "sweep", str(sweep_file), "--out", str(out),
+         "--workers", "1", "--quiet"], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+        text=True, preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_IGN))
+    cases = out / "cases"
+    deadline = time.monotonic() + 120
+    while time.monotonic() < deadline and not any(
+            (c / "summary.json").is_file() and '"completed"' in (c / "summary.json").read_text()
+            for c in (cases.iterdir() if cases.is_dir() else [])):
+        time.sleep(0.1)
+    child.send_signal(signum)
+    _, err = child.communicate(timeout=120)
+    assert child.returncode == 130, err
+    assert "interrupted" in err and "Traceback" not in err
+    done = pd.read_csv(out / "sweep.csv")
+    assert 1 <= len(done) < 5 and set(done["status"]) <= {"completed", "failed"}
+    again = sweep(sweep_file, out, workers=1, progress=False)
+    assert len(again) == 5 and again["skipped"].sum() >= len(done)

@@ -392,8 +392,9 @@ def _sweep(args: argparse.Namespace) -> int:
     """Run a sweep file's cases on Dask; write OUT/sweep.csv and the figures it asks for."""
     from .studies.sweep import SWEEP_FILE, sweep
 
-    table = sweep(args.sweep, args.out, scheduler=args.scheduler, workers=args.workers,
-                  progress=not args.quiet)
+    with _interrupting_signals():
+        table = sweep(args.sweep, args.out, scheduler=args.scheduler, workers=args.workers,
+                      progress=not args.quiet)
     failed = table[table["status"] != "completed"] if "status" in table else table.iloc[:0]
     skipped = int(table["skipped"].fillna(False).astype(bool).sum()) if "skipped" in table else 0
     print(f"{len(table)} cases ({skipped} already done, {len(failed)} not completed): "
@@ -401,6 +402,26 @@ def _sweep(args: argparse.Namespace) -> int:
     for _, row in failed.iterrows():
         print(f"  {row['case']}: {row.get('status')}: {row.get('error')}", file=sys.stderr)
     return 1 if len(failed) else 0
+
+
+@contextlib.contextmanager
+def _interrupting_signals():
+    """SIGINT and SIGTERM raise KeyboardInterrupt in the sweep's driver, which waits on its
+    cases (no compiled kernel to land in): the cases done are kept in sweep.csv and a rerun
+    runs the rest. A tester's sweep started with SIGINT ignored (a background job of a
+    script) ran on through it, and SIGTERM ended it without a word or a sweep.csv."""
+    def interrupt(signum: int, frame: object) -> None:
+        raise KeyboardInterrupt(f"interrupted by {signal.Signals(signum).name}")
+
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    previous = {signum: signal.signal(signum, interrupt) for signum in StopOnSignal.SIGNALS}
+    try:
+        yield
+    finally:
+        for signum, handler in previous.items():
+            signal.signal(signum, handler)
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -216,9 +216,16 @@ def sweep(spec: str | Path, out: str | Path, *, scheduler: str | None = None,
              for k, (case, folder) in enumerate(zip(cases, folders, strict=True))]
     (out / "cases").mkdir(parents=True, exist_ok=True)
     work = [(case, folder, cost) for case, folder, cost in zip(cases, folders, costs, strict=True)]
+    rows: list[dict | None] = [None] * len(work)
     with _dask_client(scheduler, workers) as (client, cluster):
-        rows = _run_cases(client, cluster is not None, sweep_spec, str(scenario_path), work,
-                          progress)
+        try:
+            _run_cases(client, cluster is not None, sweep_spec, str(scenario_path), work,
+                       progress, rows)
+        except KeyboardInterrupt:  # the cases done so far are kept in sweep.csv
+            pd.DataFrame([r for r in rows if r is not None]).to_csv(out / SWEEP_FILE,
+                                                                    index=False)
+            raise
+        rows = [r for r in rows if r is not None]
         if cluster is not None:
             client.run(_quiet_worker_logs)  # every case's result is in
             cluster.scale(0)  # its workers shut down while the results are written
@@ -306,8 +313,10 @@ def _wait_until_workers_left(client: Any) -> None:
 
 
 def _run_cases(client: Any, own_cluster: bool, spec: SweepSpec, scenario_path: str,
-               work: list[tuple[dict, str, float]], progress: bool) -> list[dict]:
-    """The cases' rows, in the order of ``work`` (case, folder, cost), run longest first.
+               work: list[tuple[dict, str, float]], progress: bool,
+               rows: list[dict | None]) -> None:
+    """The cases' rows into ``rows``, in the order of ``work`` (case, folder, cost), run
+    longest first; the caller's list keeps the rows of the cases done if it is interrupted.
 
     On the sweep's own LocalCluster one case per worker thread is in flight and the next
     longest goes to the first worker that is free (list scheduling: Dask assigns a few long
@@ -329,7 +338,6 @@ def _run_cases(client: Any, own_cluster: bool, spec: SweepSpec, scenario_path: s
         index[future.key] = i
         return future
 
-    rows: list[dict | None] = [None] * len(work)
     running = as_completed([submit(*item) for item in itertools.islice(waiting, slots)])
     with tqdm(total=len(work), unit="case", disable=not progress or None,
               file=sys.stderr) as bar:
@@ -341,7 +349,6 @@ def _run_cases(client: Any, own_cluster: bool, spec: SweepSpec, scenario_path: s
             bar.update(1)
             for item in itertools.islice(waiting, 1):  # the next longest, if any
                 running.add(submit(*item))
-    return [r for r in rows if r is not None]
 
 
 def _draw_figures(table: pd.DataFrame, figures: Sequence[FigureSpec], out: Path) -> None:
