@@ -263,3 +263,17 @@ def test_a_signalled_sweep_stops_and_keeps_the_cases_done(sweep_file, tmp_path, 
     assert 1 <= len(done) < 5 and set(done["status"]) <= {"completed", "failed"}
     again = sweep(sweep_file, out, workers=1, progress=False)
     assert len(again) == 5 and again["skipped"].sum() >= len(done)
+
+
+def test_a_figure_of_a_column_the_table_will_not_have_is_refused_before_any_case_runs(
+        tmp_path):
+    """A tester's figure of an unknown column failed only after every case had run."""
+    bad = tmp_path / "bad.toml"
+    bad.write_text('scenario = "x.toml"\n[grid]\n"analysis.dt" = [0.1]\n[[figures]]\n'
+                   'x = "analysis.dt"\ny = "nope"\n')
+    with pytest.raises(ScenarioError, match="figures.0.y = 'nope': not a column of sweep.csv"):
+        load_sweep(bad)
+    bad.write_text('scenario = "x.toml"\n[grid]\n"analysis.dt" = [0.1]\n[reductions]\n'
+                   'ke = "kinetic_energy:last"\n[[figures]]\nx = "analysis.dt"\ny = "ke"\n'
+                   'by = "max_penetration"\n')
+    assert load_sweep(bad)[0].figures[0].y == "ke"

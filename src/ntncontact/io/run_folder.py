@@ -252,7 +252,8 @@ def prepare(directory: Path, overwrite: bool) -> RunLock:
         if found and not overwrite:
             shown = ", ".join(found[:5]) + (", ..." if len(found) > 5 else "")
             raise RunFolderError(f"{directory} already holds results ({shown}): choose "
-                                 "another --out, or add --overwrite to replace them")
+                                 "another folder, or replace them (--overwrite; "
+                                 "overwrite=True in ntncontact.run)")
         if found:
             remove_results(directory)
     except BaseException:

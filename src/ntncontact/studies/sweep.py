@@ -109,7 +109,21 @@ class SweepSpec(_Strict):
             if not column or op not in REDUCTIONS:
                 raise ValueError(f"reductions.{name} = '{spec}': expected 'COLUMN:OP' with OP "
                                  f"one of {', '.join(REDUCTIONS)}")
+        self._check_figures()
         return self
+
+    def _check_figures(self) -> None:
+        """Each figure's columns are sweep.csv's: refused here, not after every case ran (a
+        tester's figure of an unknown column failed once the sweep was done)."""
+        known = (set(self.set) | set(self.grid) | {k for c in self.cases for k in c}
+                 | set(self.reductions) | set(HEADLINE) | {"contact_duration"})
+        for k, figure in enumerate(self.figures):
+            for key in ("x", "y", "by"):
+                column = getattr(figure, key)
+                if column is not None and column not in known:
+                    raise ValueError(f"figures.{k}.{key} = '{column}': not a column of "
+                                     f"sweep.csv (an override key, a reduction, or one of "
+                                     f"{', '.join(HEADLINE)}, contact_duration)")
 
     def case_overrides(self) -> list[dict[str, Any]]:
         """The cases in order: the grid's combinations (last key fastest), then ``cases``;
