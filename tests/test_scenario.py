@@ -101,7 +101,7 @@ penalty_normal = 100.0
     [
         (('surface_1 = "bottom"', 'surface_1 = "botom"'), "contact.0: .*botom"),
         (('body_2 = "base"\nsurface_2 = "top"', 'body_2 = "block"\nsurface_2 = "bottom"'),
-         "same surface"),
+         "same body 'block'.*self-contact"),
         (("penalty_normal = 100.0", "penalty_normal = 100.0\nfriction = -0.1"),
          "contact.0.friction"),
         (("penalty_normal = 100.0", "penalty_normal = -1.0"), "contact.0.penalty_normal"),
