@@ -335,3 +335,28 @@ def test_a_file_that_cannot_grow_fails_the_run_with_whole_rows_and_names_the_fil
     if failing == "contact.csv":  # its rows up to the last whole step
         contact = read_csv_table(out / "contact.csv")
         assert contact["step"].size > 0 and contact["step"].max() <= summary["steps"] + 1
+
+
+def test_an_xdmf_series_that_would_not_fit_stops_the_run_before_hdf5_fails(tmp_path):
+    """HDF5 does not recover from a write that fails: a tester's full disk crashed an XDMF run
+    with a segmentation fault, 42 tracebacks on stderr and the index at the first frame. The
+    writer now refuses a frame without room for it (a file-size limit here, the same check as
+    the disk's free space), and the frames before it stay readable."""
+    import resource
+
+    import ntncontact as ntc
+
+    def limited() -> None:
+        resource.setrlimit(resource.RLIMIT_FSIZE, (600_000, 600_000))
+
+    out = tmp_path / "ring"
+    done = subprocess.run([sys.executable, "-m", "ntncontact.cli", "run",
+                           str(EXAMPLES / "ring_impact.toml"), "--out", str(out), "--quiet",
+                           "--set", 'analysis.field_format="xdmf"'],
+                          preexec_fn=limited, capture_output=True, text=True, timeout=300)
+    assert done.returncode == 1, done.stderr
+    assert "no room for the next XDMF frame" in done.stderr and "fields.h5" in done.stderr
+    assert "Traceback" not in done.stderr
+    results = ntc.read_results(out)
+    assert results.summary["status"] == "failed" and len(results.times) >= 1
+    assert results.fields(results.times[-1]).points.shape[0] > 0

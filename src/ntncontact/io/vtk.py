@@ -9,7 +9,10 @@ it newly lists is complete, so every file a PVD names exists and parses.
 
 from __future__ import annotations
 
+import errno
 import os
+import resource
+import shutil
 import time as _time
 import xml.etree.ElementTree as ET
 from collections.abc import Mapping, Sequence
@@ -23,6 +26,8 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from .run_folder import make_subfolder, replace_atomically
+
+MEGABYTE = 1 << 20
 
 REQUIRED_POINT_DATA = ("displacement", "velocity")
 REQUIRED_CELL_DATA = ("von_mises", "body_id")
@@ -317,6 +322,7 @@ class XdmfSeriesWriter:
               point_data: Mapping[str, ArrayLike], cell_data: Mapping[str, ArrayLike]) -> Path:
         """Append output step ``step`` at ``time``; returns the XDMF path."""
         mesh = frame_mesh(points, cells, point_data, cell_data)
+        self._check_room(mesh)
         if self._first is None:
             self._first = (mesh.points, mesh.cells[0].data)
             self._series.write_points_cells(mesh.points, [("quad", mesh.cells[0].data)])
@@ -331,15 +337,36 @@ class XdmfSeriesWriter:
             self._write_index()
         return self.path
 
+    def _check_room(self, mesh: meshio.Mesh) -> None:
+        """Refuse a frame that may not fit on the disk or under the file-size limit, before
+        HDF5 starts it: HDF5 does not recover from a write that fails (a tester's full disk
+        crashed the run with a segmentation fault, its index left at the first frame). The
+        room asked is twice the frame's arrays and 64 kB besides (HDF5's metadata)."""
+        frame = sum(np.asarray(a).nbytes for a in mesh.point_data.values())
+        frame += sum(np.asarray(a).nbytes for blocks in mesh.cell_data.values() for a in blocks)
+        if self._first is None:
+            frame += mesh.points.nbytes + mesh.cells[0].data.nbytes
+        needed = 2 * frame + 64 * 1024
+        h5 = Path(self._series.h5_filename)
+        limit = resource.getrlimit(resource.RLIMIT_FSIZE)[0]
+        size = h5.stat().st_size if h5.exists() else 0
+        if shutil.disk_usage(self.directory).free < needed or (
+                limit != resource.RLIM_INFINITY and size + needed > limit):
+            raise OSError(errno.ENOSPC, "no room for the next XDMF frame (HDF5 cannot recover "
+                          f"from a write that fails; {needed / MEGABYTE:.1f} MB needed)",
+                          str(h5))
+
     def _write_index(self) -> None:
         self._series.h5_file.flush()
         replace_atomically(self.path, ET.ElementTree(self._series.xdmf_file).write)
         self._indexed = _time.monotonic()
 
     def close(self) -> None:
-        """Write the complete XDMF index and close the HDF5 file (once)."""
+        """Write the complete XDMF index and close the HDF5 file (once); no index without a
+        frame (meshio cannot read a series of none)."""
         if self._series.h5_file:
-            self._write_index()
+            if self._entries:
+                self._write_index()
             self._series.h5_file.close()
 
 
