@@ -10,6 +10,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 from numpy.typing import NDArray
 
+from ..fem.loads import dirichlet_values
 from ..fem.q4 import DN_GP, InvertedElementError
 from ..mesh.overlap import boundary_edges, deepest_overlap, edge_size
 from ..solvers.newton import NewtonError
@@ -141,7 +142,27 @@ def named_failure(model: Model, err: BaseException) -> str:
             and 0 <= inverted.element < len(model.cells):
         body = model.bodies[int(model.body_of_cell()[inverted.element])]
         return f"{err}: element {inverted.element - body.cell_offset} of body '{body.name}'"
+    columns = getattr(inverted, "columns", None)
+    if columns is not None:
+        return f"{err}{_singular_where(model, np.asarray(columns))}"
     return str(err)
+
+
+def _singular_where(model: Model, columns: NDArray) -> str:
+    """Where a singular matrix's tiny pivots sit: the bodies and directions of their free
+    dofs (the Newton matrix's first unknowns, the dofs no support prescribes, in order; the
+    rest are multipliers). A tester's unsupported static block was reported without a body."""
+    fixed, _ = dirichlet_values(model.prescribed, 0.0, model.ndof)
+    free = np.setdiff1d(np.arange(model.ndof), fixed)
+    dofs = free[columns[columns < free.size]]
+    if not dofs.size:
+        return ""
+    of_node = model.body_of_node()[dofs // 2]
+    parts = []
+    for b in np.unique(of_node):
+        axes = "".join(sorted({"xy"[d % 2] for d in dofs[of_node == b]}))
+        parts.append(f"'{model.bodies[int(b)].name}' ({' and '.join(axes)})")
+    return f": the tiny pivots are on the dofs of body {', '.join(parts)}"
 
 
 NO_NODES = np.zeros(0, np.int64)

@@ -88,7 +88,13 @@ MAX_CONSECUTIVE_FALLBACKS = 3
 
 
 class LinearSolverError(RuntimeError):
-    """The linear system cannot be solved: singular matrix, bad input or backend failure."""
+    """The linear system cannot be solved: singular matrix, bad input or backend failure.
+    ``columns``: the matrix's columns of the tiny pivots where known (SuperLU), so that the
+    caller can name the bodies they belong to."""
+
+    def __init__(self, message: str, columns: NDArray | None = None) -> None:
+        super().__init__(message)
+        self.columns = columns
 
 
 @lru_cache(maxsize=1)
@@ -627,7 +633,8 @@ def _check_pivots(lu: spla.SuperLU) -> None:
     if small.size:
         raise LinearSolverError(
             f"matrix is numerically singular: {small.size} pivot(s) below "
-            f"{PIVOT_RTOL:g} x the largest {SINGULAR_CAUSES}")
+            f"{PIVOT_RTOL:g} x the largest {SINGULAR_CAUSES}",
+            columns=np.argsort(lu.perm_c)[small])  # U's column k is A's argsort(perm_c)[k]
 
 
 class _PardisoBackend:
