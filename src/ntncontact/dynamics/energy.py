@@ -17,11 +17,11 @@ this variant (``engine.builder``): their work is not in the equation.
 
 theta = 0 is the exact gap constraint (impenetrable, but closing a residual gap g_n does work);
 theta = 1 freezes the tributary-weighted gap over the step, i.e. the persistency condition,
-which conserves energy (report 3.3.1). The energy equation picks the theta in between that
-conserves energy exactly (the normal contact forces do no net work). Contact forces stay equal
-and opposite pair forces, so linear and angular momentum are conserved as in the mid-point
-rule. E is the kinetic plus strain energy at
-t_{n+1}: x_{n+1} = X + 2 d - d_n, v_{n+1} = 4 (d - d_n)/dt - v_n with d = d_{n+1/2}.
+which conserves energy (report 3.3.1). The energy equation picks the theta that conserves
+energy exactly (the normal contact forces do no net work); it is not confined to [0, 1]. Contact
+forces stay equal and opposite pair forces, so linear and angular momentum are conserved as in
+the mid-point rule. E is the kinetic plus strain energy at t_{n+1}:
+x_{n+1} = X + 2 d - d_n, v_{n+1} = 4 (d - d_n)/dt - v_n with d = d_{n+1/2}.
 """
 
 from __future__ import annotations
