@@ -121,6 +121,11 @@ class EnergyConsistentContact:
         return (force, tuple(cat), np.concatenate(hs), tuple(gcat), tuple(bcat),
                 (crow, np.full(crow.size, row), np.concatenate(c_vals)))
 
+    def excess(self, d: NDArray) -> float:
+        """The energy equation's residual at the mid-point displacements ``d``: E_{n+1} less
+        the loads' work, less E_n."""
+        return self.end_energy(d)[0] - self.energy_n
+
     def with_theta(self, theta: float) -> EnergyConsistentContact:
         """The same term with theta held fixed (theta = 1: the persistency condition)."""
         return EnergyConsistentContact(self.terms, self.h_start, self.end_energy, self.energy_n,

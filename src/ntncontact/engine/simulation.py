@@ -684,15 +684,15 @@ class Simulation:
             bordered, new = self._solve_bordered(problem, others, combined, y0)
         except (NewtonError, LinearSolverError):
             bordered, new = self._theta_by_bracket(problem, others, combined, y0,
-                                                   violation_signed)
+                                                   violation_signed, tolerance)
         if combined.fixed_theta is not None:  # no equation solved: did theta = 1 conserve?
-            self._energy_unmet = abs(end_energy(bordered.full(new.y))[0] - energy_n) > tolerance
+            self._energy_unmet = abs(combined.excess(bordered.full(new.y))) > tolerance
         lams, theta = combined.split(bordered.multipliers(new.y)[-1])
         self._energy_multiplier = theta
         return bordered, new, new.iterations, (others, lams)
 
     def _theta_by_bracket(self, problem: StepProblem, others: list, combined,
-                          y0: NDArray, excess_0: float):
+                          y0: NDArray, excess_0: float, tolerance: float):
         """The energy equation as a root in theta alone, where the bordered Newton failed:
         the step solved at fixed theta, from theta = 0 (the step already solved, its excess
         energy over E_n + W ``excess_0``) and theta = 1 (persistency), by secant steps, and by
@@ -706,11 +706,9 @@ class Simulation:
             y = y.copy()
             y[-1] = theta
             bordered, new = self._solve_bordered(problem, others, combined.with_theta(theta), y)
-            excess = combined.end_energy(bordered.full(new.y))[0] - combined.energy_n
-            return bordered, new, excess
+            return bordered, new, combined.excess(bordered.full(new.y))
 
         best = found = solved(1.0, y0)
-        tolerance = self.settings.rtol * max(abs(combined.energy_n), 1e-300)
         (a, e_a), (b, e_b) = (0.0, excess_0), (1.0, found[2])
         for _ in range(THETA_BRACKET_ITERATIONS):
             if abs(e_b) <= tolerance:
@@ -919,8 +917,8 @@ class Simulation:
         }
 
     def _take_energy_unmet(self) -> bool:
-        """Whether the step just completed kept theta = 1 for want of a root (reset here:
-        a step without contact solves no energy equation)."""
+        """Whether the step just completed found no theta that conserves its energy (reset
+        here: a step without contact solves no energy equation)."""
         unmet, self._energy_unmet = self._energy_unmet, False
         return unmet
 
