@@ -167,17 +167,38 @@ def run_case(scenario_path: str, overrides: Mapping[str, Any], folder: str,
         else:
             with single_threaded():  # one single-threaded case per worker and core
                 results = run(scenario, Path(folder), overwrite=True)  # read back from it
-        row |= {"skipped": done, "error": results.summary.get("error")}
-        row |= {k: results.summary.get(k) for k in HEADLINE if k in results.summary}
-        if row.get("contact_end_time") is not None and row.get("contact_start_time") is not None:
-            row["contact_duration"] = row["contact_end_time"] - row["contact_start_time"]
-        row |= _reduce(results.history, reductions)
+        row |= {"skipped": done} | _results_row(results, reductions)
     except Exception as err:  # recorded, the other cases go on
         row |= {"status": "failed", "skipped": False,
                 "error": f"{type(err).__name__}: {err}".strip()}
         if not isinstance(err, ScenarioError | ValueError):
             row["traceback"] = traceback.format_exc(limit=3)
     return row
+
+
+def _results_row(results: Any, reductions: Mapping[str, str]) -> dict[str, Any]:
+    """A case's sweep.csv values from its read-back results (without case and overrides)."""
+    summary = results.summary
+    row: dict[str, Any] = {"error": summary.get("error")}
+    row |= {k: summary.get(k) for k in HEADLINE if k in summary}
+    if row.get("contact_end_time") is not None and row.get("contact_start_time") is not None:
+        row["contact_duration"] = row["contact_end_time"] - row["contact_start_time"]
+    return row | _reduce(results.history, reductions)
+
+
+def _rows_on_disk(work: list[tuple[dict, str, float]], rows: list[dict | None],
+                  reductions: Mapping[str, str]) -> list[dict]:
+    """The rows of an interrupted sweep: those returned, and those of cases whose folder
+    completed but whose result had not reached the client yet (CI caught a SIGINT in that
+    window, and sweep.csv was written empty)."""
+    kept = []
+    for (case, folder, _), row in zip(work, rows, strict=True):
+        if row is None and _completed_summary(Path(folder), override_strings(case)):
+            row = {"case": Path(folder).name, **case, "skipped": False}
+            row |= _results_row(read_results(folder), reductions)
+        if row is not None:
+            kept.append(row)
+    return kept
 
 
 def _completed(folder: Path, scenario: Scenario) -> bool:
@@ -236,8 +257,9 @@ def sweep(spec: str | Path, out: str | Path, *, scheduler: str | None = None,
             _run_cases(client, cluster is not None, sweep_spec, str(scenario_path), work,
                        progress, rows)
         except KeyboardInterrupt:  # the cases done so far are kept in sweep.csv
-            pd.DataFrame([r for r in rows if r is not None]).to_csv(out / SWEEP_FILE,
-                                                                    index=False)
+            done = _rows_on_disk(work, rows, sweep_spec.reductions)
+            pd.DataFrame(done, columns=None if done else ["case"]).to_csv(out / SWEEP_FILE,
+                                                                          index=False)
             raise
         rows = [r for r in rows if r is not None]
         if cluster is not None:
