@@ -174,8 +174,6 @@ CASES = [
     Case("energy_variant_without_exact_gap_pairs",
          ("analysis.energy_conserving", 'method = "lagrange"', 'law = "gap"'),
          sets=("analysis.energy_conserving=true",)),
-    Case("checkpoints_of_an_xdmf_run", ("analysis.checkpoint_interval", "xdmf", "VTU"),
-         sets=("analysis.checkpoint_interval=0.05", 'analysis.field_format="xdmf"')),
     # mesh-quality: say what was expected
     Case("mesh_quality_not_a_mesh", ("x.msh", "not a readable gmsh .msh file"),
          command="mesh-quality", file_name="x.msh", text="garbage\n"),

@@ -25,7 +25,7 @@ from ntncontact.io.checkpoint import (
     checkpoint_files,
     read_checkpoint,
 )
-from ntncontact.io.vtk import read_pvd, read_vtu
+from ntncontact.io.vtk import XdmfSeries, read_pvd, read_vtu
 from ntncontact.io.writers import read_csv_table
 from ntncontact.solvers.linear import pardiso_available
 
@@ -166,6 +166,75 @@ def test_a_killed_run_continued_from_its_checkpoint_matches_the_uninterrupted_on
     assert len(read_csv_table(out / "contact.csv")["step"]) > 0, f"{context}: no contact"
     assert_same_frames(ref, out, context)
     assert summary(out) == summary(ref) | {"overrides": overrides}, context
+
+
+def assert_same_xdmf_frames(out_a: Path, out_b: Path, context: str) -> None:
+    """The same XDMF frames at the same times, with exactly the same points, cells and data,
+    and no array in the HDF5 file that the index does not name."""
+    import h5py
+
+    series_a, series_b = XdmfSeries(out_a / "fields.xdmf"), XdmfSeries(out_b / "fields.xdmf")
+    assert series_a.times == series_b.times, context
+    for k in range(len(series_a)):
+        fa, fb = series_a.mesh(k), series_b.mesh(k)
+        assert np.array_equal(fa.points, fb.points), f"{context}: frame {k} points"
+        assert np.array_equal(fa.cells[0].data, fb.cells[0].data), f"{context}: frame {k}"
+        assert sorted(fa.point_data) == sorted(fb.point_data), context
+        for name in fa.point_data:
+            assert np.array_equal(fa.point_data[name], fb.point_data[name], equal_nan=True), \
+                f"{context}: frame {k} {name}"
+        for name in fa.cell_data:
+            assert np.array_equal(fa.cell_data[name][0], fb.cell_data[name][0],
+                                  equal_nan=True), f"{context}: frame {k} {name}"
+    with h5py.File(out_a / "fields.h5") as a, h5py.File(out_b / "fields.h5") as b:
+        assert sorted(a) == sorted(b), f"{context}: arrays the index does not name"
+
+
+@pytest.mark.slow
+def test_a_killed_xdmf_run_continued_from_its_checkpoint_matches_the_uninterrupted_one(
+        tmp_path):
+    """An XDMF + HDF5 series (long runs' format) restarts as VTU frames do: the checkpoint
+    writes the index, the restart keeps the checkpoint's frames and drops the later ones a
+    kill left in the HDF5 file. It used to be refused when the scenario was read."""
+    pytest.importorskip("h5py")
+    spin = EXAMPLES / "ring_impact.toml"
+    overrides = ["analysis.t_end=0.12", 'analysis.field_format="xdmf"',
+                 "analysis.output_interval=0.01"]
+    ref = tmp_path / "reference"
+    assert run_cli(spin, ref, overrides) == 0
+    overrides.append("analysis.checkpoint_interval=0.02")
+    rng = random.Random(f"{SEED}-xdmf")
+    out = tmp_path / "ring"
+    kill_at_step(start_child(spin, out, overrides), out, rng.randint(14, 19))
+    again = min(history_steps(out)[-1] + rng.randint(1, 2), 22)
+    context = f"xdmf killed at {history_steps(out)[-1]} and {again} (seed {SEED})"
+    kill_at_step(start_child(spin, out, overrides, "--restart"), out, again)
+    assert run_cli(spin, out, overrides, "--restart") == 0, context
+    assert not list(out.glob(".*")), f"{context}: temporary files left"
+    assert_same_table(ref / "history.csv", out / "history.csv", context)
+    assert_same_table(ref / "contact.csv", out / "contact.csv", context)
+    assert_same_xdmf_frames(ref, out, context)
+
+
+def test_a_restart_from_an_unreadable_hdf5_file_says_so_and_changes_nothing(tmp_path, capsys):
+    """A fields.h5 cut short (a disk failure) cannot give the checkpoint's frames: the restart
+    stops with one line naming it, and leaves the file and summary.json as they were (the
+    summary used to be rewritten as a fresh run's before the frames were read)."""
+    pytest.importorskip("h5py")
+    spin = EXAMPLES / "spinning_block.toml"
+    overrides = ["analysis.t_end=0.08", "analysis.checkpoint_interval=0.02",
+                 'analysis.field_format="xdmf"']
+    out = tmp_path / "spin"
+    assert run_cli(spin, out, overrides) == 0
+    h5 = out / "fields.h5"
+    h5.write_bytes(h5.read_bytes()[: h5.stat().st_size // 3])
+    before = {path: path.read_bytes() for path in (h5, out / "summary.json")}
+    capsys.readouterr()
+    assert run_cli(spin, out, overrides, "--restart") == 1
+    err = capsys.readouterr().err
+    assert str(h5) in err and "cannot restart" in err and "Traceback" not in err, err
+    assert {path: path.read_bytes() for path in before} == before
+    assert not list(out.glob(".*"))
 
 
 def test_a_restart_is_refused_for_another_scenario_overrides_or_version(tmp_path, capsys,

@@ -189,10 +189,6 @@ def _check_analysis_options(config: ScenarioConfig) -> None:
                             "itself)")
     if a.energy_conserving:
         _check_energy_equation(config)
-    if a.checkpoint_interval is not None and a.field_format == "xdmf":
-        raise ScenarioError("analysis.checkpoint_interval: a restart continues VTU field "
-                            "series only; with analysis.field_format = \"xdmf\" the checkpoints "
-                            "could not be restarted (use \"vtu\" for a run to restart)")
 
 
 def _check_energy_equation(config: ScenarioConfig) -> None:

@@ -25,7 +25,7 @@ import meshio
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from .run_folder import make_subfolder, replace_atomically
+from .run_folder import RunFolderError, make_subfolder, replace_atomically
 
 MEGABYTE = 1 << 20
 
@@ -306,9 +306,10 @@ class XdmfSeriesWriter:
         self.directory.mkdir(parents=True, exist_ok=True)
         self.path = self.directory / f"{name}.xdmf"
         self._series = meshio.xdmf.TimeSeriesWriter(self.path)
-        # meshio opens its HDF5 file in the working folder; ours goes beside the XDMF
+        # meshio opens its HDF5 file in the working folder; ours goes beside the XDMF, opened
+        # at the first frame or by resume (which reads the file a new one would truncate)
         self._series.h5_filename = os.fspath(self.directory / f"{name}.h5")
-        self._series.h5_file = h5py.File(self._series.h5_filename, "w")
+        self._series.h5_file = None
         self._first: tuple[NDArray, NDArray] | None = None
         self._entries: list[tuple[float, str]] = []
         self._indexed = -np.inf  # monotonic time of the last index written
@@ -324,6 +325,9 @@ class XdmfSeriesWriter:
         mesh = frame_mesh(points, cells, point_data, cell_data)
         self._check_room(mesh)
         if self._first is None:
+            import h5py
+
+            self._series.h5_file = h5py.File(self._series.h5_filename, "w")
             self._first = (mesh.points, mesh.cells[0].data)
             self._series.write_points_cells(mesh.points, [("quad", mesh.cells[0].data)])
         elif not np.array_equal(self._first[1], mesh.cells[0].data):
@@ -361,6 +365,75 @@ class XdmfSeriesWriter:
         replace_atomically(self.path, ET.ElementTree(self._series.xdmf_file).write)
         self._indexed = _time.monotonic()
 
+    def flush(self) -> None:
+        """The HDF5 file flushed and the index written for every frame so far (a checkpoint
+        calls it, so that a restart finds its frames in the index)."""
+        if self._entries:
+            self._write_index()
+
+    def resume(self, step: int, entries: Sequence[Sequence]) -> None:
+        """A restart: keep the series' first ``len(entries)`` frames (the checkpoint's; its
+        :meth:`flush` put them in the index) and drop those written after it. The kept frames'
+        arrays are copied into a new HDF5 file (a kill leaves the old one with frames the
+        index does not list, and HDF5 cannot shrink a file), so a restart costs one read and
+        write of the frames kept. ``step`` is unused (the frames are counted, not numbered)."""
+        kept = [(float(time), str(name)) for time, name in entries]
+        if not kept:
+            return
+        old = self.directory / f".{Path(self._series.h5_filename).name}.restart"
+        if not old.exists():  # else a restart killed while copying left the run's file there
+            os.replace(self._series.h5_filename, old)
+        try:
+            self._copy_frames(old, len(kept))
+        except BaseException:
+            if self._series.h5_file:
+                self._series.h5_file.close()
+            os.replace(old, self._series.h5_filename)  # the run's frames stay as they were
+            raise
+        self._entries = kept
+        self._write_index()
+        old.unlink()
+
+    def _copy_frames(self, old: Path, frames: int) -> None:
+        """The index's mesh and first ``frames`` frames, with the arrays they name copied from
+        ``old`` into a new HDF5 file; meshio's writer then appends after them."""
+        import h5py
+
+        try:
+            root = ET.parse(self.path).getroot()
+        except (OSError, ET.ParseError) as err:
+            raise RunFolderError(f"{self.path} cannot be read ({err}): cannot restart its "
+                                 "XDMF series") from None
+        # meshio's layout: the Domain holds the temporal collection (a grid a frame) and the
+        # mesh grid that every frame includes
+        domain = root.find("Domain")
+        collection = None if domain is None else domain.find("Grid[@GridType='Collection']")
+        mesh = None if domain is None else domain.find("Grid[@Name='mesh']")
+        timed = [] if collection is None else collection.findall("Grid")
+        if mesh is None or len(timed) < frames:
+            raise RunFolderError(f"{self.path} lists fewer frames than the checkpoint's "
+                                 f"{frames}: it is not the checkpointed run's series")
+        for later in timed[frames:]:
+            collection.remove(later)
+        h5_name = Path(self._series.h5_filename).name
+        names = [item.text.strip().split(":/", 1)[1] for item in root.iter("DataItem")
+                 if item.text and item.text.strip().startswith(h5_name + ":/")]
+        self._series.h5_file = h5py.File(self._series.h5_filename, "w")
+        try:
+            with h5py.File(old, "r") as source:
+                for name in names:
+                    source.copy(source[name], self._series.h5_file, name)
+        except (OSError, KeyError) as err:
+            raise RunFolderError(f"{self._series.h5_filename} cannot be read ({err}): cannot "
+                                 "restart its XDMF series") from None
+        points, cells = (self._series.h5_file[_h5_dataset(mesh.find(f"{tag}/DataItem"))][()]
+                         for tag in ("Geometry", "Topology"))
+        self._first = (points, cells)
+        self._series.xdmf_file, self._series.domain, self._series.collection = (
+            root, domain, collection)
+        self._series.has_mesh = True
+        self._series.data_counter = 1 + max(int(n.removeprefix("data")) for n in names)
+
     def close(self) -> None:
         """Write the complete XDMF index and close the HDF5 file (once); no index without a
         frame (meshio cannot read a series of none)."""
@@ -368,6 +441,13 @@ class XdmfSeriesWriter:
             if self._entries:
                 self._write_index()
             self._series.h5_file.close()
+
+
+def _h5_dataset(item: ET.Element | None) -> str:
+    """The HDF5 dataset a meshio DataItem names (``fields.h5:/data3`` -> ``data3``)."""
+    if item is None or not item.text:
+        raise RunFolderError("an XDMF index without its mesh: cannot restart its series")
+    return item.text.strip().split(":/", 1)[1]
 
 
 class XdmfSeries:

@@ -426,9 +426,6 @@ class ResultsDirectory:
         try:
             # the fields first: without h5py the xdmf writer stops before any file exists
             series = XdmfSeriesWriter if field_format == "xdmf" else VtuSeriesWriter
-            if step is not None and series is not VtuSeriesWriter:
-                raise RunFolderError("a restart continues VTU field series only "
-                                     "(analysis.field_format = \"vtu\")")
             # VTU frames are compressed and written beside the next step (VtuSeriesWriter)
             self.fields = ((series(self.directory, background=True) if series is VtuSeriesWriter
                             else series(self.directory)) if write_fields else None)
@@ -436,15 +433,17 @@ class ResultsDirectory:
             if step is not None and self.history.last_step() != step:
                 raise RunFolderError(f"{self.history.path} does not reach the checkpoint's "
                                      f"step {step}: it is not the checkpointed run's")
-            self.contact = ContactWriter(self.directory, contact_columns, step)
-            self.summary = SummaryWriter(self.directory, **summary_extra)
             if resume is not None:
                 for leftover in self.directory.glob(".*.tmp"):  # a kill mid-write
                     if leftover.name.startswith((".summary.json.", ".fields.pvd.",
-                                                 ".history.csv.", ".contact.csv.")):
+                                                 ".fields.xdmf.", ".history.csv.",
+                                                 ".contact.csv.")):
                         leftover.unlink()
-                if self.fields is not None:
-                    self.fields.resume(step, resume["pvd_entries"])
+                if self.fields is not None:  # may fail (an unreadable fields.h5): before
+                    self.fields.resume(step, resume["pvd_entries"])  # summary.json is touched
+            self.contact = ContactWriter(self.directory, contact_columns, step)
+            self.summary = SummaryWriter(self.directory, **summary_extra)
+            if resume is not None:
                 self.summary.restore(resume["summary"])
         except BaseException:
             self._close_csv()
@@ -454,6 +453,8 @@ class ResultsDirectory:
     def checkpoint_state(self, step: int) -> dict[str, Any]:
         """What :class:`ResultsDirectory` needs as ``resume`` to continue after ``step``:
         the step, the PVD entries (the output cursor of the frames) and the summary."""
+        if self.fields is not None:
+            self.fields.flush()  # the frames so far on disk (an XDMF series: in its index)
         entries = self.fields.entries if self.fields is not None else []
         return {"step": int(step), "pvd_entries": [list(e) for e in entries],
                 "summary": self.summary.checkpoint_state()}
