@@ -298,7 +298,7 @@ class XdmfSeriesWriter:
 
     def __init__(self, directory: str | os.PathLike, name: str = "fields") -> None:
         try:
-            import h5py
+            import h5py  # noqa: F401  (missing: refused before any file exists)
         except ImportError:
             raise RuntimeError("analysis.field_format = \"xdmf\" needs h5py: pip install "
                                "'ntncontact[xdmf]' (or h5py)") from None
