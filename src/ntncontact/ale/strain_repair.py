@@ -172,13 +172,17 @@ def restore_strain_energy(repair: StrainRepair, X: NDArray, x: NDArray, free: ND
     """
     X = np.asarray(X, dtype=float)
     local, nodes, which = repair.around(cells)
-    result = _restore(local, X[nodes], np.asarray(x, dtype=float)[nodes],
+    # positions from a whole-number point near the nodes (subtracted exactly): at |x| ~ 100
+    # the round-off of x - X kept W from its target to 1e-12 in 40 of 166 repairs of a
+    # tester's impact that restored all 118 at the origin, and the runs parted by 0.7 %
+    origin = np.round(X[nodes].mean(axis=0))
+    result = _restore(local, X[nodes] - origin, np.asarray(x, dtype=float)[nodes] - origin,
                       np.asarray(free, bool)[nodes], np.asarray(weights, float)[nodes], which,
                       target, tolerance)
     if not result.restored:
         return replace(result, X=X)
     repaired = X.copy()
-    repaired[nodes] = result.X
+    repaired[nodes] = result.X + origin
     return replace(result, X=repaired)
 
 
