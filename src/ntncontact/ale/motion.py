@@ -473,13 +473,32 @@ class _TnState:
         return float(chain_edge_lengths(xy, self.body.closed).min())
 
 
+#: a chain node turning by more than this (degrees) whose curvature is more than
+#: KINK_CURVATURE_RATIO times both neighbours' is a kink of a smooth surface, hence a corner
+KINK_MIN_DEG = 1.0
+KINK_CURVATURE_RATIO = 4.0
+
+
 def _kinks(xy: NDArray, closed: bool, angle_deg: float) -> NDArray[np.bool_]:
-    """Chain nodes where the polygon turns by more than ``angle_deg`` (open ends excluded)."""
+    """Chain nodes where the polygon turns by more than ``angle_deg``, or where it bends
+    much more sharply than at both neighbours (a kink of a flat or smooth surface: turn above
+    KINK_MIN_DEG, curvature turn / mean adjacent edge above KINK_CURVATURE_RATIO times the
+    neighbours'; a discretized arc, graded or not, has nearly equal curvatures). The move
+    slides the nodes between corners along a smooth curve through them: a tester's
+    foundation bending down by 12 degrees lost its corner node to the curve, one remap
+    created 5.4 % of the energy and the next step inverted the corner cell; at 5 degrees the
+    corner was cut by 9 % of the spacing in silence. Open ends excluded."""
     before = xy - np.roll(xy, 1, axis=0)
     after = np.roll(xy, -1, axis=0) - xy
     cross = before[:, 0] * after[:, 1] - before[:, 1] * after[:, 0]
     turn = np.abs(np.arctan2(cross, np.einsum("ij,ij->i", before, after)))
-    kink = turn > np.deg2rad(angle_deg)
+    if not closed:
+        turn[[0, -1]] = 0.0
+    mean_edge = 0.5 * (np.linalg.norm(before, axis=1) + np.linalg.norm(after, axis=1))
+    curvature = turn / mean_edge
+    sharper = curvature > KINK_CURVATURE_RATIO * np.maximum(np.roll(curvature, 1),
+                                                            np.roll(curvature, -1))
+    kink = (turn > np.deg2rad(angle_deg)) | ((turn > np.deg2rad(KINK_MIN_DEG)) & sharper)
     if not closed:
         kink[[0, -1]] = False
     return kink
