@@ -93,6 +93,10 @@ def test_the_status_command_reports_a_finished_run(tmp_path, capsys):
     lines = dict(line.split(":", 1) for line in capsys.readouterr().out.splitlines())
     assert lines["status"].strip() == "completed"
     assert int(lines["step"]) == 5 and float(lines["time"]) == pytest.approx(0.1, abs=1e-12)
+    from ntncontact.cli import _short
+
+    assert _short(13 * 0.004) == "0.052" and _short(None) == "None"  # a tester's disk drop
+    assert 13 * 0.004 != 0.052  # printed as 0.052000000000000005 before
 
 
 # ------------------------------------------------------------------------------------------------
@@ -360,3 +364,27 @@ def test_an_xdmf_series_that_would_not_fit_stops_the_run_before_hdf5_fails(tmp_p
     results = ntc.read_results(out)
     assert results.summary["status"] == "failed" and len(results.times) >= 1
     assert results.fields(results.times[-1]).points.shape[0] > 0
+
+
+def test_a_second_signal_while_the_last_files_are_written_waits_for_them(tmp_path, monkeypatch):
+    """A tester's double Ctrl-C left summary.json "running" (status stale) 1 time in 8: the
+    second signal's KeyboardInterrupt cut the final summary's write, which the signal mask
+    did not hold off when another thread (the VTU writer's) took the signal. The command's
+    handler now lets the last files be written; the run ends right after them."""
+    from ntncontact.cli import StopOnSignal
+    from ntncontact.io.writers import ResultsDirectory, SummaryWriter
+
+    stop = StopOnSignal()
+    stop.signum = signal.SIGINT  # the first Ctrl-C asked the run to stop
+    finish = SummaryWriter.finish
+
+    def second_signal_lands(self, *args, **kwargs):
+        stop._handle(signal.SIGINT, None)
+        return finish(self, *args, **kwargs)
+
+    monkeypatch.setattr(SummaryWriter, "finish", second_signal_lands)
+    out = tmp_path / "out"
+    ResultsDirectory(out).close("interrupted", stop.reason())
+    assert summary(out)["status"] == "interrupted" and not (out / LOCK_FILE).exists()
+    with pytest.raises(KeyboardInterrupt):  # at any other time it stops at once
+        stop._handle(signal.SIGINT, None)

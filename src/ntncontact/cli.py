@@ -12,6 +12,7 @@ import warnings
 from pathlib import Path
 
 from . import __version__
+from .io.writers import closing
 
 
 class StopOnSignal:
@@ -41,6 +42,8 @@ class StopOnSignal:
 
     def _handle(self, signum: int, frame: object) -> None:
         if self.signum is not None:
+            if closing():  # the run's last files are being written; it ends right after
+                return
             raise KeyboardInterrupt(self.reason())
         self.signum = signum
         if self.at_once:  # drawing figures: no step to finish, and no kernel to land in
@@ -187,9 +190,9 @@ def _warn_mismatch(summary: dict) -> None:
           f"({mismatch / at['element_size']:.2g} of the surface spacing, t = "
           f"{at['time']:.6g}; summary.json max_ale_mismatch): the mesh motion did not follow "
           "that pair, which is no longer node to node. An ALE surface longer than the slide "
-          "(its ends stay fixed), a larger ale.max_stretch (a node leaves a fixed end behind "
-          "by at most that times their original distance) or ale.respace = \"reference\" "
-          "may let it follow",
+          "(its ends and corners stay fixed, its kinks too: no node crosses them), a larger "
+          "ale.max_stretch (a node leaves a fixed end behind by at most that times their "
+          "original distance) or ale.respace = \"reference\" may let it follow",
           file=sys.stderr)
 
 
@@ -280,6 +283,11 @@ def _warn_results(summary: dict, static: bool) -> None:
     _warn_mismatch(summary)
 
 
+def _short(value: float | None) -> str:
+    """A time as a reader wants it: 0.052, not 0.052000000000000005 (None as it is)."""
+    return str(value) if value is None else f"{value:.10g}"
+
+
 def _status(args: argparse.Namespace) -> int:
     """The run in a results folder: its status (stale: killed), step, time."""
     from .io.run_folder import run_status
@@ -287,7 +295,7 @@ def _status(args: argparse.Namespace) -> int:
     status = run_status(Path(args.directory))
     print(f"status: {status.state}")
     print(f"step:   {status.steps}")
-    print(f"time:   {status.time}")
+    print(f"time:   {_short(status.time)}")
     if status.lock is not None and status.state in ("running", "stale"):
         gone = " (gone)" if status.state == "stale" else ""
         print(f"pid:    {status.lock.get('pid')}{gone} on {status.lock.get('host')}")
