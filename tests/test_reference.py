@@ -222,3 +222,26 @@ def test_compare_outside_a_results_folder_says_what_it_expected(tmp_path, capsys
     assert err.count("\n") == 1 and message in err and str(folder) in err
     assert "expected the results folder of `ntncontact run" in err
     assert "Errno" not in err and "Traceback" not in err
+
+
+def test_compare_takes_the_friction_and_mass_the_run_used_not_only_its_overrides(tmp_path):
+    """A tester's copy of the fast-sliding blocks with friction = 0.2 and mass = "lumped" in
+    the file itself was compared with the report's frictionless, consistent-mass row (the
+    case was read from the --set overrides only). The run's summary now records both."""
+    from pathlib import Path
+
+    import ntncontact as ntc
+
+    example = Path(__file__).resolve().parents[1] / "examples" / "blocks_fast_sliding.toml"
+    text = example.read_text().replace("friction = 0.0", "friction = 0.2")
+    text = text.replace('mass = "consistent"', 'mass = "lumped"')
+    assert "friction = 0.2" in text and 'mass = "lumped"' in text
+    copy = tmp_path / "blocks_fast_sliding.toml"
+    copy.write_text(text)
+    out = tmp_path / "run"
+    ntc.run(ntc.load_scenario(copy, {"analysis.t_end": 0.06}), out)
+    summary = json.loads((out / "summary.json").read_text())
+    assert list(summary["contact_friction"].values()) == [0.2]
+    assert summary["mass"] == "lumped"
+    label, _ = compare(out)
+    assert "mu = 0.2" in label and "lumped" in label, label

@@ -60,7 +60,10 @@ class ResultWriter:
                              **OFF_SURFACE_SUMMARY, "ale_unreturned_energy": 0.0,
                              "contact_penalties": {  # as used (contact.N.penalty_factor)
                                  ci.name: {"normal": ci.law.eps_N, "tangential": ci.law.eps_T}
-                                 for ci in model.interfaces}} | summary_extra
+                                 for ci in model.interfaces},
+                             # what `compare` picks the report's case by
+                             "contact_friction": {ci.name: ci.law.mu
+                                                  for ci in model.interfaces}} | summary_extra
         if model.analysis.energy_conserving:  # steps whose energy equation had no root
             summary_extra = {"energy_equation_unmet_steps": 0} | summary_extra
         extra_history = extra_history + reaction_columns(model)
@@ -69,6 +72,7 @@ class ResultWriter:
             summary_extra = {"max_tie_violation": 0.0} | summary_extra
         summary_extra = dict.fromkeys(EnergyAudit.KEYS) | summary_extra  # energy balance
         summary_extra = {"cut_back_steps": 0} | summary_extra  # steps solved in sub-steps
+        summary_extra = {"mass": model.analysis.mass} | summary_extra  # as `compare` needs it
         self._energy = EnergyAudit()
         self.results: ResultsDirectory | MemoryResults
         if directory is None:  # ntncontact.run(out=None): nothing written

@@ -307,8 +307,15 @@ def impact_rows(rows: list[Comparison], tolerance: float, friction: float, dt: f
 
 
 def _case(summary: dict) -> tuple[str, float, str]:
-    """(example name, friction coefficient, mass type) of a run, from its summary."""
+    """(example name, friction coefficient, mass type) of a run, from its summary: the
+    values the run used (``contact_friction``, ``mass``), so also those its scenario file
+    sets; a tester's copy of the fast-sliding blocks with friction 0.2 in the file was
+    compared with the report's frictionless row. A summary written before those keys were
+    recorded gives them by its ``--set`` overrides only."""
     example = Path(summary.get("scenario", "")).stem
+    if "mass" in summary:
+        friction = max(summary.get("contact_friction", {}).values(), default=0.0)
+        return example, float(friction), str(summary["mass"])
     friction, mass = 0.0, "consistent"
     for item in summary.get("overrides", []):
         key, _, value = item.partition("=")
