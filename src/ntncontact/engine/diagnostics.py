@@ -149,9 +149,10 @@ def named_failure(model: Model, err: BaseException) -> str:
 
 
 def _singular_where(model: Model, columns: NDArray) -> str:
-    """Where a singular matrix's tiny pivots sit: the bodies and directions of their free
-    dofs (the Newton matrix's first unknowns, the dofs no support prescribes, in order; the
-    rest are multipliers). A tester's unsupported static block was reported without a body."""
+    """Where a singular matrix leaves a motion free: the bodies and directions of the free
+    dofs it moves (``columns``: the Newton matrix's first unknowns are the dofs no support
+    prescribes, in order; the rest are multipliers). A tester's unsupported static block was
+    reported without a body."""
     fixed, _ = dirichlet_values(model.prescribed, 0.0, model.ndof)
     free = np.setdiff1d(np.arange(model.ndof), fixed)
     dofs = free[columns[columns < free.size]]
@@ -162,7 +163,7 @@ def _singular_where(model: Model, columns: NDArray) -> str:
     for b in np.unique(of_node):
         axes = "".join(sorted({"xy"[d % 2] for d in dofs[of_node == b]}))
         parts.append(f"'{model.bodies[int(b)].name}' ({' and '.join(axes)})")
-    return f": the tiny pivots are on the dofs of body {', '.join(parts)}"
+    return f": the free motion moves the dofs of body {', '.join(parts)}"
 
 
 NO_NODES = np.zeros(0, np.int64)

@@ -89,7 +89,7 @@ MAX_CONSECUTIVE_FALLBACKS = 3
 
 class LinearSolverError(RuntimeError):
     """The linear system cannot be solved: singular matrix, bad input or backend failure.
-    ``columns``: the matrix's columns of the tiny pivots where known (SuperLU), so that the
+    ``columns``: the matrix's columns that the free motion moves, where known (SuperLU), so that the
     caller can name the bodies they belong to."""
 
     def __init__(self, message: str, columns: NDArray | None = None) -> None:
@@ -559,7 +559,7 @@ class _SuperLUBackend:
         if self.unchecked:
             self.unchecked = False
             stats.pivot_checks += 1
-            _check_pivots(lu)  # raises for a singular factor
+            _check_pivots(lu, perm if self.lu_is_permuted else None)  # raises if singular
         permuted, checked = self.lu_is_permuted, []
 
         def solve(b: NDArray) -> NDArray:
@@ -571,7 +571,7 @@ class _SuperLUBackend:
             if not checked and (np.abs(x).max(initial=0.0) * scale
                                 > PIVOT_CHECK_GROWTH * np.abs(b).max(initial=0.0)):
                 stats.pivot_checks += 1
-                _check_pivots(lu)  # raises for a singular factor, at every use
+                _check_pivots(lu, perm if permuted else None)  # raises if singular
                 checked.append(True)
             return x
         return solve
@@ -627,14 +627,34 @@ class _StaticLUBackend(_SuperLUBackend):
         self.static = None
 
 
-def _check_pivots(lu: spla.SuperLU) -> None:
+def _check_pivots(lu: spla.SuperLU, perm: NDArray | None = None) -> None:
+    """Raise for a factor with tiny pivots. ``perm``: the factor is of A[perm][:, perm]."""
     d = np.abs(lu.U.diagonal())
     small = np.flatnonzero(d <= PIVOT_RTOL * d.max(initial=0.0))
     if small.size:
         raise LinearSolverError(
             f"matrix is numerically singular: {small.size} pivot(s) below "
             f"{PIVOT_RTOL:g} x the largest {SINGULAR_CAUSES}",
-            columns=np.argsort(lu.perm_c)[small])  # U's column k is A's argsort(perm_c)[k]
+            columns=np.unique(np.concatenate([_null_columns(lu, k, perm)
+                                              for k in small[:4]])))
+
+
+def _null_columns(lu: spla.SuperLU, k: int, perm: NDArray | None) -> NDArray[np.int64]:
+    """The matrix's columns where the motion that its tiny pivot ``k`` leaves free is large
+    (at least a tenth of its largest). U z = 0 with z_k = 1 and z zero beyond k (the rows
+    above k back-substituted); since Pr A Pc = L U, A z[perm_c] = 0 (for a factor of
+    A[perm][:, perm], the motion y has y[perm] = z[perm_c]). The pivot's own column is only
+    where the elimination met that motion: two testers' free bodies (a cylinder free to turn,
+    a block slipping on every pair) were named by their fully held partners'."""
+    U = lu.U.tocsc()
+    z = np.zeros(U.shape[0])
+    z[k] = 1.0
+    if k:
+        z[:k] = spla.spsolve_triangular(U[:k, :k].tocsr(), -U[:k, [k]].toarray().ravel(),
+                                        lower=False)
+    y = np.empty_like(z)
+    y[np.arange(z.size) if perm is None else perm] = np.abs(z[lu.perm_c])
+    return np.flatnonzero(y >= 0.1 * y.max())
 
 
 class _PardisoBackend:
