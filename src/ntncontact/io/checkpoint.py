@@ -179,7 +179,9 @@ def load_latest(directory: str | Path, identity: dict) -> dict:
     files = checkpoint_files(directory)
     if not files:
         raise CheckpointError(f"{directory}: no checkpoint to restart from (none in "
-                              f"{CHECKPOINT_DIR}/; set analysis.checkpoint_interval)")
+                              f"{CHECKPOINT_DIR}/: a run saves one every "
+                              "analysis.checkpoint_interval of simulated time, so it was not "
+                              "set, or the run stopped before its first)")
     unreadable = []
     for path in files:
         try:
