@@ -245,3 +245,24 @@ def test_compare_takes_the_friction_and_mass_the_run_used_not_only_its_overrides
     assert summary["mass"] == "lumped"
     label, _ = compare(out)
     assert "mu = 0.2" in label and "lumped" in label, label
+
+
+@pytest.mark.parametrize(("status", "error", "said"), [
+    ("failed", "SimulationError: step 3 failed", "the run is failed (at t = 0.2: Simulation"),
+    ("interrupted", "interrupted by SIGINT", "the run is interrupted (at t = 0.2"),
+    ("running", None, "the run is stale (at t = 0.2)"),  # killed: no live process holds it
+    ("completed", None, None)])
+def test_compare_says_when_the_run_did_not_complete(tmp_path, status, error, said):
+    """A tester's failed and interrupted runs were compared as if they had completed."""
+    (tmp_path / "summary.json").write_text(json.dumps({
+        "scenario": "examples/ring_impact.toml", "overrides": [], "status": status,
+        "error": error, "time": 0.2, "contact_start_time": 0.065, "max_penetration": 0.004,
+        "max_active_pairs": 5}))
+    with HistoryWriter(tmp_path) as w:
+        for step, t in enumerate([0.0, 0.1, 0.2]):
+            w.write({"step": step, "time": t, "kinetic_energy": 1.6, "strain_energy": 0.0,
+                     "total_energy": 1.6, "linear_momentum_x": 0.0, "linear_momentum_y": -3.2,
+                     "angular_momentum": 0.0, "newton_iterations": 1})
+    label, _ = compare(tmp_path)
+    notes = [line for line in label.splitlines() if "the run is" in line]
+    assert notes == ([] if said is None else [notes[0]]) and (said is None or said in notes[0])

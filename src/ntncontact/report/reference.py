@@ -16,6 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..io.run_folder import run_status
 from ..io.writers import read_csv_table
 from .validation_cases import CASES, TABLE, impact_tolerance
 
@@ -461,7 +462,11 @@ def compare(directory: str | Path, tolerance: float | None = None
         rows = impact_rows(rows, tolerance, friction, dt, _contact_onset(summary, time, dt))
     static = "kinetic_energy" in history and not np.any(history["kinetic_energy"])
     label = f"{example} (mu = {friction:g}, {'static run' if static else f'{mass} mass'})"
-    return "\n".join([label, *_notes(example, summary, ours, static, bool(rows))]), rows
+    # "stale" where summary.json still says running; a summary without a status (written by
+    # hand, or by a version before it had one) is taken as completed
+    state = run_status(directory).state if "status" in summary else "completed"
+    notes = _notes(example, summary | {"status": state}, ours, static, bool(rows))
+    return "\n".join([label, *notes]), rows
 
 
 def _notes(example: str, summary: dict, ours: dict[str, float], static: bool,
@@ -469,6 +474,12 @@ def _notes(example: str, summary: dict, ours: dict[str, float], static: bool,
     """What :func:`compare` says under its label: what a run whose energy starts at 0 has
     instead of a relative energy variation, and why a run has no rows."""
     notes = []
+    status = summary.get("status", "completed")
+    if status != "completed":  # a tester's failed run was compared without a word of it
+        error = summary.get("error")
+        notes.append(f"note: the run is {status} (at t = {summary.get('time', 0.0):.6g}"
+                     + (f": {error}" if error else "") + "); the values are those of the "
+                     "steps it wrote")
     if "energy_max_change" in ours:
         why = "a static run has no kinetic energy" if static else "the bodies start at rest"
         balance = summary.get("energy_balance_max_relative_error")
