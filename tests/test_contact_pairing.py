@@ -149,9 +149,12 @@ t_end = 1.0
 name = "block"
 mesh = { type = "rectangle", width = 1.0, height = 0.5, nx = 10, ny = 5 }
 material = { model = "linear_elastic", E = 1.0e4, nu = 0.3, density = 1.0 }
-loads = [{ type = "pressure", set = "top", value = 100.0,
-           function = { times = [0.0, 1.0], values = [0.0, 1.0] } }]
 supports = [{ set = "corner_top_left", x = 0.0 }]
+[[bodies.loads]]
+type = "pressure"
+set = "top"
+value = 100.0
+function = { times = [0.0, 1.0], values = [0.0, 1.0] }
 [[bodies]]
 name = "found"
 mesh = { type = "rectangle", width = 3.0, height = 0.5, nx = 20, ny = 5, origin = [-1.0, -0.5] }
