@@ -95,6 +95,28 @@ def test_mesh_quality_command_and_summary(tmp_path, capsys):
     assert 45.0 < quality["min_angle_deg"] < 90.0 < quality["max_angle_deg"] < 135.0
     vtu = sorted((res / "fields").glob("*.vtu"))[-1]
     assert main(["mesh-quality", str(vtu)]) == 0
+    # the results folder itself: its summary's final meshes (a tester's got "no such file")
+    capsys.readouterr()
+    assert main(["mesh-quality", str(res)]) == 0
+    assert f"{quality['min_angle_deg']:.6g}" in capsys.readouterr().out
+    assert main(["mesh-quality", str(tmp_path)]) == 1
+    assert "a folder without summary.json" in capsys.readouterr().err
+
+
+def test_output_into_a_closed_pipe_ends_quietly(tmp_path):
+    """`ntncontact mesh-quality ... | head -1`: the reader closed the pipe; the command used to
+    say "error: [Errno 32] Broken pipe"."""
+    import subprocess
+    import sys
+
+    code = ("import sys; sys.argv = ['ntncontact', 'mesh-quality', "
+            f"{str(EXAMPLES / 'ring_impact.toml')!r}]; "
+            "from ntncontact.cli import console_main; console_main()")
+    child = subprocess.Popen([sys.executable, "-c", code], stdout=subprocess.PIPE,
+                             stderr=subprocess.PIPE, text=True)
+    child.stdout.close()  # before the command writes anything
+    err = child.stderr.read()
+    assert child.wait(timeout=120) == 141 and err == "", err
 
 
 def test_mesh_quality_of_a_plain_vtu_mesh_reads_its_points(tmp_path, capsys):

@@ -316,7 +316,8 @@ def _plot(args: argparse.Namespace) -> int:
     return 0
 
 
-QUALITY_INPUTS = "a scenario (.toml), a Gmsh mesh (.msh) or a results VTU file (.vtu)"
+QUALITY_INPUTS = ("a scenario (.toml), a Gmsh mesh (.msh), a results VTU file (.vtu) or a "
+                  "results folder (its final meshes, summary.json mesh_quality)")
 
 
 def _mesh_quality(args: argparse.Namespace) -> int:
@@ -325,6 +326,8 @@ def _mesh_quality(args: argparse.Namespace) -> int:
     from .mesh.quality import quality_statistics
 
     path = Path(args.path)
+    if path.is_dir():
+        return _print_quality(_folder_quality(path))
     if not path.is_file():
         raise FileNotFoundError(f"{path}: no such file (expected {QUALITY_INPUTS})")
     if args.set and path.suffix != ".toml":
@@ -349,6 +352,26 @@ def _mesh_quality(args: argparse.Namespace) -> int:
         tables = {b.name: quality_statistics(b.mesh) for b in model.bodies}
     else:
         raise ValueError(f"{path}: expected {QUALITY_INPUTS}, by its file name extension")
+    return _print_quality(tables)
+
+
+def _folder_quality(folder: Path) -> dict:
+    """The final meshes' statistics a run folder's summary.json holds, body by body (a
+    tester's results folder was refused as "no such file")."""
+    from .io.run_folder import read_summary
+
+    summary = folder / "summary.json"
+    if not summary.is_file():
+        raise FileNotFoundError(f"{folder}: a folder without summary.json (expected "
+                                f"{QUALITY_INPUTS})")
+    tables = read_summary(folder).get("mesh_quality")
+    if not tables:
+        raise ValueError(f"{summary}: no mesh_quality (the run wrote none: it did not end; "
+                         "give one of its frames, fields/*.vtu)")
+    return tables
+
+
+def _print_quality(tables: dict) -> int:
     for name, stats in tables.items():
         print(f"{name}:")
         for key, value in stats.items():
@@ -481,7 +504,8 @@ def build_parser() -> argparse.ArgumentParser:
     quality = sub.add_parser("mesh-quality",
                              help="edge and angle statistics (report Table 4.1) of a scenario's "
                                   "meshes or of a VTU snapshot")
-    quality.add_argument("path", help="scenario TOML or results VTU file")
+    quality.add_argument("path", help="scenario TOML, Gmsh .msh, results VTU file or "
+                         "results folder")
     quality.add_argument("--set", action="append", metavar="KEY=VALUE")
     quality.set_defaults(func=_mesh_quality)
     return parser
@@ -506,6 +530,9 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:
         print("interrupted: files written so far are valid", file=sys.stderr)
         return 130
+    except BrokenPipeError:  # `ntncontact ... | head`: the reader has what it wanted
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())  # none at exit either
+        return 128 + signal.SIGPIPE
     except (ValueError, RuntimeError, OSError, ArithmeticError, MemoryError) as err:
         print(f"error: {_one_line(_with_source(err, args))}", file=sys.stderr)
         return 1
