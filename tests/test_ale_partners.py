@@ -14,6 +14,8 @@ spacing ratio"): a partner surface finer or coarser than the ALE surface, up to 
 
 from __future__ import annotations
 
+import json
+
 import numpy as np
 import pytest
 from helpers import Recorder, model_from_dict, offsets_across_normal
@@ -358,3 +360,56 @@ def test_partners_that_cross_on_a_crushed_surface_are_named_as_a_fold():
     assert "folds between them" in message and "round the corner" in message
     assert 'join it to the contact surface (for example surface_1 = "bottom+right")' in message
     assert "make body 'upper' ALE as well" in message
+
+
+FINE_DISK_ON_COARSE_BLOCK = """
+title = "a fine disk (spacing 0.049) lands on a coarse ALE block"
+[analysis]
+kind = "dynamic"
+dt = 0.002
+t_end = 0.1
+output_interval = 0.1
+[[bodies]]
+name = "disk"
+mesh = { type = "disk", radius = 0.5, n_circ = 64, n_radial = 3, center = [0.0, 0.51] }
+material = { model = "neo_hookean", E = 1000.0, nu = 0.3, density = 1.0 }
+initial = { velocity = [1.0, -1.0] }
+[[bodies]]
+name = "block"
+mesh_motion = "ale"
+mesh = { type = "rectangle", width = 3.0, height = 0.5, nx = 12, ny = 3, origin = [-1.5, -0.5] }
+material = { model = "neo_hookean", E = 10000.0, nu = 0.3, density = 1.0 }
+supports = [{ set = "bottom", x = 0.0, y = 0.0 }]
+[[contact]]
+body_1 = "disk"
+surface_1 = "outer"
+body_2 = "block"
+surface_2 = "top"
+penalty_normal = 2000.0
+"""
+
+
+@pytest.mark.parametrize("nx", [12, 60])
+def test_nodes_between_the_pairs_are_reported_where_they_go_deeper(tmp_path, capsys, nx):
+    """A disk five times finer than its ALE block (nx = 12: spacing 0.25) has nodes between
+    its pairs, which nothing holds: they went 0.0118 into the block while the deepest pair
+    went 0.0093, all that max_penetration reported (a tester's puck: 41 % deeper). Now
+    max_penetration_unpaired reports them and the command warns; at equal spacings (nx = 60)
+    they lie no deeper than the pairs and nothing is said."""
+    from ntncontact.cli import main
+
+    path = tmp_path / "disk.toml"
+    path.write_text(FINE_DISK_ON_COARSE_BLOCK)
+    out = tmp_path / "out"
+    assert main(["run", str(path), "--out", str(out), "--quiet",
+                 "--set", f"bodies.1.mesh.nx={nx}"]) == 0
+    err = capsys.readouterr().err
+    summary = json.loads((out / "summary.json").read_text())
+    unpaired, pairs = summary["max_penetration_unpaired"], summary["max_penetration"]
+    if nx == 12:
+        assert unpaired > 1.2 * pairs > 0.0
+        at = summary["max_penetration_unpaired_at"]
+        assert at["depth"] == unpaired and at["element_size"] == pytest.approx(0.0491, rel=0.01)
+        assert "in no pair, went" in err and "max_penetration_unpaired" in err
+    else:
+        assert unpaired <= pairs and "in no pair" not in err

@@ -174,6 +174,22 @@ def _warn_penetration(summary: dict) -> None:
           "surface)", file=sys.stderr)
 
 
+def _warn_unpaired(summary: dict) -> None:
+    """One line on stderr when a contact-surface node in no pair went deeper into the
+    partner body than the deepest pair, and than PENETRATION_WARNING of the surface spacing
+    (summary.json ``max_penetration_unpaired_at``)."""
+    at = summary.get("max_penetration_unpaired_at")
+    if not at or at["depth"] <= max(PENETRATION_WARNING * at["element_size"],
+                                    summary.get("max_penetration") or 0.0):
+        return
+    print(f"warning: node {at['node']} of interface '{at['interface']}', in no pair, went "
+          f"{at['depth']:.3g} inside its partner body ({at['depth'] / at['element_size']:.2g} "
+          f"of the surface spacing, t = {at['time']:.6g}; summary.json "
+          "max_penetration_unpaired), deeper than any pair: a surface finer than its partner "
+          "has nodes between the pairs that nothing holds. Surfaces of similar spacing, or "
+          "the finer body ALE, pair them", file=sys.stderr)
+
+
 #: an ALE node ending farther than this fraction of the surface spacing from its partner's
 #: place is a pair the mesh motion did not follow: ~1e-9 of it where the motion follows
 MISMATCH_WARNING = 0.1
@@ -280,6 +296,7 @@ def _warn_results(summary: dict, static: bool) -> None:
     _warn_unreturned_energy(summary)
     _warn_contact_energy(summary, static)
     _warn_penetration(summary)
+    _warn_unpaired(summary)
     _warn_mismatch(summary)
 
 

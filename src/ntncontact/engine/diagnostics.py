@@ -227,6 +227,50 @@ class PenetrationCheck:
         return worst
 
 
+@dataclass(frozen=True)
+class UnpairedPenetration:
+    """The deepest surface-1 node in no pair inside its interface's partner body (depth 0.0
+    and no node when none)."""
+
+    depth: float = 0.0
+    interface: str = ""
+    node: int = -1  # global, as in contact.csv
+
+
+class UnpairedCheck:
+    """Finds the contact-surface nodes that no pair holds and that lie inside the partner
+    body (summary.json ``max_penetration_unpaired``): a surface finer than its partner has
+    nodes between the pairs (an ALE partner's ordered pairing gives one partner node each,
+    docs/theory.md "Partners at any spacing ratio"), and nothing resists them. A tester's
+    puck five times finer than its ALE foundation had such nodes 41 % deeper than the deepest
+    pair, which was all ``max_penetration`` reported. The test is ``deepest_overlap``, as for
+    the nodes off the surfaces. Measured cost with every ring node unpaired and 0.1 inside
+    the obstacle (its worst case): 0.33 ms a step on the ring impact (1.7 % of its step),
+    4.8 ms refined 8x (0.7 %)."""
+
+    def __init__(self, model: Model) -> None:
+        owner = model.body_of_node()
+        self._tests = []  # (name, candidates, partner cells, partner edges, partner edge size)
+        for ci in model.interfaces:
+            partner = model.bodies[int(owner[ci.interface.surface2.nodes[0]])]
+            edges = boundary_edges(partner.mesh.cells) + partner.node_offset
+            self._tests.append((ci.name, np.asarray(ci.candidates, np.int64),
+                                model.cells[partner.cells], edges, edge_size(model.X0, edges)))
+
+    def deepest(self, x: NDArray, states) -> UnpairedPenetration:
+        """The deepest such node at the positions ``x`` with the interfaces' pairs ``states``."""
+        worst = UnpairedPenetration()
+        for (name, candidates, cells, edges, size), state in zip(self._tests, states,
+                                                                   strict=True):
+            free = candidates[~np.isin(candidates, state.pairs[:, 0])]
+            if free.size == 0:
+                continue
+            found = deepest_overlap(x[free], x, cells, edges, size)
+            if found is not None and found.depth > worst.depth:
+                worst = UnpairedPenetration(found.depth, name, int(free[found.point]))
+        return worst
+
+
 def _boxes_meet(boxes: dict, body, partner, x: NDArray, outline: dict) -> bool:
     """Whether the bounding boxes of the two bodies' boundary nodes at ``x`` overlap: bodies
     apart cost this test only (many bodies make many pairs)."""

@@ -26,6 +26,7 @@ from .convection import convective_terms
 from .diagnostics import (
     Balance,
     PenetrationCheck,
+    UnpairedCheck,
     balance,
     check_end_of_step,
     named_failure,
@@ -234,6 +235,7 @@ class Simulation:
         self._energy_multiplier = 0.0
         self._energy_unmet = False  # the energy equation had no root (report 5.5)
         self._penetration = PenetrationCheck(model) if len(model.bodies) > 1 else None
+        self._unpaired = UnpairedCheck(model) if model.interfaces else None
         # the energy-conserving solve (report 5.5) starts from each augmentation's exact one
         self._early_ratio = (0.0 if model.analysis.energy_conserving
                              else model.analysis.newton_inexact_augmentations)
@@ -925,10 +927,15 @@ class Simulation:
     def _off_surface_extra(self) -> dict:
         """The step's deepest boundary node inside another body off the contact surfaces
         (``diagnostics.PenetrationCheck``): its depth for history.csv, and where it is."""
-        if self._penetration is None:
-            return {}
-        found = self._penetration.deepest(self.state.x)
-        return {"penetration_off_surfaces": found.depth, "penetration_off_surfaces_at": found}
+        extra = {}
+        if self._penetration is not None:
+            found = self._penetration.deepest(self.state.x)
+            extra = {"penetration_off_surfaces": found.depth,
+                     "penetration_off_surfaces_at": found}
+        if self._unpaired is not None:  # contact-surface nodes in no pair (UnpairedCheck)
+            extra["penetration_unpaired_at"] = self._unpaired.deepest(self.state.x,
+                                                                      self.state.contact)
+        return extra
 
     def _tie_extra(self) -> dict:
         """History columns of the ties: the resultant force each transmits to body 1 over the

@@ -57,6 +57,8 @@ class ResultWriter:
             summary_extra = {"contact_start_time": None, "contact_end_time": None,
                              "max_penetration": 0.0, "max_penetration_at": None,
                              "max_active_pairs": 0, "unconverged_steps": 0,
+                             "max_penetration_unpaired": 0.0,
+                             "max_penetration_unpaired_at": None,
                              **OFF_SURFACE_SUMMARY, "ale_unreturned_energy": 0.0,
                              "contact_penalties": {  # as used (contact.N.penalty_factor)
                                  ci.name: {"normal": ci.law.eps_N, "tangential": ci.law.eps_T}
@@ -140,6 +142,8 @@ class ResultWriter:
         fields |= self._off_surface_summary(
             s.time, record.extra.get("penetration_off_surfaces_at"), summary)
         fields |= self._mismatch_summary(s.time, row.get("ale_mismatch", 0.0), summary)
+        fields |= self._unpaired_summary(s.time, record.extra.get("penetration_unpaired_at"),
+                                         summary)
         rows = record.extra.get("contact_rows")
         if rows is not None and len(rows["node_1"]):
             self.results.contact.write_step(s.step, s.time, rows)
@@ -189,6 +193,16 @@ class ResultWriter:
         return {"max_ale_mismatch": float(mismatch),
                 "max_ale_mismatch_at": {"time": time,
                                         "element_size": min(self._spacing.values())}}
+
+    def _unpaired_summary(self, time: float, found, summary: dict) -> dict:
+        """The deepest contact-surface node in no pair inside its partner body so far, and
+        where (``engine.diagnostics.UnpairedCheck``), with its interface's surface spacing."""
+        if found is None or found.depth <= (summary.get("max_penetration_unpaired") or 0.0):
+            return {}
+        return {"max_penetration_unpaired": found.depth,
+                "max_penetration_unpaired_at": {"time": time, "interface": found.interface,
+                                                "node": found.node, "depth": found.depth,
+                                                "element_size": self._spacing[found.interface]}}
 
     @staticmethod
     def _off_surface_summary(time: float, found, summary: dict) -> dict:
