@@ -31,11 +31,11 @@ from ..io.scenario import (
 from ..materials.models import Material, MaterialError
 from ..mesh import generators
 from ..mesh.boundary import chain_edge_lengths, surface_chain
-from ..mesh.overlap import deepest_overlap
+from ..mesh.overlap import boundary_edges, deepest_overlap
 from ..mesh.quadmesh import MeshError, QuadMesh
 from ..mesh.quality import check_elements
 from .model import AleSetup, AnalysisSettings, Body, ContactInterface, Model, stack_bodies
-from .ties import Tie, TieError, make_tie, pair_tie
+from .ties import Tie, TieError, held_on_edges, make_tie, pair_tie
 
 
 def build_mesh(cfg: MeshConfig, name: str, base_dir: Path) -> QuadMesh:
@@ -229,7 +229,27 @@ def _tie(cfg: TieConfig, index: int, bodies: tuple[Body, ...], fixed_dofs: np.nd
                                     local_2 + b2.node_offset, tolerance)
     except TieError as err:
         raise ScenarioError(f"{where}: {err}") from None
-    return make_tie(cfg.name, b1.name, b2.name, nodes_1, nodes_2, fixed_dofs)
+    return make_tie(cfg.name, b1.name, b2.name, nodes_1, nodes_2, fixed_dofs,
+                    _held_on_edges(b1, local_1, cfg.surface_1, b2, local_2, nodes_2, tolerance))
+
+
+def _held_on_edges(b1: Body, local_1: np.ndarray, surface_1: str, b2: Body,
+                   local_2: np.ndarray, paired_2: np.ndarray, tolerance: float
+                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The nodes of a tie's surface 2 that no node of surface 1 coincides with but that lie
+    on one of its edges (global), those edges' end nodes (global) and the nodes' parameters
+    on them (``ties.held_on_edges``); surface 1's edges are its edge set's, or body 1's
+    boundary edges between its nodes. Nodes on no edge (surface 2 reaching past surface 1)
+    stay free."""
+    extra = np.setdiff1d(local_2 + b2.node_offset, paired_2) - b2.node_offset
+    if surface_1 in b1.mesh.edge_sets:
+        edges = b1.mesh.edge_sets[surface_1]
+    else:
+        edges = boundary_edges(b1.mesh.cells)
+        edges = edges[np.isin(edges, local_1).all(axis=1)]
+    edge, xi = held_on_edges(b2.mesh.nodes[extra], b1.mesh.nodes, edges, tolerance)
+    held = edge >= 0
+    return (extra[held] + b2.node_offset, edges[edge[held]] + b1.node_offset, xi[held])
 
 
 def _check_ale_ties(ties: tuple[Tie, ...], ale_bodies: tuple[AleSetup, ...],
@@ -245,7 +265,7 @@ def _check_ale_ties(ties: tuple[Tie, ...], ale_bodies: tuple[AleSetup, ...],
                 sliding[motion.surface[[0, -1]]] = False
         movable = sliding | ~setup.motion.boundary
         for tie in ties:
-            for nodes in (tie.nodes_1, tie.nodes_2):
+            for nodes in (tie.nodes_1, tie.nodes_2, np.unique(tie.edge_dofs // 2)):
                 local = nodes - setup.node_offset
                 local = local[(local >= 0) & (local < setup.n_nodes)]
                 if movable[local].any():
