@@ -286,3 +286,35 @@ def test_a_tie_with_nodes_held_on_edges_keeps_momentum_in_a_dynamic_run():
     np.testing.assert_allclose(p - p[0], 0.0, atol=1e-12 * np.abs(p[0]).max())
     np.testing.assert_allclose(L - L[0], 0.0, atol=1e-10 * abs(L[0]))
     assert max(tie_violation(model.ties, r.state.x) for r in rec.records) < 1e-12
+
+
+def tied_halves_on_a_foundation(method: str, exclude: list[str] | None = None) -> dict:
+    """Two tied 2 x 2 blocks, each with its own interface on one foundation (a tester's)."""
+    press = {"type": "pressure", "set": "top", "value": 50.0}
+    halves = [{"name": name, "mesh": rect(2.0, 2.0, 4, 4, (x, 0.0)),
+               "material": material(1000.0), "loads": [press]}
+              for name, x in (("A", 0.0), ("B", 2.0))]
+    halves[0]["supports"] = [{"set": "left", "x": 0.0}]
+    foundation = {"name": "F", "mesh": rect(8.0, 1.0, 16, 2, (-2.0, -1.0)),
+                  "material": material(1e6), "supports": [{"set": "bottom", "x": 0.0,
+                                                             "y": 0.0}]}
+    contact = [{"body_1": name, "surface_1": "bottom", "body_2": "F", "surface_2": "top",
+                "method": method, "law": "gap", "penalty_normal": 1e5} for name in "AB"]
+    if exclude:
+        contact[1]["exclude"] = exclude
+    tie = {"name": "glue", "body_1": "A", "surface_1": "right", "body_2": "B",
+           "surface_2": "left"}
+    return {"analysis": static(), "bodies": [*halves, foundation], "tie": [tie],
+            "contact": contact}
+
+
+def test_tied_nodes_held_twice_by_exact_multipliers_are_refused_by_name():
+    """Both tied corner nodes against the same foundation node: two identical gap
+    constraints, a singular multiplier system ("SuperLU: Factor is exactly singular" in a
+    tester's run). Refused at build time, naming the nodes and the cure, which works."""
+    with pytest.raises(ScenarioError, match=r"nodes \[4\] of body 'A' and \[0\] of body 'B', "
+                                            r"tied together by tie 'glue'.*contact\.1\.exclude"):
+        model_from_dict(tied_halves_on_a_foundation("lagrange"))
+    model, state = solve(tied_halves_on_a_foundation("lagrange", ["corner_bottom_left"]))
+    reference, ref_state = solve(tied_halves_on_a_foundation("augmented_lagrangian"))
+    np.testing.assert_allclose(state.d, ref_state.d, atol=1e-6 * np.abs(ref_state.d).max())

@@ -161,6 +161,7 @@ def build_model(config: ScenarioConfig, base_dir: str | Path = ".") -> Model:
     fixed = np.unique(np.concatenate([p.dofs for p in prescribed] or [np.zeros(0, int)]))
     ties = tuple(_tie(t, i, bodies, fixed) for i, t in enumerate(config.tie))
     _check_ale_ties(ties, ale_bodies, bodies)
+    _check_tied_multipliers(ties, interfaces, config.contact, bodies)
     loads = LoadCase(tuple(patterns), tuple(functions), tuple(on_mesh), X0)
     return Model(bodies, analysis, loads,
                  tuple(prescribed), X0, cells, assembler, interfaces, ale_bodies, ties)
@@ -385,6 +386,37 @@ def _check_paired_once(interfaces: tuple[ContactInterface, ...],
                 f"would be paired twice. Make one interface of both: surface_1 = "
                 f"\"{cfg_i.surface_1}+{cfg_j.surface_1}\", or exclude those nodes from one of "
                 "them (exclude = [node set])")
+
+
+def _check_tied_multipliers(ties: tuple[Tie, ...], interfaces: tuple[ContactInterface, ...],
+                            configs: list[ContactConfig], bodies: tuple[Body, ...]) -> None:
+    """Refuse two tied nodes that two ``method = "lagrange"`` interfaces hold against the same
+    surface: both pair with the same partner node and their gap constraints are one, so the
+    multiplier system is singular (a tester's two tied blocks on one foundation failed with
+    "SuperLU: Factor is exactly singular"). The penalty-based methods take both."""
+    exact = [(k, ci) for k, (ci, c) in enumerate(zip(interfaces, configs, strict=True))
+             if c.method == "lagrange"]
+    for tie in ties:
+        tied = dict(zip(tie.nodes_1.tolist(), tie.nodes_2.tolist(), strict=True))
+        for i, face_i in exact:
+            for j, face_j in exact:
+                if i == j or np.intersect1d(face_i.interface.surface2.nodes,
+                                            face_j.interface.surface2.nodes).size < 2:
+                    continue
+                both = [a for a in face_i.candidates.tolist()
+                        if tied.get(a, -1) in set(face_j.candidates.tolist())]
+                if both:
+                    by_name = {b.name: b for b in bodies}
+                    b1, b2 = by_name[configs[i].body_1], by_name[configs[j].body_1]
+                    raise ScenarioError(
+                        f"contact.{i} and contact.{j} (method = \"lagrange\") hold the nodes "
+                        f"{[a - b1.node_offset for a in both[:4]]} of body '{b1.name}' and "
+                        f"{[tied[a] - b2.node_offset for a in both[:4]]} of body '{b2.name}', "
+                        f"tied together by tie '{tie.name}', against the same surface: their "
+                        "two gap constraints "
+                        "are one and the multiplier system is singular. Exclude those nodes "
+                        f"from one interface (contact.{j}.exclude), or use method = "
+                        "\"augmented_lagrangian\" there")
 
 
 def _check_not_both_ways(i: int, j: int, face_i: ContactInterface,
