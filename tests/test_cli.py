@@ -222,3 +222,19 @@ def test_the_demo_runs_the_ring_impact_and_writes_what_it_says(tmp_path):
     assert files <= named
     assert all((tmp_path / name).is_file() for name in files)
     assert {"snapshots.png", "energies.png"} <= {p.name for p in tmp_path.glob("*.png")}
+
+
+@pytest.mark.parametrize(("sets", "warned"), [
+    (["bodies.0.material.nu=0.49"], True),
+    (["bodies.0.material.nu=0.3"], False),
+    (["bodies.0.material.nu=0.49", "bodies.0.material.plane_stress=true",
+      'bodies.0.material.model="linear_elastic"'], False),  # plane stress does not lock
+])
+def test_a_nearly_incompressible_plane_strain_body_is_warned_of_locking(tmp_path, capsys, sets,
+                                                                        warned):
+    """A tester's cantilever deflected 0.50 of beam theory at nu = 0.49 without a word."""
+    args = [item for s in sets for item in ("--set", s)]
+    assert main(["run", str(EXAMPLES / "spinning_block.toml"), "--out", str(tmp_path / "o"),
+                 "--quiet", "--set", "analysis.t_end=0.04", *args]) == 0
+    err = capsys.readouterr().err
+    assert err.count("lock near incompressibility") == (1 if warned else 0), err
