@@ -178,7 +178,7 @@ CASES = [
     Case("mesh_quality_not_a_mesh", ("x.msh", "not a readable gmsh .msh file"),
          command="mesh-quality", file_name="x.msh", text="garbage\n"),
     Case("mesh_quality_unknown_kind", ("x.txt", "expected a scenario (.toml), a Gmsh mesh "
-                                       "(.msh) or a results VTU file (.vtu)"),
+                                       "(.msh), a results VTU file (.vtu) or a results folder"),
          command="mesh-quality", file_name="x.txt"),
     Case("mesh_quality_set_on_a_mesh", ("x.msh", "--set", "not a scenario (.toml)"),
          command="mesh-quality", file_name="x.msh", text="garbage\n", sets=("a.b=1",)),

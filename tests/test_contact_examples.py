@@ -233,3 +233,21 @@ def test_three_bodies_and_two_interfaces_carry_the_same_pressure():
         mine = rows["interface"] == name
         assert mine.sum() == 7
         np.testing.assert_allclose(rows["normal_traction"][mine], 2.0, rtol=1e-7)
+
+
+@pytest.mark.parametrize("method", ["lagrange", "augmented_lagrangian"])
+def test_friction_that_cycles_in_newton_says_what_may_converge(method):
+    """Hertz (report 6.2) with mu = 0.3, no cut-backs and penalty_tangential 1e6: stick and
+    slip cycle in Newton at step 10 by either method; 1e5 converges. A tester's
+    Cattaneo-Mindlin case failed so without a hint of the cause; the error now names the
+    interface, its tangential penalty and what may converge."""
+    overrides = [f'contact.0.method="{method}"', "contact.0.friction=0.3",
+                 "analysis.max_cutbacks=0", "analysis.t_end=10.0"]
+    with pytest.raises(SimulationError) as err:
+        Simulation(model_from_example("hertz.toml", overrides)).run()
+    message = str(err.value)
+    assert "no convergence" in message
+    assert "interface 'cylinder_foundation' has friction" in message and "(1e+06)" in message
+    assert ('or method = "augmented_lagrangian"' in message) == (method == "lagrange")
+    Simulation(model_from_example("hertz.toml", [*overrides,
+                                                 "contact.0.penalty_tangential=1e5"])).run()
