@@ -226,15 +226,54 @@ def test_a_restart_from_an_unreadable_hdf5_file_says_so_and_changes_nothing(tmp_
                  'analysis.field_format="xdmf"']
     out = tmp_path / "spin"
     assert run_cli(spin, out, overrides) == 0
+    checkpoint_files(out)[0].unlink()  # the restart would cut the CSV files back a step
     h5 = out / "fields.h5"
     h5.write_bytes(h5.read_bytes()[: h5.stat().st_size // 3])
-    before = {path: path.read_bytes() for path in (h5, out / "summary.json")}
+    files = [h5, out / "fields.xdmf", out / "summary.json", out / "history.csv",
+             out / "contact.csv"]
+    before = {path: path.read_bytes() for path in files if path.exists()}
     capsys.readouterr()
     assert run_cli(spin, out, overrides, "--restart") == 1
     err = capsys.readouterr().err
     assert str(h5) in err and "cannot restart" in err and "Traceback" not in err, err
+    # a tester's refused restart had cut history.csv back already
     assert {path: path.read_bytes() for path in before} == before
     assert not list(out.glob(".*"))
+    h5.unlink()  # missing: said so in one line (it was "[Errno 2] ... -> .fields.h5.restart")
+    assert run_cli(spin, out, overrides, "--restart") == 1
+    assert f"{h5} is missing" in capsys.readouterr().err
+
+
+def test_a_restart_killed_while_it_copies_the_series_leaves_it_readable(tmp_path,
+                                                                        monkeypatch):
+    """The restart writes the kept frames beside the old file and then replaces the index
+    and the file: a tester's restart killed while it copied in place left every frame
+    unreadable until the next restart. Here the copy fails half way (as a kill would stop
+    it): every frame of the folder still reads, and the next restart completes the run."""
+    pytest.importorskip("h5py")
+    from ntncontact.io import vtk
+
+    spin = EXAMPLES / "spinning_block.toml"
+    overrides = ["analysis.t_end=0.08", "analysis.checkpoint_interval=0.02",
+                 'analysis.field_format="xdmf"']
+    full = tmp_path / "full"
+    assert run_cli(spin, full, overrides) == 0
+    out = tmp_path / "spin"
+    assert run_cli(spin, out, overrides) == 0
+    checkpoint_files(out)[0].unlink()
+    real = vtk.XdmfSeriesWriter._copy_frames
+
+    def killed(self, old, new, frames):
+        real(self, old, new, frames)
+        raise KeyboardInterrupt  # after the copy, before the files are replaced
+
+    monkeypatch.setattr(vtk.XdmfSeriesWriter, "_copy_frames", killed)
+    assert run_cli(spin, out, overrides, "--restart") == 130
+    results = ntc.read_results(out)
+    assert [results.fields(t).points.shape for t in results.times]  # every frame reads
+    monkeypatch.undo()
+    assert run_cli(spin, out, overrides, "--restart") == 0
+    assert_same_xdmf_frames(full, out, "restart after a killed restart")
 
 
 def test_a_restart_is_refused_for_another_scenario_overrides_or_version(tmp_path, capsys,

@@ -270,15 +270,21 @@ def test_an_interrupted_sweep_keeps_a_case_completed_on_disk_whose_result_was_in
     """CI caught a SIGINT after a case's folder completed but before its result reached the
     client: sweep.csv was written empty. The interrupted sweep's rows now take such a case from
     its folder, the same row its worker returns; a case not run stays out."""
+    import time
+
     from ntncontact.studies.sweep import _rows_on_disk, run_case
 
     reductions = {"final_kinetic": "kinetic_energy:last"}
     cases = [{"analysis.mass": "lumped"}, {"analysis.mass": "consistent"}]
     work = [(case, str(tmp_path / f"case{k}"), 1.0) for k, case in enumerate(cases)]
+    started = time.time()
     returned = run_case(str(sweep_file.parent / "block.toml"), cases[0], work[0][1], reductions)
     assert returned["status"] == "completed" and not returned["skipped"]
-    assert _rows_on_disk(work, [None, None], reductions) == [returned]
-    assert _rows_on_disk(work, [{"case": "x"}, None], reductions) == [{"case": "x"}]
+    assert _rows_on_disk(work, [None, None], reductions, started) == [returned]
+    assert _rows_on_disk(work, [{"case": "x"}, None], reductions, started) == [{"case": "x"}]
+    # a folder completed before this sweep started may be another base scenario's (a
+    # tester's interrupted rerun after an edit listed such rows as this run's)
+    assert _rows_on_disk(work, [None, None], reductions, time.time() + 1.0) == []
 
 
 def test_a_figure_of_a_column_the_table_will_not_have_is_refused_before_any_case_runs(

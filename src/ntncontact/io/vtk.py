@@ -376,27 +376,40 @@ class XdmfSeriesWriter:
         :meth:`flush` put them in the index) and drop those written after it. The kept frames'
         arrays are copied into a new HDF5 file (a kill leaves the old one with frames the
         index does not list, and HDF5 cannot shrink a file), so a restart costs one read and
-        write of the frames kept. ``step`` is unused (the frames are counted, not numbered)."""
+        write of the frames kept. The new file is written beside the old one, then the new
+        index and the new file replace the old ones in that order: a kill at any point leaves
+        a readable series (the old index over the old file; the new index over the old file,
+        which holds its frames; or the new pair), and a later restart starts again from it. A
+        tester's restart killed while copying in place left every frame unreadable. ``step``
+        is unused (the frames are counted, not numbered)."""
+        import h5py
+
         kept = [(float(time), str(name)) for time, name in entries]
         if not kept:
             return
-        old = self.directory / f".{Path(self._series.h5_filename).name}.restart"
-        if not old.exists():  # else a restart killed while copying left the run's file there
-            os.replace(self._series.h5_filename, old)
+        h5 = Path(self._series.h5_filename)
+        new = self.directory / f".{h5.name}.new"
+        new.unlink(missing_ok=True)  # a restart killed while it copied
+        if not h5.is_file():
+            raise RunFolderError(f"{h5} is missing: cannot restart its XDMF series")
         try:
-            self._copy_frames(old, len(kept))
+            self._copy_frames(h5, new, len(kept))
         except BaseException:
             if self._series.h5_file:
                 self._series.h5_file.close()
-            os.replace(old, self._series.h5_filename)  # the run's frames stay as they were
+            self._series.h5_file = None
+            new.unlink(missing_ok=True)
             raise
         self._entries = kept
-        self._write_index()
-        old.unlink()
+        self._series.h5_file.close()
+        replace_atomically(self.path, ET.ElementTree(self._series.xdmf_file).write)
+        os.replace(new, h5)
+        self._series.h5_file = h5py.File(h5, "a")
+        self._indexed = _time.monotonic()
 
-    def _copy_frames(self, old: Path, frames: int) -> None:
+    def _copy_frames(self, old: Path, new: Path, frames: int) -> None:
         """The index's mesh and first ``frames`` frames, with the arrays they name copied from
-        ``old`` into a new HDF5 file; meshio's writer then appends after them."""
+        ``old`` into the HDF5 file ``new``; meshio's writer then appends after them."""
         import h5py
 
         try:
@@ -418,14 +431,14 @@ class XdmfSeriesWriter:
         h5_name = Path(self._series.h5_filename).name
         names = [item.text.strip().split(":/", 1)[1] for item in root.iter("DataItem")
                  if item.text and item.text.strip().startswith(h5_name + ":/")]
-        self._series.h5_file = h5py.File(self._series.h5_filename, "w")
+        self._series.h5_file = h5py.File(new, "w")
         try:
             with h5py.File(old, "r") as source:
                 for name in names:
                     source.copy(source[name], self._series.h5_file, name)
         except (OSError, KeyError) as err:
-            raise RunFolderError(f"{self._series.h5_filename} cannot be read ({err}): cannot "
-                                 "restart its XDMF series") from None
+            raise RunFolderError(f"{old} cannot be read ({err}): cannot restart its XDMF "
+                                 "series") from None
         points, cells = (self._series.h5_file[_h5_dataset(mesh.find(f"{tag}/DataItem"))][()]
                          for tag in ("Geometry", "Topology"))
         self._first = (points, cells)

@@ -439,10 +439,6 @@ class ResultsDirectory:
             # VTU frames are compressed and written beside the next step (VtuSeriesWriter)
             self.fields = ((series(self.directory, background=True) if series is VtuSeriesWriter
                             else series(self.directory)) if write_fields else None)
-            self.history = HistoryWriter(self.directory, history_columns, step)
-            if step is not None and self.history.last_step() != step:
-                raise RunFolderError(f"{self.history.path} does not reach the checkpoint's "
-                                     f"step {step}: it is not the checkpointed run's")
             if resume is not None:
                 for leftover in self.directory.glob(".*.tmp"):  # a kill mid-write
                     if leftover.name.startswith((".summary.json.", ".fields.pvd.",
@@ -450,7 +446,13 @@ class ResultsDirectory:
                                                  ".contact.csv.")):
                         leftover.unlink()
                 if self.fields is not None:  # may fail (an unreadable fields.h5): before
-                    self.fields.resume(step, resume["pvd_entries"])  # summary.json is touched
+                    # any other file is cut back or rewritten (a tester's refused restart
+                    # had cut history.csv back, and summary.json said running)
+                    self.fields.resume(step, resume["pvd_entries"])
+            self.history = HistoryWriter(self.directory, history_columns, step)
+            if step is not None and self.history.last_step() != step:
+                raise RunFolderError(f"{self.history.path} does not reach the checkpoint's "
+                                     f"step {step}: it is not the checkpointed run's")
             self.contact = ContactWriter(self.directory, contact_columns, step)
             self.summary = SummaryWriter(self.directory, **summary_extra)
             if resume is not None:

@@ -187,13 +187,17 @@ def _results_row(results: Any, reductions: Mapping[str, str]) -> dict[str, Any]:
 
 
 def _rows_on_disk(work: list[tuple[dict, str, float]], rows: list[dict | None],
-                  reductions: Mapping[str, str]) -> list[dict]:
+                  reductions: Mapping[str, str], started: float) -> list[dict]:
     """The rows of an interrupted sweep: those returned, and those of cases whose folder
-    completed but whose result had not reached the client yet (CI caught a SIGINT in that
-    window, and sweep.csv was written empty)."""
+    completed during this sweep (its summary written after ``started``, a time.time()) but
+    whose result had not reached the client yet (CI caught a SIGINT in that window, and
+    sweep.csv was written empty). A folder completed before it may hold another base
+    scenario's results (a tester's rerun after an edit listed them as this run's)."""
     kept = []
     for (case, folder, _), row in zip(work, rows, strict=True):
-        if row is None and _completed_summary(Path(folder), override_strings(case)):
+        summary = Path(folder) / "summary.json"
+        if (row is None and summary.is_file() and summary.stat().st_mtime >= started
+                and _completed_summary(Path(folder), override_strings(case))):
             row = {"case": Path(folder).name, **case, "skipped": False}
             row |= _results_row(read_results(folder), reductions)
         if row is not None:
@@ -252,12 +256,13 @@ def sweep(spec: str | Path, out: str | Path, *, scheduler: str | None = None,
     (out / "cases").mkdir(parents=True, exist_ok=True)
     work = [(case, folder, cost) for case, folder, cost in zip(cases, folders, costs, strict=True)]
     rows: list[dict | None] = [None] * len(work)
+    started = time.time()  # folders completed from now on are this sweep's
     with _dask_client(scheduler, workers) as (client, cluster):
         try:
             _run_cases(client, cluster is not None, sweep_spec, str(scenario_path), work,
                        progress, rows)
         except KeyboardInterrupt:  # the cases done so far are kept in sweep.csv
-            done = _rows_on_disk(work, rows, sweep_spec.reductions)
+            done = _rows_on_disk(work, rows, sweep_spec.reductions, started)
             pd.DataFrame(done, columns=None if done else ["case"]).to_csv(out / SWEEP_FILE,
                                                                           index=False)
             raise
