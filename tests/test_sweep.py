@@ -65,6 +65,8 @@ def test_a_sweep_runs_every_case_records_the_failure_and_skips_finished_ones_on_
     ok, bad = table.iloc[:4], table.iloc[4]
     assert (ok["status"] == "completed").all() and not ok["skipped"].any()
     assert bad["status"] == "failed" and "converge" in bad["error"].lower()
+    # how far it got, from its folder (NaN before): it failed in its first step
+    assert bad["steps"] == 0 and bad["wall_time_s"] > 0 and bad["energy_initial"] > 0
     # grid order, last key fastest; kinetic energy grows with the spin
     assert ok["analysis.mass"].tolist() == ["consistent", "lumped"] * 2
     assert (ok["final_kinetic"].iloc[2:].to_numpy() > ok["final_kinetic"].iloc[:2].to_numpy()).all()

@@ -169,11 +169,21 @@ def run_case(scenario_path: str, overrides: Mapping[str, Any], folder: str,
                 results = run(scenario, Path(folder), overwrite=True)  # read back from it
         row |= {"skipped": done} | _results_row(results, reductions)
     except Exception as err:  # recorded, the other cases go on
-        row |= {"status": "failed", "skipped": False,
-                "error": f"{type(err).__name__}: {err}".strip()}
+        row |= {"status": "failed", "skipped": False} | _written_so_far(folder, reductions)
+        row["error"] = f"{type(err).__name__}: {err}".strip()
         if not isinstance(err, ScenarioError | ValueError):
             row["traceback"] = traceback.format_exc(limit=3)
     return row
+
+
+def _written_so_far(folder: str, reductions: Mapping[str, str]) -> dict[str, Any]:
+    """A failed case's headline figures and reductions from what its folder holds (how far it
+    got: a tester's failed case had steps, times and energies in its summary and NaN in
+    sweep.csv); nothing where the folder holds no results."""
+    try:
+        return _results_row(read_results(folder), reductions)
+    except (OSError, ValueError):
+        return {}
 
 
 def _results_row(results: Any, reductions: Mapping[str, str]) -> dict[str, Any]:
