@@ -9,6 +9,7 @@ it newly lists is complete, so every file a PVD names exists and parses.
 
 from __future__ import annotations
 
+import copy
 import errno
 import os
 import resource
@@ -366,10 +367,12 @@ class XdmfSeriesWriter:
         self._indexed = _time.monotonic()
 
     def flush(self) -> None:
-        """The HDF5 file flushed and the index written for every frame so far (a checkpoint
-        calls it, so that a restart finds its frames in the index)."""
-        if self._entries:
-            self._write_index()
+        """The HDF5 file flushed, so that the frames' arrays so far are on disk (a checkpoint
+        calls it). The index is not rewritten here: a restart lists the frames it lacks
+        (:meth:`_copy_frames`). Rewriting it at every checkpoint cost O(frames) each: a
+        tester's run checkpointing every step took 146 s for 1200 frames against 14 s."""
+        if self._series.h5_file:
+            self._series.h5_file.flush()
 
     def resume(self, step: int, entries: Sequence[Sequence]) -> None:
         """A restart: keep the series' first ``len(entries)`` frames (the checkpoint's; its
@@ -393,7 +396,7 @@ class XdmfSeriesWriter:
         if not h5.is_file():
             raise RunFolderError(f"{h5} is missing: cannot restart its XDMF series")
         try:
-            self._copy_frames(h5, new, len(kept))
+            self._copy_frames(h5, new, [time for time, _ in kept])
         except BaseException:
             if self._series.h5_file:
                 self._series.h5_file.close()
@@ -407,9 +410,12 @@ class XdmfSeriesWriter:
         self._series.h5_file = h5py.File(h5, "a")
         self._indexed = _time.monotonic()
 
-    def _copy_frames(self, old: Path, new: Path, frames: int) -> None:
-        """The index's mesh and first ``frames`` frames, with the arrays they name copied from
-        ``old`` into the HDF5 file ``new``; meshio's writer then appends after them."""
+    def _copy_frames(self, old: Path, new: Path, times: list[float]) -> None:
+        """The index's mesh and its frames at ``times`` (the checkpoint's), with the arrays
+        they name copied from ``old`` into the HDF5 file ``new``; meshio's writer then
+        appends after them. Frames the index does not list yet (it is rewritten every
+        INDEX_INTERVAL seconds) are listed after its last one (:func:`_frames_after`)."""
+        frames = len(times)
         import h5py
 
         try:
@@ -423,18 +429,24 @@ class XdmfSeriesWriter:
         collection = None if domain is None else domain.find("Grid[@GridType='Collection']")
         mesh = None if domain is None else domain.find("Grid[@Name='mesh']")
         timed = [] if collection is None else collection.findall("Grid")
-        if mesh is None or len(timed) < frames:
-            raise RunFolderError(f"{self.path} lists fewer frames than the checkpoint's "
-                                 f"{frames}: it is not the checkpointed run's series")
+        if mesh is None or not timed:
+            raise RunFolderError(f"{self.path} lists no frame: it is not the checkpointed "
+                                 "run's series")
+        h5_name = Path(self._series.h5_filename).name
+        for grid in _frames_after(timed[-1], times[len(timed):], h5_name):
+            collection.append(grid)
         for later in timed[frames:]:
             collection.remove(later)
-        h5_name = Path(self._series.h5_filename).name
-        names = [item.text.strip().split(":/", 1)[1] for item in root.iter("DataItem")
+        items = [item for item in root.iter("DataItem")
                  if item.text and item.text.strip().startswith(h5_name + ":/")]
+        names = [item.text.strip().split(":/", 1)[1] for item in items]  # type: ignore[union-attr]
         self._series.h5_file = h5py.File(new, "w")
         try:
             with h5py.File(old, "r") as source:
-                for name in names:
+                for item, name in zip(items, names, strict=True):
+                    shape = tuple(int(n) for n in item.get("Dimensions", "").split())
+                    if source[name].shape != shape:  # not the array this index entry names
+                        raise KeyError(f"{name} has shape {source[name].shape}, not {shape}")
                     source.copy(source[name], self._series.h5_file, name)
         except (OSError, KeyError) as err:
             raise RunFolderError(f"{old} cannot be read ({err}): cannot restart its XDMF "
@@ -454,6 +466,22 @@ class XdmfSeriesWriter:
             if self._entries:
                 self._write_index()
             self._series.h5_file.close()
+
+
+def _frames_after(last: ET.Element, times: Sequence[float], h5_name: str) -> list[ET.Element]:
+    """The index grids of frames written after ``last`` at ``times``: meshio's writer gives
+    every frame the same attributes in the same order, each array the next dataset number,
+    so frame j after ``last`` names ``last``'s datasets shifted by j times their count."""
+    items = list(last.iter("DataItem"))
+    grids = []
+    for j, time in enumerate(times, 1):
+        grid = copy.deepcopy(last)
+        grid.find("Time").set("Value", str(time))  # type: ignore[union-attr]
+        for item in grid.iter("DataItem"):
+            number = int(item.text.strip().split(":/data", 1)[1])  # type: ignore[union-attr]
+            item.text = f"{h5_name}:/data{number + j * len(items)}"
+        grids.append(grid)
+    return grids
 
 
 def _h5_dataset(item: ET.Element | None) -> str:
