@@ -9,7 +9,11 @@ that exactly the type signatures a run uses are cached:
   output's fields;
 - the same impact with an ALE obstacle: the ALE kernels (the larger half); the element and
   contact kernels have no other form (one implementation each), so they are compiled by
-  whichever process reaches them first and loaded from the cache by the other.
+  whichever process reaches them first and loaded from the cache by the other;
+- where the run may assemble on several threads, two steps of a free block of
+  2 x MIN_ELEMENTS_PER_THREAD elements: the threaded assembly, which every mesh of that many
+  elements a material group takes (an independent tester's first 10^4-element run compiled it,
+  18-23 s inside its wall_time_s).
 
 Kernels of branches that these short runs do not reach are still compiled on first use.
 
@@ -23,11 +27,15 @@ from __future__ import annotations
 import time
 from pathlib import Path
 
+import numpy as np
+
 from . import jit, kernel_cache_dir
 from .engine.builder import build_model
 from .engine.postprocess import frame_fields
 from .engine.simulation import Simulation
+from .fem.kernels_numba import MIN_ELEMENTS_PER_THREAD
 from .io.scenario import parse_scenario
+from .threads import run_threads
 
 #: Steps to run: contact starts at step 3 (initial gap 0.01, speed 1, dt 0.005); the ring is
 #: off-centre by a third of an obstacle element so that its nodes land between the obstacle's
@@ -59,6 +67,30 @@ def _scenario(ale: bool) -> dict:
                      "law": "persistency", "penalty_normal": 1000.0,
                      "augmentation": {"gap_tolerance": 1e-6}}],
     }
+
+
+def _block_scenario() -> dict:
+    """Two steps of a free spinning block just large enough for the threaded assembly."""
+    n = int(np.ceil(np.sqrt(2 * MIN_ELEMENTS_PER_THREAD))) + 1
+    return {
+        "analysis": {"kind": "dynamic", "dt": 0.005, "t_end": 0.01},
+        "bodies": [{"name": "block",
+                    "mesh": {"type": "rectangle", "width": 1.0, "height": 1.0, "nx": n,
+                             "ny": n},
+                    "material": {"model": "neo_hookean", "E": 100.0, "nu": 0.3,
+                                 "density": 1.0},
+                    "initial": {"velocity": [0.1, 0.0], "angular_velocity": 1.0}}],
+    }
+
+
+def compile_threaded_assembly() -> float:
+    """Seconds taken by two steps of :func:`_block_scenario` where runs use several threads
+    (0 where they do not: the serial loop is the small runs')."""
+    if run_threads() < 2:
+        return 0.0
+    start = time.perf_counter()
+    Simulation(build_model(parse_scenario(_block_scenario(), Path("<warmup>")))).run()
+    return time.perf_counter() - start
 
 
 def exercise(ale: bool) -> Simulation:
@@ -100,10 +132,13 @@ def main() -> int:
     jit.NOTE.said = True  # said here, not again by each process
     if "fork" in mp.get_all_start_methods():
         with ProcessPoolExecutor(max_workers=2, mp_context=mp.get_context("fork")) as pool:
-            list(pool.map(compile_group, (True, False)))
+            groups = [pool.submit(compile_group, ale) for ale in (True, False)]
+            groups.append(pool.submit(compile_threaded_assembly))
+            [group.result() for group in groups]
     else:
         for ale in (True, False):
             compile_group(ale)
+        compile_threaded_assembly()
     print(f"Kernels compiled in {time.perf_counter() - start:.1f} s.")
     return 0
 
