@@ -388,3 +388,21 @@ def test_a_second_signal_while_the_last_files_are_written_waits_for_them(tmp_pat
     assert summary(out)["status"] == "interrupted" and not (out / LOCK_FILE).exists()
     with pytest.raises(KeyboardInterrupt):  # at any other time it stops at once
         stop._handle(signal.SIGINT, None)
+
+
+def test_a_signal_before_the_run_began_says_nothing_was_written(tmp_path, capsys,
+                                                               monkeypatch):
+    """A tester's Ctrl-C a second into `ntncontact run` was told "files written so far are
+    valid" where no folder had been made."""
+    from ntncontact import cli
+
+    def stopped_while_starting(args, stop):
+        stop.signum = signal.SIGINT
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(cli, "_run_until_stopped", stopped_while_starting)
+    out = tmp_path / "never"
+    assert main(["run", str(SPIN), "--out", str(out), "--quiet"]) == 130
+    assert "interrupted by SIGINT before the run began: nothing was written" in \
+        capsys.readouterr().err
+    assert not out.exists()

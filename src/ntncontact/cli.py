@@ -74,6 +74,9 @@ def _run(args: argparse.Namespace) -> int:
             print(f"{stop.reason()} after the run had completed (its results are whole; "
                   "summary.json status \"completed\"): the figures and comparisons not yet "
                   "written are missing", file=sys.stderr)
+        elif not (Path(args.out) / "summary.json").is_file():  # stopped while it started up
+            print(f"{stop.reason()} before the run began: nothing was written",
+                  file=sys.stderr)
         else:
             print(f"{stop.reason()}: files written so far are valid", file=sys.stderr)
         return stop.exit_code
