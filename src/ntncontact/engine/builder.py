@@ -414,29 +414,31 @@ def _check_tied_multipliers(ties: tuple[Tie, ...], interfaces: tuple[ContactInte
     surface: both pair with the same partner node and their gap constraints are one, so the
     multiplier system is singular (a tester's two tied blocks on one foundation failed with
     "SuperLU: Factor is exactly singular"). The penalty-based methods take both."""
-    exact = [(k, ci) for k, (ci, c) in enumerate(zip(interfaces, configs, strict=True))
+    exact = [(k, ci, set(ci.candidates.tolist()))
+             for k, (ci, c) in enumerate(zip(interfaces, configs, strict=True))
              if c.method == "lagrange"]
+    same_surface = [(i, j, cands_j) for i, face_i, _ in exact for j, face_j, cands_j in exact
+                    if i != j and np.intersect1d(face_i.interface.surface2.nodes,
+                                                 face_j.interface.surface2.nodes).size >= 2]
     for tie in ties:
         tied = dict(zip(tie.nodes_1.tolist(), tie.nodes_2.tolist(), strict=True))
-        for i, face_i in exact:
-            for j, face_j in exact:
-                if i == j or np.intersect1d(face_i.interface.surface2.nodes,
-                                            face_j.interface.surface2.nodes).size < 2:
-                    continue
-                both = [a for a in face_i.candidates.tolist()
-                        if tied.get(a, -1) in set(face_j.candidates.tolist())]
-                if both:
-                    by_name = {b.name: b for b in bodies}
-                    b1, b2 = by_name[configs[i].body_1], by_name[configs[j].body_1]
-                    raise ScenarioError(
-                        f"contact.{i} and contact.{j} (method = \"lagrange\") hold the nodes "
-                        f"{[a - b1.node_offset for a in both[:4]]} of body '{b1.name}' and "
-                        f"{[tied[a] - b2.node_offset for a in both[:4]]} of body '{b2.name}', "
-                        f"tied together by tie '{tie.name}', against the same surface: their "
-                        "two gap constraints "
-                        "are one and the multiplier system is singular. Exclude those nodes "
-                        f"from one interface (contact.{j}.exclude), or use method = "
-                        "\"augmented_lagrangian\" there")
+        for i, j, cands_j in same_surface:
+            both = [a for a in interfaces[i].candidates.tolist() if tied.get(a, -1) in cands_j]
+            if both:
+                _refuse_tied_twice(tie, both, tied, i, j, configs, bodies)
+
+
+def _refuse_tied_twice(tie: Tie, both: list[int], tied: dict, i: int, j: int,
+                       configs: list[ContactConfig], bodies: tuple[Body, ...]) -> None:
+    by_name = {b.name: b for b in bodies}
+    b1, b2 = by_name[configs[i].body_1], by_name[configs[j].body_1]
+    raise ScenarioError(
+        f"contact.{i} and contact.{j} (method = \"lagrange\") hold the nodes "
+        f"{[a - b1.node_offset for a in both[:4]]} of body '{b1.name}' and "
+        f"{[tied[a] - b2.node_offset for a in both[:4]]} of body '{b2.name}', tied together by "
+        f"tie '{tie.name}', against the same surface: their two gap constraints are one and "
+        f"the multiplier system is singular. Exclude those nodes from one interface "
+        f"(contact.{j}.exclude), or use method = \"augmented_lagrangian\" there")
 
 
 def _check_not_both_ways(i: int, j: int, face_i: ContactInterface,

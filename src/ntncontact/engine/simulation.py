@@ -858,7 +858,7 @@ class Simulation:
             dt = t_next - self.state.time
             self.state, its, self._last_substep = self.step_with_cutback(dt)
             self.state = replace(self.state, time=t_next)
-            extra = (self._ledger_extra() | self._contact_extra() | self._off_surface_extra()
+            extra = (self._ledger_extra() | self._contact_extra() | self._penetration_extra()
                      | self._tie_extra() | self._last_reactions | {"cut_back": self._cut_back})
             self._notify(StepRecord(self.state, self.balance(self.state), its, dt, extra))
             if progress is not None:
@@ -924,9 +924,10 @@ class Simulation:
         unmet, self._energy_unmet = self._energy_unmet, False
         return unmet
 
-    def _off_surface_extra(self) -> dict:
+    def _penetration_extra(self) -> dict:
         """The step's deepest boundary node inside another body off the contact surfaces
-        (``diagnostics.PenetrationCheck``): its depth for history.csv, and where it is."""
+        (``diagnostics.PenetrationCheck``): its depth for history.csv, and where it is; and
+        the deepest contact-surface node in no pair (``diagnostics.UnpairedCheck``)."""
         extra = {}
         if self._penetration is not None:
             found = self._penetration.deepest(self.state.x)

@@ -171,8 +171,7 @@ def tie_forces(constraints: Sequence, multipliers: Sequence[NDArray]) -> dict[st
         if isinstance(term, TieTerm):
             tie = term.tie
             rows, cols, vals = tie.gradient()
-            f = np.zeros(2 * int(max(tie.nodes_1.max(), tie.nodes_2.max(), *tie.edge_ends.ravel(),
-                                     *(tie.edge_dofs // 2))) + 2)
+            f = np.zeros(2 * (max(int(cols.max()) // 2, int(tie.nodes_1.max())) + 1))
             np.add.at(f, cols, -vals * lam[rows])
             out[tie.name] = f.reshape(-1, 2)[tie.nodes_1]  # body 1's nodes: pairs and edge ends
     return out

@@ -466,7 +466,7 @@ class ResultsDirectory:
         """What :class:`ResultsDirectory` needs as ``resume`` to continue after ``step``:
         the step, the PVD entries (the output cursor of the frames) and the summary."""
         if self.fields is not None:
-            self.fields.flush()  # the frames so far on disk (an XDMF series: in its index)
+            self.fields.flush()  # the frames so far on disk (XDMF: fields.h5 flushed)
         entries = self.fields.entries if self.fields is not None else []
         return {"step": int(step), "pvd_entries": [list(e) for e in entries],
                 "summary": self.summary.checkpoint_state()}
