@@ -4,7 +4,7 @@ Its gaps are zero to round-off, with either sign. Tested against zero, part of t
 contact at that step and the rest one step later, v dt inside, and the persistency law held the
 two groups v dt apart for the whole impact: the fast-sliding blocks refined 8x (surface spacing
 6.25e-3, contact-side row 2.1e-3) had a 6e-3 zig-zag along their face and most contact steps were
-halved. Under the persistency law a gap within ``interfaces.TOUCH_ROUNDOFF`` of the coordinates
+halved. Under the persistency law a gap within ``contact.evaluate.TOUCH_ROUNDOFF`` of the coordinates
 is a touch (``interfaces.touch_tolerance``).
 """
 
@@ -15,7 +15,8 @@ import pytest
 from helpers import Recorder, model_from_dict
 
 from ntncontact.contact import PairState, pair_gaps
-from ntncontact.engine.interfaces import TOUCH_ROUNDOFF, detect_all
+from ntncontact.contact.evaluate import TOUCH_ROUNDOFF
+from ntncontact.engine.interfaces import detect_all
 from ntncontact.engine.simulation import Simulation, initial_state
 
 DT = 0.01

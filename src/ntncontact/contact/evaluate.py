@@ -40,6 +40,11 @@ __all__ = [
     "evaluate_contact",
 ]
 
+#: A gap within this fraction of its nodes' largest coordinate is zero to round-off (a touch):
+#: detection decides it one way (``engine.interfaces.touch_tolerance``), and under the gap law
+#: the kernel gives such a pair the pressed branch's stiffness (``_normal_traction``)
+TOUCH_ROUNDOFF = 1e-10
+
 #: Integer codes of the normal laws compiled into the kernel (ContactLaw.method).
 METHOD_CODES: dict[str, int] = {"penalty": 0, "augmented_lagrangian": 1, "lagrange": 2}
 #: Kernel return codes; the caller raises the matching error.
@@ -143,12 +148,13 @@ def _sign(a):
 
 
 @njit(cache=True, inline="always")
-def _normal_traction(method, lambda_n, eps_N, measure, frictional):
+def _normal_traction(method, lambda_n, eps_N, measure, frictional, touch):
     """(t_N, dt_N/d measure): t_N = <lambda_N + eps_N measure> (2.33/2.34, lambda_N = 0 for
     penalty); "lagrange": the multiplier itself, without the bracket, so Newton sees a smooth
-    system (its sign is checked after the solve). A pair exactly at the kink (trial = 0) takes
-    the pressed branch's derivative, else a body held only by contact has a singular tangent at
-    first touch. Held pairs: a frictionless augmented-Lagrangian pair with lambda_N > 0 stays on
+    system (its sign is checked after the solve). A pair at the kink (trial = 0, or ``touch``:
+    a gap within round-off of zero) takes the pressed branch's derivative, else a body held
+    only by contact has a singular tangent at first touch (a tester's static block placed on
+    another: lifted by 1e-12, or the problem rotated by 0.001 degree, it failed as singular). Held pairs: a frictionless augmented-Lagrangian pair with lambda_N > 0 stays on
     the pressed branch within one augmentation's solve, unbracketed (docs/theory.md, 5.4): one
     that starts a solve separating would otherwise give Newton neither force nor stiffness and be
     driven deep into penetration; the augmentation test accepts only non-tensile tractions."""
@@ -157,7 +163,9 @@ def _normal_traction(method, lambda_n, eps_N, measure, frictional):
     trial = (0.0 if method == 0 else lambda_n) + eps_N * measure
     if method == 1 and not frictional and lambda_n > 0.0:  # held pair
         return trial, eps_N
-    return (trial, eps_N) if trial >= 0.0 else (0.0, 0.0)
+    if trial >= 0.0:
+        return trial, eps_N
+    return (0.0, eps_N) if touch else (0.0, 0.0)
 
 
 @njit(cache=True, inline="always")
@@ -353,7 +361,9 @@ def evaluate_pairs(x, v, x_start, table1, table2, pairs, lambda_N, dlambda_T, t_
         if rate_law and has_start and restoring[p] != 0.0:
             rate_offset = _restoring_rate(x_start, slots, i, j, rate_factor)
             measure += rate_offset
-        t_n, dt_dm = _normal_traction(method, lambda_N[p], eps_N, measure, frictional)
+        touch = not rate_law and abs(gap) <= TOUCH_ROUNDOFF * max(
+            abs(x[i, 0]), abs(x[i, 1]), abs(x[j, 0]), abs(x[j, 1]))
+        t_n, dt_dm = _normal_traction(method, lambda_N[p], eps_N, measure, frictional, touch)
         t_t, trial, stat, ds_coef, dn_coef = 0.0, 0.0, _SLIP, 0.0, 0.0
         if frictional:
             dlam = dlambda_T[p] if method != 0 else 0.0

@@ -32,12 +32,8 @@ from ..contact import (
     pair_gaps,
     release_tensile_pairs,
 )
+from ..contact.evaluate import TOUCH_ROUNDOFF
 from .model import ContactInterface
-
-#: Under the persistency law a gap within this fraction of the largest coordinate of its
-#: interface's nodes is zero to round-off, and decided one way (``touch_tolerance``).
-TOUCH_ROUNDOFF = 1e-10
-
 
 def detect_all(
     interfaces: Sequence[ContactInterface], states: Sequence[PairState], x: NDArray,
@@ -138,9 +134,12 @@ def entered_at_step_end(interfaces: Sequence[ContactInterface], states: Sequence
 
 
 def touch_tolerance(x: NDArray, ci: ContactInterface) -> float:
-    """How far below zero a gap tested at detection still enters (``detect``'s gap_tol). Under
-    the gap law 0. Under the persistency law a gap within round-off of zero, :data:`TOUCH_
-    ROUNDOFF` times the largest coordinate of the interface's nodes (a few ulps of them), is
+    """How far below zero a gap tested at detection still enters (``detect``'s gap_tol): a gap
+    within round-off of zero, :data:`TOUCH_ROUNDOFF` times the largest coordinate of the
+    interface's nodes. Under the gap law it enters (the law acts on the gap, so a pair in
+    early holds nothing open, and the kernel gives it the pressed branch's stiffness): a
+    tester's static block placed on another failed as singular when round-off (a lift of
+    1e-12, a rotation of 0.001 degree) left the gaps a hair open. Under the persistency law it is
     decided one way: detected at the step start (``penetration``) it is a touch that has
     happened, so it enters (tol > 0); at the predicted end of the step (``predicted``) it is a
     touch still to come, found with a zero gap at the next step start, so it waits (tol < 0:
@@ -154,10 +153,10 @@ def touch_tolerance(x: NDArray, ci: ContactInterface) -> float:
     amplitude and the contact steps needed 107-315 Newton iterations and 1-4 halvings;
     refined 4x with mu = 0.2 (4 of 33 nodes entered first) the run failed at t = 0.111
     (docs/theory.md, "A touch on a step boundary")."""
-    if not ci.persistency:
-        return 0.0
     nodes = np.concatenate([ci.interface.surface1.nodes, ci.interface.surface2.nodes])
     tol = TOUCH_ROUNDOFF * float(np.abs(x[nodes]).max())
+    if not ci.persistency:  # its force acts on the gap: a pair in early holds nothing open
+        return tol
     return -tol if ci.predicted_detection else tol
 
 
