@@ -30,8 +30,9 @@ def scenario(degrees: float, method: str, motion: str, lift: float = 0.0) -> dic
     material = {"model": "linear_elastic", "nu": 0.3, "density": 1.0}
     return {"analysis": {"kind": "static", "dt": 0.25, "t_end": 1.0},
             "bodies": [
-                {"name": "upper", "mesh": {"type": "gmsh", "file": str(DATA / "distorted_upper.msh"),
-                                           "transform": turn},
+                {"name": "upper",
+                 "mesh": {"type": "gmsh", "file": str(DATA / "distorted_upper.msh"),
+                          "transform": turn},
                  "material": material | {"E": 100.0},
                  "loads": [{"type": "pressure", "set": "top", "value": 1.0, "function": ramp},
                            {"type": "traction", "set": "top", "vector": shear,

@@ -4,8 +4,8 @@ Its gaps are zero to round-off, with either sign. Tested against zero, part of t
 contact at that step and the rest one step later, v dt inside, and the persistency law held the
 two groups v dt apart for the whole impact: the fast-sliding blocks refined 8x (surface spacing
 6.25e-3, contact-side row 2.1e-3) had a 6e-3 zig-zag along their face and most contact steps were
-halved. Under the persistency law a gap within ``contact.evaluate.TOUCH_ROUNDOFF`` of the coordinates
-is a touch (``interfaces.touch_tolerance``).
+halved. Under the persistency law a gap within ``contact.evaluate.TOUCH_ROUNDOFF`` of the
+coordinates is a touch (``interfaces.touch_tolerance``).
 """
 
 from dataclasses import replace

@@ -154,9 +154,10 @@ def _normal_traction(method, lambda_n, eps_N, measure, frictional, touch):
     system (its sign is checked after the solve). A pair at the kink (trial = 0, or ``touch``:
     a gap within round-off of zero) takes the pressed branch's derivative, else a body held
     only by contact has a singular tangent at first touch (a tester's static block placed on
-    another: lifted by 1e-12, or the problem rotated by 0.001 degree, it failed as singular). Held pairs: a frictionless augmented-Lagrangian pair with lambda_N > 0 stays on
-    the pressed branch within one augmentation's solve, unbracketed (docs/theory.md, 5.4): one
-    that starts a solve separating would otherwise give Newton neither force nor stiffness and be
+    another: lifted by 1e-12, or the problem rotated by 0.001 degree, it failed as singular).
+    Held pairs: a frictionless augmented-Lagrangian pair with lambda_N > 0 stays on the
+    pressed branch within one augmentation's solve, unbracketed (docs/theory.md, 5.4): one that
+    starts a solve separating would otherwise give Newton neither force nor stiffness and be
     driven deep into penetration; the augmentation test accepts only non-tensile tractions."""
     if method == 2:
         return lambda_n, 0.0

@@ -35,6 +35,7 @@ from ..contact import (
 from ..contact.evaluate import TOUCH_ROUNDOFF
 from .model import ContactInterface
 
+
 def detect_all(
     interfaces: Sequence[ContactInterface], states: Sequence[PairState], x: NDArray,
     v: NDArray, dt: float,
