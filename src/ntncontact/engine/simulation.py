@@ -31,6 +31,7 @@ from .diagnostics import (
     check_end_of_step,
     named_failure,
 )
+from .initial import initial_state
 from .interfaces import (
     LagrangeTerm,
     augment_all,
@@ -178,19 +179,6 @@ def _force_columns(b, keep: NDArray, position: NDArray, column: NDArray, size: i
     np.add.at(forces, (position[b.b_rows[take]], column[b.b_cols[take]] - block.start),
               b.b_vals[take])
     return forces
-
-
-def initial_state(model: Model) -> StepState:
-    """Reference configuration, each body's initial rigid velocity (translation + spin)."""
-    n = model.n_nodes
-    v = np.zeros((n, 2))
-    for body in model.bodies:
-        nodes = body.nodes
-        centre = model.X0[nodes].mean(axis=0)
-        r = model.X0[nodes] - centre
-        omega = body.initial_angular_velocity
-        v[nodes] = np.asarray(body.initial_velocity) + omega * np.column_stack([-r[:, 1], r[:, 0]])
-    return StepState(0, 0.0, model.X0.copy(), np.zeros((n, 2)), v, np.zeros((n, 2)))
 
 
 class Simulation:

@@ -37,6 +37,14 @@ class TimeFunction:
     def __call__(self, t: float) -> float:
         return float(np.interp(t, self.times, self.values))
 
+    def rate(self, t: float) -> float:
+        """ds/dt just after t: the slope of the segment that t starts (0 outside the times)."""
+        k = int(np.searchsorted(self.times, t, side="right"))
+        if k == 0 or k == len(self.times):
+            return 0.0
+        t0, t1 = self.times[k - 1], self.times[k]
+        return (self.values[k] - self.values[k - 1]) / (t1 - t0)
+
 
 def edge_traction_vector(
     X: NDArray, edges: NDArray, traction: NDArray | None, pressure: float | None, ndof: int
