@@ -10,11 +10,12 @@ from ntncontact.mesh.boundary import (
     boundary_edges,
     chain_edge_lengths,
     chain_from_edges,
+    hanging_nodes,
     nodal_outward_normals,
     nodal_tributary_lengths,
     surface_chain,
 )
-from ntncontact.mesh.generators import annulus, rectangle
+from ntncontact.mesh.generators import annulus, disk, half_disk, rectangle
 from ntncontact.mesh.quadmesh import MeshError, QuadMesh
 
 EPS = np.finfo(float).eps
@@ -158,3 +159,30 @@ def test_rectangle_surface_normals_point_outward():
         chain = surface_chain(m, side)
         normals = nodal_outward_normals(m.nodes[chain.nodes], chain.closed)
         assert np.abs(normals - outward).max() < 10 * EPS
+
+
+def _three_beside_one(offset: float) -> QuadMesh:
+    """Three cells stacked (x 0..1) beside one cell (x 1..2), joined at the corners only; the
+    two inner nodes of the left column are moved right by ``offset``."""
+    ys = np.array([0.0, 1 / 3, 2 / 3, 1.0])
+    xs = np.array([0.0, 0.0, 0.0, 0.0, 1.0, 1.0 + offset, 1.0 + offset, 1.0, 2.0, 2.0])
+    nodes = np.column_stack((xs, np.concatenate((ys, ys, [0.0, 1.0]))))
+    cells = [[0, 4, 5, 1], [1, 5, 6, 2], [2, 6, 7, 3], [4, 8, 9, 7]]
+    return QuadMesh(nodes, np.array(cells))
+
+
+def test_hanging_nodes_are_found_on_their_edge():
+    """Both nodes of a 3-to-1 T-junction hang on the big cell's edge (7, 4); moved off the edge
+    by more than HANGING_RTOL of its length (a notch 0.002 wide) they do not."""
+    found = hanging_nodes(_three_beside_one(0.0))
+    assert sorted(found[:, 0].tolist()) == [5, 6]
+    assert np.all(found[:, 1:] == [7, 4])
+    assert hanging_nodes(_three_beside_one(-1e-4)).shape[0] == 2  # round-off off the line
+    assert hanging_nodes(_three_beside_one(-2e-3)).shape == (0, 3)
+
+
+@pytest.mark.parametrize("mesh", [rectangle(3.0, 1.0, 30, 4, grading_x=1.3),
+                                  annulus(1.0, 1.2, 2, 64), disk(1.0, 48, 4, 0.05),
+                                  half_disk(1.0, 24, 5, 0.02)], ids=lambda m: m.name)
+def test_generated_meshes_have_no_hanging_nodes(mesh):
+    assert hanging_nodes(mesh).shape == (0, 3)

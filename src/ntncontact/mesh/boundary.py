@@ -8,9 +8,11 @@ outward unit normal ``n1`` used in the gap 2.4).
 from __future__ import annotations
 
 from dataclasses import dataclass
+from itertools import chain
 
 import numpy as np
 from numpy.typing import NDArray
+from scipy.spatial import cKDTree
 
 from ntncontact.mesh.quadmesh import MeshError, QuadMesh
 
@@ -19,6 +21,7 @@ __all__ = [
     "boundary_edges",
     "chain_edge_lengths",
     "chain_from_edges",
+    "hanging_nodes",
     "nodal_outward_normals",
     "nodal_tributary_lengths",
     "surface_chain",
@@ -64,6 +67,45 @@ def boundary_edges(mesh: QuadMesh) -> NDArray[np.int64]:
             " cells (an inverted or clockwise cell)"
         )
     return edges[np.sort(first[counts == 1])]
+
+
+#: a boundary node within this fraction of an edge's length of the edge's interior hangs on
+#: it: gmsh puts a hanging node on a straight shared line to round-off (1e-16); a thin notch
+#: between two faces of a body is far wider than this. A node on a curved shared line sits off
+#: the coarse side's chord by the sagitta (about L / 8R of the edge) and is not caught.
+HANGING_RTOL = 1e-3
+
+
+def hanging_nodes(mesh: QuadMesh, rtol: float = HANGING_RTOL) -> NDArray[np.int64]:
+    """Rows ``(node, a, b)``: a boundary node lying inside boundary edge ``(a, b)`` of the same
+    mesh (a T-junction: a finer part's node on a coarser part's edge, only the corners merged).
+
+    Nothing joins such a node to the edge, so the mesh holds a crack: a tester's block with
+    4 x 4 cells beside 2 x 2 ran without a word and opened by (0.0094, 0.0042), 3.4 % of its
+    largest displacement. Each edge looks only at the boundary nodes within its half-length
+    of its midpoint (a k-d tree): measured with the boundary edges' own search, 0.16 s for a
+    316 x 316 rectangle (10^5 cells), 0.6 s for a 10^5-cell strip 10^5 x 1 (its 2 x 10^5
+    boundary edges).
+    """
+    edges = boundary_edges(mesh)
+    if edges.shape[0] == 0:
+        return np.zeros((0, 3), np.int64)
+    on_boundary = np.unique(edges)
+    start, end = mesh.nodes[edges[:, 0]], mesh.nodes[edges[:, 1]]
+    along = end - start
+    length = np.hypot(along[:, 0], along[:, 1])
+    near = cKDTree(mesh.nodes[on_boundary]).query_ball_point(0.5 * (start + end),
+                                                             0.5 * length * (1.0 + rtol))
+    counts = np.fromiter(map(len, near), np.int64, count=len(near))
+    node = on_boundary[np.fromiter(chain.from_iterable(near), np.int64, count=counts.sum())]
+    edge = np.repeat(np.arange(edges.shape[0]), counts)
+    keep = (node != edges[edge, 0]) & (node != edges[edge, 1])
+    node, edge = node[keep], edge[keep]
+    offset = mesh.nodes[node] - start[edge]
+    t = np.einsum("ij,ij->i", offset, along[edge]) / length[edge] ** 2
+    across = np.abs(offset[:, 0] * along[edge, 1] - offset[:, 1] * along[edge, 0]) / length[edge]
+    inside = (t > rtol) & (t < 1.0 - rtol) & (across <= rtol * length[edge])
+    return np.column_stack((node[inside], edges[edge[inside]])).astype(np.int64)
 
 
 def chain_from_edges(edges: NDArray[np.int64], label: str = "edges") -> SurfaceChain:

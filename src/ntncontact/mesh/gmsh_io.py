@@ -16,7 +16,7 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.spatial import cKDTree
 
-from ntncontact.mesh.boundary import boundary_edges
+from ntncontact.mesh.boundary import boundary_edges, hanging_nodes
 from ntncontact.mesh.quadmesh import MeshError, QuadMesh
 
 __all__ = ["read_msh"]
@@ -31,8 +31,8 @@ def read_msh(path: str | Path, name: str | None = None) -> QuadMesh:
     Unused nodes are dropped and the rest renumbered in file order; clockwise cells are
     flipped to counter-clockwise. ``name`` defaults to the file stem. Raises
     :class:`MeshError` (naming the file) for triangles, higher-order or 3D cells, a
-    non-planar mesh, coincident nodes, degenerate cells, or a line group not on the
-    boundary.
+    non-planar mesh, coincident nodes, hanging nodes (T-junctions), degenerate cells, or a
+    line group not on the boundary.
     """
     path = Path(path)
     raw = _read_meshio(path)
@@ -52,6 +52,7 @@ def read_msh(path: str | Path, name: str | None = None) -> QuadMesh:
     _check_distinct(xy[used], label)
     cells = _counter_clockwise(xy[used], renumber[quads], label)
     mesh = QuadMesh(xy[used], cells, name=name or path.stem)
+    _check_conforming(mesh, label)
     groups = _physical_groups(raw, blocks, label)
     node_sets, edge_sets = _named_sets(mesh, groups, renumber, label)
     return mesh.with_sets(node_sets, edge_sets)
@@ -110,6 +111,24 @@ def _check_distinct(xy: NDArray, label: str) -> None:
         "the cells on either side are not joined (a crack). Merge them (gmsh: Coherence "
         "Mesh, Geometry.AutoCoherence), or make the parts separate bodies joined by a "
         "[[tie]] or a [[contact]]")
+
+
+def _check_conforming(mesh: QuadMesh, label: str) -> None:
+    """Refuses hanging nodes (T-junctions): parts meshed with different divisions and merged at
+    their corners only leave the finer part's nodes loose on the coarser part's edges, a crack
+    that opens under load (see :func:`hanging_nodes`)."""
+    hanging = hanging_nodes(mesh)
+    if hanging.shape[0] == 0:
+        return
+    (x, y), (ax, ay), (bx, by) = mesh.nodes[hanging[0]]
+    raise MeshError(
+        f"{label} (body '{mesh.name}'): {hanging.shape[0]} node(s) hang on another cell's edge "
+        f"(a non-conformal mesh), the first at ({x:.6g}, {y:.6g}) on the edge from "
+        f"({ax:.6g}, {ay:.6g}) to ({bx:.6g}, {by:.6g}): nothing joins them (a crack). Mesh "
+        "conformally: one surface, or matching divisions on the shared line (gmsh Coherence "
+        "merges coincident nodes only, it does not make a mesh conformal); or make the parts "
+        "separate bodies joined by a [[tie]], which holds a finer side's nodes on the other's "
+        "edges")
 
 
 def _counter_clockwise(xy: NDArray, cells: NDArray[np.int64], label: str) -> NDArray[np.int64]:
