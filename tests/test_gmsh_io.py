@@ -125,7 +125,7 @@ def test_an_interior_line_group_is_a_node_set_only(tmp_path):
         mesh = read_msh(tmp_path / "two.msh")
     assert "interface" in mesh.node_sets and "interface" not in mesh.edge_sets
     assert mesh.node_sets["interface"].size == 3  # the line's three nodes
-    with pytest.raises(MeshError, match="no surface .* named 'interface'"):
+    with pytest.raises(MeshError, match="'interface' is a node set only"):
         mesh.edge_set("interface")
 
 
@@ -155,7 +155,7 @@ def test_meshio_written_file_renumbers_and_flips(tmp_path):
 def test_unreadable_and_missing_files(tmp_path):
     bad = tmp_path / "bad.msh"
     bad.write_text("this is not a mesh\n")
-    with pytest.raises(MeshError, match=r"bad\.msh.*not a readable"):
+    with pytest.raises(MeshError, match=r"bad\.msh: not a gmsh \.msh file"):
         read_msh(bad)
     with pytest.raises(FileNotFoundError, match="missing"):
         read_msh(tmp_path / "missing.msh")
@@ -233,3 +233,74 @@ def test_hanging_nodes_are_refused(tmp_path):
                                         r"\(1, 1\) to \(1, 0\).*Coherence.*\[\[tie\]\]"):
         read_msh(tmp_path / "hanging.msh", name="blk")
     assert read_msh(tmp_path / "conformal.msh").n_cells == 4
+
+
+# one quad with its bottom edge in the line group "bottom" (format 4.1); the line block's
+# entity tag is CURVE: 1 is the curve $Entities lists, 2 is none
+V41_ONE_QUAD = """$MeshFormat
+4.1 0 8
+$EndMeshFormat
+$PhysicalNames
+2
+1 2 "bottom"
+2 1 "body"
+$EndPhysicalNames
+$Entities
+0 1 1 0
+1 0 0 0 1 0 0 1 2 0
+1 0 0 0 1 1 0 1 1 0
+$EndEntities
+$Nodes
+1 4 1 4
+2 1 0 4
+1
+2
+3
+4
+0 0 0
+1 0 0
+1 1 0
+0 1 0
+$EndNodes
+$Elements
+2 2 1 2
+1 CURVE 1 1
+1 1 2
+2 1 3 1
+2 1 2 3 4
+$EndElements
+"""
+
+
+def test_other_formats_are_refused_with_the_formats_read(tmp_path):
+    """An Abaqus .inp or a .vtu given as a gmsh mesh was refused with "(ReadError: )"; now
+    the message says which formats are read and how to convert."""
+    mesh = meshio.Mesh(np.array([[0, 0], [1, 0], [1, 1], [0, 1]], dtype=float),
+                       [("quad", np.array([[0, 1, 2, 3]]))])
+    for suffix in ("inp", "vtu"):
+        meshio.write(tmp_path / f"block.{suffix}", mesh)
+        with pytest.raises(MeshError, match=rf"block\.{suffix}: not a gmsh \.msh file.*format "
+                                            r"2\.2 or 4\.1.*meshio convert in\.inp out\.msh"):
+            read_msh(tmp_path / f"block.{suffix}")
+
+
+def test_inconsistent_v41_entities_are_named(tmp_path):
+    """A v4.1 file whose line block names an entity $Entities lacks gave "(KeyError:
+    np.int32(2))"; the consistent file is read."""
+    for curve in ("1", "2"):
+        (tmp_path / f"curve{curve}.msh").write_text(V41_ONE_QUAD.replace("CURVE", curve))
+    assert read_msh(tmp_path / "curve1.msh").edge_sets["bottom"].shape == (1, 2)
+    with pytest.raises(MeshError, match=r"curve2\.msh: the file's entities and physical groups "
+                                        r"are inconsistent.*entity 2,"):
+        read_msh(tmp_path / "curve2.msh")
+
+
+def test_second_order_quads_get_the_element_order_hint(tmp_path):
+    points = np.array([[0, 0, 0], [2, 0, 0], [2, 2, 0], [0, 2, 0], [1, 0, 0], [2, 1, 0],
+                       [1, 2, 0], [0, 1, 0], [1, 1, 0]], dtype=float)
+    mesh = meshio.Mesh(points, [("quad9", np.arange(9)[None, :])],
+                       cell_data={"gmsh:physical": [np.array([1])],
+                                  "gmsh:geometrical": [np.array([1])]})
+    meshio.write(tmp_path / "q9.msh", mesh, file_format="gmsh22", binary=False)
+    with pytest.raises(MeshError, match=r"\['quad9'\].*Mesh\.ElementOrder = 1"):
+        read_msh(tmp_path / "q9.msh")

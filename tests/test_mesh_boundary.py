@@ -186,3 +186,15 @@ def test_hanging_nodes_are_found_on_their_edge():
                                   half_disk(1.0, 24, 5, 0.02)], ids=lambda m: m.name)
 def test_generated_meshes_have_no_hanging_nodes(mesh):
     assert hanging_nodes(mesh).shape == (0, 3)
+
+
+def test_a_surface_that_is_a_point_group_says_so():
+    """A contact surface named after a physical point group was "no surface (edge set) named
+    'bottom' (known: ...)"; now it says 'bottom' holds nodes only and a surface needs a line
+    group."""
+    mesh = rectangle(1.0, 1.0, 2, 2).with_sets(node_sets={"corner": np.array([0])})
+    with pytest.raises(MeshError, match=r"'corner' is a node set only \(a physical point or "
+                                        r"surface group.*needs a physical line group"):
+        mesh.edge_set("corner")
+    with pytest.raises(MeshError, match="no surface .* named 'nowhere'"):
+        mesh.edge_set("nowhere")

@@ -58,15 +58,34 @@ def read_msh(path: str | Path, name: str | None = None) -> QuadMesh:
     return mesh.with_sets(node_sets, edge_sets)
 
 
+#: what every refusal of an unreadable file says: the formats read and how to get one
+_FORMATS = ("only gmsh .msh files (format 2.2 or 4.1) are read; convert another format with "
+            "`meshio convert in.inp out.msh`, then give the boundary curves physical line "
+            "groups (surfaces, supports, loads) in gmsh")
+
+
 def _read_meshio(path: Path) -> meshio.Mesh:
-    """meshio's gmsh reader, called directly: ``meshio.read`` exits the process on bad files."""
+    """meshio's gmsh reader, called directly: ``meshio.read`` exits the process on bad files.
+    Its own errors said nothing a user could act on (an Abaqus .inp: "ReadError: "; a v4.1
+    file whose groups name a missing entity: "KeyError: np.int32(2)")."""
     if not path.is_file():
         raise FileNotFoundError(f"gmsh mesh file not found: {path}")
+    with path.open("rb") as stream:
+        first = stream.readline(64).strip()
+    if not first.startswith(b"$MeshFormat"):
+        raise MeshError(f"{path}: not a gmsh .msh file (it does not begin with $MeshFormat): "
+                        f"{_FORMATS}")
     try:
         return meshio.gmsh.read(path)
-    except Exception as err:  # meshio raises ReadError, ValueError, KeyError, ... on bad input
-        raise MeshError(f"{path}: not a readable gmsh .msh file ({type(err).__name__}: {err})"
-                        ) from err
+    except KeyError as err:  # an entity tag that $Entities does not hold
+        tag = err.args[0] if err.args else "?"
+        tag = int(tag) if isinstance(tag, (int, np.integer)) else tag
+        raise MeshError(f"{path}: the file's entities and physical groups are inconsistent (an "
+                        f"element block refers to entity {tag}, which $Entities does not list); "
+                        "write it again from gmsh (File > Export, format 4.1 or 2.2)") from err
+    except Exception as err:  # meshio raises ReadError, ValueError, ... on bad input
+        raise MeshError(f"{path}: not a readable gmsh .msh file ({type(err).__name__}: {err}); "
+                        f"{_FORMATS}") from err
 
 
 def _check_cell_types(blocks: list[tuple[str, NDArray]], label: str) -> None:
@@ -76,8 +95,11 @@ def _check_cell_types(blocks: list[tuple[str, NDArray]], label: str) -> None:
                         "(recombine in gmsh: Mesh.RecombineAll = 1 or setRecombine)")
     unsupported = kinds - set(_DIMENSION)
     if unsupported:
+        higher = [kind for kind in unsupported if kind.startswith(("quad", "line"))]
+        hint = (" (second-order cells: mesh with Mesh.ElementOrder = 1 in gmsh, or `gmsh -order "
+                "1`)" if higher else "")
         raise MeshError(f"{label}: unsupported cell types {sorted(unsupported)}; only first-order "
-                        "quads (with line and vertex cells for physical groups) are read")
+                        f"quads (with line and vertex cells for physical groups) are read{hint}")
 
 
 def _planar_points(points: NDArray[np.float64], label: str) -> NDArray[np.float64]:

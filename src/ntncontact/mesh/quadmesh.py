@@ -88,6 +88,12 @@ class QuadMesh:
         missing = [p for p in parts if p not in self.edge_sets]
         if len(set(parts)) < len(parts):  # a typo for another face, most likely
             raise MeshError(f"{self.name}: surface '{name}' names a part twice")
+        if missing and missing[0] in self.node_sets:
+            raise MeshError(
+                f"{self.name}: '{missing[0]}' is a node set only (a physical point or surface "
+                "group, or a line inside the mesh); a surface needs a physical line group on "
+                f"the boundary (surfaces: {sorted(self.edge_sets)})"
+            )
         if missing:
             raise MeshError(
                 f"{self.name}: no surface (edge set) named '{missing[0]}' "
