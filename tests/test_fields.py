@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import shutil
 
+import meshio
 import numpy as np
 import pandas as pd
 import pytest
@@ -386,3 +387,27 @@ def test_xdmf_without_h5py_stops_before_writing_any_file(tmp_path, monkeypatch):
     with pytest.raises(RuntimeError, match=r"needs h5py: pip install 'ntncontact\[xdmf\]'"):
         api.run(api.scenario_from_dict(data), out=tmp_path / "out")
     assert not [p.name for p in (tmp_path / "out").iterdir() if p.suffix in (".csv", ".json")]
+
+
+def test_frames_give_each_node_its_number_in_the_mesh_file(tmp_path):
+    """Outputs number the nodes 0..n-1 over all bodies; a gmsh user could not find such a node
+    in the file. The frames' ``file_node_id`` gives the file's number (node 1 unused and
+    dropped here, so the block's nodes are 2..7) and -1 for a generated body's nodes."""
+    points = np.array([[9, 9, 0], [0, 0, 0], [1, 0, 0], [2, 0, 0], [0, 1, 0], [1, 1, 0],
+                       [2, 1, 0]], dtype=float)
+    mesh = meshio.Mesh(points, [("quad", np.array([[1, 2, 5, 4], [2, 3, 6, 5]])),
+                                ("line", np.array([[1, 2], [2, 3]]))],
+                       cell_data={"gmsh:physical": [np.array([1, 1]), np.array([2, 2])],
+                                  "gmsh:geometrical": [np.array([1, 1]), np.array([1, 1])]},
+                       field_data={"body": np.array([1, 2]), "bottom": np.array([2, 1])})
+    meshio.write(tmp_path / "block.msh", mesh, file_format="gmsh22", binary=False)
+    data = _block("linear_elastic")
+    data["bodies"][0]["mesh"] = {"type": "rectangle", "width": 1.0, "height": 1.0, "nx": 1,
+                                 "ny": 1, "origin": [5.0, 0.0]}
+    data["bodies"].append({
+        "name": "read", "mesh": {"type": "gmsh", "file": str(tmp_path / "block.msh")},
+        "material": {"model": "linear_elastic", "E": 100.0, "nu": 0.3, "density": 1.0},
+        "supports": [{"set": "bottom", "x": 0.0, "y": 0.0}]})
+    _run(tmp_path, data)
+    ids = _last_frame(tmp_path / "out").point_data["file_node_id"]
+    assert ids.tolist() == [-1] * 4 + [2, 3, 4, 5, 6, 7]

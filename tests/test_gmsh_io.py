@@ -236,7 +236,7 @@ def test_hanging_nodes_are_refused(tmp_path):
 
 
 # one quad with its bottom edge in the line group "bottom" (format 4.1); the line block's
-# entity tag is CURVE: 1 is the curve $Entities lists, 2 is none
+# entity tag is {curve}: 1 is the curve $Entities lists, 2 is none; node tags from {t1}
 V41_ONE_QUAD = """$MeshFormat
 4.1 0 8
 $EndMeshFormat
@@ -251,12 +251,12 @@ $Entities
 1 0 0 0 1 1 0 1 1 0
 $EndEntities
 $Nodes
-1 4 1 4
+1 4 {t1} {t4}
 2 1 0 4
-1
-2
-3
-4
+{t1}
+{t2}
+{t3}
+{t4}
 0 0 0
 1 0 0
 1 1 0
@@ -264,12 +264,16 @@ $Nodes
 $EndNodes
 $Elements
 2 2 1 2
-1 CURVE 1 1
-1 1 2
+1 {curve} 1 1
+1 {t1} {t2}
 2 1 3 1
-2 1 2 3 4
+2 {t1} {t2} {t3} {t4}
 $EndElements
 """
+
+
+def _one_quad_v41(curve: int = 1, first_tag: int = 1) -> str:
+    return V41_ONE_QUAD.format(curve=curve, **{f"t{k}": first_tag + k - 1 for k in range(1, 5)})
 
 
 def test_other_formats_are_refused_with_the_formats_read(tmp_path):
@@ -287,8 +291,8 @@ def test_other_formats_are_refused_with_the_formats_read(tmp_path):
 def test_inconsistent_v41_entities_are_named(tmp_path):
     """A v4.1 file whose line block names an entity $Entities lacks gave "(KeyError:
     np.int32(2))"; the consistent file is read."""
-    for curve in ("1", "2"):
-        (tmp_path / f"curve{curve}.msh").write_text(V41_ONE_QUAD.replace("CURVE", curve))
+    for curve in (1, 2):
+        (tmp_path / f"curve{curve}.msh").write_text(_one_quad_v41(curve))
     assert read_msh(tmp_path / "curve1.msh").edge_sets["bottom"].shape == (1, 2)
     with pytest.raises(MeshError, match=r"curve2\.msh: the file's entities and physical groups "
                                         r"are inconsistent.*entity 2,"):
@@ -304,3 +308,14 @@ def test_second_order_quads_get_the_element_order_hint(tmp_path):
     meshio.write(tmp_path / "q9.msh", mesh, file_format="gmsh22", binary=False)
     with pytest.raises(MeshError, match=r"\['quad9'\].*Mesh\.ElementOrder = 1"):
         read_msh(tmp_path / "q9.msh")
+
+
+def test_the_files_node_numbers_are_kept(tmp_path):
+    """The reader numbers the nodes 0..n-1 and messages and outputs use those; the file's own
+    numbers (sparse here: 11..14; 4.1's reader gives them less one) are kept as
+    ``file_node_ids``, through a rigid placement, and a generated mesh has none."""
+    (tmp_path / "sparse.msh").write_text(_one_quad_v41(first_tag=11))
+    mesh = read_msh(tmp_path / "sparse.msh")
+    assert mesh.file_node_ids.tolist() == [11, 12, 13, 14]
+    assert mesh.transformed(30.0, (1.0, 2.0)).file_node_ids.tolist() == [11, 12, 13, 14]
+    assert mesh.with_sets({"a": [0]}).file_node_ids.tolist() == [11, 12, 13, 14]

@@ -92,6 +92,11 @@ class ResultWriter:
         self.interval = model.analysis.output_interval
         self._next_output = 0.0
         self._body_id = model.body_of_cell().astype(float)
+        # each node's number in its body's mesh file (-1: a generated mesh), so that a global
+        # node of contact.csv can be found in the file the user meshed
+        self._file_node_id = np.concatenate([
+            np.full(b.mesh.n_nodes, -1) if b.mesh.file_node_ids is None else b.mesh.file_node_ids
+            for b in model.bodies]).astype(float)
         self._spacing = {ci.name: ci.spacing for ci in model.interfaces}
         self._last: StepRecord | None = None
         if resume is not None:
@@ -262,7 +267,7 @@ class ResultWriter:
         point = {"displacement": s.d, "velocity": s.v, "acceleration": s.a,
                  "mesh_velocity": mesh_velocity(s.v, s.X, before.state.X if moving else s.X,
                                                 record.dt, F),
-                 "material_position": s.X}
+                 "material_position": s.X, "file_node_id": self._file_node_id}
         point |= nodal | contact_node_fields(record.extra.get("contact_rows"), len(s.X))
         self.results.fields.write(s.step, s.time, s.X, model.cells, point_data=point,
                                   cell_data=cell | {"body_id": self._body_id})

@@ -51,7 +51,8 @@ def read_msh(path: str | Path, name: str | None = None) -> QuadMesh:
     renumber[used] = np.arange(used.size)
     _check_distinct(xy[used], label)
     cells = _counter_clockwise(xy[used], renumber[quads], label)
-    mesh = QuadMesh(xy[used], cells, name=name or path.stem)
+    mesh = QuadMesh(xy[used], cells, name=name or path.stem,
+                    file_node_ids=_file_node_ids(path, xy.shape[0])[used])
     _check_conforming(mesh, label)
     groups = _physical_groups(raw, blocks, label)
     node_sets, edge_sets = _named_sets(mesh, groups, renumber, label)
@@ -86,6 +87,30 @@ def _read_meshio(path: Path) -> meshio.Mesh:
     except Exception as err:  # meshio raises ReadError, ValueError, ... on bad input
         raise MeshError(f"{path}: not a readable gmsh .msh file ({type(err).__name__}: {err}); "
                         f"{_FORMATS}") from err
+
+
+def _file_node_ids(path: Path, n_points: int) -> NDArray[np.int64]:
+    """The file's node numbers in file order (meshio's point order), which meshio reads and
+    drops: outputs give them so that a node of contact.csv can be found in the file. Read with
+    meshio's own node readers; -1 for every node if that fails (a format meshio reads
+    differently), since they only help find a node."""
+    try:
+        with path.open("rb") as stream:
+            stream.readline()  # $MeshFormat, checked by _read_meshio
+            version, data_size, is_ascii = meshio.gmsh.main._read_header(stream)
+            reader = {"2.2": meshio.gmsh._gmsh22, "4.1": meshio.gmsh._gmsh41}[version]
+            while stream.readline().strip() != b"$Nodes":
+                pass
+            if reader is meshio.gmsh._gmsh22:
+                _, tags = reader._read_nodes(stream, is_ascii)
+                ids = np.asarray(tags, dtype=np.int64)
+            else:  # 4.1's reader returns the tags less one
+                _, tags, _ = meshio.gmsh._gmsh41._read_nodes(stream, is_ascii, data_size)
+                ids = np.asarray(tags, dtype=np.int64) + 1
+        ids = ids.reshape(-1)
+    except Exception:  # noqa: BLE001 - the ids are a help for finding nodes, not the mesh
+        ids = np.zeros(0, np.int64)
+    return ids if ids.size == n_points else np.full(n_points, -1, np.int64)
 
 
 def _check_cell_types(blocks: list[tuple[str, NDArray]], label: str) -> None:

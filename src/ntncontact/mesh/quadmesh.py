@@ -30,7 +30,9 @@ class QuadMesh:
     ``node_sets`` map a name to node indices; ``edge_sets`` (surfaces) map a name to an
     (m, 2) array of node pairs, each pair ordered so that the body lies on its left
     (counter-clockwise boundary orientation), i.e. the outward normal of edge (a, b) is
-    ``rot(-90)(x_b - x_a)``.
+    ``rot(-90)(x_b - x_a)``. ``file_node_ids`` are the node numbers of the file a mesh was read
+    from (a reader renumbers the nodes 0..n-1; messages and outputs use those), None for a
+    generated mesh.
     """
 
     nodes: NDArray[np.float64]
@@ -38,6 +40,7 @@ class QuadMesh:
     node_sets: Mapping[str, NDArray[np.int64]] = field(default_factory=dict)
     edge_sets: Mapping[str, NDArray[np.int64]] = field(default_factory=dict)
     name: str = "body"
+    file_node_ids: NDArray[np.int64] | None = None
 
     def __post_init__(self) -> None:
         nodes = _frozen(self.nodes, np.float64)
@@ -54,6 +57,11 @@ class QuadMesh:
             for key, idx in sets.items():
                 if idx.size and (idx.min() < 0 or idx.max() >= len(nodes)):
                     raise MeshError(f"{self.name}: {label} '{key}' refers to a missing node")
+        if self.file_node_ids is not None:
+            ids = _frozen(self.file_node_ids, np.int64).reshape(-1)
+            if ids.size != len(nodes):
+                raise MeshError(f"{self.name}: {ids.size} file node ids for {len(nodes)} nodes")
+            object.__setattr__(self, "file_node_ids", ids)
         object.__setattr__(self, "nodes", nodes)
         object.__setattr__(self, "cells", cells)
         object.__setattr__(self, "node_sets", MappingProxyType(node_sets))
@@ -103,7 +111,8 @@ class QuadMesh:
 
     def with_nodes(self, nodes: NDArray[np.float64]) -> QuadMesh:
         """The same topology and sets at new node coordinates."""
-        return QuadMesh(nodes, self.cells, dict(self.node_sets), dict(self.edge_sets), self.name)
+        return QuadMesh(nodes, self.cells, dict(self.node_sets), dict(self.edge_sets), self.name,
+                        self.file_node_ids)
 
     def with_sets(
         self,
@@ -113,7 +122,7 @@ class QuadMesh:
         """A copy with extra (or replaced) named sets."""
         ns = dict(self.node_sets) | dict(node_sets or {})
         es = dict(self.edge_sets) | dict(edge_sets or {})
-        return QuadMesh(self.nodes, self.cells, ns, es, self.name)
+        return QuadMesh(self.nodes, self.cells, ns, es, self.name, self.file_node_ids)
 
     def transformed(
         self, angle_deg: float = 0.0, translation: tuple[float, float] = (0.0, 0.0),
