@@ -229,8 +229,9 @@ def test_hanging_nodes_are_refused(tmp_path):
                            cell_data={"gmsh:physical": [tags], "gmsh:geometrical": [tags]})
         meshio.write(tmp_path / f"{name}.msh", mesh, file_format="gmsh22", binary=False)
     with pytest.raises(MeshError, match=r"hanging\.msh \(body 'blk'\): 1 node\(s\) hang on "
-                                        r"another cell's edge.*at \(1, 0\.5\) on the edge from "
-                                        r"\(1, 1\) to \(1, 0\).*Coherence.*\[\[tie\]\]"):
+                                        r"another cell's edge.*at \(1, 0\.5\) \(file node 3\) "
+                                        r"on the edge from \(1, 1\) to \(1, 0\).*Coherence.*"
+                                        r"\[\[tie\]\]"):
         read_msh(tmp_path / "hanging.msh", name="blk")
     assert read_msh(tmp_path / "conformal.msh").n_cells == 4
 

@@ -98,15 +98,15 @@ def _file_node_ids(path: Path, n_points: int) -> NDArray[np.int64]:
         with path.open("rb") as stream:
             stream.readline()  # $MeshFormat, checked by _read_meshio
             version, data_size, is_ascii = meshio.gmsh.main._read_header(stream)
-            reader = {"2.2": meshio.gmsh._gmsh22, "4.1": meshio.gmsh._gmsh41}[version]
             while stream.readline().strip() != b"$Nodes":
                 pass
-            if reader is meshio.gmsh._gmsh22:
-                _, tags = reader._read_nodes(stream, is_ascii)
-                ids = np.asarray(tags, dtype=np.int64)
-            else:  # 4.1's reader returns the tags less one
-                _, tags, _ = meshio.gmsh._gmsh41._read_nodes(stream, is_ascii, data_size)
-                ids = np.asarray(tags, dtype=np.int64) + 1
+            if version == "2.2":
+                ids = np.asarray(meshio.gmsh._gmsh22._read_nodes(stream, is_ascii)[1], np.int64)
+            elif version == "4.1":  # its reader returns the tags less one
+                tags = meshio.gmsh._gmsh41._read_nodes(stream, is_ascii, data_size)[1]
+                ids = np.asarray(tags, np.int64) + 1
+            else:
+                ids = np.zeros(0, np.int64)
         ids = ids.reshape(-1)
     except Exception:  # noqa: BLE001 - the ids are a help for finding nodes, not the mesh
         ids = np.zeros(0, np.int64)
@@ -168,10 +168,12 @@ def _check_conforming(mesh: QuadMesh, label: str) -> None:
     if hanging.shape[0] == 0:
         return
     (x, y), (ax, ay), (bx, by) = mesh.nodes[hanging[0]]
+    file_id = -1 if mesh.file_node_ids is None else int(mesh.file_node_ids[hanging[0, 0]])
     raise MeshError(
         f"{label} (body '{mesh.name}'): {hanging.shape[0]} node(s) hang on another cell's edge "
-        f"(a non-conformal mesh), the first at ({x:.6g}, {y:.6g}) on the edge from "
-        f"({ax:.6g}, {ay:.6g}) to ({bx:.6g}, {by:.6g}): nothing joins them (a crack). Mesh "
+        f"(a non-conformal mesh), the first at ({x:.6g}, {y:.6g}) (file node {file_id}) on "
+        f"the edge from ({ax:.6g}, {ay:.6g}) to ({bx:.6g}, {by:.6g}): nothing joins them (a "
+        "crack). Mesh "
         "conformally: one surface, or matching divisions on the shared line (gmsh Coherence "
         "merges coincident nodes only, it does not make a mesh conformal); or make the parts "
         "separate bodies joined by a [[tie]], which holds a finer side's nodes on the other's "
