@@ -11,7 +11,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..fem.loads import dirichlet_values
-from ..fem.q4 import DN_GP, InvertedElementError
+from ..fem.q4 import DN_GP, InvertedElementError, shape_gradients
 from ..mesh.overlap import boundary_edges, deepest_overlap, edge_size
 from ..solvers.newton import NewtonError
 
@@ -19,6 +19,34 @@ if TYPE_CHECKING:
     import scipy.sparse as sp
 
     from .model import Model
+
+
+#: A linear elastic body's element turned by more than this (radians) is reported: its small
+#: strain then holds the rotation's second-order stretch, 1 - cos(theta) = 0.5 % here, which
+#: the linear model takes for a strain without stress or energy
+LINEAR_ROTATION_LIMIT = 0.1
+
+_DN_CENTRE = shape_gradients(np.zeros(1), np.zeros(1))[0]  # (4, 2): dN/dxi at the centre
+
+
+def largest_linear_rotation(model: Model, X: NDArray, d: NDArray) -> tuple[float, str]:
+    """(angle, body): the largest rotation (radians) of an element centre of a linear elastic
+    body, from F = I + du/dX there, theta = atan2(F21 - F12, F11 + F22); (0, "") without such
+    bodies. Small-strain elasticity is not rotation-invariant: a tester's spinning block made
+    linear elastic kept its energy and momentum while it stretched from 1 x 0.5 to 4 x 6.5
+    with zero stress, and nothing said so. ~5 ms a step at 6 x 10^4 elements."""
+    angle, name = 0.0, ""
+    for body in model.bodies:
+        if body.material.kind != "linear_elastic":
+            continue
+        cells = model.cells[body.cells]
+        dX = np.einsum("eai,aj->eij", X[cells], _DN_CENTRE)  # dX/dxi
+        du = np.einsum("eai,aj->eij", d[cells], _DN_CENTRE)
+        F = np.eye(2) + du @ np.linalg.inv(dX)
+        theta = np.abs(np.arctan2(F[:, 1, 0] - F[:, 0, 1], F[:, 0, 0] + F[:, 1, 1]))
+        if theta.size and theta.max() > angle:
+            angle, name = float(theta.max()), body.name
+    return angle, name
 
 
 @dataclass(frozen=True)

@@ -7,7 +7,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..engine.diagnostics import EnergyAudit
+from ..engine.diagnostics import EnergyAudit, largest_linear_rotation
 from ..engine.model import Model
 from ..engine.postprocess import (
     contact_node_fields,
@@ -50,6 +50,9 @@ class ResultWriter:
         if len(model.bodies) > 1 and not model.interfaces:  # bodies no interface joins
             extra_history = extra_history + OFF_SURFACE_HISTORY
             summary_extra = OFF_SURFACE_SUMMARY | summary_extra
+        if any(body.material.kind == "linear_elastic" for body in model.bodies):
+            summary_extra = {"max_linear_elastic_rotation": 0.0,
+                             "max_linear_elastic_rotation_at": None} | summary_extra
         if model.ale_bodies and model.interfaces:
             summary_extra = {"max_ale_mismatch": 0.0, "max_ale_mismatch_at": None} | summary_extra
         if model.interfaces:
@@ -138,6 +141,9 @@ class ResultWriter:
                                               summary.get("max_tie_violation", 0.0))
         if "contact_work" in row:  # cumulative: the summary keeps the last
             fields["contact_work"] = row["contact_work"]
+        if "frictional_dissipation" in row:  # cumulative, as contact_work
+            fields["frictional_dissipation"] = row["frictional_dissipation"]
+        fields |= self._rotation_summary(model, s, summary)
         if row.get("ale_unreturned_energy"):  # cumulative: the summary keeps the last
             fields["ale_unreturned_energy"] = row["ale_unreturned_energy"]
         if record.extra.get("cut_back"):
@@ -190,6 +196,18 @@ class ResultWriter:
                                        "node": int(rows["node_1"][deepest]),
                                        "depth": float(depth[deepest]),
                                        "element_size": self._spacing[name]}}
+
+    @staticmethod
+    def _rotation_summary(model: Model, s, summary: dict) -> dict:
+        """``max_linear_elastic_rotation`` and when and where: the largest element rotation
+        of a linear elastic body so far (``engine.diagnostics.largest_linear_rotation``)."""
+        if "max_linear_elastic_rotation" not in summary:
+            return {}
+        angle, body = largest_linear_rotation(model, s.X, s.d)
+        if angle <= summary["max_linear_elastic_rotation"]:
+            return {}
+        return {"max_linear_elastic_rotation": angle,
+                "max_linear_elastic_rotation_at": {"time": s.time, "body": body}}
 
     def _widest_pressed_opening(self, time: float, rows: dict, summary: dict) -> dict:
         """``max_separation_under_traction`` and where: the widest open gap (``end_gap`` < 0)
