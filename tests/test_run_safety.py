@@ -406,3 +406,32 @@ def test_a_signal_before_the_run_began_says_nothing_was_written(tmp_path, capsys
     assert "interrupted by SIGINT before the run began: nothing was written" in \
         capsys.readouterr().err
     assert not out.exists()
+
+
+def test_a_bug_ends_in_one_line_with_its_traceback_in_a_file(tmp_path, capsys, monkeypatch):
+    """An exception the command does not expect (here an AttributeError from a step, as a
+    session's own slip produced) printed a traceback; now one line names it and the file that
+    keeps the traceback, and the run's folder says "failed" with its rows readable."""
+    from ntncontact.engine.simulation import Simulation
+
+    advance = Simulation.advance
+    calls = []
+
+    def failing(self, *args, **kwargs):
+        calls.append(1)
+        if len(calls) > 3:
+            raise AttributeError("'NoneType' object has no attribute 't_N'")
+        return advance(self, *args, **kwargs)
+
+    monkeypatch.setattr(Simulation, "advance", failing)
+    out = tmp_path / "spin"
+    assert main(["run", str(SPIN), "--out", str(out), "--quiet"]) == 1
+    err = capsys.readouterr().err
+    assert "Traceback" not in err and err.count("\n") == 1, err
+    assert err.startswith("internal error: AttributeError: 'NoneType' object has no attribute")
+    saved = Path(err.split("its traceback is in ")[1].split(":")[0])
+    assert "Traceback" in saved.read_text() and "failing" in saved.read_text()
+    saved.unlink()
+    data = summary(out)
+    assert data["status"] == "failed" and "no attribute 't_N'" in data["error"]
+    assert history_steps(out) == list(range(data["steps"] + 1))

@@ -7,7 +7,9 @@ import contextlib
 import os
 import signal
 import sys
+import tempfile
 import threading
+import traceback
 import warnings
 from pathlib import Path
 
@@ -556,6 +558,19 @@ def main(argv: list[str] | None = None) -> int:
     except (ValueError, RuntimeError, OSError, ArithmeticError, MemoryError) as err:
         print(f"error: {_one_line(_with_source(err, args))}", file=sys.stderr)
         return 1
+    except Exception as err:  # noqa: BLE001 - a bug: one line here, the traceback in a file
+        print(f"internal error: {type(err).__name__}: {_one_line(str(err))} (a bug in "
+              f"ntncontact; its traceback is in {_save_traceback()}: please report it with "
+              "the scenario; the results written so far are readable)", file=sys.stderr)
+        return 1
+
+
+def _save_traceback() -> str:
+    """Write the current exception's traceback to a new file in the temporary folder."""
+    fd, path = tempfile.mkstemp(prefix="ntncontact-traceback-", suffix=".txt")
+    with os.fdopen(fd, "w") as stream:
+        traceback.print_exc(file=stream)
+    return path
 
 
 def _with_source(err: BaseException, args: argparse.Namespace) -> str:

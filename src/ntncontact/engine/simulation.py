@@ -46,7 +46,13 @@ from .interfaces import (
     unconverged_interfaces,
     with_solved_multipliers,
 )
-from .mesh_motion import MeshMotion, mesh_settled, move_meshes, without_unfollowed
+from .mesh_motion import (
+    MeshMotion,
+    end_of_step_mismatch,
+    mesh_settled,
+    move_meshes,
+    without_unfollowed,
+)
 from .model import Model
 from .problem import StepProblem, StepState
 from .reactions import support_reactions, support_sets
@@ -312,7 +318,9 @@ class Simulation:
         results = solved.results
         committed = commit_all(interfaces, solved.used, results) if interfaces else ()
         self._last_contact = (results if interfaces else (), solved.augmentations)
-        self._last_mismatch = solved.mismatch
+        self._last_mismatch = (max(solved.mismatch, end_of_step_mismatch(
+            self.model, results, s.X + d1)) if self.model.ale_bodies and interfaces else
+            solved.mismatch)
         self._last_tie_forces = solved.tie_forces
         self._last_reactions = solved.reactions
         out_of_balance = (self._remap_out_of_balance_work(s, state, d1)
