@@ -18,7 +18,8 @@ import pytest
 from helpers import LEDGE, run_example
 
 import ntncontact as ntc
-from ntncontact.cli import MISMATCH_WARNING, main
+from ntncontact.cli import main
+from ntncontact.report.run_warnings import MISMATCH_WARNING
 
 
 def test_a_slide_past_the_ale_surfaces_end_is_named(tmp_path, capsys):

@@ -17,10 +17,10 @@ import numpy as np
 import pytest
 from helpers import model_from_example, run_example
 
-from ntncontact.cli import CONTACT_GAIN_WARNING
 from ntncontact.contact import pair_gaps
 from ntncontact.io.vtk import read_pvd, read_vtu
 from ntncontact.io.writers import read_csv_table
+from ntncontact.report.run_warnings import CONTACT_GAIN_WARNING
 
 
 def _run(tmp_path: Path, capsys, *sets: str) -> tuple[dict, str]:

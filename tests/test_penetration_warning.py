@@ -12,7 +12,7 @@ from pathlib import Path
 import pytest
 from helpers import run_example
 
-from ntncontact.cli import PENETRATION_WARNING
+from ntncontact.report.run_warnings import PENETRATION_WARNING
 
 
 def _run(tmp_path: Path, capsys, *sets: str) -> tuple[dict, str]:

@@ -2,7 +2,8 @@
 
 The public Python API (docs/api.md): :func:`load_scenario`, :func:`scenario_from_dict`,
 :func:`run`, :func:`read_results`, :func:`sweep` and the :class:`Scenario` and
-:class:`Results` they pass around. Everything else is internal.
+:class:`Results` they pass around, and the :class:`PhysicsWarning` a run issues. Everything
+else is internal.
 """
 
 import os
@@ -37,6 +38,7 @@ _use_kernel_cache_dir()
 
 # the public API, after the kernel cache is set up (the kernel modules are imported by it)
 from .api import (  # noqa: E402
+    PhysicsWarning,
     Results,
     Scenario,
     load_scenario,
@@ -46,5 +48,5 @@ from .api import (  # noqa: E402
 )
 from .studies.sweep import sweep  # noqa: E402
 
-__all__ = ["Results", "Scenario", "load_scenario", "read_results", "run", "scenario_from_dict",
-           "sweep", "__version__"]
+__all__ = ["PhysicsWarning", "Results", "Scenario", "load_scenario", "read_results", "run",
+           "scenario_from_dict", "sweep", "__version__"]

@@ -11,10 +11,12 @@ Documented with runnable examples in docs/api.md (the test suite runs them)::
 
 from __future__ import annotations
 
+import contextlib
 import copy
 import io
 import json
 import math
+import warnings
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -31,6 +33,7 @@ from .io.results import ResultWriter
 from .io.scenario import ScenarioConfig, ScenarioError, apply_override, parse_scenario, read_toml
 from .io.vtk import find_field_series, read_frame_mesh, read_series
 from .io.writers import CONTACT_FILE, HISTORY_FILE, SUMMARY_FILE, MemoryResults, to_jsonable
+from .report.run_warnings import PhysicsWarning, result_warnings
 
 Overrides = Mapping[str, Any] | Sequence[str] | None
 
@@ -192,28 +195,53 @@ def run(scenario: Scenario | str | Path, out: str | Path | None = None, *,
     results is refused unless ``overwrite`` (then a run's old files are removed first), or
     ``restart``: continue the killed run in ``out`` from its last checkpoint
     (``analysis.checkpoint_interval``; the scenario and overrides must be the run's). A
-    failed step raises (``SimulationError``) after the folder's summary says ``failed``."""
+    failed step raises (``SimulationError``) after the folder's summary says ``failed``. The
+    warnings ``ntncontact run`` prints (penetration, energy) are issued as
+    :class:`PhysicsWarning`, one per line, also before a failed run's error."""
     if isinstance(scenario, Mapping):
         raise TypeError("run takes a Scenario or the path of a scenario file; make a Scenario "
                         "of a dict with ntc.scenario_from_dict(data)")
     if not isinstance(scenario, Scenario):
         scenario = load_scenario(scenario)
-    if out is None:
-        return _run_in_memory(scenario, progress, restart)
+    static = scenario.config.analysis.kind == "static"
+    try:
+        if out is None:
+            results = _run_in_memory(scenario, progress, restart)
+        else:
+            results = _run_in_folder(scenario, Path(out), progress, overwrite, restart)
+    except _RunFailed as failed:  # its warnings before its error, as the command prints them
+        _issue_warnings(failed.summary, static)
+        raise failed.error from None  # the error as the run raised it
+    _issue_warnings(results.summary, static)
+    return results
+
+
+class _RunFailed(Exception):
+    """A run that failed after its writer started: the summary so far, for its warnings."""
+
+    def __init__(self, summary: dict, error: Exception) -> None:
+        super().__init__(str(error))
+        self.summary, self.error = summary, error
+
+
+def _run_in_folder(scenario: Scenario, out: Path, progress: Callable[[float], None] | None,
+                   overwrite: bool, restart: bool) -> Results:
+    """:func:`run` into the results folder ``out``."""
     if restart and overwrite:
         raise ValueError("run: restart continues the run in out, overwrite replaces it: "
                          "give one of them")
     model = build_model(scenario.config, scenario.base_dir)
     identity = checkpoint.run_identity(scenario.config, scenario.overrides, model)
     resume = checkpoint.load_latest(out, identity) if restart else None
-    writer = ResultWriter(Path(out), model, overwrite=overwrite,
+    writer = ResultWriter(out, model, overwrite=overwrite,
                           resume=resume and resume["writer"], scenario=scenario.source,
                           title=scenario.config.title, overrides=list(scenario.overrides),
                           scenario_hash=identity["scenario_hash"])
     simulation = Simulation(model, [writer])
     checkpoint.attach(simulation, writer, out, scenario.config.analysis.checkpoint_interval,
                       identity, resume)
-    simulation.run(progress)
+    with _failed_with_summary(writer):
+        simulation.run(progress)
     return read_results(out)
 
 
@@ -228,8 +256,28 @@ def _run_in_memory(scenario: Scenario, progress: Callable[[float], None] | None,
     writer = ResultWriter(None, model, scenario=scenario.source,
                           title=scenario.config.title, overrides=list(scenario.overrides),
                           scenario_hash=identity["scenario_hash"])
-    Simulation(model, [writer]).run(progress)  # a failed step raises, as with a folder
+    with _failed_with_summary(writer):
+        Simulation(model, [writer]).run(progress)  # a failed step raises, as with a folder
     return _results_of(writer.results)
+
+
+@contextlib.contextmanager
+def _failed_with_summary(writer: ResultWriter):
+    """A failed run's error, carried with its summary so far (:class:`_RunFailed`): the
+    warnings come before the error, as the command prints them (a tester's gap-law runs
+    whose energy grew 37-fold until an element inverted showed only the inversion)."""
+    try:
+        yield
+    except Exception as err:
+        raise _RunFailed(dict(writer.results.summary.data), err) from None
+
+
+def _issue_warnings(summary: Mapping[str, Any], static: bool) -> None:
+    """The warnings ``ntncontact run`` prints after a run, as :class:`PhysicsWarning` at the
+    caller of :func:`run` (a tester's run that the command warned had gone 0.0309 inside its
+    partner surface was silent here)."""
+    for line in result_warnings(dict(summary), static):
+        warnings.warn(line, PhysicsWarning, stacklevel=3)
 
 
 def _results_of(kept: MemoryResults) -> Results:

@@ -138,146 +138,6 @@ def _run_until_stopped(args: argparse.Namespace, stop: StopOnSignal) -> int:
     return 0
 
 
-#: a node off the contact surfaces inside another body deeper than this fraction of that
-#: body's element size is worth a warning
-OFF_SURFACE_WARNING = 0.01
-
-
-def _warn_off_surfaces(summary: dict) -> None:
-    """One line on stderr when a boundary node on no contact surface went inside another
-    body (summary.json ``max_penetration_off_surfaces``)."""
-    at = summary.get("max_penetration_off_surfaces_at")
-    depth = summary.get("max_penetration_off_surfaces") or 0.0
-    if not at or depth <= OFF_SURFACE_WARNING * at["element_size"]:
-        return
-    cure = ("make that face a contact surface too, joined to the one beside it (for example "
-            "surface_1 = \"bottom+right\"")
-    if not at.get("joined", True):
-        cure = f"no [[contact]] joins '{at['body']}' and '{at['inside']}' (add one"
-    print(f"warning: node {at['node']} of body '{at['body']}', on no contact surface, went "
-          f"{depth:.3g} inside '{at['inside']}' (t = {at['time']:.6g}) where nothing resists "
-          f"it: {cure}; summary.json max_penetration_off_surfaces)", file=sys.stderr)
-
-
-#: a pair's penetration above this fraction of its interface's surface spacing is worth a
-#: warning: the examples' deepest are 2.8 % (tilted blocks, ring impact), a disk four times
-#: finer than the ALE block it falls on 29 % of the disk's spacing
-PENETRATION_WARNING = 0.1
-
-
-def _warn_penetration(summary: dict) -> None:
-    """One line on stderr when a contact pair went deeper than PENETRATION_WARNING of its
-    interface's surface spacing (summary.json ``max_penetration_at``)."""
-    at = summary.get("max_penetration_at")
-    if not at or at["depth"] <= PENETRATION_WARNING * at["element_size"]:
-        return
-    print(f"warning: node {at['node']} of interface '{at['interface']}' went {at['depth']:.3g} "
-          f"inside its partner surface ({at['depth'] / at['element_size']:.2g} of the surface "
-          f"spacing, t = {at['time']:.6g}; summary.json max_penetration_at): a stiffer "
-          "penalty (penalty_normal or penalty_factor), a smaller dt, or surfaces of similar "
-          "spacing keep the pairs closer (node-to-node pairs hold the nodes of the coarser "
-          "surface)", file=sys.stderr)
-
-
-def _warn_unpaired(summary: dict) -> None:
-    """One line on stderr when a contact-surface node in no pair went deeper into the
-    partner body than the deepest pair, and than PENETRATION_WARNING of the surface spacing
-    (summary.json ``max_penetration_unpaired_at``)."""
-    at = summary.get("max_penetration_unpaired_at")
-    if not at or at["depth"] <= max(PENETRATION_WARNING * at["element_size"],
-                                    summary.get("max_penetration") or 0.0):
-        return
-    print(f"warning: node {at['node']} of interface '{at['interface']}', in no pair, went "
-          f"{at['depth']:.3g} inside its partner body ({at['depth'] / at['element_size']:.2g} "
-          f"of the surface spacing, t = {at['time']:.6g}; summary.json "
-          "max_penetration_unpaired), deeper than any pair: a surface finer than its partner "
-          "has nodes between the pairs that nothing holds. Surfaces of similar spacing, or "
-          "the finer body ALE, pair them", file=sys.stderr)
-
-
-#: an ALE node ending farther than this fraction of the surface spacing from its partner's
-#: place is a pair the mesh motion did not follow: ~1e-9 of it where the motion follows
-MISMATCH_WARNING = 0.1
-
-
-def _warn_mismatch(summary: dict) -> None:
-    """One line on stderr when an ALE node ended far from its partner's place (summary.json
-    ``max_ale_mismatch``): the pair is then no longer node to node."""
-    at = summary.get("max_ale_mismatch_at")
-    if not at or summary["max_ale_mismatch"] <= MISMATCH_WARNING * at["element_size"]:
-        return
-    mismatch = summary["max_ale_mismatch"]
-    print(f"warning: an ALE contact node ended {mismatch:.3g} from its partner's place "
-          f"({mismatch / at['element_size']:.2g} of the surface spacing, t = "
-          f"{at['time']:.6g}; summary.json max_ale_mismatch): the mesh motion did not follow "
-          "that pair, which is no longer node to node. An ALE surface longer than the slide "
-          "(its ends and corners stay fixed, its kinks too: no node crosses them), a larger "
-          "ale.max_stretch (a node leaves a fixed end behind by at most that times their "
-          "original distance) or ale.respace = \"reference\" may let it follow",
-          file=sys.stderr)
-
-
-#: net positive work of the contact forces (energy contact added) above this fraction of the
-#: run's energy scale is worth a warning: the persistency law's is ~1e-10 of it, the gap law's
-#: in a dynamic run 0.9 (rod impact, penalty_normal = 1e5: the energy 5.0 -> 38.4)
-CONTACT_GAIN_WARNING = 1e-3
-
-
-def _energy_scale(summary: dict) -> float | None:
-    """The energy scale the summary's relative balance error was taken against (None when
-    the balance error is zero or missing)."""
-    error, relative = (summary.get("energy_balance_max_error"),
-                       summary.get("energy_balance_max_relative_error"))
-    return error / relative if error and relative else None
-
-
-def _warn_contact_energy(summary: dict, static: bool) -> None:
-    """One line on stderr when the contact forces did net positive work on the bodies
-    (summary.json ``contact_work``): the energy balance closes, since the ledger counts that
-    work, but the energy came from contact, which frictionless contact cannot give. Dynamic
-    runs: the gap law (report 5.5). Static runs, where the gap law is the only one: pairs
-    whose nodes do not face each other (a tester's press of a 7-element block on a
-    10-element base, both Lagrangian: 0.0038 of the energy scale; 0 with matching nodes)."""
-    gain = summary.get("contact_work") or 0.0
-    scale = _energy_scale(summary)
-    if gain <= 0.0 or not scale or gain <= CONTACT_GAIN_WARNING * scale:
-        return
-    cause = ("the gap law does so in a dynamic run (report 5.5); the persistency law, or "
-             "method = \"lagrange\" with analysis.energy_conserving = true, conserves it")
-    unmet = summary.get("energy_equation_unmet_steps")
-    if unmet:  # analysis.energy_conserving is on, and could not conserve at these steps
-        cause = (f"report 5.5's energy equation had no root at {unmet} step(s) (summary.json "
-                 "energy_equation_unmet_steps), where no relaxation of the gaps conserves the "
-                 "energy; the persistency law conserves it")
-    if static:
-        cause = ("node-to-node pairs whose nodes do not face each other (non-matching "
-                 "Lagrangian surfaces) do so, their forces along surface 1's normal at nodes "
-                 "offset along it; matching surface nodes, or an ALE body (mesh_motion = "
-                 "\"ale\") that moves its contact nodes onto their partners, remove it")
-    print(f"warning: the contact forces added {gain:.3g} to the bodies' energy "
-          f"({gain / scale:.2g} of its scale; summary.json contact_work): {cause}",
-          file=sys.stderr)
-
-
-#: energy the ALE remaps added and no body gave back, above this fraction of the run's energy
-#: scale, is worth a warning (the ledger's own round-off is ~1e-12 of it)
-UNRETURNED_WARNING = 1e-8
-
-
-def _warn_unreturned_energy(summary: dict) -> None:
-    """One line on stderr when the ALE remaps changed the total energy by more than their
-    conservation could give back (summary.json ``ale_unreturned_energy``): the energy balance
-    error then holds it, and this names its cause."""
-    unreturned = summary.get("ale_unreturned_energy") or 0.0
-    scale = _energy_scale(summary)
-    if unreturned and scale and abs(unreturned) > UNRETURNED_WARNING * scale:
-        print(f"warning: the ALE remaps changed the total energy by {unreturned:.3g} "
-              f"({unreturned / scale:.2g} of its scale) that no body's velocities could give "
-              "back (no Lagrangian body, or none with the kinetic energy, where it happened; "
-              "keep a body in motion Lagrangian): summary.json ale_unreturned_energy",
-              file=sys.stderr)
-
-
 @contextlib.contextmanager
 def _finished_on_error(writer, stop: StopOnSignal, static: bool):
     """An exception before the time loop took over (a signal during start-up): the summary
@@ -296,13 +156,12 @@ def _finished_on_error(writer, stop: StopOnSignal, static: bool):
 
 
 def _warn_results(summary: dict, static: bool) -> None:
-    """The warnings a run's summary calls for, one line each on stderr."""
-    _warn_off_surfaces(summary)
-    _warn_unreturned_energy(summary)
-    _warn_contact_energy(summary, static)
-    _warn_penetration(summary)
-    _warn_unpaired(summary)
-    _warn_mismatch(summary)
+    """The warnings a run's summary calls for (``report.run_warnings``), one line each on
+    stderr."""
+    from .report.run_warnings import result_warnings
+
+    for line in result_warnings(summary, static):
+        print(f"warning: {line}", file=sys.stderr)
 
 
 def _short(value: float | None) -> str:

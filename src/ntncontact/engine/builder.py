@@ -35,6 +35,7 @@ from ..mesh.boundary import chain_edge_lengths, surface_chain
 from ..mesh.overlap import boundary_edges, deepest_overlap
 from ..mesh.quadmesh import MeshError, QuadMesh
 from ..mesh.quality import check_elements
+from .diagnostics import PhysicsWarning
 from .model import AleSetup, AnalysisSettings, Body, ContactInterface, Model, stack_bodies
 from .ties import Tie, TieError, held_on_edges, make_tie, pair_tie
 
@@ -89,6 +90,36 @@ def _warn_locking(where: str, material: Material) -> None:
                       "strain, and the body comes out too stiff (a cantilever: 0.50 of beam "
                       "theory's deflection at nu = 0.49, 0.11 at 0.499; refining eases it "
                       "slowly): compare with a run at nu = 0.45", stacklevel=2)
+
+
+def _warn_penalty_rate_law(config: ScenarioConfig) -> None:
+    """Warn of penalty interfaces under the persistency (rate) law in a dynamic run with a load
+    still on at t_end: that law's penalty relates the traction to the gap rate, a dashpot, so
+    a sustained load sinks the body at t_N / eps_N without bound (a tester's block resting
+    under gravity: 0.009, 0.019, 0.029, 0.039 deep at t = 1..4). Prescribed motions are not
+    looked at: whether they press the bodies together is not known before the run."""
+    if config.analysis.kind != "dynamic" or not _sustained_loads(config):
+        return
+    names = [f"contact.{i} ('{c.name or f'interface{i}'}')" for i, c in enumerate(config.contact)
+             if c.method == "penalty" and (c.law or "persistency") == "persistency"]
+    if names:
+        warnings.warn(f"{', '.join(names)}: method = \"penalty\" under the persistency law "
+                      f"cannot carry the sustained {_sustained_loads(config)[0]}: its penalty "
+                      "resists the gap's rate, not the gap, so the bodies sink into each other "
+                      "at traction / penalty_normal without bound; use method = "
+                      "\"augmented_lagrangian\", or law = \"gap\" with a penalty in stress per "
+                      "length (docs/scenarios.md, \"Choosing penalty_normal, dt and the ALE "
+                      "body\")",
+                      PhysicsWarning, stacklevel=3)
+
+
+def _sustained_loads(config: ScenarioConfig) -> list[str]:
+    """The loads still on at t_end, as "gravity on 'block'" (a time function ending at zero
+    is a load that returns)."""
+    t_end = config.analysis.t_end
+    return [f"{load.type} on '{body.name}'" for body in config.bodies for load in body.loads
+            if load.function is None
+            or np.interp(t_end, load.function.times, load.function.values) != 0.0]
 
 
 def time_function(cfg: TimeFunctionConfig | None) -> TimeFunction:
@@ -169,6 +200,7 @@ def build_model(config: ScenarioConfig, base_dir: str | Path = ".") -> Model:
         _check_no_overlap(i, c, ci, bodies)
     _check_paired_once(interfaces, config.contact, bodies)
     _check_analysis_options(config)
+    _warn_penalty_rate_law(config)
     ale_bodies = tuple(_ale_setup(i, body, bc, config) for i, (body, bc)
                        in enumerate(zip(bodies, config.bodies, strict=True))
                        if bc.mesh_motion == "ale")

@@ -49,6 +49,12 @@ def largest_linear_rotation(model: Model, X: NDArray, d: NDArray) -> tuple[float
     return angle, name
 
 
+class PhysicsWarning(UserWarning):
+    """A run whose results are doubtful for a physical reason (penetration, energy gained,
+    a law that cannot carry the load): ``ntncontact.run`` issues one per line the command
+    prints as ``warning: ...``, so that they can be filtered (``warnings.simplefilter``)."""
+
+
 @dataclass(frozen=True)
 class Balance:
     kinetic_energy: float

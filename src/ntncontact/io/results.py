@@ -16,6 +16,7 @@ from ..engine.postprocess import (
 )
 from ..engine.reactions import reaction_columns
 from ..engine.simulation import StepRecord
+from ..mesh.boundary import chain_edge_lengths
 from .writers import MemoryResults, ResultsDirectory
 
 CONTACT_HISTORY = ("active_pairs", "frictional_dissipation", "contact_work", "augmentations",
@@ -34,6 +35,25 @@ def tie_history(model: Model) -> tuple[str, ...]:
     for tie in model.ties:
         columns += [f"tie_{tie.name}_force_x", f"tie_{tie.name}_force_y"]
     return tuple(columns)
+
+
+def contact_setup(model: Model) -> dict[str, dict]:
+    """Per interface, what its penetration warning's advice depends on (report.run_warnings):
+    its ``[[contact]]`` index, method, law and detection, both surfaces' median edge lengths
+    in the original mesh, and whether each side's body is ALE."""
+    body = model.body_of_node()
+    setup = {}
+    for index, ci in enumerate(model.interfaces):
+        sides = (ci.interface.surface1, ci.interface.surface2)
+        spacings = [float(np.median(chain_edge_lengths(model.X0[s.nodes], s.closed)))
+                    for s in sides]
+        ale = [model.bodies[body[s.nodes[0]]].mesh_motion == "ale" for s in sides]
+        setup[ci.name] = {"index": index, "method": ci.law.method,
+                          "law": "persistency" if ci.persistency else "gap",
+                          "detection": "predicted" if ci.predicted_detection else "penetration",
+                          "spacing_1": spacings[0], "spacing_2": spacings[1],
+                          "ale_1": ale[0], "ale_2": ale[1]}
+    return setup
 
 
 class ResultWriter:
@@ -70,7 +90,9 @@ class ResultWriter:
                                  for ci in model.interfaces},
                              # what `compare` picks the report's case by
                              "contact_friction": {ci.name: ci.law.mu
-                                                  for ci in model.interfaces}} | summary_extra
+                                                  for ci in model.interfaces},
+                             # what the penetration warning's advice depends on
+                             "contact_setup": contact_setup(model)} | summary_extra
         if model.analysis.energy_conserving:  # steps whose energy equation had no root
             summary_extra = {"energy_equation_unmet_steps": 0} | summary_extra
         extra_history = extra_history + reaction_columns(model)
@@ -80,6 +102,9 @@ class ResultWriter:
         summary_extra = dict.fromkeys(EnergyAudit.KEYS) | summary_extra  # energy balance
         summary_extra = {"cut_back_steps": 0} | summary_extra  # steps solved in sub-steps
         summary_extra = {"mass": model.analysis.mass} | summary_extra  # as `compare` needs it
+        # the energy warning names the mid-point rule as the cause of a gain (report.run_warnings)
+        summary_extra = {"integrator": None if model.analysis.kind == "static"
+                         else model.analysis.integrator} | summary_extra
         self._energy = EnergyAudit()
         self.results: ResultsDirectory | MemoryResults
         if directory is None:  # ntncontact.run(out=None): nothing written

@@ -1,0 +1,224 @@
+"""The warnings a run's summary calls for, one line each: ``ntncontact run`` prints them
+(``warning: ...``) and ``ntncontact.run`` issues them as :class:`PhysicsWarning`. They are
+computed from summary.json's data alone, so that a run read back says the same."""
+
+from __future__ import annotations
+
+from ..engine.diagnostics import PhysicsWarning
+
+__all__ = ["PhysicsWarning", "result_warnings"]
+
+#: a node off the contact surfaces inside another body deeper than this fraction of that
+#: body's element size is worth a warning
+OFF_SURFACE_WARNING = 0.01
+
+#: a pair's penetration above this fraction of its interface's surface spacing is worth a
+#: warning: the examples' deepest are 2.8 % (tilted blocks, ring impact), a disk four times
+#: finer than the ALE block it falls on 29 % of the disk's spacing
+PENETRATION_WARNING = 0.1
+
+#: surfaces whose median spacings differ by more than this ratio are "non-matching": node-to-
+#: node pairs then hold only the coarser surface's nodes (the example pairs are within 1.1)
+SPACING_RATIO = 1.5
+
+#: an ALE node ending farther than this fraction of the surface spacing from its partner's
+#: place is a pair the mesh motion did not follow: ~1e-9 of it where the motion follows
+MISMATCH_WARNING = 0.1
+
+#: net positive work of the contact forces (energy contact added) above this fraction of the
+#: run's energy scale is worth a warning: the persistency law's is ~1e-10 of it, the gap law's
+#: in a dynamic run 0.9 (rod impact, penalty_normal = 1e5: the energy 5.0 -> 38.4)
+CONTACT_GAIN_WARNING = 1e-3
+
+#: energy the ALE remaps added and no body gave back, above this fraction of the run's energy
+#: scale, is worth a warning (the ledger's own round-off is ~1e-12 of it)
+UNRETURNED_WARNING = 1e-8
+
+#: a dynamic run's energy balance error above this fraction of its energy scale is worth a
+#: warning: the examples' dynamic runs close it to 1e-7 or better (most to 1e-10), the mid-point
+#: rule's spinning Neo-Hookean block drifts 7.9e-4 in 1000 steps, and a soft block between
+#: walls under it gained 6.2e-2 in 12 impacts; the same threshold as contact's energy gain
+BALANCE_WARNING = 1e-3
+
+
+def result_warnings(summary: dict, static: bool) -> list[str]:
+    """The warnings a run's summary calls for, one line each, without the ``warning:``
+    prefix (``static``: an ``analysis.kind = "static"`` run)."""
+    found = (_off_surfaces(summary), _unreturned_energy(summary),
+             _contact_energy(summary, static), _balance(summary, static),
+             _penetration(summary), _unpaired(summary), _mismatch(summary))
+    return [line for line in found if line]
+
+
+def _off_surfaces(summary: dict) -> str | None:
+    """A boundary node on no contact surface went inside another body (summary.json
+    ``max_penetration_off_surfaces``)."""
+    at = summary.get("max_penetration_off_surfaces_at")
+    depth = summary.get("max_penetration_off_surfaces") or 0.0
+    if not at or depth <= OFF_SURFACE_WARNING * at["element_size"]:
+        return None
+    cure = ("make that face a contact surface too, joined to the one beside it (for example "
+            "surface_1 = \"bottom+right\"")
+    if not at.get("joined", True):
+        cure = f"no [[contact]] joins '{at['body']}' and '{at['inside']}' (add one"
+    return (f"node {at['node']} of body '{at['body']}', on no contact surface, went "
+            f"{depth:.3g} inside '{at['inside']}' (t = {at['time']:.6g}) where nothing resists "
+            f"it: {cure}; summary.json max_penetration_off_surfaces)")
+
+
+def _setup(summary: dict, name: str) -> dict | None:
+    """The interface's settings as summary.json's ``contact_setup`` holds them (None in a
+    summary written before it did)."""
+    return (summary.get("contact_setup") or {}).get(name)
+
+
+def _spacings(setup: dict) -> str:
+    """The two surfaces' spacings, and which is finer when they do not match: node-to-node
+    pairs hold the coarser surface's nodes only."""
+    h1, h2 = setup["spacing_1"], setup["spacing_2"]
+    if max(h1, h2) <= SPACING_RATIO * min(h1, h2):
+        return (f"the surfaces' spacings are similar ({h1:.3g} and {h2:.3g}), so their "
+                "mismatch is not the cause")
+    finer, coarser = ("surface_1", "surface_2") if h1 < h2 else ("surface_2", "surface_1")
+    return (f"{finer} (spacing {min(h1, h2):.3g}) is {max(h1, h2) / min(h1, h2):.2g} times "
+            f"finer than {coarser} ({max(h1, h2):.3g}) and node-to-node pairs hold only the "
+            "coarser surface's nodes: similar spacings, or the finer body ALE, pair them")
+
+
+def _cures(setup: dict) -> list[str]:
+    """What keeps an interface's pairs closer, as far as it applies to its settings."""
+    where = f"contact.{setup['index']}"
+    cures = []
+    if setup["detection"] == "penetration":  # tested at the step start: the lag of one step
+        cures.append(f"{where}.detection = \"predicted\" (a node that goes inside within a "
+                     "step is found only at the next step's start)")
+    if not (setup["ale_1"] or setup["ale_2"]):
+        cures.append("the partner body ALE (mesh_motion = \"ale\") where the surfaces slide "
+                     "along each other (a smaller dt does not help there)")
+    if setup["method"] in ("penalty", "augmented_lagrangian"):
+        cures.append(f"a stiffer penalty ({where}.penalty_normal or penalty_factor)")
+    return cures
+
+
+def _advice(summary: dict, name: str) -> str:
+    """The part of a penetration warning that says what applies to this interface."""
+    setup = _setup(summary, name)
+    if setup is None:
+        return "surfaces of similar spacing keep the pairs closer"
+    cures = _cures(setup)
+    text = _spacings(setup)
+    return text + (". What keeps the pairs closer: " + "; or ".join(cures) if cures else "")
+
+
+def _penetration(summary: dict) -> str | None:
+    """A contact pair went deeper than PENETRATION_WARNING of its interface's surface spacing
+    (summary.json ``max_penetration_at``)."""
+    at = summary.get("max_penetration_at")
+    if not at or at["depth"] <= PENETRATION_WARNING * at["element_size"]:
+        return None
+    return (f"node {at['node']} of interface '{at['interface']}' went {at['depth']:.3g} "
+            f"inside its partner surface ({at['depth'] / at['element_size']:.2g} of the surface "
+            f"spacing, t = {at['time']:.6g}; summary.json max_penetration_at): "
+            f"{_advice(summary, at['interface'])}")
+
+
+def _unpaired(summary: dict) -> str | None:
+    """A contact-surface node in no pair went deeper into the partner body than the deepest
+    pair, and than PENETRATION_WARNING of the surface spacing (summary.json
+    ``max_penetration_unpaired_at``)."""
+    at = summary.get("max_penetration_unpaired_at")
+    if not at or at["depth"] <= max(PENETRATION_WARNING * at["element_size"],
+                                    summary.get("max_penetration") or 0.0):
+        return None
+    return (f"node {at['node']} of interface '{at['interface']}', in no pair, went "
+            f"{at['depth']:.3g} inside its partner body ({at['depth'] / at['element_size']:.2g} "
+            f"of the surface spacing, t = {at['time']:.6g}; summary.json "
+            "max_penetration_unpaired), deeper than any pair, with nothing holding it: "
+            f"{_advice(summary, at['interface'])}")
+
+
+def _mismatch(summary: dict) -> str | None:
+    """An ALE node ended far from its partner's place (summary.json ``max_ale_mismatch``):
+    the pair is then no longer node to node."""
+    at = summary.get("max_ale_mismatch_at")
+    if not at or summary["max_ale_mismatch"] <= MISMATCH_WARNING * at["element_size"]:
+        return None
+    mismatch = summary["max_ale_mismatch"]
+    return (f"an ALE contact node ended {mismatch:.3g} from its partner's place "
+            f"({mismatch / at['element_size']:.2g} of the surface spacing, t = "
+            f"{at['time']:.6g}; summary.json max_ale_mismatch): the mesh motion did not follow "
+            "that pair, which is no longer node to node. An ALE surface longer than the slide "
+            "(its ends and corners stay fixed, its kinks too: no node crosses them), a larger "
+            "ale.max_stretch (a node leaves a fixed end behind by at most that times their "
+            "original distance) or ale.respace = \"reference\" may let it follow")
+
+
+def _energy_scale(summary: dict) -> float | None:
+    """The energy scale the summary's relative balance error was taken against (None when
+    the balance error is zero or missing)."""
+    error, relative = (summary.get("energy_balance_max_error"),
+                       summary.get("energy_balance_max_relative_error"))
+    return error / relative if error and relative else None
+
+
+def _contact_energy(summary: dict, static: bool) -> str | None:
+    """The contact forces did net positive work on the bodies (summary.json
+    ``contact_work``): the energy balance closes, since the ledger counts that work, but the
+    energy came from contact, which frictionless contact cannot give. Dynamic runs: the gap
+    law (report 5.5). Static runs, where the gap law is the only one: pairs whose nodes do not
+    face each other (a tester's press of a 7-element block on a 10-element base, both
+    Lagrangian: 0.0038 of the energy scale; 0 with matching nodes)."""
+    gain = summary.get("contact_work") or 0.0
+    scale = _energy_scale(summary)
+    if gain <= 0.0 or not scale or gain <= CONTACT_GAIN_WARNING * scale:
+        return None
+    cause = ("the gap law does so in a dynamic run (report 5.5); the persistency law, or "
+             "method = \"lagrange\" with analysis.energy_conserving = true, conserves it")
+    unmet = summary.get("energy_equation_unmet_steps")
+    if unmet:  # analysis.energy_conserving is on, and could not conserve at these steps
+        cause = (f"report 5.5's energy equation had no root at {unmet} step(s) (summary.json "
+                 "energy_equation_unmet_steps), where no relaxation of the gaps conserves the "
+                 "energy; the persistency law conserves it")
+    if static:
+        cause = ("node-to-node pairs whose nodes do not face each other (non-matching "
+                 "Lagrangian surfaces) do so, their forces along surface 1's normal at nodes "
+                 "offset along it; matching surface nodes, or an ALE body (mesh_motion = "
+                 "\"ale\") that moves its contact nodes onto their partners, remove it")
+    return (f"the contact forces added {gain:.3g} to the bodies' energy "
+            f"({gain / scale:.2g} of its scale; summary.json contact_work): {cause}")
+
+
+def _unreturned_energy(summary: dict) -> str | None:
+    """The ALE remaps changed the total energy by more than their conservation could give
+    back (summary.json ``ale_unreturned_energy``): the energy balance error then holds it,
+    and this names its cause."""
+    unreturned = summary.get("ale_unreturned_energy") or 0.0
+    scale = _energy_scale(summary)
+    if not unreturned or not scale or abs(unreturned) <= UNRETURNED_WARNING * scale:
+        return None
+    return (f"the ALE remaps changed the total energy by {unreturned:.3g} "
+            f"({unreturned / scale:.2g} of its scale) that no body's velocities could give "
+            "back (no Lagrangian body, or none with the kinetic energy, where it happened; "
+            "keep a body in motion Lagrangian): summary.json ale_unreturned_energy")
+
+
+def _balance(summary: dict, static: bool) -> str | None:
+    """A dynamic run's energy ledger is off by more than BALANCE_WARNING of its scale
+    (summary.json ``energy_balance_max_relative_error``): energy the loads, contact and the
+    remaps do not account for came from the time integration. Static runs are left out: their
+    works are trapezoidal sums over load steps, not a conservation law (the delamination
+    example's 2.7e-3)."""
+    relative = summary.get("energy_balance_max_relative_error") or 0.0
+    if static or relative <= BALANCE_WARNING:
+        return None
+    if summary.get("ale_unreturned_energy") and _unreturned_energy(summary):
+        return None  # that warning names the cause already
+    cause = ("the time integration or an unconverged step did (history.csv's total_energy "
+             "against external_work and contact_work shows when)")
+    if summary.get("integrator") == "midpoint":
+        cause = ("the mid-point rule (analysis.integrator = \"midpoint\") does not conserve "
+                 "energy with a nonlinear (Neo-Hookean) material; analysis.integrator = "
+                 "\"energy_momentum\" (the default) does")
+    return (f"the energy balance is off by {relative:.2g} of the energy scale (summary.json "
+            "energy_balance_max_relative_error: energy that no load, contact or remap "
+            f"accounts for): {cause}")

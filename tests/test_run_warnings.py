@@ -1,0 +1,158 @@
+"""The run's physics warnings (session 39's testers):
+
+- ``ntncontact.run`` was silent where ``ntncontact run`` warned (an oblique impact at dt 0.0025:
+  "node 1 ... went 0.0309 inside its partner surface"): both take the lines from
+  ``report.run_warnings``, the API as :class:`PhysicsWarning`;
+- the penetration advice named a stiffer penalty and a smaller dt whatever the interface; a
+  smaller dt made a tester's slide worse, and with equal spacings the depth was detection lag:
+  the advice now follows the interface's settings (summary.json ``contact_setup``);
+- a mid-point run's ledger off by 6.2 % of the energy was not warned about;
+- a penalty interface under the persistency (rate) law sinks without bound under a sustained
+  load, and nothing said so.
+"""
+
+from __future__ import annotations
+
+import copy
+import warnings
+
+import pytest
+from helpers import model_from_dict
+
+import ntncontact as ntc
+from ntncontact.cli import main
+from ntncontact.report.run_warnings import BALANCE_WARNING, result_warnings
+
+#: the tester's oblique impact of a spinning Neo-Hookean block on a free base (freeimpact.toml)
+#: at dt 0.0025, up to just past its deepest pair (t = 0.065)
+IMPACT = {
+    "analysis": {"kind": "dynamic", "dt": 0.0025, "t_end": 0.07, "output_interval": 0.05},
+    "bodies": [
+        {"name": "block",
+         "mesh": {"type": "rectangle", "width": 1.0, "height": 0.5, "nx": 8, "ny": 4,
+                  "origin": [-0.5, 0.02]},
+         "material": {"model": "neo_hookean", "E": 100.0, "nu": 0.3, "density": 1.0},
+         "initial": {"velocity": [2.0, -1.5], "angular_velocity": 1.5}},
+        {"name": "base",
+         "mesh": {"type": "rectangle", "width": 3.0, "height": 0.5, "nx": 24, "ny": 4,
+                  "origin": [-1.5, -0.5]},
+         "material": {"model": "neo_hookean", "E": 100.0, "nu": 0.3, "density": 2.0},
+         "initial": {"velocity": [-0.5, 0.0]}}],
+    "contact": [{"name": "if", "body_1": "block", "surface_1": "bottom", "body_2": "base",
+                 "surface_2": "top", "method": "augmented_lagrangian",
+                 "penalty_normal": 1000.0, "penalty_tangential": 1000.0}],
+}
+
+
+def _toml(data: dict) -> str:
+    """``data`` as a scenario file (the command reads files)."""
+    lines = ["[analysis]\n" + "".join(f"{k} = {ntc.api.toml_value(v)}\n"
+                                       for k, v in data["analysis"].items())]
+    for key in ("bodies", "contact"):
+        for entry in data[key]:
+            lines.append(f"[[{key}]]\n" + "".join(f"{k} = {ntc.api.toml_value(v)}\n"
+                                                  for k, v in entry.items()))
+    return "\n".join(lines)
+
+
+@pytest.mark.slow
+def test_the_api_issues_the_warnings_the_command_prints_once(tmp_path, capsys):
+    with pytest.warns(ntc.PhysicsWarning) as caught:
+        results = ntc.run(ntc.scenario_from_dict(IMPACT))
+    lines = [str(w.message) for w in caught if w.category is ntc.PhysicsWarning]
+    assert len(lines) == 1 and lines[0].startswith("node 1 of interface 'if' went 0.0309")
+    # equal spacings: detection lag, not a mismatch; no smaller dt recommended
+    assert "spacings are similar (0.125 and 0.125)" in lines[0]
+    assert 'contact.0.detection = "predicted"' in lines[0] and "penalty_normal" in lines[0]
+    assert results.summary["integrator"] == "energy_momentum"
+    assert results.summary["contact_setup"]["if"]["detection"] == "penetration"
+    scenario = tmp_path / "impact.toml"
+    scenario.write_text(_toml(IMPACT), encoding="utf-8")
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", ntc.PhysicsWarning)  # the command issues none of them
+        assert main(["run", str(scenario), "--out", str(tmp_path / "out"), "--quiet"]) == 0
+    err = capsys.readouterr().err
+    assert err.count("warning:") == 1 and f"warning: {lines[0]}" in err
+
+
+def _penetrated(**setup: object) -> dict:
+    """A summary whose deepest pair went 0.3 spacings deep, with the interface's settings."""
+    at = {"time": 0.5, "interface": "if", "node": 3, "depth": 0.03, "element_size": 0.1}
+    base = {"index": 2, "method": "augmented_lagrangian", "law": "persistency",
+            "detection": "penetration", "spacing_1": 0.1, "spacing_2": 0.1,
+            "ale_1": False, "ale_2": False}
+    return {"max_penetration": 0.03, "max_penetration_at": at,
+            "contact_setup": {"if": base | setup}}
+
+
+def test_the_penetration_advice_names_only_what_applies():
+    (lagging,) = result_warnings(_penetrated(), static=False)
+    assert "spacings are similar" in lagging and 'contact.2.detection = "predicted"' in lagging
+    assert 'mesh_motion = "ale"' in lagging and "contact.2.penalty_normal" in lagging
+    assert "a smaller dt keep" not in lagging
+    (coarse,) = result_warnings(_penetrated(method="lagrange", detection="predicted",
+                                            spacing_1=0.025, ale_2=True), static=False)
+    assert "surface_1 (spacing 0.025) is 4 times finer than surface_2 (0.1)" in coarse
+    assert "penalty" not in coarse and "detection" not in coarse and "slide" not in coarse
+    (unpaired,) = result_warnings(
+        _penetrated(spacing_2=0.4) | {"max_penetration_at": None, "max_penetration": 0.01,
+                                      "max_penetration_unpaired_at": {
+                                          "time": 0.5, "interface": "if", "node": 3,
+                                          "depth": 0.03, "element_size": 0.1}},
+        static=False)
+    assert "in no pair" in unpaired and "4 times finer than surface_2" in unpaired
+
+
+def test_an_energy_ledger_off_by_percent_is_warned_and_the_midpoint_rule_named():
+    summary = {"energy_balance_max_relative_error": 0.062, "energy_balance_max_error": 0.62,
+               "integrator": "midpoint"}
+    (line,) = result_warnings(summary, static=False)
+    assert "0.062 of the energy scale" in line and 'integrator = "energy_momentum"' in line
+    assert "mid-point rule" not in result_warnings(summary | {"integrator": "energy_momentum"},
+                                                   static=False)[0]
+    assert result_warnings(summary, static=True) == []  # the static works are trapezoidal sums
+    quiet = summary | {"energy_balance_max_relative_error": BALANCE_WARNING / 2}
+    assert result_warnings(quiet, static=False) == []
+
+
+def _resting(contact: dict, gravity: bool = True) -> dict:
+    """A block resting on a fixed base (dynamic), under gravity or with no load at all."""
+    block = {"name": "block",
+             "mesh": {"type": "rectangle", "width": 1.0, "height": 0.5, "nx": 4, "ny": 2},
+             "material": {"model": "linear_elastic", "E": 100.0, "nu": 0.3, "density": 1.0},
+             "initial": {"velocity": [0.0, 0.0 if gravity else -1.0]}}
+    if gravity:
+        block["loads"] = [{"type": "gravity", "vector": [0.0, -1.0]}]
+    base = {"name": "base",
+            "mesh": {"type": "rectangle", "width": 1.0, "height": 0.5, "nx": 4, "ny": 2,
+                     "origin": [0.0, -0.5]},
+            "material": {"model": "linear_elastic", "E": 100.0, "nu": 0.3, "density": 1.0},
+            "supports": [{"set": "bottom", "x": 0.0, "y": 0.0}]}
+    return {"analysis": {"kind": "dynamic", "dt": 0.05, "t_end": 4.0},
+            "bodies": [block, base],
+            "contact": [{"name": "rest", "body_1": "block", "surface_1": "bottom",
+                         "body_2": "base", "surface_2": "top", "penalty_normal": 100.0}
+                        | contact]}
+
+
+def _build_warnings(data: dict) -> list[str]:
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        model_from_dict(copy.deepcopy(data))
+    return [str(w.message) for w in caught if w.category is ntc.PhysicsWarning]
+
+
+def test_penalty_under_the_rate_law_with_a_sustained_load_is_warned_at_build():
+    (line,) = _build_warnings(_resting({"method": "penalty"}))
+    assert line.startswith("contact.0 ('rest'): method = \"penalty\" under the persistency law")
+    assert "gravity on 'block'" in line and 'method = "augmented_lagrangian"' in line
+    assert 'law = "gap"' in line
+    # an impact with no load, the gap law, the augmented Lagrangian: nothing to say
+    assert _build_warnings(_resting({"method": "penalty"}, gravity=False)) == []
+    assert _build_warnings(_resting({"method": "penalty", "law": "gap"})) == []
+    assert _build_warnings(_resting({"method": "augmented_lagrangian"})) == []
+    # a load that returns to zero before t_end is no sustained load
+    ramp = _resting({"method": "penalty"})
+    ramp["bodies"][0]["loads"][0]["function"] = {"times": [0.0, 1.0, 2.0],
+                                                 "values": [0.0, 1.0, 0.0]}
+    assert _build_warnings(ramp) == []
