@@ -31,6 +31,7 @@ import logging
 import sys
 import time
 import traceback
+import warnings
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from pathlib import Path
 from typing import Annotated, Any, Literal
@@ -43,6 +44,7 @@ from ..api import Scenario, load_scenario, override_strings, read_results, run
 from ..engine.builder import build_mesh, build_model
 from ..io.checkpoint import run_identity
 from ..io.scenario import ScenarioError, read_toml
+from ..report.run_warnings import PhysicsWarning, result_warnings
 from ..threads import single_threaded
 
 SWEEP_FILE = "sweep.csv"
@@ -165,9 +167,13 @@ def run_case(scenario_path: str, overrides: Mapping[str, Any], folder: str,
         if done:
             results = read_results(folder)
         else:
-            with single_threaded():  # one single-threaded case per worker and core
+            with single_threaded(), warnings.catch_warnings():  # one case per worker and core
+                warnings.simplefilter("ignore", PhysicsWarning)  # in the row, not the worker log
                 results = run(scenario, Path(folder), overwrite=True)  # read back from it
         row |= {"skipped": done} | _results_row(results, reductions)
+        # the lines ntncontact run prints, from the summary (also of a skipped case)
+        row["warnings"] = " | ".join(result_warnings(
+            results.summary, scenario.config.analysis.kind == "static")) or None
     except Exception as err:  # recorded, the other cases go on
         row |= {"status": "failed", "skipped": False} | _written_so_far(folder, reductions)
         row["error"] = f"{type(err).__name__}: {err}".strip()
