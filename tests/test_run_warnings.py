@@ -156,3 +156,18 @@ def test_penalty_under_the_rate_law_with_a_sustained_load_is_warned_at_build():
     ramp["bodies"][0]["loads"][0]["function"] = {"times": [0.0, 1.0, 2.0],
                                                  "values": [0.0, 1.0, 0.0]}
     assert _build_warnings(ramp) == []
+
+
+@pytest.mark.slow
+def test_a_sweep_case_records_its_warnings_also_when_skipped(tmp_path):
+    from ntncontact.studies.sweep import run_case
+
+    scenario = tmp_path / "impact.toml"
+    scenario.write_text(_toml(IMPACT), encoding="utf-8")
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", ntc.PhysicsWarning)  # recorded, not issued
+        rows = [run_case(str(scenario), {"analysis.dt": 0.0025}, str(tmp_path / "case"), {})
+                for _ in range(2)]
+    assert [row["skipped"] for row in rows] == [False, True]
+    for row in rows:
+        assert row["warnings"].startswith("node 1 of interface 'if' went 0.0309")
