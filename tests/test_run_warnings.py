@@ -111,6 +111,7 @@ def test_an_energy_ledger_off_by_percent_is_warned_and_the_midpoint_rule_named()
     assert "mid-point rule" not in result_warnings(summary | {"integrator": "energy_momentum"},
                                                    static=False)[0]
     assert result_warnings(summary, static=True) == []  # the static works are trapezoidal sums
+    assert result_warnings(summary | {"integrator": None}) == []  # the summary says static
     quiet = summary | {"energy_balance_max_relative_error": BALANCE_WARNING / 2}
     assert result_warnings(quiet, static=False) == []
 

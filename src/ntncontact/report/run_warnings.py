@@ -42,9 +42,12 @@ UNRETURNED_WARNING = 1e-8
 BALANCE_WARNING = 1e-3
 
 
-def result_warnings(summary: dict, static: bool) -> list[str]:
+def result_warnings(summary: dict, static: bool | None = None) -> list[str]:
     """The warnings a run's summary calls for, one line each, without the ``warning:``
-    prefix (``static``: an ``analysis.kind = "static"`` run)."""
+    prefix (``static``: an ``analysis.kind = "static"`` run; None: as the summary's
+    ``integrator`` says, null in a static run)."""
+    if static is None:
+        static = "integrator" in summary and summary["integrator"] is None
     found = (_off_surfaces(summary), _unreturned_energy(summary),
              _contact_energy(summary, static), _balance(summary, static),
              _penetration(summary), _unpaired(summary), _mismatch(summary))

@@ -171,9 +171,6 @@ def run_case(scenario_path: str, overrides: Mapping[str, Any], folder: str,
                 warnings.simplefilter("ignore", PhysicsWarning)  # in the row, not the worker log
                 results = run(scenario, Path(folder), overwrite=True)  # read back from it
         row |= {"skipped": done} | _results_row(results, reductions)
-        # the lines ntncontact run prints, from the summary (also of a skipped case)
-        row["warnings"] = " | ".join(result_warnings(
-            results.summary, scenario.config.analysis.kind == "static")) or None
     except Exception as err:  # recorded, the other cases go on
         row |= {"status": "failed", "skipped": False} | _written_so_far(folder, reductions)
         row["error"] = f"{type(err).__name__}: {err}".strip()
@@ -197,6 +194,8 @@ def _results_row(results: Any, reductions: Mapping[str, str]) -> dict[str, Any]:
     summary = results.summary
     row: dict[str, Any] = {"error": summary.get("error")}
     row |= {k: summary.get(k) for k in HEADLINE if k in summary}
+    # the lines ntncontact run prints, from the summary (also of a skipped case)
+    row["warnings"] = " | ".join(result_warnings(summary)) or None
     if row.get("contact_end_time") is not None and row.get("contact_start_time") is not None:
         row["contact_duration"] = row["contact_end_time"] - row["contact_start_time"]
     return row | _reduce(results.history, reductions)
