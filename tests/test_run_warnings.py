@@ -172,3 +172,24 @@ def test_a_sweep_case_records_its_warnings_also_when_skipped(tmp_path):
     assert [row["skipped"] for row in rows] == [False, True]
     for row in rows:
         assert row["warnings"].startswith("node 1 of interface 'if' went 0.0309")
+
+
+def test_a_failed_run_warns_before_its_error_as_it_was_raised(monkeypatch):
+    """The command prints a failed run's warnings before its error; so does the API (the
+    step's failure is faked here: the summary so far shows a deep pair)."""
+    from ntncontact import api
+    from ntncontact.engine.simulation import SimulationError
+
+    class Failing:
+        def __init__(self, model, observers):
+            self.writer = observers[0]
+
+        def run(self, progress=None):
+            self.writer.results.summary.update(**_penetrated())
+            raise SimulationError("step 3 failed")
+
+    monkeypatch.setattr(api, "Simulation", Failing)
+    with pytest.warns(ntc.PhysicsWarning, match="node 3 of interface 'if' went 0.03"):
+        with pytest.raises(SimulationError, match="^step 3 failed$") as err:
+            ntc.run(ntc.scenario_from_dict(IMPACT))
+    assert err.value.__context__ is None and err.value.__cause__ is None

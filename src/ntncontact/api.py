@@ -204,14 +204,17 @@ def run(scenario: Scenario | str | Path, out: str | Path | None = None, *,
     if not isinstance(scenario, Scenario):
         scenario = load_scenario(scenario)
     static = scenario.config.analysis.kind == "static"
+    failed = None
     try:
         if out is None:
             results = _run_in_memory(scenario, progress, restart)
         else:
             results = _run_in_folder(scenario, Path(out), progress, overwrite, restart)
-    except _RunFailed as failed:  # its warnings before its error, as the command prints them
+    except _RunFailed as err:
+        failed = err
+    if failed is not None:  # its warnings before its error, as the command prints them
         _issue_warnings(failed.summary, static)
-        raise failed.error from None  # the error as the run raised it
+        raise failed.error  # as the run raised it (outside the except: no chained context)
     _issue_warnings(results.summary, static)
     return results
 
