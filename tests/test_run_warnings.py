@@ -193,3 +193,22 @@ def test_a_failed_run_warns_before_its_error_as_it_was_raised(monkeypatch):
         with pytest.raises(SimulationError, match="^step 3 failed$") as err:
             ntc.run(ntc.scenario_from_dict(IMPACT))
     assert err.value.__context__ is None and err.value.__cause__ is None
+
+
+def test_an_opening_under_traction_and_a_linear_body_turned_far_are_warned_about():
+    """Session 39's summary keys: a pressed pair open by 0.18 of the spacing (a tester's soft
+    block between walls) and a linear elastic element turned by 0.41 rad (the report's
+    delamination) each give one line; below their thresholds nothing."""
+    opening = {"max_separation_under_traction": 0.022,
+               "max_separation_under_traction_at": {"time": 3.77, "interface": "left",
+                                                    "node": 36, "opening": 0.022,
+                                                    "element_size": 0.125}}
+    turned = {"max_linear_elastic_rotation": 0.41,
+              "max_linear_elastic_rotation_at": {"time": 14.0, "body": "upper"}}
+    lines = result_warnings(opening | turned, static=False)
+    assert len(lines) == 2
+    assert "node 36 of interface 'left' was pressed across an open gap of 0.022" in lines[0]
+    assert "'upper' turned by 0.41 rad" in lines[1] and "1 - cos = 0.083" in lines[1]
+    opening["max_separation_under_traction_at"]["opening"] = 0.012  # 0.096 of the spacing
+    turned["max_linear_elastic_rotation"] = 0.099
+    assert result_warnings(opening | turned, static=False) == []

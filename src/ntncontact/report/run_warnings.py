@@ -4,7 +4,9 @@ computed from summary.json's data alone, so that a run read back says the same."
 
 from __future__ import annotations
 
-from ..engine.diagnostics import PhysicsWarning
+import math
+
+from ..engine.diagnostics import LINEAR_ROTATION_LIMIT, PhysicsWarning
 
 __all__ = ["PhysicsWarning", "result_warnings"]
 
@@ -24,6 +26,16 @@ SPACING_RATIO = 1.5
 #: an ALE node ending farther than this fraction of the surface spacing from its partner's
 #: place is a pair the mesh motion did not follow: ~1e-9 of it where the motion follows
 MISMATCH_WARNING = 0.1
+
+#: a pressed pair open by more than this fraction of its interface's surface spacing is worth
+#: a warning, as a penetration is (the ring impact holds 8.1e-4, 0.8 %; a tester's soft block
+#: between walls 0.022, 18 %)
+OPENING_WARNING = 0.1
+
+#: an element of a linear elastic body turned by more than this (radians) is worth a warning:
+#: the linear strain then holds the rotation's 1 - cos(theta) = 0.5 % as a stretch without
+#: stress (``engine.diagnostics.LINEAR_ROTATION_LIMIT``)
+ROTATION_WARNING = LINEAR_ROTATION_LIMIT
 
 #: net positive work of the contact forces (energy contact added) above this fraction of the
 #: run's energy scale is worth a warning: the persistency law's is ~1e-10 of it, the gap law's
@@ -50,7 +62,8 @@ def result_warnings(summary: dict, static: bool | None = None) -> list[str]:
         static = "integrator" in summary and summary["integrator"] is None
     found = (_off_surfaces(summary), _unreturned_energy(summary),
              _contact_energy(summary, static), _balance(summary, static),
-             _penetration(summary), _unpaired(summary), _mismatch(summary))
+             _penetration(summary), _unpaired(summary), _opening(summary), _mismatch(summary),
+             _linear_rotation(summary))
     return [line for line in found if line]
 
 
@@ -139,6 +152,34 @@ def _unpaired(summary: dict) -> str | None:
             f"of the surface spacing, t = {at['time']:.6g}; summary.json "
             "max_penetration_unpaired), deeper than any pair, with nothing holding it: "
             f"{_advice(summary, at['interface'])}")
+
+
+def _opening(summary: dict) -> str | None:
+    """A pressed pair was open by more than OPENING_WARNING of its surface spacing (summary.json
+    ``max_separation_under_traction_at``): the persistency law held an opening it had got to
+    in a step without traction."""
+    at = summary.get("max_separation_under_traction_at")
+    if not at or at["opening"] <= OPENING_WARNING * at["element_size"]:
+        return None
+    return (f"node {at['node']} of interface '{at['interface']}' was pressed across an open gap "
+            f"of {at['opening']:.3g} ({at['opening'] / at['element_size']:.2g} of the surface "
+            f"spacing, t = {at['time']:.6g}; summary.json max_separation_under_traction): the "
+            "persistency law holds a pair's gap where a step without traction left it; "
+            "release_steps = 1 releases such pairs (at the cost of deeper entries), and "
+            "method = \"lagrange\" with law = \"gap\" holds none")
+
+
+def _linear_rotation(summary: dict) -> str | None:
+    """An element of a linear elastic body turned by more than ROTATION_WARNING (summary.json
+    ``max_linear_elastic_rotation``)."""
+    at = summary.get("max_linear_elastic_rotation_at")
+    angle = summary.get("max_linear_elastic_rotation") or 0.0
+    if not at or angle <= ROTATION_WARNING:
+        return None
+    return (f"an element of the linear elastic body '{at['body']}' turned by {angle:.3g} rad "
+            f"(t = {at['time']:.6g}; summary.json max_linear_elastic_rotation): small-strain "
+            f"elasticity reads a rotation as a stretch of 1 - cos = {1 - math.cos(angle):.2g} "
+            "without stress; model = \"neo_hookean\" is valid for any rotation")
 
 
 def _mismatch(summary: dict) -> str | None:
