@@ -7,7 +7,7 @@ import pytest
 import scipy.sparse as sp
 
 from ntncontact.solvers.linear import LinearSolver
-from ntncontact.solvers.newton import FactorCache, NewtonSettings, newton, norm2
+from ntncontact.solvers.newton import FactorCache, NewtonSettings, _floor_note, newton, norm2
 
 N = 40
 
@@ -98,3 +98,22 @@ def test_norm2_of_entries_whose_squares_overflow_is_finite_and_silent():
         assert norm2(np.array([3e200, -4e200, 0.0])) == pytest.approx(5e200, rel=1e-15)
         assert norm2(np.array([3.0, 4.0])) == 5.0
         assert norm2(np.array([1e300, np.inf])) == np.inf
+
+
+def test_a_tolerance_below_the_round_off_floor_is_named_as_such():
+    """A tester's rtol = 1e-12 on a free spinning Neo-Hookean block failed as "no convergence"
+    with |R| 6.6e-11 against 2.8e-11: the residual's round-off floor. The message says so; a
+    real failure to converge (|R| far above round-off) does not get the note."""
+    import ntncontact as ntc
+
+    block = {"analysis": {"kind": "dynamic", "dt": 0.02, "t_end": 0.4, "output_interval": 0.4,
+                          "newton": {"rtol": 1e-13}},
+             "bodies": [{"name": "block", "mesh": {"type": "rectangle", "width": 1.0,
+                                                   "height": 0.5, "nx": 8, "ny": 4},
+                         "material": {"model": "neo_hookean", "E": 100.0, "nu": 0.3,
+                                      "density": 1.0},
+                         "initial": {"velocity": [1.0, 0.5], "angular_velocity": 4.0}}]}
+    with pytest.raises(RuntimeError, match="stalled at its round-off floor"):
+        ntc.run(ntc.scenario_from_dict(block))
+    assert _floor_note([1.0, 0.5, 0.4, 0.45, 0.41, 0.43], 1.0) == ""  # stalled, not round-off
+    assert _floor_note([1e-12, 2e-12, 1.5e-12, 1e-12, 3e-12], 1.0).startswith(": the residual")

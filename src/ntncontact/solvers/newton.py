@@ -153,10 +153,27 @@ def _newton(residual: Residual, jacobian: Jacobian, solve: LinearSolve, y0: NDAr
             return NewtonResult(y, it, norms, early=True)
     raise NewtonError(
         f"no convergence in {settings.max_iterations} iterations (|R| = {norms[-1]:.3e}, "
-        f"tolerance {settings.rtol * scale + settings.atol:.3e})",
+        f"tolerance {settings.rtol * scale + settings.atol:.3e}){_floor_note(norms, scale)}",
         norms[-1],
         settings.max_iterations,
     )
+
+
+#: a residual that stalls below this fraction of its force scale is at its round-off floor
+ROUNDOFF_FLOOR = 1e-9
+
+
+def _floor_note(norms: list[float], scale: float) -> str:
+    """Why a stalled Newton failed, when it stalled at round-off: the last 5 residuals within
+    a factor 10 of each other, the smallest below ROUNDOFF_FLOOR of the force scale (a
+    tester's rtol = 1e-12 on a free block: |R| 6.6e-11 against a tolerance of 2.8e-11, which
+    the arithmetic cannot reach, reported as a plain failure)."""
+    last = norms[-5:]
+    floor = min(norms)
+    if len(last) < 5 or max(last) > 10.0 * min(last) or not 0.0 < floor < ROUNDOFF_FLOOR * scale:
+        return ""
+    return (f": the residual stalled at its round-off floor, {floor / scale:.1e} of the force "
+            "scale; analysis.newton.rtol below that cannot be met")
 
 
 def _modified_step(residual: Residual, y: NDArray, R: NDArray, norm0: float,
