@@ -273,3 +273,36 @@ def test_both_blocks_ale_with_the_leading_face_joined_keep_the_reports_dissipati
     assert results.summary["status"] == "completed"
     assert dissipated == pytest.approx(0.225, rel=0.02)
     assert results.summary["energy_balance_max_relative_error"] < 1e-8
+
+
+def test_a_pair_touching_at_rest_enters_under_predicted_detection_too():
+    """detection = "predicted" passes a negative tolerance (a touch still to come waits), but
+    a pair touching at rest is a touch that has happened: a tester's block placed on another
+    under gravity fell through its first step and kept g dt^2 / 2 inside (0.002 at dt 0.02)."""
+    from ntncontact.contact import entering
+
+    gap, rate = np.array([0.0, 1e-13, 0.0, -1e-3]), np.array([0.0, 0.0, -1.0, 0.0])
+    assert entering(gap, rate, True, -1e-10).tolist() == [True, True, False, False]
+    assert entering(gap, rate, True, 1e-10).tolist() == [True, True, False, False]
+
+
+def test_a_block_resting_under_gravity_is_held_from_the_start_with_predicted_detection():
+    import ntncontact as ntc
+
+    def block(name, width, nx, origin, E, **more):
+        return {"name": name, "mesh": {"type": "rectangle", "width": width, "height": 0.5,
+                                       "nx": nx, "ny": 2, "origin": origin},
+                "material": {"model": "neo_hookean", "E": E, "nu": 0.3, "density": 1.0}
+                } | more
+    data = {"analysis": {"kind": "dynamic", "dt": 0.02, "t_end": 0.2},
+            "bodies": [block("block", 1.0, 4, [0.0, 0.0], 100.0,
+                             loads=[{"type": "gravity", "vector": [0.0, -10.0]}]),
+                       block("ground", 2.0, 8, [-0.5, -0.5], 1000.0,
+                             supports=[{"set": "bottom", "x": 0.0, "y": 0.0}])],
+            "contact": [{"name": "c", "body_1": "block", "surface_1": "bottom",
+                         "body_2": "ground", "surface_2": "top",
+                         "method": "augmented_lagrangian", "penalty_normal": 300.0,
+                         "detection": "predicted"}]}
+    summary = ntc.run(ntc.scenario_from_dict(data)).summary
+    assert summary["contact_start_time"] == 0.0
+    assert summary["max_penetration"] < 1e-9  # was g dt^2 / 2 = 0.002

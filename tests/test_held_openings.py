@@ -48,3 +48,15 @@ def test_bars_of_equal_impedance_hold_no_opening():
     summary = ntc.run(ntc.scenario_from_dict(bars(100.0))).summary
     assert summary["max_separation_under_traction"] == 0.0
     assert summary["max_separation_under_traction_at"] is None
+
+
+def test_gap_law_pairs_are_not_counted():
+    """The gap law holds its mid-step gap at zero while its step-end gap swings (a tester's
+    gap-law slide: -4e-16 and -0.0069): no opening is held, so the key stays 0."""
+    data = bars(400.0)
+    data["contact"][0] |= {"method": "lagrange", "law": "gap"}
+    del data["contact"][0]["penalty_normal"]
+    results = ntc.run(ntc.scenario_from_dict(data))
+    pressed = results.contact[results.contact["normal_traction"] > 0.0]
+    assert pressed["end_gap"].min() < -1e-3  # the step ends do swing open
+    assert results.summary["max_separation_under_traction"] == 0.0

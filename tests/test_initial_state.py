@@ -26,7 +26,7 @@ def bar(**body: object) -> dict:
 def test_a_held_end_stays_at_rest_and_its_reaction_rises_to_the_wave_force():
     data = bar(supports=[{"set": "left", "x": 0.0, "y": 0.0}],
                initial={"velocity": [1.0, 0.0]})
-    with pytest.warns(UserWarning, match="2 supported node"):
+    with pytest.warns(ntc.PhysicsWarning, match="2 supported node"):
         results = ntc.run(ntc.scenario_from_dict(data))
     held = np.isclose(results.fields(0.0).points[:, 0], 0.0)
     for t in results.times:

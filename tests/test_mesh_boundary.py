@@ -172,13 +172,15 @@ def _three_beside_one(offset: float) -> QuadMesh:
 
 
 def test_hanging_nodes_are_found_on_their_edge():
-    """Both nodes of a 3-to-1 T-junction hang on the big cell's edge (7, 4); moved off the edge
-    by more than HANGING_RTOL of its length (a notch 0.002 wide) they do not."""
+    """Both nodes of a 3-to-1 T-junction hang on the big cell's edge (7, 4), also a round-off
+    away from it; moved off the edge by more than HANGING_RTOL of its length (a slot 1e-8 or
+    5e-4 wide: a tester's valid U-shaped body with a 5e-4 slot was refused) they do not."""
     found = hanging_nodes(_three_beside_one(0.0))
     assert sorted(found[:, 0].tolist()) == [5, 6]
     assert np.all(found[:, 1:] == [7, 4])
-    assert hanging_nodes(_three_beside_one(-1e-4)).shape[0] == 2  # round-off off the line
-    assert hanging_nodes(_three_beside_one(-2e-3)).shape == (0, 3)
+    assert hanging_nodes(_three_beside_one(-1e-13)).shape[0] == 2  # round-off off the line
+    for slot in (-1e-8, -5e-4, -2e-3):
+        assert hanging_nodes(_three_beside_one(slot)).shape == (0, 3)
 
 
 @pytest.mark.parametrize("mesh", [rectangle(3.0, 1.0, 30, 4, grading_x=1.3),

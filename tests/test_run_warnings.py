@@ -63,7 +63,8 @@ def test_the_api_issues_the_warnings_the_command_prints_once(tmp_path, capsys):
     assert len(lines) == 1 and lines[0].startswith("node 1 of interface 'if' went 0.0309")
     # equal spacings: detection lag, not a mismatch; no smaller dt recommended
     assert "spacings are similar (0.125 and 0.125)" in lines[0]
-    assert 'contact.0.detection = "predicted"' in lines[0] and "penalty_normal" in lines[0]
+    assert 'contact.0.detection = "predicted"' in lines[0]
+    assert "penalty_normal" not in lines[0]  # the augmented Lagrangian: the depth is the lag
     assert results.summary["integrator"] == "energy_momentum"
     assert results.summary["contact_setup"]["if"]["detection"] == "penetration"
     scenario = tmp_path / "impact.toml"
@@ -88,8 +89,11 @@ def _penetrated(**setup: object) -> dict:
 def test_the_penetration_advice_names_only_what_applies():
     (lagging,) = result_warnings(_penetrated(), static=False)
     assert "spacings are similar" in lagging and 'contact.2.detection = "predicted"' in lagging
-    assert 'mesh_motion = "ale"' in lagging and "contact.2.penalty_normal" in lagging
+    assert 'mesh_motion = "ale"' in lagging and "penalty_normal" not in lagging
     assert "a smaller dt keep" not in lagging
+    # the penalty method, quasi-static: the depth is traction / penalty, no detection lag
+    (pressed,) = result_warnings(_penetrated(method="penalty"), static=True)
+    assert "contact.2.penalty_normal" in pressed and "detection" not in pressed
     (coarse,) = result_warnings(_penetrated(method="lagrange", detection="predicted",
                                             spacing_1=0.025, ale_2=True), static=False)
     assert "surface_1 (spacing 0.025) is 4 times finer than surface_2 (0.1)" in coarse
@@ -157,6 +161,44 @@ def test_penalty_under_the_rate_law_with_a_sustained_load_is_warned_at_build():
     ramp["bodies"][0]["loads"][0]["function"] = {"times": [0.0, 1.0, 2.0],
                                                  "values": [0.0, 1.0, 0.0]}
     assert _build_warnings(ramp) == []
+    # a load on a body no interface joins to this one: nothing (a tester's third body); a load
+    # on a block stacked on the contact's upper body: warned
+    far = _resting({"method": "penalty"}, gravity=False)
+    far["bodies"].append({"name": "far", "mesh": {"type": "rectangle", "width": 1.0,
+                                                  "height": 0.5, "nx": 2, "ny": 1,
+                                                  "origin": [10.0, 0.0]},
+                          "material": {"model": "linear_elastic", "E": 100.0, "nu": 0.3,
+                                       "density": 1.0},
+                          "loads": [{"type": "gravity", "vector": [0.0, -1.0]}]})
+    assert _build_warnings(far) == []
+    stacked = copy.deepcopy(far)
+    stacked["bodies"][2]["mesh"]["origin"] = [0.0, 0.5]
+    stacked["contact"].append({"name": "stack", "body_1": "far", "surface_1": "bottom",
+                               "body_2": "block", "surface_2": "top",
+                               "method": "augmented_lagrangian", "penalty_normal": 100.0})
+    (line,) = _build_warnings(stacked)
+    assert line.startswith("contact.0 ('rest')") and "gravity on 'far'" in line
+
+
+def test_the_balance_warning_names_what_the_ledger_leaves_out():
+    """A tester's bar driven by a moving support and a disk drop with conserve_energy =
+    "kinetic" were told the time integration (or the mid-point rule) made the imbalance,
+    which the support's work (8e-12) or the remap's energy (9e-12) closed."""
+    summary = {"energy_balance_max_relative_error": 0.0043, "integrator": "midpoint",
+               "outside_ledger": ["the work of supports with prescribed motion"]}
+    (line,) = result_warnings(summary, static=False)
+    assert "leaves out the work of supports with prescribed motion" in line
+    assert "energy_momentum" not in line
+
+
+def test_an_opening_entered_by_predicted_detection_is_explained_as_such():
+    summary = {"max_separation_under_traction": 0.00785,
+               "max_separation_under_traction_at": {"time": 0.1, "interface": "if",
+                                                    "node": 8, "opening": 0.00785,
+                                                    "element_size": 0.05},
+               "contact_setup": {"if": _penetrated(detection="predicted")["contact_setup"]["if"]}}
+    (line,) = result_warnings(summary, static=False)
+    assert "entered early" in line and "release_steps" not in line
 
 
 @pytest.mark.slow

@@ -123,3 +123,23 @@ def test_a_face_touching_on_a_step_boundary_enters_at_once(mesh_motion, angle, d
     approach = np.hypot(0.5, 1.0) * DT
     assert gaps.max() < 0.01 * approach
     assert gaps[:9].min() > -0.01 * approach  # nor a step's approach apart
+
+
+def test_a_real_gap_far_from_the_origin_is_no_touch():
+    """The touch band is round-off of the coordinates: rods placed 1e5 from the origin and
+    1e-6 apart were held apart from t = 0 under 2e7 Pa at 1e-10 of the coordinates; at 1e-12
+    (1.4e-7 there) no pair enters before they meet at t = 1e-6 / v."""
+    import ntncontact as ntc
+
+    def rod(name, x0, v):
+        return {"name": name, "mesh": {"type": "rectangle", "width": 1.0, "height": 0.1,
+                                       "nx": 10, "ny": 1, "origin": [1e5 + x0, 1e5]},
+                "material": {"model": "linear_elastic", "E": 100.0, "nu": 0.0,
+                             "density": 1.0}, "initial": {"velocity": [v, 0.0]}}
+    data = {"analysis": {"kind": "dynamic", "dt": 2.5e-7, "t_end": 7.5e-7},
+            "bodies": [rod("a", -1.0 - 1e-6, 1.0), rod("b", 0.0, 0.0)],
+            "contact": [{"name": "ends", "body_1": "a", "surface_1": "right", "body_2": "b",
+                         "surface_2": "left", "penalty_normal": 1000.0}]}
+    results = ntc.run(ntc.scenario_from_dict(data))
+    assert results.summary["contact_start_time"] is None
+    assert results.history["active_pairs"].max() == 0

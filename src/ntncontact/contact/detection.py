@@ -43,8 +43,11 @@ def entering(gap: NDArray[np.float64], gap_rate: NDArray[np.float64] | None,
     approach is not taken: the far side of a ring lies "behind" its partner surface too."""
     enter = gap >= -gap_tol
     if persistency:
-        at_rest = (gap_rate == 0.0) & (gap <= gap_tol)  # type: ignore[operator]
-        enter &= (gap_rate > 0.0) | at_rest  # type: ignore[operator]
+        # |gap_tol|: with predicted detection gap_tol < 0 (a touch to come waits), but a pair
+        # touching at rest is a touch that has happened (a tester's block placed on another
+        # under gravity fell a step first, and kept g dt^2 / 2 inside for the whole run)
+        at_rest = (gap_rate == 0.0) & (np.abs(gap) <= abs(gap_tol))  # type: ignore[operator]
+        enter = (enter & (gap_rate > 0.0)) | at_rest  # type: ignore[operator]
     return enter
 
 

@@ -98,28 +98,40 @@ def _warn_penalty_rate_law(config: ScenarioConfig) -> None:
     a sustained load sinks the body at t_N / eps_N without bound (a tester's block resting
     under gravity: 0.009, 0.019, 0.029, 0.039 deep at t = 1..4). Prescribed motions are not
     looked at: whether they press the bodies together is not known before the run."""
-    if config.analysis.kind != "dynamic" or not _sustained_loads(config):
+    if config.analysis.kind != "dynamic":
         return
-    names = [f"contact.{i} ('{c.name or f'interface{i}'}')" for i, c in enumerate(config.contact)
-             if c.method == "penalty" and (c.law or "persistency") == "persistency"]
-    if names:
-        warnings.warn(f"{', '.join(names)}: method = \"penalty\" under the persistency law "
-                      f"cannot carry the sustained {_sustained_loads(config)[0]}: its penalty "
-                      "resists the gap's rate, not the gap, so the bodies sink into each other "
-                      "at traction / penalty_normal without bound; use method = "
-                      "\"augmented_lagrangian\", or law = \"gap\" with a penalty in stress per "
-                      "length (docs/scenarios.md, \"Choosing penalty_normal, dt and the ALE "
-                      "body\")",
-                      PhysicsWarning, stacklevel=3)
+    for i, c in enumerate(config.contact):
+        loads = _sustained_loads(config, _joined(config, {c.body_1, c.body_2}))
+        if c.method == "penalty" and (c.law or "persistency") == "persistency" and loads:
+            warnings.warn(f"contact.{i} ('{c.name or f'interface{i}'}'): method = \"penalty\" "
+                          f"under the persistency law cannot carry the sustained {loads[0]}: its "
+                          "penalty resists the gap's rate, not the gap, so the bodies sink into "
+                          "each other at traction / penalty_normal without bound; use method = "
+                          "\"augmented_lagrangian\", or law = \"gap\" with a penalty in stress "
+                          "per length (docs/scenarios.md, \"Choosing penalty_normal, dt and the "
+                          "ALE body\")", PhysicsWarning, stacklevel=3)
 
 
-def _sustained_loads(config: ScenarioConfig) -> list[str]:
-    """The loads still on at t_end, as "gravity on 'block'" (a time function ending at zero
-    is a load that returns)."""
+def _joined(config: ScenarioConfig, bodies: set[str]) -> set[str]:
+    """``bodies`` and every body joined to them through contact interfaces and ties: a load
+    on a block stacked on top presses the interface below it too."""
+    links = [(c.body_1, c.body_2) for c in (*config.contact, *config.tie)]
+    grown = set(bodies)
+    while True:
+        more = {b for a, b in links if a in grown} | {a for a, b in links if b in grown}
+        if more <= grown:
+            return grown
+        grown |= more
+
+
+def _sustained_loads(config: ScenarioConfig, bodies: set[str]) -> list[str]:
+    """The loads on ``bodies`` still on at t_end, as "gravity on 'block'" (a time function
+    ending at zero is a load that returns; a load on a body the interface does not join was
+    warned about too, a tester's third body 10 units away)."""
     t_end = config.analysis.t_end
     return [f"{load.type} on '{body.name}'" for body in config.bodies for load in body.loads
-            if load.function is None
-            or np.interp(t_end, load.function.times, load.function.values) != 0.0]
+            if body.name in bodies and (load.function is None
+            or np.interp(t_end, load.function.times, load.function.values) != 0.0)]
 
 
 def time_function(cfg: TimeFunctionConfig | None) -> TimeFunction:

@@ -7,6 +7,7 @@ import warnings
 import numpy as np
 from numpy.typing import NDArray
 
+from .diagnostics import PhysicsWarning
 from .model import Body, Model
 from .problem import StepState
 
@@ -53,4 +54,4 @@ def _supports_prescribe(model: Model, v: NDArray) -> None:
         if moved.size:
             warnings.warn(f"body '{body.name}': {np.unique(moved // 2).size} supported node(s) "
                           "start at their supports' velocity (a held node at rest), not at the "
-                          "body's initial velocity", stacklevel=2)
+                          "body's initial velocity", PhysicsWarning, stacklevel=2)
