@@ -254,3 +254,23 @@ def test_an_opening_under_traction_and_a_linear_body_turned_far_are_warned_about
     opening["max_separation_under_traction_at"]["opening"] = 0.012  # 0.096 of the spacing
     turned["max_linear_elastic_rotation"] = 0.099
     assert result_warnings(opening | turned, static=False) == []
+
+
+def test_build_warnings_are_kept_in_the_summary_and_a_sweeps_row(tmp_path, capsys):
+    """A tester's sweep case with penalty under the rate law had an empty warnings column,
+    though `ntncontact run` printed the build-time warning for it."""
+    from ntncontact.studies.sweep import run_case
+
+    scenario = tmp_path / "rest.toml"
+    scenario.write_text(_toml(_resting({"method": "penalty"}) | {
+        "analysis": {"kind": "dynamic", "dt": 0.05, "t_end": 0.1}}), encoding="utf-8")
+    assert main(["run", str(scenario), "--out", str(tmp_path / "run"), "--quiet"]) == 0
+    err = capsys.readouterr().err
+    assert err.count("cannot carry the sustained gravity") == 1  # printed once
+    summary = ntc.read_results(tmp_path / "run").summary
+    (kept,) = summary["build_warnings"]
+    assert "cannot carry the sustained gravity on 'block'" in kept
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # a worker issues none: they are in the row
+        row = run_case(str(scenario), {"analysis.dt": 0.05}, str(tmp_path / "case"), {})
+    assert "cannot carry the sustained gravity" in row["warnings"]

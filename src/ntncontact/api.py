@@ -27,6 +27,7 @@ import numpy as np
 import pandas as pd
 
 from .engine.builder import build_model
+from .engine.diagnostics import warnings_noted
 from .engine.simulation import Simulation
 from .io import checkpoint
 from .io.results import ResultWriter
@@ -233,13 +234,15 @@ def _run_in_folder(scenario: Scenario, out: Path, progress: Callable[[float], No
     if restart and overwrite:
         raise ValueError("run: restart continues the run in out, overwrite replaces it: "
                          "give one of them")
-    model = build_model(scenario.config, scenario.base_dir)
+    with warnings_noted() as build_warnings:  # issued, and kept in the summary
+        model = build_model(scenario.config, scenario.base_dir)
     identity = checkpoint.run_identity(scenario.config, scenario.overrides, model)
     resume = checkpoint.load_latest(out, identity) if restart else None
     writer = ResultWriter(out, model, overwrite=overwrite,
                           resume=resume and resume["writer"], scenario=scenario.source,
                           title=scenario.config.title, overrides=list(scenario.overrides),
-                          scenario_hash=identity["scenario_hash"])
+                          scenario_hash=identity["scenario_hash"],
+                          build_warnings=build_warnings)
     simulation = Simulation(model, [writer])
     checkpoint.attach(simulation, writer, out, scenario.config.analysis.checkpoint_interval,
                       identity, resume)
@@ -254,9 +257,10 @@ def _run_in_memory(scenario: Scenario, progress: Callable[[float], None] | None,
     if restart or scenario.config.analysis.checkpoint_interval is not None:
         raise ScenarioError(f"{scenario.source}: checkpoints and restarts need a results "
                             "folder: give out=...")
-    model = build_model(scenario.config, scenario.base_dir)
+    with warnings_noted() as build_warnings:
+        model = build_model(scenario.config, scenario.base_dir)
     identity = checkpoint.run_identity(scenario.config, scenario.overrides, model)
-    writer = ResultWriter(None, model, scenario=scenario.source,
+    writer = ResultWriter(None, model, build_warnings=build_warnings, scenario=scenario.source,
                           title=scenario.config.title, overrides=list(scenario.overrides),
                           scenario_hash=identity["scenario_hash"])
     with _failed_with_summary(writer):

@@ -88,6 +88,7 @@ def _run_until_stopped(args: argparse.Namespace, stop: StopOnSignal) -> int:
     from tqdm import tqdm
 
     from .engine.builder import build_model
+    from .engine.diagnostics import warnings_noted
     from .engine.simulation import RunInterrupted, Simulation
     from .io import checkpoint
     from .io.results import ResultWriter
@@ -95,7 +96,8 @@ def _run_until_stopped(args: argparse.Namespace, stop: StopOnSignal) -> int:
 
     scenario = Path(args.scenario)
     config = load_scenario(scenario, args.set)
-    model = build_model(config, scenario.parent)
+    with warnings_noted() as build_warnings:  # printed as issued, and kept in the summary
+        model = build_model(config, scenario.parent)
     if stop.signum is not None:  # before any file is written
         raise RunInterrupted(stop.reason())
     if args.times:  # refused before the run, not after it
@@ -111,7 +113,7 @@ def _run_until_stopped(args: argparse.Namespace, stop: StopOnSignal) -> int:
     writer = ResultWriter(out, model, overwrite=args.overwrite,
                           resume=resume and resume["writer"], scenario=str(scenario),
                           title=config.title, overrides=list(args.set or []),
-                          scenario_hash=identity["scenario_hash"])
+                          scenario_hash=identity["scenario_hash"], build_warnings=build_warnings)
     with _finished_on_error(writer, stop, model.analysis.kind == "static"):
         sim = Simulation(model, [writer])
         checkpoint.attach(sim, writer, out, config.analysis.checkpoint_interval, identity,

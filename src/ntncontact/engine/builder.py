@@ -36,6 +36,7 @@ from ..mesh.overlap import boundary_edges, deepest_overlap
 from ..mesh.quadmesh import MeshError, QuadMesh
 from ..mesh.quality import check_elements
 from .diagnostics import PhysicsWarning
+from .initial import warn_overridden_velocities
 from .model import AleSetup, AnalysisSettings, Body, ContactInterface, Model, stack_bodies
 from .ties import Tie, TieError, held_on_edges, make_tie, pair_tie
 
@@ -89,7 +90,7 @@ def _warn_locking(where: str, material: Material) -> None:
                       "the fully integrated Q4 elements lock near incompressibility in plane "
                       "strain, and the body comes out too stiff (a cantilever: 0.50 of beam "
                       "theory's deflection at nu = 0.49, 0.11 at 0.499; refining eases it "
-                      "slowly): compare with a run at nu = 0.45", stacklevel=2)
+                      "slowly): compare with a run at nu = 0.45", PhysicsWarning, stacklevel=2)
 
 
 def _warn_penalty_rate_law(config: ScenarioConfig) -> None:
@@ -227,8 +228,10 @@ def build_model(config: ScenarioConfig, base_dir: str | Path = ".") -> Model:
     _check_ale_ties(ties, ale_bodies, bodies)
     _check_tied_multipliers(ties, interfaces, config.contact, bodies)
     loads = LoadCase(tuple(patterns), tuple(functions), tuple(on_mesh), X0)
-    return Model(bodies, analysis, loads,
-                 tuple(prescribed), X0, cells, assembler, interfaces, ale_bodies, ties)
+    model = Model(bodies, analysis, loads,
+                  tuple(prescribed), X0, cells, assembler, interfaces, ale_bodies, ties)
+    warn_overridden_velocities(model)
+    return model
 
 
 def _check_analysis_options(config: ScenarioConfig) -> None:

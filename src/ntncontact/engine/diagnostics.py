@@ -4,6 +4,9 @@ inside another body off the contact surfaces."""
 
 from __future__ import annotations
 
+import warnings
+from collections.abc import Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
@@ -53,6 +56,22 @@ class PhysicsWarning(UserWarning):
     """A run whose results are doubtful for a physical reason (penetration, energy gained,
     a law that cannot carry the load): ``ntncontact.run`` issues one per line the command
     prints as ``warning: ...``, so that they can be filtered (``warnings.simplefilter``)."""
+
+
+@contextmanager
+def warnings_noted() -> Iterator[list[str]]:
+    """The warnings issued inside, as lines in the yielded list (summary.json
+    ``build_warnings``), issued again on leaving, so that the command prints them and Python
+    callers see them as before: a sweep's row recorded the summary's warnings only, and lost
+    those of the model's build (a tester's penalty under the rate law)."""
+    noted: list[str] = []
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        yield noted
+    for warning in caught:
+        noted.append(str(warning.message))
+        warnings.warn_explicit(warning.message, warning.category, warning.filename,
+                               warning.lineno)
 
 
 @dataclass(frozen=True)

@@ -44,7 +44,7 @@ from ..api import Scenario, load_scenario, override_strings, read_results, run
 from ..engine.builder import build_mesh, build_model
 from ..io.checkpoint import run_identity
 from ..io.scenario import ScenarioError, read_toml
-from ..report.run_warnings import PhysicsWarning, result_warnings
+from ..report.run_warnings import result_warnings
 from ..threads import single_threaded
 
 SWEEP_FILE = "sweep.csv"
@@ -168,7 +168,7 @@ def run_case(scenario_path: str, overrides: Mapping[str, Any], folder: str,
             results = read_results(folder)
         else:
             with single_threaded(), warnings.catch_warnings():  # one case per worker and core
-                warnings.simplefilter("ignore", PhysicsWarning)  # in the row, not the worker log
+                warnings.simplefilter("ignore")  # in the row (the summary's), not the log
                 results = run(scenario, Path(folder), overwrite=True)  # read back from it
         row |= {"skipped": done} | _results_row(results, reductions)
     except Exception as err:  # recorded, the other cases go on
@@ -195,7 +195,8 @@ def _results_row(results: Any, reductions: Mapping[str, str]) -> dict[str, Any]:
     row: dict[str, Any] = {"error": summary.get("error")}
     row |= {k: summary.get(k) for k in HEADLINE if k in summary}
     # the lines ntncontact run prints, from the summary (also of a skipped case)
-    row["warnings"] = " | ".join(result_warnings(summary)) or None
+    lines = list(summary.get("build_warnings") or []) + result_warnings(summary)
+    row["warnings"] = " | ".join(lines) or None
     if row.get("contact_end_time") is not None and row.get("contact_start_time") is not None:
         row["contact_duration"] = row["contact_end_time"] - row["contact_start_time"]
     return row | _reduce(results.history, reductions)
