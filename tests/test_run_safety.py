@@ -408,6 +408,30 @@ def test_a_signal_before_the_run_began_says_nothing_was_written(tmp_path, capsys
     assert not out.exists()
 
 
+def test_a_sigint_during_the_build_over_an_old_run_says_one_true_line(tmp_path, capsys,
+                                                                      monkeypatch):
+    """A tester's Ctrl-C a second into `ntncontact run --overwrite` over a folder holding an
+    earlier completed run printed "stopping after this step" (no step existed) and then "files
+    written so far are valid", and status said "completed": the old run, untouched."""
+    from ntncontact.engine import builder
+
+    out = tmp_path / "spin"
+    assert run_spin(out, "--set", "analysis.t_end=0.1") == 0
+    before = (out / "summary.json").read_bytes()
+    capsys.readouterr()
+    build = builder.build_model
+
+    def signalled(*args, **kwargs):
+        os.kill(os.getpid(), signal.SIGINT)  # lands in the command's handler, mid-build
+        return build(*args, **kwargs)
+
+    monkeypatch.setattr(builder, "build_model", signalled)
+    assert main(["run", str(SPIN), "--out", str(out), "--quiet", "--overwrite"]) == 130
+    err = capsys.readouterr().err
+    assert err == "interrupted by SIGINT before the run began: nothing was written\n"
+    assert (out / "summary.json").read_bytes() == before
+
+
 def test_a_bug_ends_in_one_line_with_its_traceback_in_a_file(tmp_path, capsys, monkeypatch):
     """An exception the command does not expect (here an AttributeError from a step, as a
     session's own slip produced) printed a traceback; now one line names it and the file that

@@ -30,6 +30,8 @@ class StopOnSignal:
         self.signum: int | None = None
         #: the run is complete (only figures and comparisons are left): stop at the first signal
         self.at_once = False
+        #: the run's results writer exists (its folder was prepared): before, nothing was written
+        self.writing = False
         self._previous: dict[int, object] = {}
 
     def __enter__(self) -> StopOnSignal:
@@ -50,6 +52,8 @@ class StopOnSignal:
         self.signum = signum
         if self.at_once:  # drawing figures: no step to finish, and no kernel to land in
             raise KeyboardInterrupt(self.reason())
+        if not self.writing:  # no step to finish: the run stops before it begins, one line
+            return
         # os.write: print() from a signal handler can meet the stream mid-write
         os.write(2, f"\n{signal.Signals(signum).name}: stopping after this step "
                     "(again to stop at once)\n".encode())
@@ -76,7 +80,7 @@ def _run(args: argparse.Namespace) -> int:
             print(f"{stop.reason()} after the run had completed (its results are whole; "
                   "summary.json status \"completed\"): the figures and comparisons not yet "
                   "written are missing", file=sys.stderr)
-        elif not (Path(args.out) / "summary.json").is_file():  # stopped while it started up
+        elif not stop.writing:  # stopped while it started up, the folder untouched
             print(f"{stop.reason()} before the run began: nothing was written",
                   file=sys.stderr)
         else:
@@ -114,6 +118,7 @@ def _run_until_stopped(args: argparse.Namespace, stop: StopOnSignal) -> int:
                           resume=resume and resume["writer"], scenario=str(scenario),
                           title=config.title, overrides=list(args.set or []),
                           scenario_hash=identity["scenario_hash"], build_warnings=build_warnings)
+    stop.writing = True
     with _finished_on_error(writer, stop, model.analysis.kind == "static"):
         sim = Simulation(model, [writer])
         checkpoint.attach(sim, writer, out, config.analysis.checkpoint_interval, identity,
