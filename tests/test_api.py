@@ -175,3 +175,17 @@ def test_a_scenario_dict_takes_numpy_numbers():
     built = ntc.scenario_from_dict(raw, base_dir=EXAMPLES)
     assert built.config.bodies[0].mesh.nx == 3
     assert built.config.bodies[0].material.E == 50.0
+
+
+def test_a_summary_that_is_not_json_is_named(tmp_path, capsys):
+    """A tester's truncated summary.json: `compare` said "Invalid control character at: line 1
+    column 17", naming no file."""
+    from ntncontact.cli import main
+    from ntncontact.io.run_folder import RunFolderError
+
+    (tmp_path / "summary.json").write_text('{"status": "compl\x01', encoding="utf-8")
+    (tmp_path / "history.csv").write_text("step,time,total_energy\n0,0.0,1.0\n")
+    with pytest.raises(RunFolderError, match=r"summary\.json is not valid JSON"):
+        ntc.read_results(tmp_path)
+    assert main(["compare", str(tmp_path)]) == 1
+    assert f"{tmp_path / 'summary.json'} is not valid JSON" in capsys.readouterr().err

@@ -320,3 +320,32 @@ def test_the_files_node_numbers_are_kept(tmp_path):
     assert mesh.file_node_ids.tolist() == [11, 12, 13, 14]
     assert mesh.transformed(30.0, (1.0, 2.0)).file_node_ids.tolist() == [11, 12, 13, 14]
     assert mesh.with_sets({"a": [0]}).file_node_ids.tolist() == [11, 12, 13, 14]
+
+
+def _one_quad_v22(nodes: str, element: str = "1 3 2 1 1 1 2 3 4") -> str:
+    return ("$MeshFormat\n2.2 0 8\n$EndMeshFormat\n$PhysicalNames\n1\n2 1 \"block\"\n"
+            f"$EndPhysicalNames\n$Nodes\n4\n{nodes}$EndNodes\n$Elements\n1\n{element}\n"
+            "$EndElements\n")
+
+
+SQUARE = "1 0 0 0\n2 1 0 0\n3 1 1 0\n4 0 1 0\n"
+
+
+def test_malformed_gmsh_files_are_named_for_what_they_are(tmp_path):
+    """A tester's malformed gmsh files: a NaN coordinate ("data must be finite", naming
+    nothing), an element citing an undefined node and a format 4.0 file (both told to convert
+    an Abaqus file with meshio)."""
+    (tmp_path / "good.msh").write_text(_one_quad_v22(SQUARE))
+    assert read_msh(tmp_path / "good.msh").n_cells == 1
+    (tmp_path / "nan.msh").write_text(_one_quad_v22(SQUARE.replace("2 1 0 0", "2 nan 0 0")))
+    with pytest.raises(MeshError, match=r"nan\.msh: 1 node\(s\) with a coordinate that is not "
+                                        r"a number, the first file node 2"):
+        read_msh(tmp_path / "nan.msh")
+    (tmp_path / "orphan.msh").write_text(_one_quad_v22(SQUARE, "1 3 2 1 1 1 2 3 999"))
+    with pytest.raises(MeshError, match=r"orphan\.msh: a gmsh format 2\.2 file that cannot be "
+                                        r"read: an element may cite a node"):
+        read_msh(tmp_path / "orphan.msh")
+    (tmp_path / "old.msh").write_text(_one_quad_v22(SQUARE).replace("2.2 0 8", "4 0 8"))
+    with pytest.raises(MeshError, match=r"old\.msh: gmsh format 4; ntncontact reads formats "
+                                        r"2\.2 and 4\.1"):
+        read_msh(tmp_path / "old.msh")

@@ -31,6 +31,7 @@ from .engine.diagnostics import warnings_noted
 from .engine.simulation import Simulation
 from .io import checkpoint
 from .io.results import ResultWriter
+from .io.run_folder import read_summary
 from .io.scenario import ScenarioConfig, ScenarioError, apply_override, parse_scenario, read_toml
 from .io.vtk import find_field_series, read_frame_mesh, read_series
 from .io.writers import CONTACT_FILE, HISTORY_FILE, SUMMARY_FILE, MemoryResults, to_jsonable
@@ -169,7 +170,7 @@ def read_results(directory: str | Path) -> Results:
     summary_path = directory / SUMMARY_FILE
     if not summary_path.is_file():
         raise FileNotFoundError(f"{directory}: not a results folder (no {SUMMARY_FILE})")
-    summary = json.loads(summary_path.read_text(encoding="utf-8"))
+    summary = read_summary(directory)  # a file that is not JSON is named
     series = find_field_series(directory)  # fields.pvd, or fields.xdmf (field_format)
     frames = tuple(read_series(series)) if series is not None else ()
     return Results(read_table(directory / HISTORY_FILE), read_table(directory / CONTACT_FILE),

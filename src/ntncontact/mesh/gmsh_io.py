@@ -46,6 +46,7 @@ def read_msh(path: str | Path, name: str | None = None) -> QuadMesh:
     _, first = np.unique(np.sort(quads, axis=1), axis=0, return_index=True)
     quads = quads[np.sort(first)]
     xy = _planar_points(np.asarray(raw.points, dtype=float), label)
+    _check_finite(xy, path)
     used = np.unique(quads)
     renumber = np.full(xy.shape[0], -1, dtype=np.int64)
     renumber[used] = np.arange(used.size)
@@ -85,8 +86,22 @@ def _read_meshio(path: Path) -> meshio.Mesh:
                         f"element block refers to entity {tag}, which $Entities does not list); "
                         "write it again from gmsh (File > Export, format 4.1 or 2.2)") from err
     except Exception as err:  # meshio raises ReadError, ValueError, ... on bad input
-        raise MeshError(f"{path}: not a readable gmsh .msh file ({type(err).__name__}: {err}); "
-                        f"{_FORMATS}") from err
+        raise MeshError(f"{path}: {_unreadable(path)} ({type(err).__name__}: {err})") from err
+
+
+def _unreadable(path: Path) -> str:
+    """Why a file that begins as a gmsh file could not be read, by its format's version: a
+    tester's element citing an undefined node, and a format 4.0 file, were both told to
+    convert an Abaqus file."""
+    with path.open("rb") as stream:
+        stream.readline()
+        version = stream.readline().split()[:1]
+    version = version[0].decode(errors="replace") if version else "?"
+    if version not in ("2.2", "4.1"):
+        return (f"gmsh format {version}; ntncontact reads formats 2.2 and 4.1 (in gmsh: "
+                "Mesh.MshFileVersion = 4.1, or File > Export)")
+    return (f"a gmsh format {version} file that cannot be read: an element may cite a node "
+            "that $Nodes does not define, or a section is cut short; write it again from gmsh")
 
 
 def _file_node_ids(path: Path, n_points: int) -> NDArray[np.int64]:
@@ -111,6 +126,15 @@ def _file_node_ids(path: Path, n_points: int) -> NDArray[np.int64]:
     except Exception:  # noqa: BLE001 - the ids are a help for finding nodes, not the mesh
         ids = np.zeros(0, np.int64)
     return ids if ids.size == n_points else np.full(n_points, -1, np.int64)
+
+
+def _check_finite(xy: NDArray[np.float64], path: Path) -> None:
+    """Every coordinate a number (a tester's NaN was "data must be finite", naming nothing)."""
+    bad = np.flatnonzero(~np.all(np.isfinite(xy), axis=1))
+    if bad.size:
+        tag = _file_node_ids(path, xy.shape[0])[bad[0]]
+        raise MeshError(f"{path}: {bad.size} node(s) with a coordinate that is not a number, "
+                        f"the first file node {tag} at {tuple(xy[bad[0]].tolist())}")
 
 
 def _check_cell_types(blocks: list[tuple[str, NDArray]], label: str) -> None:

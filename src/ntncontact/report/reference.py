@@ -9,14 +9,13 @@ the section they come from.
 from __future__ import annotations
 
 import csv
-import json
 from dataclasses import dataclass, replace
 from importlib import resources
 from pathlib import Path
 
 import numpy as np
 
-from ..io.run_folder import run_status
+from ..io.run_folder import read_summary, run_status
 from ..io.writers import read_csv_table
 from .validation_cases import CASES, TABLE, impact_tolerance
 
@@ -373,7 +372,7 @@ def our_values(directory: Path) -> dict[str, float]:
     (they divide by it): it has the absolute ``energy_max_change``, max |E - E0|, instead;
     likewise ``linear_momentum_max_change`` where the linear momentum starts at 0.
     """
-    summary = json.loads((directory / "summary.json").read_text())
+    summary = read_summary(directory)  # a file that is not JSON is named
     h = read_csv_table(directory / "history.csv")
     e = h["total_energy"]
     e0 = float(e[0])
@@ -446,7 +445,7 @@ def compare(directory: str | Path, tolerance: float | None = None
     The label names the case; a line under it for each note (:func:`_notes`): a run whose
     energy starts at 0 (static), and why there are no rows."""
     directory = require_results_folder(directory)
-    summary = json.loads((directory / "summary.json").read_text())
+    summary = read_summary(directory)  # a file that is not JSON is named
     example, friction, mass = _case(summary)
     history = read_csv_table(directory / "history.csv")
     time = history["time"]
