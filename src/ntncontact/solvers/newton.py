@@ -173,7 +173,10 @@ def _floor_note(norms: list[float], scale: float) -> str:
     if len(last) < 5 or max(last) > 10.0 * min(last) or not 0.0 < floor < ROUNDOFF_FLOOR * scale:
         return ""
     return (f": the residual stalled at its round-off floor, {floor / scale:.1e} of the force "
-            "scale; analysis.newton.rtol below that cannot be met")
+            "scale, which analysis.newton.rtol must stay above; the floor grows with the "
+            "coordinates' size times the stiffest penalty (a tester's static contact 1000 "
+            "units from the origin with a penalty 500 times the elements' stiffness: a "
+            "smaller penalty_factor, or the model near the origin, lowers it)")
 
 
 def _modified_step(residual: Residual, y: NDArray, R: NDArray, norm0: float,
