@@ -410,4 +410,5 @@ def test_frames_give_each_node_its_number_in_the_mesh_file(tmp_path):
         "supports": [{"set": "bottom", "x": 0.0, "y": 0.0}]})
     _run(tmp_path, data)
     ids = _last_frame(tmp_path / "out").point_data["file_node_id"]
+    assert ids.dtype.kind == "i"  # node numbers, as contact_partner (it was float64)
     assert ids.tolist() == [-1] * 4 + [2, 3, 4, 5, 6, 7]

@@ -1,4 +1,4 @@
-"""The ``ntncontact`` command: run scenarios, plot results."""
+"""The ntncontact command: run scenarios, plot results."""
 
 from __future__ import annotations
 
@@ -355,7 +355,8 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--quiet", action="store_true", help="no progress bar")
     run.add_argument("--overwrite", action="store_true",
                      help="replace the results already in the folder (only the files a run "
-                          "writes: CSV, JSON, fields.pvd and fields/*.vtu, PNG and GIF figures)")
+                          "writes: CSV, JSON, fields.pvd/fields.xdmf with their frames, the "
+                          "checkpoints, comparison.csv, PNG and GIF figures)")
     run.add_argument("--restart", action="store_true",
                      help="continue the killed run in --out from its last checkpoint "
                           "(analysis.checkpoint_interval); its files are cut back to it")
@@ -370,7 +371,9 @@ def build_parser() -> argparse.ArgumentParser:
     _figure_options(plot)
     plot.set_defaults(func=_plot)
     val = sub.add_parser("validate", help="run the report's examples and write a report")
-    val.add_argument("--out", required=True)
+    val.add_argument("--out", required=True,
+                     help="folder for the runs and report.html / report.md (exit code 1 when a "
+                          "case fails)")
     val.add_argument("--quick", action="store_true", help="shortened runs (for CI)")
     val.set_defaults(func=_validate)
     comp = sub.add_parser("compare", help="compare a results folder with the report's numbers")
@@ -394,7 +397,8 @@ def build_parser() -> argparse.ArgumentParser:
                                   "meshes or of a VTU snapshot")
     quality.add_argument("path", help="scenario TOML, Gmsh .msh, results VTU file or "
                          "results folder")
-    quality.add_argument("--set", action="append", metavar="KEY=VALUE")
+    quality.add_argument("--set", action="append", metavar="KEY=VALUE",
+                         help="override a scenario key (a scenario TOML only; repeatable)")
     quality.set_defaults(func=_mesh_quality)
     return parser
 

@@ -141,7 +141,7 @@ class ResultWriter:
         # node of contact.csv can be found in the file the user meshed
         self._file_node_id = np.concatenate([
             np.full(b.mesh.n_nodes, -1) if b.mesh.file_node_ids is None else b.mesh.file_node_ids
-            for b in model.bodies]).astype(float)
+            for b in model.bodies]).astype(np.int64)
         self._spacing = {ci.name: ci.spacing for ci in model.interfaces}
         self._persistency = [ci.name for ci in model.interfaces if ci.persistency]
         self._last: StepRecord | None = None
