@@ -38,6 +38,7 @@ def test_the_widest_opening_under_traction_is_reported_where_it_is(unequal):
     assert summary["max_separation_under_traction"] > 1e-3  # measured 1.1e-3
     at = summary["max_separation_under_traction_at"]
     assert at["interface"] == "ends" and at["element_size"] == pytest.approx(1.0)
+    assert at["file_node"] == -1  # a generated mesh
     row = pressed.loc[pressed["end_gap"].idxmin()]
     assert at["node"] == row["node_1"] and at["time"] == pytest.approx(row["time"])
 

@@ -274,3 +274,15 @@ def test_build_warnings_are_kept_in_the_summary_and_a_sweeps_row(tmp_path, capsy
         warnings.simplefilter("error")  # a worker issues none: they are in the row
         row = run_case(str(scenario), {"analysis.dt": 0.05}, str(tmp_path / "case"), {})
     assert "cannot carry the sustained gravity" in row["warnings"]
+
+
+def test_a_node_of_a_mesh_file_is_named_by_its_number_in_the_file_too():
+    """A tester's 10^4-element gmsh run warned about "node 100", which is node 14745 of the
+    user's file."""
+    summary = _penetrated()
+    summary["max_penetration_at"]["file_node"] = 14745
+    (line,) = result_warnings(summary, static=False)
+    assert line.startswith("node 3 (file node 14745) of interface 'if' went 0.03")
+    summary["max_penetration_at"]["file_node"] = -1  # a generated mesh: no file number
+    (line,) = result_warnings(summary, static=False)
+    assert line.startswith("node 3 of interface 'if'")

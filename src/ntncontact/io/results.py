@@ -237,6 +237,7 @@ class ResultWriter:
         return {"max_penetration": float(depth[deepest]),
                 "max_penetration_at": {"time": time, "interface": name,
                                        "node": int(rows["node_1"][deepest]),
+                                       "file_node": self._file_node(rows["node_1"][deepest]),
                                        "depth": float(depth[deepest]),
                                        "element_size": self._spacing[name]}}
 
@@ -251,6 +252,10 @@ class ResultWriter:
             return {}
         return {"max_linear_elastic_rotation": angle,
                 "max_linear_elastic_rotation_at": {"time": s.time, "body": body}}
+
+    def _file_node(self, node: int) -> int:
+        """A global node's number in its body's mesh file (-1: a generated mesh)."""
+        return int(self._file_node_id[int(node)])
 
     def _widest_pressed_opening(self, time: float, rows: dict, summary: dict) -> dict:
         """``max_separation_under_traction`` and where: the widest open gap (``end_gap`` < 0)
@@ -269,6 +274,7 @@ class ResultWriter:
         return {"max_separation_under_traction": float(opening[widest]),
                 "max_separation_under_traction_at": {
                     "time": time, "interface": name, "node": int(rows["node_1"][widest]),
+                    "file_node": self._file_node(rows["node_1"][widest]),
                     "opening": float(opening[widest]), "element_size": self._spacing[name]}}
 
     def _mismatch_summary(self, time: float, mismatch: float, summary: dict) -> dict:
@@ -290,6 +296,7 @@ class ResultWriter:
         return {"max_penetration_unpaired": found.depth,
                 "max_penetration_unpaired_at": {"time": time, "interface": found.interface,
                                                 "node": found.node, "depth": found.depth,
+                                                "file_node": self._file_node(found.node),
                                                 "element_size": self._spacing[found.interface]}}
 
     @staticmethod

@@ -139,7 +139,7 @@ def _penetration(summary: dict, static: bool) -> str | None:
     at = summary.get("max_penetration_at")
     if not at or at["depth"] <= PENETRATION_WARNING * at["element_size"]:
         return None
-    return (f"node {at['node']} of interface '{at['interface']}' went {at['depth']:.3g} "
+    return (f"node {_node(at)} of interface '{at['interface']}' went {at['depth']:.3g} "
             f"inside its partner surface ({at['depth'] / at['element_size']:.2g} of the surface "
             f"spacing, t = {at['time']:.6g}; summary.json max_penetration_at): "
             f"{_advice(summary, at['interface'], static)}")
@@ -153,11 +153,18 @@ def _unpaired(summary: dict, static: bool) -> str | None:
     if not at or at["depth"] <= max(PENETRATION_WARNING * at["element_size"],
                                     summary.get("max_penetration") or 0.0):
         return None
-    return (f"node {at['node']} of interface '{at['interface']}', in no pair, went "
+    return (f"node {_node(at)} of interface '{at['interface']}', in no pair, went "
             f"{at['depth']:.3g} inside its partner body ({at['depth'] / at['element_size']:.2g} "
             f"of the surface spacing, t = {at['time']:.6g}; summary.json "
             "max_penetration_unpaired), deeper than any pair, with nothing holding it: "
             f"{_advice(summary, at['interface'], static)}")
+
+
+def _node(at: dict) -> str:
+    """A global node, with its number in the user's mesh file where it has one: a gmsh user
+    cannot find the global number in their file (a tester's node 100 was file node 14745)."""
+    file_node = at.get("file_node", -1)
+    return f"{at['node']}" + (f" (file node {file_node})" if file_node >= 0 else "")
 
 
 def _opening(summary: dict) -> str | None:
@@ -175,7 +182,7 @@ def _opening(summary: dict) -> str | None:
     else:
         cause = ("the persistency law holds a pair's gap where a step without traction left "
                  "it; release_steps = 1 releases such pairs (at the cost of deeper entries)")
-    return (f"node {at['node']} of interface '{at['interface']}' was pressed across an open gap "
+    return (f"node {_node(at)} of interface '{at['interface']}' was pressed across an open gap "
             f"of {at['opening']:.3g} ({at['opening'] / at['element_size']:.2g} of the surface "
             f"spacing, t = {at['time']:.6g}; summary.json max_separation_under_traction): "
             f"{cause}; method = \"lagrange\" with law = \"gap\" holds none")
