@@ -349,3 +349,18 @@ def test_malformed_gmsh_files_are_named_for_what_they_are(tmp_path):
     with pytest.raises(MeshError, match=r"old\.msh: gmsh format 4; ntncontact reads formats "
                                         r"2\.2 and 4\.1"):
         read_msh(tmp_path / "old.msh")
+
+
+def test_a_t_junction_on_a_curved_shared_line_is_refused():
+    """A tester's quarter ring, r 1 to 1.2 meshed with 8 cells around and r 1.2 to 1.5 with 4
+    (every other node on r = 1.2 shared): the finer part's loose nodes sit on the arc, off the
+    coarser cells' chords (straight-edge T-junction test: not seen), and the run was 5.8 % off
+    at the inner surface. They lie inside the coarser cells, which is refused; the conformal
+    ring is read."""
+    from pathlib import Path
+
+    data = Path(__file__).parent / "data"
+    assert read_msh(data / "quarter_ring_conformal.msh").n_cells > 0
+    with pytest.raises(MeshError, match=r"4 boundary node\(s\) lie inside another cell of the "
+                                        r"body.*different divisions on a curved shared line"):
+        read_msh(data / "quarter_ring_curved_junction.msh")

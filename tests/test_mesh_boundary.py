@@ -13,6 +13,7 @@ from ntncontact.mesh.boundary import (
     hanging_nodes,
     nodal_outward_normals,
     nodal_tributary_lengths,
+    nodes_inside_cells,
     surface_chain,
 )
 from ntncontact.mesh.generators import annulus, disk, half_disk, rectangle
@@ -188,6 +189,7 @@ def test_hanging_nodes_are_found_on_their_edge():
                                   half_disk(1.0, 24, 5, 0.02)], ids=lambda m: m.name)
 def test_generated_meshes_have_no_hanging_nodes(mesh):
     assert hanging_nodes(mesh).shape == (0, 3)
+    assert nodes_inside_cells(mesh).shape == (0, 2)
 
 
 def test_a_surface_that_is_a_point_group_says_so():

@@ -22,6 +22,7 @@ __all__ = [
     "chain_edge_lengths",
     "chain_from_edges",
     "hanging_nodes",
+    "nodes_inside_cells",
     "nodal_outward_normals",
     "nodal_tributary_lengths",
     "surface_chain",
@@ -107,6 +108,35 @@ def hanging_nodes(mesh: QuadMesh, rtol: float = HANGING_RTOL) -> NDArray[np.int6
     across = np.abs(offset[:, 0] * along[edge, 1] - offset[:, 1] * along[edge, 0]) / length[edge]
     inside = (t > rtol) & (t < 1.0 - rtol) & (across <= rtol * length[edge])
     return np.column_stack((node[inside], edges[edge[inside]])).astype(np.int64)
+
+
+def nodes_inside_cells(mesh: QuadMesh, rtol: float = HANGING_RTOL) -> NDArray[np.int64]:
+    """Rows ``(node, cell)``: a boundary node strictly inside a cell of the same mesh that it
+    is not a corner of, by more than ``rtol`` of the cell's edges. A conforming mesh has none;
+    a T-junction on a curved shared line has: the finer part's node sits on the arc, off the
+    coarser cell's chord by the sagitta and inside that cell when the coarser part lies on
+    the arc's convex side (a tester's quarter ring, 8 cells against 4 on r = 1.2, ran and was
+    5.8 % off; :func:`hanging_nodes` sees straight edges only). Each cell looks for boundary
+    nodes within its own centroid-corner reach (a k-d tree over the boundary nodes)."""
+    edges = boundary_edges(mesh)
+    if edges.shape[0] == 0:
+        return np.zeros((0, 2), np.int64)
+    on_boundary = np.unique(edges)
+    corners = mesh.nodes[mesh.cells]  # (ne, 4, 2), counter-clockwise
+    centroid = corners.mean(axis=1)
+    reach = np.linalg.norm(corners - centroid[:, None], axis=-1).max(axis=1)
+    near = cKDTree(mesh.nodes[on_boundary]).query_ball_point(centroid, reach)
+    counts = np.fromiter(map(len, near), np.int64, count=len(near))
+    node = on_boundary[np.fromiter(chain.from_iterable(near), np.int64, count=counts.sum())]
+    cell = np.repeat(np.arange(len(mesh.cells)), counts)
+    keep = ~np.any(mesh.cells[cell] == node[:, None], axis=1)
+    node, cell = node[keep], cell[keep]
+    quad = corners[cell]
+    sides = np.roll(quad, -1, axis=1) - quad
+    rel = mesh.nodes[node][:, None, :] - quad
+    cross = sides[..., 0] * rel[..., 1] - sides[..., 1] * rel[..., 0]  # |side| x distance in
+    inside = (cross > rtol * np.einsum("kij,kij->ki", sides, sides)).all(axis=1)
+    return np.column_stack((node[inside], cell[inside])).astype(np.int64)
 
 
 def chain_from_edges(edges: NDArray[np.int64], label: str = "edges") -> SurfaceChain:

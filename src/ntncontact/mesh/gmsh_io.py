@@ -16,7 +16,7 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.spatial import cKDTree
 
-from ntncontact.mesh.boundary import boundary_edges, hanging_nodes
+from ntncontact.mesh.boundary import boundary_edges, hanging_nodes, nodes_inside_cells
 from ntncontact.mesh.quadmesh import MeshError, QuadMesh
 
 __all__ = ["read_msh"]
@@ -190,6 +190,7 @@ def _check_conforming(mesh: QuadMesh, label: str) -> None:
     that opens under load (see :func:`hanging_nodes`)."""
     hanging = hanging_nodes(mesh)
     if hanging.shape[0] == 0:
+        _check_nothing_inside(mesh, label)
         return
     (x, y), (ax, ay), (bx, by) = mesh.nodes[hanging[0]]
     file_id = -1 if mesh.file_node_ids is None else int(mesh.file_node_ids[hanging[0, 0]])
@@ -202,6 +203,24 @@ def _check_conforming(mesh: QuadMesh, label: str) -> None:
         "merges coincident nodes only, it does not make a mesh conformal); or make the parts "
         "separate bodies joined by a [[tie]], which holds a finer side's nodes on the other's "
         "edges")
+
+
+def _check_nothing_inside(mesh: QuadMesh, label: str) -> None:
+    """Refuses a boundary node inside another cell of the body (:func:`nodes_inside_cells`):
+    a T-junction on a curved shared line, or parts that overlap."""
+    inside = nodes_inside_cells(mesh)
+    if inside.shape[0] == 0:
+        return
+    node, cell = inside[0]
+    x, y = mesh.nodes[node]
+    file_id = -1 if mesh.file_node_ids is None else int(mesh.file_node_ids[node])
+    raise MeshError(
+        f"{label} (body '{mesh.name}'): {np.unique(inside[:, 0]).size} boundary node(s) lie "
+        f"inside another cell of the body, the first at ({x:.6g}, {y:.6g}) (file node "
+        f"{file_id}) inside cell {cell}: parts meshed with different divisions on a curved "
+        "shared line (the finer part's nodes sit on the arc, off the coarser cell's edge), or "
+        "parts that overlap. Mesh conformally (matching divisions on the shared line), or make "
+        "the parts separate bodies joined by a [[tie]]")
 
 
 def _counter_clockwise(xy: NDArray, cells: NDArray[np.int64], label: str) -> NDArray[np.int64]:
