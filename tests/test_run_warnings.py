@@ -286,3 +286,25 @@ def test_a_node_of_a_mesh_file_is_named_by_its_number_in_the_file_too():
     summary["max_penetration_at"]["file_node"] = -1  # a generated mesh: no file number
     (line,) = result_warnings(summary, static=False)
     assert line.startswith("node 3 of interface 'if'")
+
+
+def test_a_dynamic_support_that_starts_away_from_zero_is_warned_about():
+    """A tester's bar held at x = 0.01 from t = 0: its nodes jumped in the first step and swung
+    between 0 and 0.02, the energy growing 0 -> 2.33. A ramp from 0 is not warned about."""
+    data = _resting({"method": "augmented_lagrangian"}, gravity=False)
+    data["bodies"][1]["supports"] = [{"set": "bottom", "x": 0.01, "y": 0.0}]
+    (line,) = _build_warnings(data)
+    assert "supports.0 (set 'bottom'): it prescribes a displacement other than 0 at t = 0" in line
+    data["bodies"][1]["supports"][0]["function"] = {"times": [0.0, 1.0], "values": [0.0, 1.0]}
+    assert _build_warnings(data) == []
+
+
+def test_no_penalty_warning_for_a_supported_or_zero_load():
+    """False alarms a tester found: the weight of a supported body goes to its supports, and
+    gravity [0, 0] is no load."""
+    supported = _resting({"method": "penalty"}, gravity=False)
+    supported["bodies"][1]["loads"] = [{"type": "gravity", "vector": [0.0, -1.0]}]
+    assert _build_warnings(supported) == []
+    zero = _resting({"method": "penalty"})
+    zero["bodies"][0]["loads"][0]["vector"] = [0.0, 0.0]
+    assert _build_warnings(zero) == []

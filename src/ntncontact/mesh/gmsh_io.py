@@ -217,7 +217,9 @@ def _check_nothing_inside(mesh: QuadMesh, label: str) -> None:
     raise MeshError(
         f"{label} (body '{mesh.name}'): {np.unique(inside[:, 0]).size} boundary node(s) lie "
         f"inside another cell of the body, the first at ({x:.6g}, {y:.6g}) (file node "
-        f"{file_id}) inside cell {cell}: parts meshed with different divisions on a curved "
+        f"{file_id}) inside the cell with corners at "
+        f"{', '.join(f'({cx:.6g}, {cy:.6g})' for cx, cy in mesh.nodes[mesh.cells[cell]])}: "
+        "parts meshed with different divisions on a curved "
         "shared line (the finer part's nodes sit on the arc, off the coarser cell's edge), or "
         "parts that overlap. Mesh conformally (matching divisions on the shared line), or make "
         "the parts separate bodies joined by a [[tie]]")

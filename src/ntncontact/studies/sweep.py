@@ -229,7 +229,9 @@ def _completed(folder: Path, scenario: Scenario) -> bool:
     data = _completed_summary(folder, scenario.overrides)
     if data is None:
         return False
-    model = build_model(scenario.config, scenario.base_dir)
+    with warnings.catch_warnings():  # the build's warnings are the case's row's, not the log's
+        warnings.simplefilter("ignore")
+        model = build_model(scenario.config, scenario.base_dir)
     identity = run_identity(scenario.config, scenario.overrides, model)
     return data.get("scenario_hash") == identity["scenario_hash"]
 
