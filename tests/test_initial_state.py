@@ -11,7 +11,6 @@ import numpy as np
 import pytest
 
 import ntncontact as ntc
-from ntncontact.engine.initial import initial_state
 from ntncontact.fem.loads import TimeFunction
 
 
@@ -64,4 +63,3 @@ def test_the_rate_of_a_piecewise_linear_time_function():
     assert [f.rate(t) for t in (-1.0, 0.0, 0.5, 1.0, 2.0, 3.0)] == [0.0, 2.0, 2.0, -0.5, -0.5,
                                                                    0.0]
     assert TimeFunction.constant(3.0).rate(0.0) == 0.0
-    assert initial_state.__module__ == "ntncontact.engine.initial"

@@ -17,13 +17,20 @@ def initial_state(model: Model) -> StepState:
     (translation + spin about its centre of mass); the supported dofs move as their supports
     prescribe (:func:`_supports_prescribe`)."""
     n = model.n_nodes
-    v = np.zeros((n, 2))
-    spinning = any(body.initial_angular_velocity for body in model.bodies)
-    mass = _row_sum_masses(model) if spinning else None
-    for body in model.bodies:
-        v[body.nodes] = _rigid_velocity(model.X0, body, mass)
+    v = _rigid_velocities(model)
     _supports_prescribe(model, v)
     return StepState(0, 0.0, model.X0.copy(), np.zeros((n, 2)), v, np.zeros((n, 2)))
+
+
+def _rigid_velocities(model: Model) -> NDArray:
+    """(n, 2): every body's initial rigid velocity at its nodes (row-sum masses assembled
+    once, and only where a body spins)."""
+    v = np.zeros((model.n_nodes, 2))
+    spinning = any(body.initial_angular_velocity for body in model.bodies)
+    mass = model.assembler.nodal_mass(model.X0, True).diagonal() if spinning else None
+    for body in model.bodies:
+        v[body.nodes] = _rigid_velocity(model.X0, body, mass)
+    return v
 
 
 def _rigid_velocity(X: NDArray, body: Body, mass: NDArray | None) -> NDArray:
@@ -51,12 +58,7 @@ def _supports_prescribe(model: Model, v: NDArray) -> None:
 
 def warn_overridden_velocities(model: Model) -> None:
     """A warning per body whose given initial velocity its supports override."""
-    n = model.n_nodes
-    given = np.zeros((n, 2))
-    for body in model.bodies:
-        given[body.nodes] = _rigid_velocity(model.X0, body, None if not
-                                            body.initial_angular_velocity else
-                                            _row_sum_masses(model))
+    given = _rigid_velocities(model)
     started = given.copy()
     _supports_prescribe(model, started)
     for body in model.bodies:
@@ -65,7 +67,3 @@ def warn_overridden_velocities(model: Model) -> None:
             warnings.warn(f"body '{body.name}': {int(moved.any(axis=1).sum())} supported "
                           "node(s) start at their supports' velocity (a held node at rest), not "
                           "at the body's initial velocity", PhysicsWarning, stacklevel=3)
-
-
-def _row_sum_masses(model: Model) -> NDArray:
-    return model.assembler.nodal_mass(model.X0, True).diagonal()

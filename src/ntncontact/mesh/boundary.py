@@ -96,11 +96,8 @@ def hanging_nodes(mesh: QuadMesh, rtol: float = HANGING_RTOL) -> NDArray[np.int6
     start, end = mesh.nodes[edges[:, 0]], mesh.nodes[edges[:, 1]]
     along = end - start
     length = np.hypot(along[:, 0], along[:, 1])
-    near = cKDTree(mesh.nodes[on_boundary]).query_ball_point(0.5 * (start + end),
-                                                             0.5 * length * (1.0 + rtol))
-    counts = np.fromiter(map(len, near), np.int64, count=len(near))
-    node = on_boundary[np.fromiter(chain.from_iterable(near), np.int64, count=counts.sum())]
-    edge = np.repeat(np.arange(edges.shape[0]), counts)
+    node, edge = _nodes_near(mesh.nodes, on_boundary, 0.5 * (start + end),
+                             0.5 * length * (1.0 + rtol))
     keep = (node != edges[edge, 0]) & (node != edges[edge, 1])
     node, edge = node[keep], edge[keep]
     offset = mesh.nodes[node] - start[edge]
@@ -125,10 +122,7 @@ def nodes_inside_cells(mesh: QuadMesh, rtol: float = HANGING_RTOL) -> NDArray[np
     corners = mesh.nodes[mesh.cells]  # (ne, 4, 2), counter-clockwise
     centroid = corners.mean(axis=1)
     reach = np.linalg.norm(corners - centroid[:, None], axis=-1).max(axis=1)
-    near = cKDTree(mesh.nodes[on_boundary]).query_ball_point(centroid, reach)
-    counts = np.fromiter(map(len, near), np.int64, count=len(near))
-    node = on_boundary[np.fromiter(chain.from_iterable(near), np.int64, count=counts.sum())]
-    cell = np.repeat(np.arange(len(mesh.cells)), counts)
+    node, cell = _nodes_near(mesh.nodes, on_boundary, centroid, reach)
     keep = ~np.any(mesh.cells[cell] == node[:, None], axis=1)
     node, cell = node[keep], cell[keep]
     quad = corners[cell]
@@ -137,6 +131,16 @@ def nodes_inside_cells(mesh: QuadMesh, rtol: float = HANGING_RTOL) -> NDArray[np
     cross = sides[..., 0] * rel[..., 1] - sides[..., 1] * rel[..., 0]  # |side| x distance in
     inside = (cross > rtol * np.einsum("kij,kij->ki", sides, sides)).all(axis=1)
     return np.column_stack((node[inside], cell[inside])).astype(np.int64)
+
+
+def _nodes_near(nodes: NDArray, candidates: NDArray[np.int64], centres: NDArray,
+                radii: NDArray) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
+    """(node, centre index) pairs: each of ``candidates`` within its centre's radius (a k-d
+    tree over the candidates), flattened for vectorized tests."""
+    near = cKDTree(nodes[candidates]).query_ball_point(centres, radii)
+    counts = np.fromiter(map(len, near), np.int64, count=len(near))
+    node = candidates[np.fromiter(chain.from_iterable(near), np.int64, count=counts.sum())]
+    return node, np.repeat(np.arange(len(centres)), counts)
 
 
 def chain_from_edges(edges: NDArray[np.int64], label: str = "edges") -> SurfaceChain:
