@@ -316,5 +316,8 @@ def test_disk_errors():
         disk(-1.0, 16, 2)
     with pytest.raises(MeshError, match="core_fraction"):
         disk(1.0, 16, 2, core_fraction=0.8)
-    with pytest.raises(MeshError, match="too large"):
+    # the key is named (the message used to speak of a "first cell size" only)
+    with pytest.raises(MeshError, match="surface_size = 0.6 does not fit.*too large"):
         disk(1.0, 16, 2, surface_size=0.6)
+    with pytest.raises(MeshError, match="surface_size = 0.3 does not fit.*cannot cover"):
+        disk(1.0, 16, 1, surface_size=0.3)

@@ -247,7 +247,12 @@ def _ring_fractions(n_radial: int, thickness: float, surface_size: float | None)
         return np.linspace(0.0, 1.0, n_radial + 1)
     if not surface_size > 0:
         raise MeshError(f"surface_size must be positive, got {surface_size}")
-    sizes = _sizes_with_first(thickness, surface_size, n_radial)[::-1]  # core -> circle
+    try:
+        sizes = _sizes_with_first(thickness, surface_size, n_radial)[::-1]  # core -> circle
+    except MeshError as err:
+        raise MeshError(
+            f"surface_size = {surface_size} does not fit: the {n_radial} ring layer(s) span "
+            f"{thickness:.6g} (the radius minus the core's half-width): {err}") from None
     fractions = np.concatenate(([0.0], np.cumsum(sizes))) / thickness
     fractions[-1] = 1.0
     return fractions
