@@ -17,7 +17,7 @@ from .augmentation import (
 from .detection import Detection, detect, entering, release_mask
 from .evaluate import ContactResult, contact_term, evaluate_contact
 from .friction import SLIP, STICK
-from .kinematics import pair_gaps
+from .kinematics import facing, pair_gaps, rate_roundoff
 from .lagrange import LagrangeBlocks, blocks_of, lagrange_blocks, release_tensile_pairs
 from .laws import ContactLaw
 from .pairing import Pairing, beyond_ends, closest_pairs, neighbour_pairs, ordered_partners
@@ -53,7 +53,9 @@ __all__ = [
     "evaluate_contact",
     "extrapolated_update",
     "lagrange_blocks",
+    "facing",
     "pair_gaps",
+    "rate_roundoff",
     "newton_update",
     "release_mask",
     "release_tensile_pairs",

@@ -17,7 +17,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 from numpy.typing import NDArray
 
-from .kinematics import pair_gaps
+from .kinematics import facing, pair_gaps, rate_roundoff
 from .state import PairState
 from .surfaces import Interface
 
@@ -34,19 +34,22 @@ class Detection:
 
 
 def entering(gap: NDArray[np.float64], gap_rate: NDArray[np.float64] | None,
-             persistency: bool, gap_tol: float = 0.0) -> NDArray[np.bool_]:
+             persistency: bool, gap_tol: float = 0.0,
+             rate_tol: NDArray[np.float64] | float = 0.0) -> NDArray[np.bool_]:
     """Which candidate pairs enter the active set: penetrating (gap >= -gap_tol) and, under
     the persistency law, approaching (gdot > 0) or touching at rest (|gap| <= gap_tol and
-    gdot = 0 exactly: bodies placed touching at t = 0 with no velocity, which a load then
-    presses together; taken one step late, a block resting under gravity kept the step's
-    fall, g dt^2 / 2, as penetration for the whole run). A node deeper than that with no
-    approach is not taken: the far side of a ring lies "behind" its partner surface too."""
+    |gdot| <= ``rate_tol``, its round-off, :func:`rate_roundoff`: bodies placed touching at
+    t = 0, at rest or sliding along each other, which a load then presses together; taken one
+    step late, a block resting under gravity kept the step's fall, g dt^2 / 2, as penetration
+    for the whole run). A node deeper than that with no approach is not taken: the far side of
+    a ring lies "behind" its partner surface too."""
     enter = gap >= -gap_tol
     if persistency:
         # |gap_tol|: with predicted detection gap_tol < 0 (a touch to come waits), but a pair
         # touching at rest is a touch that has happened (a tester's block placed on another
         # under gravity fell a step first, and kept g dt^2 / 2 inside for the whole run)
-        at_rest = (gap_rate == 0.0) & (np.abs(gap) <= abs(gap_tol))  # type: ignore[operator]
+        at_rest = ((np.abs(gap_rate) <= rate_tol)  # type: ignore[arg-type]
+                   & (np.abs(gap) <= abs(gap_tol)))
         enter = (enter & (gap_rate > 0.0)) | at_rest  # type: ignore[operator]
     return enter
 
@@ -93,6 +96,8 @@ def detect(
     if persistency and v is None:
         raise ValueError("detection under the persistency law needs velocities v")
     _, gap, gap_rate = pair_gaps(x, interface, fresh, v, objective)
-    new = fresh[entering(gap, gap_rate, persistency, gap_tol)]
+    rate_tol = 0.0 if v is None else rate_roundoff(x, v, interface, fresh, gap_tol)
+    new = fresh[entering(gap, gap_rate, persistency, gap_tol, rate_tol)
+                & facing(x, interface, fresh)]
     return Detection(kept.concat(PairState.from_pairs(new)), new[:, 0].copy(),
                      state.pairs[released, 0].copy())

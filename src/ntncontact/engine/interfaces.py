@@ -26,10 +26,12 @@ from ..contact import (
     detect,
     entering,
     evaluate_contact,
+    facing,
     lagrange_blocks,
     neighbour_pairs,
     ordered_partners,
     pair_gaps,
+    rate_roundoff,
     release_tensile_pairs,
 )
 from ..contact.evaluate import TOUCH_ROUNDOFF
@@ -127,8 +129,10 @@ def entered_at_step_end(interfaces: Sequence[ContactInterface], states: Sequence
         _, gap, rate = pair_gaps(x, ci.interface, fresh, v, ci.law.moment_free)
         # a released pair's node comes back wherever it is inside, approaching or not: the
         # pair was active, and the persistency law releases by the rate over release_steps
-        enter = entering(gap, rate, ci.persistency, tol) | (
+        rate_tol = rate_roundoff(x, v, ci.interface, fresh, tol) if v is not None else 0.0
+        enter = entering(gap, rate, ci.persistency, tol, rate_tol) | (
             np.isin(fresh[:, 0], again) & entering(gap, rate, False, tol))
+        enter &= facing(x, ci.interface, fresh)
         added |= bool(enter.any())
         grown.append(state.concat(PairState.from_pairs(fresh[enter])))
     return tuple(grown) if added else None
