@@ -1,0 +1,60 @@
+"""Pairs whose bodies have parted are released (an independent tester, session 40).
+
+A spinning disk struck a free block off-centre and rolled away from it: one pair was never
+released. The persistency law held its frozen gap, each step's re-pairing with the nearest
+block node made it jump (0.004 -> 0.084 -> 0.175), and the pair pushed the bodies apart
+from 0.66 away: ``max_penetration`` 0.175 warned as "went inside" a block it was 0.63 outside
+of, ``contact_end_time`` = t_end. A spinning ring rolling off its obstacle was dented by pairs
+2.2 apart. Kept pairs are now released where their normal no longer faces the partner's or
+where they are open by more than half the partner's chord (``engine.interfaces``)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ntncontact.api import load_scenario, run
+
+SPIN = """
+[analysis]
+kind = "dynamic"
+dt = 0.01
+t_end = 0.4
+output_interval = 0.01
+[[bodies]]
+name = "disk"
+mesh = { type = "disk", radius = 0.3, n_circ = 16, n_radial = 2, center = [-0.62, 0.15] }
+material = { model = "neo_hookean", E = 100.0, nu = 0.3, density = 1.0 }
+initial = { velocity = [2.0, 0.5], angular_velocity = 4.0 }
+[[bodies]]
+name = "block"
+mesh = { type = "rectangle", width = 0.6, height = 0.8, nx = 6, ny = 8, origin = [0.0, -0.4] }
+material = { model = "neo_hookean", E = 200.0, nu = 0.25, density = 1.5 }
+initial = { velocity = [-0.5, 0.1], angular_velocity = -1.0 }
+[[contact]]
+name = "dc"
+body_1 = "disk"
+surface_1 = "outer"
+body_2 = "block"
+surface_2 = "left"
+penalty_normal = 1000.0
+"""
+SPACING = 0.1  # the block's left face
+
+
+def test_a_disk_rolling_away_is_let_go(tmp_path):
+    path = tmp_path / "spin.toml"
+    path.write_text(SPIN)
+    result = run(load_scenario(path), tmp_path / "out")
+    assert result.summary["status"] == "completed"
+    pressed = result.contact[result.contact["normal_force"] > 0.0]
+    worst = 0.0
+    for time, rows in pressed.groupby("time"):
+        frame = result.fields(time)
+        x = frame.points[:, :2] + frame.point_data["displacement"][:, :2]
+        apart = np.linalg.norm(x[rows["node_1"].to_numpy()] - x[rows["node_2"].to_numpy()],
+                               axis=1)
+        worst = max(worst, apart.max())
+    assert worst < 2.0 * SPACING  # 0.66 before
+    # the bodies part at about t = 0.31 (the frames): contact ended before t_end
+    assert result.summary["contact_end_time"] <= 0.32
+    assert result.summary["max_penetration"] < 0.5 * SPACING  # 0.175 before
