@@ -15,7 +15,14 @@ from numpy.typing import NDArray
 
 from ..fem.loads import dirichlet_values
 from ..fem.q4 import DN_GP, InvertedElementError, shape_gradients
-from ..mesh.overlap import boundary_edges, deepest_overlap, edge_size
+from ..mesh.overlap import (
+    boundary_edges,
+    deepest_overlap,
+    deepest_self_overlap,
+    edge_size,
+    rigid_deviation,
+    self_clearance,
+)
 from ..solvers.newton import NewtonError
 
 if TYPE_CHECKING:
@@ -339,6 +346,97 @@ class UnpairedCheck:
             found = deepest_overlap(x[free], x, cells, edges, size)
             if found is not None and found.depth > worst.depth:
                 worst = UnpairedPenetration(found.depth, name, int(free[found.point]))
+        return worst
+
+
+class SurfaceTwoCheck:
+    """Finds the surface-2 nodes inside surface 1's body (summary.json
+    ``max_penetration_surface_2``), the mirror of :class:`UnpairedCheck`: a pair's depth is
+    measured at its surface-1 node along that node's normal, so a sharp corner on surface 2
+    cutting into a flat surface 1 between its nodes showed in no key (a tester's 45-degree
+    square's corner 0.0445 below the block's top, 0.71 of the spacing, with
+    ``max_penetration`` 0.0). All surface-2 nodes are tested, paired or not: the warning
+    compares the deepest with the pairs'. Measured cost (CPU): 0.23 ms a step on the ring
+    impact (0.9 % of its step), 0.20 ms on the disk drop (0.7 %)."""
+
+    def __init__(self, model: Model) -> None:
+        owner = model.body_of_node()
+        self._tests = []  # (name, surface-2 nodes, partner cells, partner edges, edge size)
+        for ci in model.interfaces:
+            partner = model.bodies[int(owner[ci.interface.surface1.nodes[0]])]
+            edges = boundary_edges(partner.mesh.cells) + partner.node_offset
+            self._tests.append((ci.name, np.unique(ci.interface.surface2.nodes),
+                                model.cells[partner.cells], edges, edge_size(model.X0, edges)))
+
+    def deepest(self, x: NDArray) -> UnpairedPenetration:
+        """The deepest surface-2 node inside its interface's surface-1 body at ``x`` (the
+        interface and the global node, as :class:`UnpairedCheck` gives them)."""
+        worst = UnpairedPenetration()
+        for name, nodes, cells, edges, size in self._tests:
+            found = deepest_overlap(x[nodes], x, cells, edges, size)
+            if found is not None and found.depth > worst.depth:
+                worst = UnpairedPenetration(found.depth, name, int(nodes[found.point]))
+        return worst
+
+
+@dataclass(frozen=True)
+class SelfPenetration:
+    """The deepest boundary node of a body inside one of its own cells (depth 0.0 and no node
+    when none)."""
+
+    depth: float = 0.0
+    body: str = ""
+    node: int = -1  # global, as the other checks' file_node needs it
+    size: float = 1.0  # the body's median boundary edge (reference): depth's scale
+
+
+class SelfCrossingCheck:
+    """Finds a body that passed through itself (summary.json ``max_self_penetration``): a
+    boundary node inside one of the body's own cells that it is not a corner of
+    (``mesh.overlap.deepest_self_overlap``). Self contact is not modelled, so a tester's thin
+    ring folded by a fast impact (15 % of c) crossed itself into a figure-eight, 80 of its
+    nodes inside its own cells, and the run completed with an energy balance of 3e-12 and no
+    word of it.
+
+    A body is searched only when its nodes moved farther from a rigid motion of the last
+    configuration found clean than half that configuration's clearance (its boundary nodes'
+    distance to the cells they are not corners of): distances then changed too little for a
+    fold (``mesh.overlap.rigid_deviation``, ``self_clearance``). Measured cost (CPU): 0.22 ms
+    a step on the ring impact (0.9 % of its step; searching every body every step took
+    0.73 ms, 3.1 %), 0.33 ms on the disk drop (1.2 %: the disk never needs a search, its ALE
+    block's sliding mesh often does)."""
+
+    def __init__(self, model: Model) -> None:
+        # per body: it, its nodes, boundary nodes, cells, boundary edges, edge size (global
+        # numbers), and the last clean configuration of its nodes with half its clearance
+        self._tests = []
+        self._clean: list[tuple[NDArray, float]] = []
+        for body in model.bodies:
+            edges = boundary_edges(body.mesh.cells) + body.node_offset
+            boundary, cells = np.unique(edges), model.cells[body.cells]
+            self._tests.append((body, np.unique(cells), boundary, cells, edges,
+                                edge_size(model.X0, edges)))
+            self._clean.append(self._clearance(model.X0, boundary, cells))
+
+    @staticmethod
+    def _clearance(x: NDArray, boundary: NDArray, cells: NDArray) -> tuple[NDArray, float]:
+        """A clean configuration of the body's nodes and half its clearance."""
+        nodes = np.unique(cells)
+        return x[nodes].copy(), 0.5 * self_clearance(boundary, x, cells)
+
+    def deepest(self, x: NDArray) -> SelfPenetration:
+        """The deepest such node at the positions ``x``."""
+        worst = SelfPenetration()
+        for k, (body, nodes, boundary, cells, edges, size) in enumerate(self._tests):
+            reference, reach = self._clean[k]
+            if rigid_deviation(reference, x[nodes]) < reach:
+                continue  # no distance in the body changed enough to fold it
+            found = deepest_self_overlap(boundary, x, cells, edges, size)
+            if found is None:  # clean: the reference of the next steps
+                self._clean[k] = self._clearance(x, boundary, cells)
+            elif found.depth > worst.depth:
+                worst = SelfPenetration(found.depth, body.name, int(boundary[found.point]),
+                                        size)
         return worst
 
 

@@ -26,6 +26,8 @@ from .convection import convective_terms
 from .diagnostics import (
     Balance,
     PenetrationCheck,
+    SelfCrossingCheck,
+    SurfaceTwoCheck,
     UnpairedCheck,
     balance,
     check_end_of_step,
@@ -230,6 +232,8 @@ class Simulation:
         self._energy_unmet = False  # the energy equation had no root (report 5.5)
         self._penetration = PenetrationCheck(model) if len(model.bodies) > 1 else None
         self._unpaired = UnpairedCheck(model) if model.interfaces else None
+        self._surface_2 = SurfaceTwoCheck(model) if model.interfaces else None
+        self._self_crossing = SelfCrossingCheck(model)
         # the energy-conserving solve (report 5.5) starts from each augmentation's exact one
         self._early_ratio = (0.0 if model.analysis.energy_conserving
                              else model.analysis.newton_inexact_augmentations)
@@ -923,7 +927,9 @@ class Simulation:
     def _penetration_extra(self) -> dict:
         """The step's deepest boundary node inside another body off the contact surfaces
         (``diagnostics.PenetrationCheck``): its depth for history.csv, and where it is; and
-        the deepest contact-surface node in no pair (``diagnostics.UnpairedCheck``)."""
+        the deepest contact-surface node in no pair (``diagnostics.UnpairedCheck``), the
+        deepest surface-2 node inside body 1 (``diagnostics.SurfaceTwoCheck``) and the deepest
+        boundary node inside its own body (``diagnostics.SelfCrossingCheck``)."""
         extra = {}
         if self._penetration is not None:
             found = self._penetration.deepest(self.state.x)
@@ -932,6 +938,9 @@ class Simulation:
         if self._unpaired is not None:  # contact-surface nodes in no pair (UnpairedCheck)
             extra["penetration_unpaired_at"] = self._unpaired.deepest(self.state.x,
                                                                       self.state.contact)
+        if self._surface_2 is not None:  # surface-2 nodes inside body 1 (SurfaceTwoCheck)
+            extra["penetration_surface_2_at"] = self._surface_2.deepest(self.state.x)
+        extra["self_penetration_at"] = self._self_crossing.deepest(self.state.x)
         return extra
 
     def _tie_extra(self) -> dict:

@@ -98,6 +98,8 @@ class ResultWriter:
                              "max_active_pairs": 0, "unconverged_steps": 0,
                              "max_penetration_unpaired": 0.0,
                              "max_penetration_unpaired_at": None,
+                             "max_penetration_surface_2": 0.0,
+                             "max_penetration_surface_2_at": None,
                              "max_separation_under_traction": 0.0,
                              "max_separation_under_traction_at": None,
                              **OFF_SURFACE_SUMMARY, "ale_unreturned_energy": 0.0,
@@ -115,6 +117,8 @@ class ResultWriter:
         if model.ties:
             extra_history = extra_history + tie_history(model)
             summary_extra = {"max_tie_violation": 0.0} | summary_extra
+        summary_extra = {"max_self_penetration": 0.0,  # a body through itself
+                         "max_self_penetration_at": None} | summary_extra
         summary_extra = dict.fromkeys(EnergyAudit.KEYS) | summary_extra  # energy balance
         summary_extra = {"cut_back_steps": 0} | summary_extra  # steps solved in sub-steps
         summary_extra = {"mass": model.analysis.mass} | summary_extra  # as `compare` needs it
@@ -200,6 +204,9 @@ class ResultWriter:
         fields |= self._mismatch_summary(s.time, row.get("ale_mismatch", 0.0), summary)
         fields |= self._unpaired_summary(s.time, record.extra.get("penetration_unpaired_at"),
                                          summary)
+        fields |= self._surface_2_summary(s.time, record.extra.get("penetration_surface_2_at"),
+                                          summary)
+        fields |= self._self_summary(s.time, record.extra.get("self_penetration_at"), summary)
         rows = record.extra.get("contact_rows")
         if rows is not None and len(rows["node_1"]):
             self.results.contact.write_step(s.step, s.time, rows)
@@ -298,6 +305,32 @@ class ResultWriter:
                                                 "node": found.node, "depth": found.depth,
                                                 "file_node": self._file_node(found.node),
                                                 "element_size": self._spacing[found.interface]}}
+
+    def _surface_2_summary(self, time: float, found, summary: dict) -> dict:
+        """The deepest surface-2 node inside its interface's surface-1 body so far, and where
+        (``engine.diagnostics.SurfaceTwoCheck``), with the interface's surface spacing."""
+        if found is None or found.depth <= (summary.get("max_penetration_surface_2") or 0.0):
+            return {}
+        return {"max_penetration_surface_2": found.depth,
+                "max_penetration_surface_2_at": {"time": time, "interface": found.interface,
+                                                 "node": found.node, "depth": found.depth,
+                                                 "file_node": self._file_node(found.node),
+                                                 "element_size":
+                                                     self._spacing[found.interface]}}
+
+    def _self_summary(self, time: float, found, summary: dict) -> dict:
+        """The deepest boundary node inside its own body so far, and where
+        (``engine.diagnostics.SelfCrossingCheck``); ``first_time``: the end of the first step
+        that found one, from which on the results are not physical."""
+        if found is None or found.depth <= (summary.get("max_self_penetration") or 0.0):
+            return {}
+        before = summary.get("max_self_penetration_at") or {}
+        return {"max_self_penetration": found.depth,
+                "max_self_penetration_at": {"time": time, "body": found.body,
+                                            "node": found.node,
+                                            "file_node": self._file_node(found.node),
+                                            "depth": found.depth, "element_size": found.size,
+                                            "first_time": before.get("first_time", time)}}
 
     @staticmethod
     def _off_surface_summary(time: float, found, summary: dict) -> dict:

@@ -47,18 +47,30 @@ def in_elements(points: NDArray, nodes: NDArray, cells: NDArray, slack: float) -
     found = np.zeros(len(points), bool)
     if len(points) == 0 or len(cells) == 0:
         return found
+    point, _ = _inside_pairs(points, nodes, cells, slack)
+    found[point] = True
+    return found
+
+
+def _inside_pairs(points: NDArray, nodes: NDArray, cells: NDArray,
+                  slack: float) -> tuple[NDArray, NDArray]:
+    """The (point, cell) index pairs of ``points`` inside quads of ``cells``, as
+    :func:`in_elements` finds them (the cells in the points' bounding box, then a k-d tree
+    on their centroids)."""
+    none = (np.zeros(0, np.int64), np.zeros(0, np.int64))
     corners = nodes[cells]  # (ne, 4, 2)
     low, high = points.min(axis=0) - slack, points.max(axis=0) + slack
-    corners = corners[np.all((corners.max(axis=1) >= low) & (corners.min(axis=1) <= high),
-                             axis=1)]
-    if len(corners) == 0:
-        return found
+    kept = np.flatnonzero(np.all((corners.max(axis=1) >= low) & (corners.min(axis=1) <= high),
+                                 axis=1))
+    if len(kept) == 0:
+        return none
+    corners = corners[kept]
     centroid = corners.mean(axis=1)
     reach = float(np.linalg.norm(corners - centroid[:, None], axis=-1).max()) + slack
     near = cKDTree(points).sparse_distance_matrix(cKDTree(centroid), reach,
                                                   output_type="ndarray")
     if near.size == 0:
-        return found
+        return none
     point, cell = near["i"], near["j"]
     quad = corners[cell]  # (k, 4, 2)
     edges = np.roll(quad, -1, axis=1) - quad
@@ -66,8 +78,7 @@ def in_elements(points: NDArray, nodes: NDArray, cells: NDArray, slack: float) -
     # cross / length: the distance inside each edge's line
     cross = edges[..., 0] * rel[..., 1] - edges[..., 1] * rel[..., 0]
     inside = (cross >= -slack * np.linalg.norm(edges, axis=-1)).all(axis=-1)
-    found[point[inside]] = True
-    return found
+    return point[inside], kept[cell[inside]]
 
 
 def boundary_edges(cells: NDArray) -> NDArray:
@@ -192,3 +203,73 @@ def deepest_overlap(points: NDArray, nodes: NDArray, cells: NDArray,
     index = int(keep[inside[worst]])
     return Overlap(index, (float(points[index, 0]), float(points[index, 1])),
                    float(along[worst]), edge=True)
+
+
+def deepest_self_overlap(boundary: NDArray, nodes: NDArray, cells: NDArray, edges: NDArray,
+                         size: float) -> Overlap | None:
+    """The boundary node of a body deepest inside one of that body's own cells that does not
+    have it as a corner, or None: the body has passed through itself (a thin ring folded
+    by an impact), which no contact surface resists (self contact is not modelled).
+
+    ``boundary``: the body's boundary nodes (indices into ``nodes``), ``cells`` its cells,
+    ``edges`` its ``boundary_edges`` and ``size`` their ``edge_size``. A node is never inside
+    a cell of a valid, unfolded mesh that it is not a corner of (up to the DEPTH_TOLERANCE x
+    ``size`` slack). The depth is the distance to the body's boundary edges away from the
+    node: those with an end on one of the node's own cells are left out, since the node lies
+    on them. ``Overlap.point`` indexes ``boundary``."""
+    if len(boundary) == 0 or len(cells) == 0:
+        return None
+    tolerance = DEPTH_TOLERANCE * size
+    point, cell = _inside_pairs(nodes[boundary], nodes, cells, tolerance)
+    foreign = ~np.any(cells[cell] == boundary[point, None], axis=1)
+    point = np.unique(point[foreign])
+    best: Overlap | None = None
+    for p in point:  # few: nodes of a fold only
+        node = boundary[p]
+        local = np.unique(cells[np.any(cells == node, axis=1)])
+        away = edges[~np.isin(edges, local).any(axis=1)]
+        if len(away) == 0:
+            continue
+        depth = float(distance_to_segments(nodes[[node]], nodes[away[:, 0]],
+                                           nodes[away[:, 1]])[0])
+        if depth > tolerance and (best is None or depth > best.depth):
+            best = Overlap(int(p), (float(nodes[node, 0]), float(nodes[node, 1])), depth)
+    return best
+
+
+def self_clearance(boundary: NDArray, nodes: NDArray, cells: NDArray) -> float:
+    """The smallest distance from a boundary node to a cell it is not a corner of (inf with
+    none): a deformation that changes no distance between points of the body by this much
+    cannot put a boundary node inside such a cell (``deepest_self_overlap`` then finds none).
+    Cells farther than two cell radii from a node's centroid distance are left out: they are
+    at least that far."""
+    corners = nodes[cells]
+    centroid = corners.mean(axis=1)
+    radius = float(np.linalg.norm(corners - centroid[:, None], axis=-1).max())
+    near = cKDTree(nodes[boundary]).sparse_distance_matrix(cKDTree(centroid), 3.0 * radius,
+                                                           output_type="ndarray")
+    point, cell = near["i"], near["j"]
+    foreign = ~np.any(cells[cell] == boundary[point, None], axis=1)
+    point, cell = point[foreign], cell[foreign]
+    clearance = 2.0 * radius
+    for start in range(0, len(point), CHUNK):  # the distance to the quad's four edges
+        quad = corners[cell[start:start + CHUNK]]
+        rel = nodes[boundary[point[start:start + CHUNK]], None, :] - quad
+        ab = np.roll(quad, -1, axis=1) - quad
+        t = np.clip(np.sum(rel * ab, axis=-1) / np.maximum(np.sum(ab * ab, axis=-1), 1e-300),
+                    0.0, 1.0)
+        gap = rel - t[..., None] * ab
+        clearance = min(clearance, float(np.sqrt(np.sum(gap * gap, axis=-1)).min()))
+    return clearance
+
+
+def rigid_deviation(reference: NDArray, current: NDArray) -> float:
+    """How far the points ``current`` (n, 2) are at most from a rigid motion of ``reference``
+    (the rotation about the centroids that best fits them in least squares): distances
+    between points of the body changed by at most twice this."""
+    a = reference - reference.mean(axis=0)
+    b = current - current.mean(axis=0)
+    angle = np.arctan2(np.sum(a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]), np.sum(a * b))
+    c, s = np.cos(angle), np.sin(angle)
+    turned = np.stack([c * a[:, 0] - s * a[:, 1], s * a[:, 0] + c * a[:, 1]], axis=1)
+    return float(np.sqrt(np.sum((b - turned) ** 2, axis=1)).max())

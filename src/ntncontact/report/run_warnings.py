@@ -23,6 +23,15 @@ PENETRATION_WARNING = 0.1
 #: node pairs then hold only the coarser surface's nodes (the example pairs are within 1.1)
 SPACING_RATIO = 1.5
 
+#: a boundary node inside its own body's cells deeper than this fraction of the body's
+#: boundary spacing is a body that passed through itself (the examples: none at all)
+SELF_PENETRATION_WARNING = 0.01
+
+#: more than this share of a run's steps halved says that its dt is too large (the examples
+#: halve at most 3 of 30 load steps, the delamination's onset; a tester's block at 82 % of c
+#: 18 of 30)
+CUT_BACK_SHARE = 0.25
+
 #: an ALE node ending farther than this fraction of the surface spacing from its partner's
 #: place is a pair the mesh motion did not follow: ~1e-9 of it where the motion follows
 MISMATCH_WARNING = 0.1
@@ -68,9 +77,10 @@ def result_warnings(summary: dict, static: bool | None = None) -> list[str]:
     found = (_off_surfaces(summary), _unreturned_energy(summary),
              _contact_energy(summary, static), _contact_loss(summary, static),
              _balance(summary, static),
-             _penetration(summary, static), _unpaired(summary, static), _opening(summary),
+             _penetration(summary, static), _unpaired(summary, static),
+             _surface_2(summary, static), _self_crossing(summary), _opening(summary),
              _mismatch(summary),
-             _linear_rotation(summary))
+             _linear_rotation(summary), _cut_backs(summary))
     return [line for line in found if line]
 
 
@@ -165,6 +175,54 @@ def _unpaired(summary: dict, static: bool) -> str | None:
             f"of the surface spacing, t = {at['time']:.6g}; summary.json "
             "max_penetration_unpaired), deeper than any pair, with nothing holding it: "
             f"{_advice(summary, at['interface'], static)}")
+
+
+def _surface_2(summary: dict, static: bool) -> str | None:
+    """A surface-2 node went deeper into surface 1's body than the deepest pair by more than
+    PENETRATION_WARNING of the surface spacing (summary.json ``max_penetration_surface_2_at``):
+    pairs measure their depth at surface 1's nodes, so a surface-2 corner between them cuts
+    in unmeasured (a tester's 0.047 against pairs at 0.0). A paired surface-2 node's distance
+    to the boundary reads about its pair's depth (a spinning block's 0.0316 against its
+    pair's 0.0309), which the penetration warning reports already: hence the margin."""
+    at = summary.get("max_penetration_surface_2_at")
+    if not at or at["depth"] <= (PENETRATION_WARNING * at["element_size"]
+                                 + (summary.get("max_penetration") or 0.0)):
+        return None
+    return (f"node {_node(at)} of interface '{at['interface']}', on surface_2, went "
+            f"{at['depth']:.3g} inside surface_1's body ({at['depth'] / at['element_size']:.2g} "
+            f"of the surface spacing, t = {at['time']:.6g}; summary.json "
+            "max_penetration_surface_2), deeper than any pair measured: a pair measures its "
+            "depth at its surface_1 node, along that node's normal, so a surface_2 node "
+            "between surface_1's nodes (a corner) cuts in unmeasured; with that face as "
+            "surface_1 (its body as body_1) its nodes are the pairs' own")
+
+
+def _self_crossing(summary: dict) -> str | None:
+    """A body passed through itself (summary.json ``max_self_penetration_at``): self contact
+    is not modelled, so nothing resisted it."""
+    at = summary.get("max_self_penetration_at")
+    depth = summary.get("max_self_penetration") or 0.0
+    if not at or depth <= SELF_PENETRATION_WARNING * at["element_size"]:
+        return None
+    return (f"body '{at['body']}' passed through itself: its node {_node(at)} went "
+            f"{depth:.3g} inside its own cells (t = {at['time']:.6g}; summary.json "
+            "max_self_penetration). Self contact is not modelled, so the results are not "
+            f"physical from t = {at['first_time']:.6g} on (the first step that found a "
+            "crossing)")
+
+
+def _cut_backs(summary: dict) -> str | None:
+    """Steps whose solve failed at the full dt and were solved in halved sub-steps
+    (summary.json ``cut_back_steps``): the run's results hold, but only the summary said
+    so (a tester's block at 82 % of c: 18 of 30 steps)."""
+    cut, steps = summary.get("cut_back_steps") or 0, summary.get("steps") or 0
+    if not cut:
+        return None
+    line = (f"{cut} of {steps} steps needed halving (summary.json cut_back_steps): their "
+            "solve failed at the full analysis.dt and was redone in halved sub-steps")
+    if cut > CUT_BACK_SHARE * steps:  # the delamination example halves 3 of 30, on purpose
+        line += ": analysis.dt is too large for this case"
+    return line
 
 
 def _node(at: dict) -> str:
