@@ -7,10 +7,13 @@ u_x from -0.0144 to +0.0012 on a block that should have been symmetric)."""
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
 import pytest
 
+from ntncontact import api
 from ntncontact.cli import main
+from ntncontact.engine.simulation import SimulationError
 
 BLOCK = """
 title = "static block, supported in y only"
@@ -113,3 +116,22 @@ def test_the_free_body_is_named_not_the_held_one(tmp_path, capsys, cutbacks):
     err = capsys.readouterr().err
     assert "numerically singular" in err and "Traceback" not in err
     assert "the free motion moves the dofs of body 'cyl'" in err and "'fnd'" not in err, err
+
+
+
+def test_a_body_that_contact_lets_go_at_zero_load_is_not_moved(tmp_path):
+    """Tester Q's cycle of the report's Hertz problem, loaded in 17 steps, held, unloaded in
+    17 to zero and held: the cylinder, held in x only, loses its last pairs at zero load and
+    nothing holds it in y. The step fails with the singular-matrix error naming it; before,
+    Newton moved it by R's round-off over its free pivot (0.987, a sixth of an element) and
+    the run completed, with no stress and no word."""
+    root = Path(__file__).resolve().parents[1]
+    function = {"times": [0.0, 17.0, 18.0, 35.0, 36.0], "values": [0.0, 1.0, 1.0, 0.0, 0.0]}
+    scenario = api.load_scenario(root / "examples" / "hertz.toml",
+                             {"analysis.t_end": 36.0, "bodies.0.loads.0.function": function})
+    with pytest.raises(SimulationError) as failed:
+        api.run(scenario)
+    message = str(failed.value)
+    assert message.startswith("step 36 ")
+    assert "numerically singular" in message
+    assert "the free motion moves the dofs of body 'cylinder' (y)" in message

@@ -142,11 +142,12 @@ class Observer(Protocol):
     def on_finish(self, status: str, error: str | None) -> None: ...
 
 
-def default_linear_solve(precision: Precision = "auto"
+def default_linear_solve(precision: Precision = "auto", check_pivots: bool = False
                          ) -> Callable[[sp.spmatrix, NDArray], NDArray]:
-    """The project's sparse solver, PARDISO factoring in ``precision`` (see
+    """The project's sparse solver, PARDISO factoring in ``precision``, SuperLU's factors
+    checked for singularity at each factorization with ``check_pivots`` (see
     :class:`~ntncontact.solvers.linear.LinearSolver`)."""
-    return LinearSolver(precision=precision).solve
+    return LinearSolver(precision=precision, check_pivots=check_pivots).solve
 
 
 def _newton_updated(ci) -> bool:
@@ -196,7 +197,8 @@ class Simulation:
                  linear_solve: Callable | None = None) -> None:
         self.model = model
         self.observers = list(observers)
-        self.solve = linear_solve or default_linear_solve(model.analysis.factor_precision)
+        self.solve = linear_solve or default_linear_solve(
+            model.analysis.factor_precision, check_pivots=model.analysis.kind == "static")
         self.settings = NewtonSettings(rtol=model.analysis.newton_rtol,
                                        max_iterations=model.analysis.newton_max_iterations)
         self.dynamic = model.analysis.kind == "dynamic"

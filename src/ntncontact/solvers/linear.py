@@ -71,13 +71,17 @@ PIVOT_RTOL = 1e-12
 #: examples' smallest pivots are 1.5e-8 (block sliding) to 9e-3 of the largest, that body's
 #: 2e-16. Small systems have every SuperLU factor checked (the static LU's fallbacks, and
 #: patterns it leaves to SuperLU: ties and Lagrange multipliers): the delamination example's
-#: 946 checks cost 0.16 of 7.6 s of CPU.
+#: 946 checks cost 0.16 of 7.6 s of CPU. A quasi-static run checks every factor
+#: (``LinearSolver(check_pivots=True)``): a tester's Hertz cylinder, free in y and unloaded to
+#: zero, lost its last pairs and moved by 0.987 in one Newton step (R's round-off along the
+#: free motion over its pivot) with no error; the growth test passed, |x| max|A| ~ 1e8 ~
+#: 1e6 |b|.
 PIVOT_CHECK_GROWTH = 1e6
 #: what a singular matrix usually means, for the error both backends raise
 SINGULAR_CAUSES = ("(a body whose supports leave a rigid motion free, in a static run also "
                    "one held only by contact pairs that all slip, as under a tangential load "
-                   "above the friction's limit; a mechanism, or coincident nodes that split a "
-                   "mesh?)")
+                   "above the friction's limit, or that all opened, as at zero load; a "
+                   "mechanism, or coincident nodes that split a mesh?)")
 #: SuperLU keeps a diagonal pivot at least this fraction of the largest entry of its column
 #: (partial pivoting otherwise); the static LU accepts a pivot on the same test, so it takes
 #: the pivots SuperLU would and falls back to SuperLU where SuperLU would interchange rows.
@@ -341,10 +345,13 @@ class LinearSolver:
     single-precision factor, each solution refined in double to a residual of
     :data:`MIXED_RTOL` |b|), "double" (solutions at round-off), or "auto" (single from
     :data:`MIXED_MIN_UNKNOWNS` unknowns). SuperLU and the static LU always factor in double.
+    ``check_pivots``: check every SuperLU factor's pivots before its first solve, not only
+    when a solution grows (see :data:`PIVOT_CHECK_GROWTH`): for quasi-static runs, where no
+    mass holds a body that contact lets go.
     """
 
     def __init__(self, backend: Backend = "auto", symmetric: bool | None = None,
-                 precision: Precision = "auto") -> None:
+                 precision: Precision = "auto", check_pivots: bool = False) -> None:
         self._pattern: _Pattern | None = None
         # one factorization per symmetry mode (PARDISO), so alternating modes keep both analyses
         self._impls: dict[bool | None, _PardisoBackend | _SuperLUBackend] = {}
@@ -358,6 +365,7 @@ class LinearSolver:
             raise LinearSolverError("PARDISO requested but pypardiso/MKL is not installed")
         self._backend = None if self._auto else backend
         self.symmetric = symmetric
+        self.check_pivots = check_pivots
         self.stats = SolverStats()
         self._generation = 0  # counts factorizations: a PARDISO factor is valid until the next
 
@@ -402,6 +410,8 @@ class LinearSolver:
             if other is not impl:  # its factor is dead from now on (Factorization.valid)
                 other.release_factor()
         impl.factor(A.data)
+        if self.check_pivots and isinstance(impl, _SuperLUBackend):
+            impl.unchecked = True
         self._generation += 1
         return Factorization(self, A.shape[0], impl.solver(),
                              self._generation if backend == "pardiso" else None)
