@@ -11,6 +11,8 @@ import pytest
 
 from ntncontact.ale import surface
 from ntncontact.ale.surface import SurfaceCurve, slide_chain
+from ntncontact.mesh.generators import rectangle
+from ntncontact.mesh.overlap import boundary_edges, deepest_overlap, distance_to_segments
 
 
 def _cpu_time(f, *args, repeats=3) -> float:
@@ -146,3 +148,69 @@ def test_the_surface_move_costs_about_linearly_in_the_chain_nodes():
     assert out[6] == -1 and np.abs(out[1]).max() > 0.1  # a real move: the nodes slid
     ratio = _cpu_time(slide_chain, *large) / _cpu_time(slide_chain, *small)
     assert ratio < 24.0, f"8x the chain nodes cost {ratio:.1f}x"
+
+
+# --- the build's overlap check ----------------------------------------------------------------
+
+
+def _distance_oracle(points: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Every point against every segment (the check's former form, in chunks)."""
+    ab = b - a
+    out = np.empty(len(points))
+    for start in range(0, len(points), 256):
+        rel = points[start:start + 256, None, :] - a[None]
+        t = np.clip(np.sum(rel * ab, axis=-1) / np.maximum(np.sum(ab * ab, axis=-1), 1e-300),
+                    0.0, 1.0)
+        gap = rel - t[..., None] * ab[None]
+        out[start:start + 256] = np.sqrt(np.min(np.sum(gap * gap, axis=-1), axis=1))
+    return out
+
+
+def test_the_distances_to_segments_are_those_of_the_all_pairs_search():
+    """3,000 points on and around a 3,000-segment wavy outline with short and long (and one
+    degenerate) segments: the same distances to the bit."""
+    rng = np.random.default_rng(5)
+    x = np.sort(np.r_[rng.uniform(0.0, 3000.0, 1499), 0.0, 3000.0])
+    top = np.c_[x, 0.01 * np.sin(x)]
+    outline = np.vstack([top, top[::-1] + [0.0, -4.0]])
+    a, b = outline[:-1], outline[1:]
+    a = np.vstack([a, [[7.0, -2.0]]])
+    b = np.vstack([b, [[7.0, -2.0]]])  # a point as a segment
+    pts = np.vstack([top[:1000], np.c_[rng.uniform(-5.0, 3005.0, 2000),
+                                       rng.uniform(-10.0, 6.0, 2000)],
+                     [[1e5, 1e5], [7.0, -2.0]]])
+    np.testing.assert_array_equal(distance_to_segments(pts, a, b), _distance_oracle(pts, a, b))
+    bad = distance_to_segments(np.array([[np.nan, 0.0], [1.0, 1.0]]), a, b)
+    assert np.isnan(bad[0]) and bad[1] == _distance_oracle(np.array([[1.0, 1.0]]), a, b)[0]
+
+
+@pytest.mark.parametrize("sink", [0.0, 0.05])
+def test_a_long_layer_on_its_base_gets_the_verdict_of_the_all_pairs_search(sink):
+    """A 3,000-element layer on a 3,000-element base (every surface node inside within the
+    tolerance): touching builds; one node pushed 0.05 in is found, as deep as the oracle says."""
+    n = 3000
+    base = rectangle(float(n), 2.0, n, 2)
+    layer_nodes = rectangle(float(n), 2.0, n, 2).nodes + [0.0, 2.0]
+    bottom = np.flatnonzero(np.isclose(layer_nodes[:, 1], 2.0))
+    bottom = bottom[np.argsort(layer_nodes[bottom, 0])]  # the layer on the left: left to right
+    chain = layer_nodes[bottom].copy()
+    chain[1234, 1] -= sink
+    found = deepest_overlap(chain, base.nodes, base.cells, chain=True)
+    if sink == 0.0:
+        assert found is None
+        return
+    edges = boundary_edges(base.cells)  # the oracle's depths: to every boundary edge
+    depth = _distance_oracle(chain, base.nodes[edges[:, 0]], base.nodes[edges[:, 1]])
+    assert found is not None and found.point == int(np.argmax(depth)) == 1234
+    assert found.depth == depth[1234] == pytest.approx(sink)
+
+
+def test_the_distances_cost_about_linearly_in_the_surface():
+    """8x the points and segments cost 64x before (every pair); now about 8x."""
+    def case(n):
+        x = np.linspace(0.0, n, n + 1)
+        edge = np.c_[x, 1e-3 * np.sin(x)]
+        return edge[:-1] + [0.25, 1e-9], edge[:-1], edge[1:]
+    ratio = _cpu_time(distance_to_segments, *case(8000)) / _cpu_time(
+        distance_to_segments, *case(1000))
+    assert ratio < 24.0, f"8x the surface cost {ratio:.1f}x"
