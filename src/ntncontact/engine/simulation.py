@@ -12,7 +12,7 @@ import scipy.sparse as sp
 from numpy.typing import NDArray
 
 from ..ale.motion import AleMotionError
-from ..contact import PairState, extrapolated_update, lagrange_blocks, newton_update
+from ..contact import SLIP, PairState, extrapolated_update, lagrange_blocks, newton_update
 from ..dynamics.energy import EndEnergy, EnergyConsistentContact
 from ..dynamics.mass import MovingMass
 from ..dynamics.midpoint import end_of_step, midpoint_velocity, velocity_factor
@@ -59,6 +59,25 @@ from .model import Model
 from .problem import StepProblem, StepState
 from .reactions import support_reactions, support_sets
 from .ties import tie_forces, tie_terms, tie_violation
+
+
+def _static_dissipation(result, used: PairState, x_start: NDArray) -> float:
+    """Frictional dissipation of a quasi-static step over its SLIP pairs by the trapezoidal
+    rule, as ``contact_work``: the mean of the tangential forces t_T L_c at the step's start
+    (``used.t_T``, L_c at ``x_start``) and end, times the slip increment delta g_T. The end
+    force alone (the kernel's ``dissipation``) over-counted a load ramp's friction work, to
+    first order in the step: twice the true value in one step, more than the contact
+    forces' total work (report 6.1's ramp: 22.2, 12.5, 11.4 in 1, 8, 32 steps against
+    -contact_work 11.1). A pair whose force reverses within the step counts 0, not a
+    negative mean: its work there is the regularized stick's elastic unloading."""
+    slip = result.status == SLIP
+    x0 = result.transfer.positions(x_start) if result.transfer is not None else x_start
+    nodes = result.slots[slip]  # slots 0, 4, 5: the node and its surface neighbours
+    back = np.linalg.norm(x0[nodes[:, 0]] - x0[nodes[:, 4]], axis=1)
+    ahead = np.linalg.norm(x0[nodes[:, 5]] - x0[nodes[:, 0]], axis=1)
+    start = used.t_T[slip] * 0.5 * (back + ahead)
+    mean = 0.5 * (start + result.t_T[slip] * result.length[slip]) * result.slip_measure[slip]
+    return float(np.sum(np.maximum(mean, 0.0)))
 
 
 class SimulationError(RuntimeError):
@@ -331,7 +350,7 @@ class Simulation:
         self._last_reactions = solved.reactions
         out_of_balance = (self._remap_out_of_balance_work(s, state, d1)
                           if not self.dynamic and s is not state else 0.0)
-        self._accumulate_work(s, d1, results, dt)
+        self._accumulate_work(s, d1, results, dt, solved.used)
         self._step_work["ale_remap_energy"] += solved.remap_energy + out_of_balance
         self._step_work["ale_unreturned_energy"] += solved.unreturned_energy
         new = StepState(s.step + 1, s.time + dt, s.X, d1, v1, a1, committed)
@@ -866,9 +885,12 @@ class Simulation:
             if progress is not None:
                 progress(self.state.time)
 
-    def _accumulate_work(self, s: StepState, d1: NDArray, results, dt: float) -> None:
+    def _accumulate_work(self, s: StepState, d1: NDArray, results, dt: float,
+                         used: tuple = ()) -> None:
         """Work of the external and contact forces over the step, and the frictional
-        dissipation: E_{n+1} - E_n = external + contact work (+ the scheme's own error)."""
+        dissipation: E_{n+1} - E_n = external + contact work (+ the scheme's own error).
+        ``used``: the contact states the step was solved with (their t_T is the step
+        start's), for the static dissipation's trapezoidal rule."""
         dx = (s.X + d1 - s.x).ravel()
         active = [r for r in results if r is not None]
         force = sum(r.force for r in active) if active else np.zeros(dx.size)
@@ -884,7 +906,10 @@ class Simulation:
         self._step_work["external_work"] += float(load @ dx)
         if active:
             self._step_work["contact_work"] -= float(force @ dx)
-            self._step_work["frictional_dissipation"] += sum(r.dissipation for r in active)
+            self._step_work["frictional_dissipation"] += (
+                sum(r.dissipation for r in active) if self.dynamic
+                else sum(_static_dissipation(r, u, s.x) for r, u in zip(results, used, strict=True)
+                         if r is not None))
 
     def _static_start_load(self, s: StepState, ndof: int) -> NDArray:
         """The external load that the state ``s`` at a static step's start balances: the
