@@ -42,7 +42,15 @@ class InvertedElementError(ValueError):
     def __init__(self, element: int, value: float, where: str) -> None:
         self.element = int(element)
         self.value = float(value)
+        self.where = where
         super().__init__(f"element {element} is inverted in the {where} (det J = {value:.3e})")
+
+    def named(self, body: str, local: int) -> str:
+        """The message with the element named once, by its body and its number there (the
+        global number appended after it read "element 4 is inverted ...: element 4 of body
+        'block'")."""
+        return (f"element {local} of body '{body}' (global element {self.element}) is inverted "
+                f"in the {self.where} (det J = {self.value:.3e})")
 
 
 @dataclass(frozen=True)
