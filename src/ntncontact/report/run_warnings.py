@@ -277,10 +277,11 @@ def _mismatch(summary: dict) -> str | None:
     return (f"an ALE contact node ended {mismatch:.3g} from its partner's place "
             f"({mismatch / at['element_size']:.2g} of the surface spacing, t = "
             f"{at['time']:.6g}; summary.json max_ale_mismatch): the mesh motion did not follow "
-            "that pair, which is no longer node to node. An ALE surface longer than the slide "
-            "(its ends and corners stay fixed, its kinks too: no node crosses them), a larger "
-            "ale.max_stretch (a node leaves a fixed end behind by at most that times their "
-            "original distance) or ale.respace = \"reference\" may let it follow")
+            "that pair, which is no longer node to node. A larger ale.max_stretch (a node "
+            "leaves a fixed end behind by at most that times their original distance, so a "
+            "slide away from an end runs out of it even on a long surface), an ALE surface "
+            "longer than the slide (its ends and corners stay fixed, its kinks too: no node "
+            "crosses them) or ale.respace = \"reference\" may let it follow")
 
 
 def _energy_scale(summary: dict) -> float | None:
