@@ -9,12 +9,22 @@ import signal
 import sys
 import tempfile
 import threading
+import time
 import traceback
 import warnings
+from collections.abc import Callable
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from . import __version__
 from .io.writers import closing
+
+if TYPE_CHECKING:
+    from .io.run_folder import RunLock
+
+#: seconds of wall time between two progress lines when stderr is not a terminal (a batch
+#: job's log, where tqdm's bar is off: a tester's 60 s of a run printed nothing)
+PROGRESS_INTERVAL = 30.0
 
 
 class StopOnSignal:
@@ -22,7 +32,10 @@ class StopOnSignal:
     (``Simulation.run``'s ``stop_reason``), and the run ends as interrupted with every file
     closed. Raising KeyboardInterrupt from the handler instead could land inside a compiled
     kernel and surface as a SystemError. A second signal stops at once (KeyboardInterrupt).
-    The handlers are installed in the main thread only, and the previous ones restored."""
+    While the model is built (``building``) nothing is written and no step is to finish,
+    so the first signal stops at once: a tester's first Ctrl-C 8 s into a 31 s build was
+    silent until the build ended. The handlers are installed in the main thread only, and the
+    previous ones restored."""
 
     SIGNALS = (signal.SIGINT, signal.SIGTERM)
 
@@ -30,6 +43,8 @@ class StopOnSignal:
         self.signum: int | None = None
         #: the run is complete (only figures and comparisons are left): stop at the first signal
         self.at_once = False
+        #: the model is being built: nothing written, nothing to finish: stop at the first signal
+        self.building = False
         #: the run's results writer exists (its folder was prepared): before, nothing was written
         self.writing = False
         self._previous: dict[int, object] = {}
@@ -50,7 +65,9 @@ class StopOnSignal:
                 return
             raise KeyboardInterrupt(self.reason())
         self.signum = signum
-        if self.at_once:  # drawing figures: no step to finish, and no kernel to land in
+        # drawing figures: no step to finish; building: nothing to keep (an error from a
+        # compiled kernel it lands in is taken for the interruption, see _run)
+        if self.at_once or self.building:
             raise KeyboardInterrupt(self.reason())
         if not self.writing:  # no step to finish: the run stops before it begins, one line
             return
@@ -98,40 +115,53 @@ def _run_until_stopped(args: argparse.Namespace, stop: StopOnSignal) -> int:
     from .io.results import ResultWriter
     from .io.scenario import load_scenario
 
+    started = time.monotonic()
     scenario = Path(args.scenario)
     config = load_scenario(scenario, args.set)
-    with warnings_noted() as build_warnings:  # printed as issued, and kept in the summary
-        model = build_model(config, scenario.parent)
-    if stop.signum is not None:  # before any file is written
-        raise RunInterrupted(stop.reason())
-    if args.times:  # refused before the run, not after it
-        from .report.plotting import check_times
-
-        check_times(args.times, 0.0, model.analysis.t_end, f"the run of {scenario}")
     out = Path(args.out)
-    identity = checkpoint.run_identity(config, args.set or [], model)
     if args.restart and args.overwrite:
         raise ValueError("--restart continues the run in --out, --overwrite replaces it: "
                          "give one of them")
-    resume = checkpoint.load_latest(out, identity) if args.restart else None
-    writer = ResultWriter(out, model, overwrite=args.overwrite,
-                          resume=resume and resume["writer"], scenario=str(scenario),
-                          title=config.title, overrides=list(args.set or []),
-                          scenario_hash=identity["scenario_hash"], build_warnings=build_warnings)
+    created = not out.exists()
+    lock = _lock_before_build(out)
+    try:
+        with warnings_noted() as build_warnings:  # printed as issued, and kept in the summary
+            model = _build(build_model, config, scenario.parent, stop)
+        if stop.signum is not None:  # before any file is written
+            raise RunInterrupted(stop.reason())
+        if args.times:  # refused before the run, not after it
+            from .report.plotting import check_times
+
+            check_times(args.times, 0.0, model.analysis.t_end, f"the run of {scenario}")
+        identity = checkpoint.run_identity(config, args.set or [], model)
+        resume = checkpoint.load_latest(out, identity) if args.restart else None
+        writer = ResultWriter(out, model, overwrite=args.overwrite,
+                              resume=resume and resume["writer"], scenario=str(scenario),
+                              title=config.title, overrides=list(args.set or []),
+                              scenario_hash=identity["scenario_hash"],
+                              build_warnings=build_warnings, lock=lock)
+    except BaseException:
+        _release_unused(lock, out, created)
+        raise
     stop.writing = True
     with _finished_on_error(writer, stop, model.analysis.kind == "static"):
         sim = Simulation(model, [writer])
         checkpoint.attach(sim, writer, out, config.analysis.checkpoint_interval, identity,
                           resume)
         t_end = model.analysis.t_end
-        with tqdm(total=t_end, unit="t", disable=args.quiet or None, desc=scenario.stem,
-                  bar_format="{l_bar}{bar}| t={n:.4g}/{total:.4g} [{elapsed}<{remaining}]") \
-                as bar:
+        if args.quiet or not sys.stderr.isatty():
+            lines = None if args.quiet else ProgressLines(scenario.stem, t_end,
+                                                          lambda: sim.state.step, started)
+            sim.run(lines, stop.reason)
+        else:
+            with tqdm(total=t_end, unit="t", desc=scenario.stem,
+                      bar_format="{l_bar}{bar}| t={n:.4g}/{total:.4g} "
+                                 "[{elapsed}<{remaining}]") as bar:
 
-            def progress(t: float) -> None:
-                bar.update(t - bar.n)
+                def progress(t: float) -> None:
+                    bar.update(t - bar.n)
 
-            sim.run(progress, stop.reason)
+                sim.run(progress, stop.reason)
     stop.at_once = True  # the run is complete: a signal from here on stops at once
     fields = "fields.xdmf" if model.analysis.field_format == "xdmf" else "fields.pvd"
     print(f"results written to {out} (history.csv, summary.json, {fields})")
@@ -143,6 +173,63 @@ def _run_until_stopped(args: argparse.Namespace, stop: StopOnSignal) -> int:
     if args.plot or args.gif or args.times:
         print("figures:", *_draw_figures(out, args), sep="\n  ")
     return 0
+
+
+def _build(build_model: Callable, config: object, folder: Path, stop: StopOnSignal) -> object:
+    """The model, built with a first signal stopping at once (``StopOnSignal.building``)."""
+    stop.building = True
+    try:
+        return build_model(config, folder)
+    finally:
+        stop.building = False
+
+
+def _lock_before_build(out: Path) -> RunLock:
+    """The results folder, created if need be and locked before the model's build (as long as
+    35 s for a tester's long interfaces), which ``ntncontact status`` reports as "starting"
+    and during which a second run into the folder is refused (it went ahead then)."""
+    from .io.run_folder import RunLock
+
+    out.mkdir(parents=True, exist_ok=True)
+    return RunLock.acquire(out, phase="building")
+
+
+def _release_unused(lock: RunLock, out: Path, created: bool) -> None:
+    """Release the folder a run stopped or failed before it wrote anything into (with the
+    stop signals held off: a second Ctrl-C must not leave the lock file behind), and remove
+    the folder if this run made it and it is still empty."""
+    held = signal.pthread_sigmask(signal.SIG_BLOCK, StopOnSignal.SIGNALS)
+    try:
+        lock.release()
+        if created:
+            with contextlib.suppress(OSError):
+                out.rmdir()
+    finally:
+        signal.pthread_sigmask(signal.SIG_SETMASK, held)
+
+
+class ProgressLines:
+    """Progress as plain lines on stderr, one every ``interval`` seconds of wall time, where
+    stderr is not a terminal (a batch job's log): the step, t / t_end, the fraction done and
+    the time since the command started."""
+
+    def __init__(self, name: str, t_end: float, step: Callable[[], int], started: float,
+                 interval: float | None = None,
+                 clock: Callable[[], float] = time.monotonic) -> None:
+        self.name, self.t_end, self.step, self.started = name, t_end, step, started
+        self.interval = PROGRESS_INTERVAL if interval is None else interval
+        self.clock = clock
+        self._printed = clock()
+
+    def __call__(self, t: float) -> None:
+        now = self.clock()
+        if now - self._printed < self.interval:
+            return
+        self._printed = now
+        elapsed = int(now - self.started)
+        print(f"{self.name}: step {self.step()}, t = {t:.6g} / {self.t_end:.6g} "
+              f"({100.0 * t / self.t_end:.0f} %), elapsed {elapsed // 3600}:"
+              f"{elapsed // 60 % 60:02d}:{elapsed % 60:02d}", file=sys.stderr, flush=True)
 
 
 @contextlib.contextmanager
@@ -181,6 +268,15 @@ def _status(args: argparse.Namespace) -> int:
     from .io.run_folder import run_status
 
     status = run_status(Path(args.directory))
+    if status.state == "starting" or status.steps is None:  # nothing written yet
+        doing = "building the model" if status.phase == "building" else "preparing the folder"
+        note = f" ({doing})" if status.state == "starting" else " (killed before its first step)"
+        print(f"status: {status.state}{note}")
+        lock = status.lock or {}
+        gone = " (gone)" if status.state == "stale" else ""
+        print(f"pid:    {lock.get('pid')}{gone} on {lock.get('host')}, "
+              f"started {lock.get('started')}")
+        return 0
     print(f"status: {status.state}")
     print(f"step:   {status.steps}")
     print(f"time:   {_short(status.time)}")

@@ -18,6 +18,7 @@ from ..engine.postprocess import (
 from ..engine.reactions import reaction_columns
 from ..engine.simulation import StepRecord
 from ..mesh.boundary import chain_edge_lengths
+from .run_folder import RunLock
 from .writers import MemoryResults, ResultsDirectory
 
 CONTACT_HISTORY = ("active_pairs", "frictional_dissipation", "contact_work", "augmentations",
@@ -80,9 +81,10 @@ class ResultWriter:
     def __init__(self, directory: str | Path | None, model: Model,
                  extra_history: tuple[str, ...] = (),
                  overwrite: bool = False, resume: dict | None = None,
-                 **summary_extra: object) -> None:
+                 lock: RunLock | None = None, **summary_extra: object) -> None:
         """``resume``: a restart from a checkpoint (``checkpoint_state``'s values, with the
-        state it was taken at under "state"): the folder's files are cut back to it."""
+        state it was taken at under "state"): the folder's files are cut back to it.
+        ``lock``: the folder's lock if the caller holds it already (``ResultsDirectory``)."""
         extra_history = ("external_work",) + extra_history
         if len(model.bodies) > 1 and not model.interfaces:  # bodies no interface joins
             extra_history = extra_history + OFF_SURFACE_HISTORY
@@ -136,7 +138,7 @@ class ResultWriter:
                                             overwrite=overwrite,
                                             resume=None if resume is None else resume["files"],
                                             field_format=model.analysis.field_format,
-                                            **summary_extra)
+                                            lock=lock, **summary_extra)
         self.model = model
         self.extra_history = extra_history
         self.interval = model.analysis.output_interval

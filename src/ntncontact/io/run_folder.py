@@ -108,11 +108,14 @@ class RunLock:
     def __init__(self, path: Path, fd: int) -> None:
         self.path = path
         self._fd: int | None = fd
+        self._info: dict[str, Any] = {}
 
     @classmethod
-    def acquire(cls, directory: Path) -> RunLock:
+    def acquire(cls, directory: Path, phase: str | None = None) -> RunLock:
         """Lock ``directory`` for this process, or raise :class:`RunFolderError` naming the
-        run that holds it."""
+        run that holds it. ``phase`` ("building": the command locks the folder before its
+        model's build, which took 10-35 s on a tester's long interfaces) is written in the
+        lock file for :func:`run_status` until :meth:`set_phase` clears it."""
         path = directory / LOCK_FILE
         while True:
             try:
@@ -136,8 +139,23 @@ class RunLock:
         info = {"pid": os.getpid(), "host": socket.gethostname(),
                 "started": time.strftime("%Y-%m-%dT%H:%M:%S%z")}
         os.ftruncate(fd, 0)
-        os.write(fd, (json.dumps(info) + "\n").encode())
-        return cls(path, fd)
+        lock = cls(path, fd)
+        lock._info = info
+        lock.set_phase(phase)
+        return lock
+
+    def set_phase(self, phase: str | None) -> None:
+        """Write (or, None, drop) the ``phase`` the lock file names. One ``pwrite`` padded
+        with spaces, as summary.json's (never truncated): a reader sees the old text or the
+        new one, both valid JSON."""
+        if self._fd is None:
+            return
+        info = {k: v for k, v in self._info.items() if k != "phase"}
+        if phase is not None:
+            info["phase"] = phase
+        self._info = info
+        data = (json.dumps(info) + "\n").encode()
+        os.pwrite(self._fd, data.ljust(os.fstat(self._fd).st_size), 0)
 
     def release(self) -> None:
         """Remove the lock file and unlock (harmless when released already)."""
@@ -242,11 +260,13 @@ def remove_results(directory: Path) -> None:
             leftover.unlink()
 
 
-def prepare(directory: Path, overwrite: bool) -> RunLock:
-    """Create ``directory`` if needed and lock it; refuse it if it holds results, unless
-    ``overwrite``, which removes them. Returns the held lock."""
+def prepare(directory: Path, overwrite: bool, lock: RunLock | None = None) -> RunLock:
+    """Create ``directory`` if needed and lock it (``lock``: this process holds it already,
+    since before the model's build); refuse it if it holds results, unless ``overwrite``,
+    which removes them. Returns the held lock."""
     directory.mkdir(parents=True, exist_ok=True)
-    lock = RunLock.acquire(directory)
+    lock = lock or RunLock.acquire(directory)
+    lock.set_phase(None)  # built: from here on summary.json tells the run's state
     try:
         found = existing_results(directory)
         if found and not overwrite:
@@ -268,13 +288,16 @@ def prepare(directory: Path, overwrite: bool) -> RunLock:
 @dataclass(frozen=True)
 class RunStatus:
     """A results folder's run as a reader sees it. ``state`` is the summary's status, except
-    "running" when no live process holds the folder, which is "stale" (the run was killed)."""
+    "running" when no live process holds the folder, which is "stale" (the run was killed),
+    and "starting" while a live run holds the folder before its summary.json exists or while
+    it builds its model (``phase`` "building"; an older run's summary may still be there)."""
 
     state: str
     steps: int | None
     time: float | None
     error: str | None
     lock: dict[str, Any] | None
+    phase: str | None = None
 
 
 def read_summary(directory: Path, tries: int = 5) -> dict[str, Any]:
@@ -299,11 +322,21 @@ def _read_json(path: Path) -> dict[str, Any]:
 
 
 def run_status(directory: Path) -> RunStatus:
-    """The status of the run in ``directory`` (see :class:`RunStatus`)."""
-    summary = read_summary(directory)
+    """The status of the run in ``directory`` (see :class:`RunStatus`). A tester's status of
+    a run building its model (10-35 s) said "holds no run" and exited 1."""
     lock = read_lock(directory)
-    state = summary.get("status")
     alive = lock is not None and lock_holder_alive(directory, lock)
+    phase = lock.get("phase") if alive and lock is not None else None
+    try:
+        summary = read_summary(directory)
+    except RunFolderError:
+        if lock is None or (directory / "summary.json").exists():  # no run, or unreadable
+            raise
+        # locked before anything was written: starting, or killed then (stale)
+        return RunStatus("starting" if alive else "stale", None, None, None, lock, phase)
+    state = summary.get("status")
+    if phase is not None:  # an older run's summary, about to be replaced
+        return RunStatus("starting", None, None, None, lock, phase)
     if alive:
         state = "running"
     elif state == "running":

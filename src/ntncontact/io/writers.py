@@ -426,12 +426,18 @@ class ResultsDirectory:
         overwrite: bool = False,
         resume: Mapping[str, Any] | None = None,
         field_format: str = "vtu",
+        lock: RunLock | None = None,
         **summary_extra: Any,
     ) -> None:
+        """``lock``: the folder's lock, taken by the caller already (``ntncontact run`` takes
+        it before the model's build), now this writer's to release."""
         self.directory = Path(directory)
         # a restart keeps the folder's results (cut back to the checkpoint, below)
-        self._lock: RunLock | None = (prepare(self.directory, overwrite) if resume is None
-                                      else RunLock.acquire(self.directory))
+        if resume is not None and lock is not None:
+            lock.set_phase(None)
+        self._lock: RunLock | None = (prepare(self.directory, overwrite, lock)
+                                      if resume is None
+                                      else lock or RunLock.acquire(self.directory))
         step = None if resume is None else int(resume["step"])
         try:
             # the fields first: without h5py the xdmf writer stops before any file exists
