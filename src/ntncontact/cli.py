@@ -448,7 +448,9 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--out", required=True, help="results folder")
     run.add_argument("--set", action="append", metavar="KEY=VALUE",
                      help="override a scenario key, e.g. analysis.mass=\"lumped\" (repeatable)")
-    run.add_argument("--quiet", action="store_true", help="no progress bar")
+    run.add_argument("--quiet", action="store_true",
+                     help="no progress bar (nor, when stderr is not a terminal, the progress "
+                          "line printed every 30 s instead)")
     run.add_argument("--overwrite", action="store_true",
                      help="replace the results already in the folder (only the files a run "
                           "writes: CSV, JSON, fields.pvd/fields.xdmf with their frames, the "
