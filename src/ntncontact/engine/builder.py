@@ -37,7 +37,7 @@ from ..mesh.overlap import boundary_edges, deepest_overlap
 from ..mesh.quadmesh import MeshError, QuadMesh
 from ..mesh.quality import check_elements
 from .diagnostics import PhysicsWarning
-from .initial import warn_overridden_velocities
+from .initial import warn_overridden_velocities, warn_tied_velocities
 from .model import AleSetup, AnalysisSettings, Body, ContactInterface, Model, stack_bodies
 from .ties import Tie, TieError, held_on_edges, make_tie, pair_tie
 
@@ -262,6 +262,7 @@ def build_model(config: ScenarioConfig, base_dir: str | Path = ".") -> Model:
     model = Model(bodies, analysis, loads,
                   tuple(prescribed), X0, cells, assembler, interfaces, ale_bodies, ties)
     warn_overridden_velocities(model)
+    warn_tied_velocities(model)
     return model
 
 
