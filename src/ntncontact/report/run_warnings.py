@@ -298,13 +298,21 @@ def _contact_energy(summary: dict, static: bool) -> str | None:
     energy came from contact, which frictionless contact cannot give. Dynamic runs: the gap
     law (report 5.5). Static runs, where the gap law is the only one: pairs whose nodes do not
     face each other (a tester's press of a 7-element block on a 10-element base, both
-    Lagrangian: 0.0038 of the energy scale; 0 with matching nodes)."""
+    Lagrangian: 0.0038 of the energy scale; 0 with matching nodes). A persistency-law run
+    with ``gap_restoring`` was told the gap law did it and advised the law it had (a tester:
+    +20 %): that option is named instead when an interface that adds energy has it."""
     gain = summary.get("contact_work") or 0.0
     scale = _energy_scale(summary)
     if gain <= 0.0 or not scale or gain <= CONTACT_GAIN_WARNING * scale:
         return None
     cause = ("the gap law does so in a dynamic run (report 5.5); the persistency law, or "
              "method = \"lagrange\" with analysis.energy_conserving = true, conserves it")
+    restoring = _gap_restoring(summary)
+    if restoring:
+        cause = (f"gap_restoring = true ({', '.join(restoring)}) does so: a pair's first step "
+                 "closes its entry gap within that step (gdot + g/dt), pushing the bodies "
+                 "apart; without it the persistency law conserves the energy, and "
+                 "detection = \"predicted\" keeps the entry gaps small")
     unmet = summary.get("energy_equation_unmet_steps")
     if unmet:  # analysis.energy_conserving is on, and could not conserve at these steps
         cause = (f"report 5.5's energy equation had no root at {unmet} step(s) (summary.json "
@@ -317,6 +325,15 @@ def _contact_energy(summary: dict, static: bool) -> str | None:
                  "\"ale\") that moves its contact nodes onto their partners, remove it")
     return (f"the contact forces added {gain:.3g} to the bodies' energy "
             f"({gain / scale:.2g} of its scale; summary.json contact_work): {cause}")
+
+
+def _gap_restoring(summary: dict) -> list[str]:
+    """The interfaces that set ``gap_restoring`` under the persistency law, when no interface
+    uses the gap law (which would add energy itself)."""
+    setups = (summary.get("contact_setup") or {}).items()
+    if any(setup["law"] == "gap" for _, setup in setups):
+        return []
+    return [name for name, setup in setups if setup.get("gap_restoring")]
 
 
 def _contact_loss(summary: dict, static: bool) -> str | None:
@@ -341,15 +358,22 @@ def _contact_loss(summary: dict, static: bool) -> str | None:
 def _unreturned_energy(summary: dict) -> str | None:
     """The ALE remaps changed the total energy by more than their conservation could give
     back (summary.json ``ale_unreturned_energy``): the energy balance error then holds it,
-    and this names its cause."""
+    and this names its cause. Only the kinetic energy beyond each body's rigid motion can be
+    given back (``engine.remap_conservation.hand_over_energy`` keeps the momenta): a
+    tester's warning said "no Lagrangian body, or none with the kinetic energy" beside a
+    Lagrangian block with 60 times the 0.002 to hand over, all of it in its rigid motion."""
     unreturned = summary.get("ale_unreturned_energy") or 0.0
     scale = _energy_scale(summary)
     if not unreturned or not scale or abs(unreturned) <= UNRETURNED_WARNING * scale:
         return None
     return (f"the ALE remaps changed the total energy by {unreturned:.3g} "
             f"({unreturned / scale:.2g} of its scale) that no body's velocities could give "
-            "back (no Lagrangian body, or none with the kinetic energy, where it happened; "
-            "keep a body in motion Lagrangian): summary.json ale_unreturned_energy")
+            "back: the hand-over keeps each body's linear and angular momentum, so a body can "
+            "give only its kinetic energy beyond its rigid motion (its vibration), and no "
+            "body, ALE or Lagrangian, had enough of it where it happened (bodies that move "
+            "nearly rigidly have almost none, however fast they move or spin); keeping a "
+            "moving curved body Lagrangian (only its partner ALE) avoids such remaps: "
+            "summary.json ale_unreturned_energy")
 
 
 def _balance(summary: dict, static: bool) -> str | None:
