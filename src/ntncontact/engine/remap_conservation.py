@@ -106,7 +106,10 @@ def hand_over_energy(model: Model, time: float, X: NDArray, x: NDArray, v: NDArr
     corrections could not take out; negative: put in) taken from the velocities of one
     Lagrangian body, its momenta kept (the least mass-norm change): the bodies in contact
     with the ALE bodies (indices ``partners``) before any other, each group with the most
-    kinetic energy first. A supported ALE body nearly at rest cannot give back what its remap
+    kinetic energy first. Its momenta kept, a body can give only its kinetic energy beyond its
+    rigid motion: one moving or spinning nearly rigidly has almost none to give, however fast
+    (the unreturned-energy warning says so). A supported ALE body nearly at rest cannot give
+    back what its remap
     added to its strain energy: the disk drop's block when a third pair's node joins the
     dimple under the rolling disk (W + 1.17e-3, the block's K 1.12e-3), and the ledger gained
     it; the rolling disk gives the 7.6e-5 left (its nodal velocities change by at most 0.010,
