@@ -6,7 +6,9 @@
 - a persistency-law run with ``gap_restoring = true`` (+20 %) was told the gap law added the
   energy, and advised the persistency law it had;
 - ``ale.convection = "convective_term"`` (momentum off by 1.2 %, energy by 0.054) was told
-  the time integration did it.
+  the time integration did it;
+- the linear elastic rotation warning did not say that such a body, turned and deformed, does
+  not keep its angular momentum.
 """
 
 from __future__ import annotations
@@ -67,3 +69,13 @@ def test_the_convective_term_is_named_as_outside_the_ledger_with_the_momenta():
                                     outside_ledger=left_out))
     (line,) = [w for w in lines if "energy balance is off" in w]
     assert "convective term" in line and "linear and angular momentum" in line
+
+
+def test_the_linear_rotation_warning_says_the_angular_momentum_is_not_kept():
+    """Tester P: a linear elastic disk and block after an oblique impact drifted 16 % of |L0|
+    in 8 steps of free flight; the warning spoke of the stretch only."""
+    lines = result_warnings(summary(max_linear_elastic_rotation=0.673,
+                                    max_linear_elastic_rotation_at={"time": 0.4,
+                                                                    "body": "disk"}))
+    (line,) = [w for w in lines if "max_linear_elastic_rotation" in w]
+    assert "does not keep its angular momentum" in line
