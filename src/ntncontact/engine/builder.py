@@ -253,7 +253,8 @@ def build_model(config: ScenarioConfig, base_dir: str | Path = ".") -> Model:
                                 a.newton.inexact_augmentations,
                                 factor_precision=a.newton.factor_precision,
                                 energy_conserving=a.energy_conserving,
-                                integrator=a.integrator, field_format=a.field_format)
+                                integrator=a.integrator, field_format=a.field_format,
+                                contact_output=a.contact_output)
     fixed = np.unique(np.concatenate([p.dofs for p in prescribed] or [np.zeros(0, int)]))
     ties = tuple(_tie(t, i, bodies, fixed) for i, t in enumerate(config.tie))
     _check_ale_ties(ties, ale_bodies, bodies)

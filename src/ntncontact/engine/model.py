@@ -75,6 +75,8 @@ class AnalysisSettings:
     integrator: Literal["midpoint", "energy_momentum"] = "energy_momentum"
     #: field frames: "vtu" (PVD + VTU files) or "xdmf" (one XDMF + HDF5 time series)
     field_format: Literal["vtu", "xdmf"] = "vtu"
+    #: contact.csv's rows: every step's ("steps"), the field frames' steps' ("frames"), none
+    contact_output: Literal["steps", "frames", "none"] = "steps"
 
     def __post_init__(self) -> None:
         # the scenario validation says the same with the file and key; this guards the API

@@ -250,6 +250,9 @@ class AnalysisConfig(Strict):
     t_end: Positive
     mass: Literal["consistent", "lumped"] = "consistent"
     output_interval: Positive | None = None
+    #: which steps' pairs contact.csv keeps: every step's, those of the field frames, or
+    #: none (the summary's contact figures are taken from every step's pairs all the same)
+    contact_output: Literal["steps", "frames", "none"] = "steps"
     checkpoint_interval: Positive | None = None
     max_cutbacks: Annotated[int, Field(ge=0, le=20)] = 4
     newton: NewtonConfig = NewtonConfig()
