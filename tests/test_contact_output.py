@@ -24,7 +24,7 @@ ROD = EXAMPLES / "rod_impact.toml"  # dt 0.05, contact from step 2 (t = 0.05..0.
 SHORT = {"analysis.t_end": 0.6, "analysis.output_interval": 0.2}
 
 
-def run_rod(out: Path, contact_output: str | None, restart: bool = False,
+def run_rod(out: Path | None, contact_output: str | None, restart: bool = False,
             **extra: object) -> ntc.Results:
     """The short rod impact into ``out``; ``extra``: more overrides."""
     overrides = dict(SHORT, **extra)
@@ -152,3 +152,11 @@ def test_a_failed_run_writes_the_rows_of_its_last_frame(tmp_path, capsys, monkey
     assert frame_steps(out) == [0, 4, 6]
     steps = read_csv_table(out / "contact.csv")["step"]
     assert sorted(set(steps.tolist())) == [4, 6]
+
+
+def test_a_run_kept_in_memory_keeps_the_same_rows(runs):
+    """``ntncontact.run(out=None)`` thins its contact table as the folder's contact.csv."""
+    kept = run_rod(None, "frames")
+    assert sorted(set(kept.contact["step"].tolist())) == [4, 8, 12]
+    assert len(run_rod(None, "none").contact) == 0
+    assert kept.summary["contact_start_time"] == pytest.approx(0.05)
