@@ -126,11 +126,16 @@ def test_bodies_no_interface_joins_are_measured_and_warned(tmp_path, capsys):
 
 def test_tied_bodies_are_not_reported(tmp_path, capsys):
     """Tied bodies share their tied face (depth 0 on each other's boundary): a tied pair
-    moving together, pushed by the block's speed, reports nothing."""
+    moving together, pushed by the block's speed, reports no penetration. (The neighbour
+    starts at rest: the build warns that the tied nodes start 1 apart, a difference the tie
+    never removes.)"""
     summary, err, _ = run_two_bodies(tmp_path, capsys, "tied", speed=1.0, x2=0.5, joint=TIE)
     assert summary["max_penetration_off_surfaces"] == 0.0
     assert summary["max_penetration_off_surfaces_at"] is None
-    assert "warning" not in err
+    assert "went" not in err and "no [[contact]] joins" not in err
+    assert "its nodes start with velocities up to 1 apart" in err
+    assert "Give the tied parts the same initial.velocity" in err
+    assert "angular_velocity" not in err  # no part spins: no spin advice
 
 
 def test_bodies_apart_that_stay_apart_report_nothing(tmp_path, capsys):

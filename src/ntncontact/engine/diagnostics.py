@@ -196,14 +196,16 @@ def check_end_of_step(model: Model, x: NDArray, time: float) -> None:
 
 def named_failure(model: Model, err: BaseException) -> str:
     """The message of a step's failure; an inverted element found by the solve (numbered
-    globally), or by every trial of its line search, is also named by its body and its
-    number in that body."""
+    globally), or by every trial of its line search, is named once, by its body and its
+    number there (the global message with the body appended read "element 4 is inverted
+    ...: element 4 of body 'block'")."""
     inverted = err.__cause__ if isinstance(err, NewtonError) else err
     if isinstance(inverted, InvertedElementError) \
             and not isinstance(inverted, InvertedAtStepEnd) \
             and 0 <= inverted.element < len(model.cells):
         body = model.bodies[int(model.body_of_cell()[inverted.element])]
-        return f"{err}: element {inverted.element - body.cell_offset} of body '{body.name}'"
+        named = inverted.named(body.name, inverted.element - body.cell_offset)
+        return str(err).replace(str(inverted), named)
     columns = getattr(inverted, "columns", None)
     if columns is not None:
         return f"{err}{_singular_where(model, np.asarray(columns))}"

@@ -79,26 +79,33 @@ def warn_tied_velocities(model: Model) -> None:
     alternating velocity mode), a spurious kinetic energy for the whole run, in silence."""
     started = _rigid_velocities(model)
     _supports_prescribe(model, started)
-    centres = None
     for tie in model.ties:
         gap, node = _largest_velocity_difference(tie, started.reshape(-1))
         scale = max(float(np.abs(started[tie.nodes_1]).max(initial=0.0)), 1e-300)
         if gap <= 1e-9 * scale:
             continue
-        centres = centres or _mass_centres(model)
-        where = ", ".join(f"'{name}' {tuple(round(float(c), 6) for c in centres[name])}"
-                          for name in (tie.body_1, tie.body_2))
         at = tuple(round(float(c), 6) for c in model.X0[node])
         warnings.warn(
             f"tie '{tie.name}' (bodies '{tie.body_1}' and '{tie.body_2}'): its nodes start with "
             f"velocities up to {gap:.3g} apart (largest at the node at {at}); "
             "the tie holds their positions but never removes that difference, which stays in "
-            "the velocities and the kinetic energy for the whole run. Each body's "
-            "initial.angular_velocity spins it about its own centre of mass (here " + where +
-            "): for a common spin omega about the assembly's centre c, give each part the "
-            "same angular_velocity and velocity = v + omega x (c_part - c), i.e. "
-            "(v_x - omega (y_part - y_c), v_y + omega (x_part - x_c))",
-            PhysicsWarning, stacklevel=3)
+            "the velocities and the kinetic energy for the whole run. "
+            + _common_motion_advice(model, tie), PhysicsWarning, stacklevel=3)
+
+
+def _common_motion_advice(model: Model, tie: Tie) -> str:
+    """How to start tied parts as one body: the same initial velocity, or, where a part
+    spins, the velocities of one rigid spin about the assembly's centre."""
+    bodies = {body.name: body for body in model.bodies}
+    if not any(bodies[name].initial_angular_velocity for name in (tie.body_1, tie.body_2)):
+        return "Give the tied parts the same initial.velocity"
+    centres = _mass_centres(model)
+    where = ", ".join(f"'{name}' {tuple(round(float(c), 6) for c in centres[name])}"
+                      for name in (tie.body_1, tie.body_2))
+    return ("Each body's initial.angular_velocity spins it about its own centre of mass (here "
+            + where + "): for a common spin omega about the assembly's centre c, give each "
+            "part the same angular_velocity and velocity = v + omega x (c_part - c), i.e. "
+            "(v_x - omega (y_part - y_c), v_y + omega (x_part - x_c))")
 
 
 def _largest_velocity_difference(tie: Tie, vf: NDArray) -> tuple[float, int]:

@@ -25,7 +25,6 @@ from ..threads import serial_blas
 from .convection import convective_terms
 from .diagnostics import (
     Balance,
-    InvertedAtStepEnd,
     PenetrationCheck,
     SelfCrossingCheck,
     StepCrossingCheck,
@@ -80,20 +79,6 @@ def _static_dissipation(result, used: PairState, x_start: NDArray) -> float:
     start = used.t_T[slip] * 0.5 * (back + ahead)
     mean = 0.5 * (start + result.t_T[slip] * result.length[slip]) * result.slip_measure[slip]
     return float(np.sum(np.maximum(mean, 0.0)))
-
-
-def _failure_text(model: Model, err: BaseException) -> str:
-    """:func:`named_failure`, but an element that the solve found inverted (numbered
-    globally) is named once, by its body and its number there: the global message with the
-    body appended read "element 4 is inverted ...: element 4 of body 'block'"."""
-    inverted = err.__cause__ if isinstance(err, NewtonError) else err
-    if isinstance(inverted, InvertedElementError) \
-            and not isinstance(inverted, InvertedAtStepEnd) \
-            and 0 <= inverted.element < len(model.cells):
-        body = model.bodies[int(model.body_of_cell()[inverted.element])]
-        named = inverted.named(body.name, inverted.element - body.cell_offset)
-        return str(err).replace(str(inverted), named)
-    return named_failure(model, err)
 
 
 def _last_attempt(step_start: float, start: float, h: float, halvings: int) -> str:
@@ -856,7 +841,7 @@ class Simulation:
                     raise SimulationError(
                         f"step {self.state.step + 1} (t = {self.state.time:.6g} -> "
                         f"{self.state.time + dt:.6g}) failed after {cuts - 1} halvings of the "
-                        f"step: {_failure_text(self.model, err)}"
+                        f"step: {named_failure(self.model, err)}"
                         f"{_last_attempt(self.state.time, state.time, h, cuts - 1)}"
                     ) from err
                 self._step_work = before
