@@ -70,8 +70,10 @@ def _kept_where_they_face(x: NDArray, ci: ContactInterface, state: PairState) ->
     an ALE partner follows its node (the mesh motion), so ALE pairs keep their partners.
     Released too where the pair's normal no longer faces its partner's (``contact.facing``):
     a tester's spinning disk rolled away from a block with a pair held 0.66 apart, its
-    persistency-law gap frozen and its force pushing on, and a spinning ring was dented by
-    pairs 2.2 apart."""
+    persistency-law gap frozen and its force pushing on. Not released by their opening: a
+    pair entered early by predicted detection holds an opening up to the approach speed
+    times dt, which a release at half the partner's chord cut (a tester's rods then touched
+    every other step and went 0.5 through each other with the penalty method)."""
     if len(state) == 0:
         return state
     pairing = closest_pairs(x, ci.interface, state.pairs[:, 0])
@@ -81,25 +83,9 @@ def _kept_where_they_face(x: NDArray, ci: ContactInterface, state: PairState) ->
         partners = np.where(moved, pairing.node2, state.pairs[:, 1])
         state = replace(state, pairs=np.column_stack([state.pairs[:, 0], partners]))
     # a pair whose normal has turned away from its partner's is no contact either (a
-    # spinning disk's node kept pressing a block it had rolled away from), nor one open by
-    # more than the partner's chord
+    # spinning disk's node kept pressing a block it had rolled away from)
     return state.take(~beyond_ends(x, ci.interface, pairing)
-                      & facing(x, ci.interface, state.pairs)
-                      & ~_wide_open(x, ci, state.pairs))
-
-
-def _wide_open(x: NDArray, ci: ContactInterface, pairs: NDArray) -> NDArray[np.bool_]:
-    """Which pairs are open by more than half their partner node's chord (the partner's two
-    segments): bodies that far apart touch nowhere near the pair. The persistency law holds
-    the gap a pair has when its traction is positive, and a spinning ring rolling off its
-    obstacle kept pairs pressed across openings of 0.3-0.67 (3-7 spacings), their forces
-    denting the ring; releasing at a tenth of a spacing chattered (docs/examples.md,
-    "Detection lag"). The same persistency law holds openings up to the approach speed times
-    dt when a pair enters early (``max_separation_under_traction`` warns from a tenth)."""
-    s2 = ci.interface.surface2
-    k = s2.index_of(pairs[:, 1])
-    chord = np.linalg.norm(x[s2.next[k]] - x[s2.prev[k]], axis=1)
-    return pair_gaps(x, ci.interface, pairs)[1] < -0.5 * chord
+                      & facing(x, ci.interface, state.pairs))
 
 
 def _candidates(x: NDArray, v: NDArray, dt: float, ci: ContactInterface, state: PairState,
