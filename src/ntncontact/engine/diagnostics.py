@@ -12,11 +12,9 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.spatial import cKDTree
 
 from ..fem.loads import dirichlet_values
 from ..fem.q4 import DN_GP, InvertedElementError, shape_gradients
-from ..mesh.boundary import chain_edge_lengths
 from ..mesh.overlap import (
     boundary_edges,
     deepest_overlap,
@@ -442,84 +440,6 @@ class SelfCrossingCheck:
                 worst = SelfPenetration(found.depth, body.name, int(boundary[found.point]),
                                         size)
         return worst
-
-
-@dataclass(frozen=True)
-class StepCrossing:
-    """The surface-1 node that moved farthest, relative to its nearest surface-2 node and
-    along that node's normal, in one step, as a multiple of the partner surface's local
-    spacing (ratio 0.0 and no node when no node could reach its partner)."""
-
-    ratio: float = 0.0
-    interface: str = ""
-    node: int = -1  # global, as in contact.csv
-    displacement: float = 0.0  # the relative step displacement along the partner's normal
-    spacing: float = 1.0  # the partner surface's spacing at the nearest node (reference)
-
-
-class StepCrossingCheck:
-    """Finds a step in which a surface-1 node moved, relative to its nearest surface-2 node
-    at the step's start and along that node's normal, farther than the partner surface's
-    spacing there, while it was within reach (nearer than that move): the node may have
-    crossed the partner between two detections (summary.json ``max_contact_step``). A
-    tester's disk at vy = -20 with dt 0.015 (100 times the dt rule) moved 0.3 in one step,
-    through a plate 0.05 thick with spacing 0.05, and ended below it: contact detects at step
-    ends, so the run completed with ``max_penetration`` 0.0 and no word. Along the normal
-    only: an ALE partner's nodes slide along the surface (the disk drop's block: a node 1.2
-    spacings a step, relative to the disk), which crosses nothing. The examples' largest
-    ratio is 0.11 (the fast-sliding blocks; ring impact 0.05, disk drop 0.027). Measured cost
-    (CPU): 0.08 ms a step on the ring impact (0.3 % of its 21-25 ms step), one k-d tree of
-    the partner surface per interface."""
-
-    def __init__(self, model: Model) -> None:
-        # (name, surface-1 nodes, surface-2 chain, whether closed, spacing at each chain node)
-        self._tests = []
-        for ci in model.interfaces:
-            s1, s2 = ci.interface.surface1, ci.interface.surface2
-            self._tests.append((ci.name, np.unique(s1.nodes), np.asarray(s2.nodes), s2.closed,
-                                _node_spacing(model.X0[s2.nodes], s2.closed)))
-
-    def largest(self, x_start: NDArray, x_end: NDArray) -> StepCrossing:
-        """The largest such ratio over a step from ``x_start`` to ``x_end``."""
-        worst = StepCrossing()
-        for name, nodes_1, nodes_2, closed, spacing in self._tests:
-            distance, near = cKDTree(x_start[nodes_2]).query(x_start[nodes_1])
-            move = ((x_end[nodes_1] - x_start[nodes_1])
-                    - (x_end[nodes_2[near]] - x_start[nodes_2[near]]))
-            normal = _chain_normals(x_start[nodes_2], closed)[near]
-            step = np.abs(np.sum(move * normal, axis=1))
-            ratio = np.where(distance <= step, step / spacing[near], 0.0)
-            k = int(np.argmax(ratio))
-            if ratio[k] > worst.ratio:
-                worst = StepCrossing(float(ratio[k]), name, int(nodes_1[k]), float(step[k]),
-                                     float(spacing[near[k]]))
-        return worst
-
-
-def _chain_normals(xy: NDArray, closed: bool) -> NDArray:
-    """Unit normals (either sense) of a surface chain at its nodes, from the chord between
-    each node's neighbours (an open chain's ends: their one edge)."""
-    if closed:
-        chord = np.roll(xy, -1, axis=0) - np.roll(xy, 1, axis=0)
-    else:
-        after = np.concatenate((xy[1:], xy[-1:]))
-        before = np.concatenate((xy[:1], xy[:-1]))
-        chord = after - before
-    length = np.hypot(chord[:, 0], chord[:, 1])[:, None]
-    return np.column_stack([-chord[:, 1], chord[:, 0]]) / np.where(length > 0.0, length, 1.0)
-
-
-def _node_spacing(xy: NDArray, closed: bool) -> NDArray:
-    """Per node of a surface chain, the mean length of its edges (an open chain's ends: their
-    one edge)."""
-    lengths = chain_edge_lengths(xy, closed)
-    if closed:
-        return 0.5 * (lengths + np.roll(lengths, 1))
-    if lengths.size == 0:
-        return np.ones(len(xy))
-    before, after = np.concatenate(([lengths[0]], lengths)), np.concatenate((lengths,
-                                                                           [lengths[-1]]))
-    return 0.5 * (before + after)
 
 
 def _boxes_meet(boxes: dict, body, partner, x: NDArray, outline: dict) -> bool:

@@ -27,7 +27,6 @@ from .diagnostics import (
     Balance,
     PenetrationCheck,
     SelfCrossingCheck,
-    StepCrossingCheck,
     SurfaceTwoCheck,
     UnpairedCheck,
     balance,
@@ -267,7 +266,6 @@ class Simulation:
         self._unpaired = UnpairedCheck(model) if model.interfaces else None
         self._surface_2 = SurfaceTwoCheck(model) if model.interfaces else None
         self._self_crossing = SelfCrossingCheck(model)
-        self._step_crossing = StepCrossingCheck(model) if model.interfaces else None
         # the energy-conserving solve (report 5.5) starts from each augmentation's exact one
         self._early_ratio = (0.0 if model.analysis.energy_conserving
                              else model.analysis.newton_inexact_augmentations)
@@ -891,12 +889,10 @@ class Simulation:
             # target times k dt (not accumulated sums) so output times are exact
             t_next = min((k + 1) * analysis.dt, analysis.t_end)
             dt = t_next - self.state.time
-            start = self.state.x
             self.state, its, self._last_substep = self.step_with_cutback(dt)
             self.state = replace(self.state, time=t_next)
             extra = (self._ledger_extra() | self._contact_extra() | self._penetration_extra()
-                     | self._crossing_extra(start) | self._tie_extra() | self._last_reactions
-                     | {"cut_back": self._cut_back})
+                     | self._tie_extra() | self._last_reactions | {"cut_back": self._cut_back})
             self._notify(StepRecord(self.state, self.balance(self.state), its, dt, extra))
             if progress is not None:
                 progress(self.state.time)
@@ -985,14 +981,6 @@ class Simulation:
             extra["penetration_surface_2_at"] = self._surface_2.deepest(self.state.x)
         extra["self_penetration_at"] = self._self_crossing.deepest(self.state.x)
         return extra
-
-    def _crossing_extra(self, start: NDArray) -> dict:
-        """The step's surface-1 node that moved farthest relative to its nearest surface-2
-        node, against that surface's spacing (``diagnostics.StepCrossingCheck``): a body may
-        have passed through its partner between two detections."""
-        if self._step_crossing is None:
-            return {}
-        return {"step_crossing_at": self._step_crossing.largest(start, self.state.x)}
 
     def _tie_extra(self) -> dict:
         """History columns of the ties: the resultant force each transmits to body 1 over the

@@ -114,7 +114,6 @@ class ResultWriter:
                              "max_penetration_unpaired_at": None,
                              "max_penetration_surface_2": 0.0,
                              "max_penetration_surface_2_at": None,
-                             "max_contact_step": 0.0, "max_contact_step_at": None,
                              "max_separation_under_traction": 0.0,
                              "max_separation_under_traction_at": None,
                              **OFF_SURFACE_SUMMARY, "ale_unreturned_energy": 0.0,
@@ -225,7 +224,6 @@ class ResultWriter:
         fields |= self._surface_2_summary(s.time, record.extra.get("penetration_surface_2_at"),
                                           summary)
         fields |= self._self_summary(s.time, record.extra.get("self_penetration_at"), summary)
-        fields |= self._crossing_summary(s.time, record.extra.get("step_crossing_at"), summary)
         framed = self._due(s.time, model)  # before the rows: "frames" keeps those steps'
         rows = record.extra.get("contact_rows")
         if rows is not None and len(rows["node_1"]):
@@ -356,20 +354,6 @@ class ResultWriter:
                                                  "file_node": self._file_node(found.node),
                                                  "element_size":
                                                      self._spacing[found.interface]}}
-
-    def _crossing_summary(self, time: float, found, summary: dict) -> dict:
-        """The largest step displacement of a surface-1 node relative to its nearest surface-2
-        node so far, as a multiple of that surface's spacing there, and where
-        (``engine.diagnostics.StepCrossingCheck``): above 1, the node may have passed through
-        its partner between two detections."""
-        if found is None or found.ratio <= (summary.get("max_contact_step") or 0.0):
-            return {}
-        return {"max_contact_step": found.ratio,
-                "max_contact_step_at": {"time": time, "interface": found.interface,
-                                        "node": found.node,
-                                        "file_node": self._file_node(found.node),
-                                        "displacement": found.displacement,
-                                        "element_size": found.spacing}}
 
     def _self_summary(self, time: float, found, summary: dict) -> dict:
         """The deepest boundary node inside its own body so far, and where

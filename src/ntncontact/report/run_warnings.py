@@ -32,11 +32,6 @@ SELF_PENETRATION_WARNING = 0.01
 #: 18 of 30)
 CUT_BACK_SHARE = 0.25
 
-#: a surface-1 node that moved more than this many of its partner surface's spacings in one
-#: step, relative to its nearest partner node and within reach of it, may have crossed the
-#: partner unseen (the examples: 0.11 at most; a tester's disk through a thin plate: 6)
-CONTACT_STEP_WARNING = 1.0
-
 #: an ALE node ending farther than this fraction of the surface spacing from its partner's
 #: place is a pair the mesh motion did not follow: ~1e-9 of it where the motion follows
 MISMATCH_WARNING = 0.1
@@ -83,8 +78,7 @@ def result_warnings(summary: dict, static: bool | None = None) -> list[str]:
              _contact_energy(summary, static), _contact_loss(summary, static),
              _balance(summary, static),
              _penetration(summary, static), _unpaired(summary, static),
-             _surface_2(summary, static), _self_crossing(summary), _tunnelling(summary),
-             _opening(summary),
+             _surface_2(summary, static), _self_crossing(summary), _opening(summary),
              _mismatch(summary),
              _linear_rotation(summary), _cut_backs(summary))
     return [line for line in found if line]
@@ -215,28 +209,6 @@ def _self_crossing(summary: dict) -> str | None:
             "max_self_penetration). Self contact is not modelled, so the results are not "
             f"physical from t = {at['first_time']:.6g} on (the first step that found a "
             "crossing)")
-
-
-def _tunnelling(summary: dict) -> str | None:
-    """A surface-1 node moved, in one step and relative to its nearest surface-2 node within
-    reach, more than CONTACT_STEP_WARNING times the partner surface's spacing (summary.json
-    ``max_contact_step``): contact detects at the steps' ends, so a body can pass through a
-    thin partner between two of them (a tester's disk through a plate, dt 100 times the
-    rule: completed, no penetration reported, no word)."""
-    at = summary.get("max_contact_step_at")
-    ratio = summary.get("max_contact_step") or 0.0
-    if not at or ratio <= CONTACT_STEP_WARNING:
-        return None
-    setup = _setup(summary, at["interface"]) or {}
-    cures = "a smaller analysis.dt (docs/scenarios.md gives its bound)"
-    if setup.get("detection") == "penetration":
-        cures += (f", or contact.{setup['index']}.detection = \"predicted\" (tests x + dt v, "
-                  "which sees a crossing within the step)")
-    return (f"node {_node(at)} of interface '{at['interface']}' moved {at['displacement']:.3g} "
-            f"in one step relative to its nearest surface_2 node ({ratio:.2g} times that "
-            f"surface's spacing, t = {at['time']:.6g}; summary.json max_contact_step): contact "
-            "is detected at the steps' ends, so the bodies may have passed through each other "
-            f"unseen (tunnelling) and contact been missed: {cures}")
 
 
 def _cut_backs(summary: dict) -> str | None:
