@@ -80,7 +80,7 @@ def result_warnings(summary: dict, static: bool | None = None) -> list[str]:
              _penetration(summary, static), _unpaired(summary, static),
              _surface_2(summary, static), _self_crossing(summary), _opening(summary),
              _mismatch(summary),
-             _linear_rotation(summary), _cut_backs(summary))
+             _linear_rotation(summary, static), _cut_backs(summary))
     return [line for line in found if line]
 
 
@@ -254,21 +254,23 @@ def _opening(summary: dict) -> str | None:
             f"{cause}")
 
 
-def _linear_rotation(summary: dict) -> str | None:
+def _linear_rotation(summary: dict, static: bool) -> str | None:
     """An element of a linear elastic body turned by more than ROTATION_WARNING (summary.json
-    ``max_linear_elastic_rotation``): the stretch, and the angular momentum, which a body
-    that turns and deforms does not keep (small strain is not objective)."""
+    ``max_linear_elastic_rotation``): the stretch, and in a dynamic run the angular momentum,
+    which a body that turns and deforms does not keep (small strain is not objective)."""
     at = summary.get("max_linear_elastic_rotation_at")
     angle = summary.get("max_linear_elastic_rotation") or 0.0
     if not at or angle <= ROTATION_WARNING:
         return None
+    momentum = ("" if static else
+                ", and a body that turns and deforms does not keep its angular momentum (its "
+                "stress is not rotated with it: a tester's linear disk drifted 16 % of |L0| in "
+                "8 steps of free flight after an impact)")
     return (f"an element of the linear elastic body '{at['body']}' turned by {angle:.3g} rad "
             f"(t = {at['time']:.6g}; summary.json max_linear_elastic_rotation): small-strain "
             f"elasticity reads a rotation as a stretch of 1 - cos = {1 - math.cos(angle):.2g} "
-            "without stress, and a body that turns and deforms does not keep its angular "
-            "momentum (its stress is not rotated with it: a tester's linear disk drifted 16 % "
-            "of |L0| in 8 steps of free flight after an impact); model = \"neo_hookean\" is "
-            "valid for any rotation and keeps it")
+            f"without stress{momentum}; model = \"neo_hookean\" is valid for any rotation"
+            + ("" if static else " and keeps it"))
 
 
 def _mismatch(summary: dict) -> str | None:

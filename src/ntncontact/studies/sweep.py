@@ -59,7 +59,8 @@ REDUCTIONS: dict[str, Callable[[np.ndarray], float]] = {
 #: summary.json values copied into every sweep.csv row (where the run has them)
 HEADLINE = ("status", "steps", "wall_time_s", "cpu_time_s", "energy_initial", "energy_final",
             "energy_max_relative_variation", "contact_start_time", "contact_end_time",
-            "max_penetration", "max_active_pairs", "max_penetration_off_surfaces")
+            "max_penetration", "max_active_pairs", "max_penetration_off_surfaces",
+            "max_penetration_surface_2", "max_self_penetration", "cut_back_steps")
 
 #: Dask settings of the LocalCluster a sweep starts (docs/api.md, "Where it runs"). Its
 #: periodic work otherwise costs ~7 % of a core-second per worker-second of a running case
