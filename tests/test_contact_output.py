@@ -128,30 +128,43 @@ def test_a_restart_keeps_the_frames_rows(tmp_path, runs):
     assert frame_steps(out) == frame_steps(runs["frames"])
 
 
-def test_a_failed_run_writes_the_rows_of_its_last_frame(tmp_path, capsys, monkeypatch):
-    """A run that stops between frames writes a frame of its last completed step; with
-    "frames", that frame's pairs are in contact.csv too."""
+def fail_from_the_seventh_step(monkeypatch) -> None:
     from ntncontact.engine.simulation import Simulation
 
     advance = Simulation.advance
     calls = []
 
-    def fail_from_the_seventh(self, *args, **kwargs):
+    def failing(self, *args, **kwargs):
         calls.append(1)
         if len(calls) >= 7:
             raise RuntimeError("no convergence (a stand-in)")
         return advance(self, *args, **kwargs)
 
-    monkeypatch.setattr(Simulation, "advance", fail_from_the_seventh)
+    monkeypatch.setattr(Simulation, "advance", failing)
+
+
+def test_a_failed_runs_last_frame_adds_no_rows_and_a_restart_drops_it(tmp_path, capsys,
+                                                                       monkeypatch, runs):
+    """A run that stops between frames writes a frame of its last completed step (6), off
+    the output schedule: it adds no contact.csv rows under "frames", and a restart from that
+    step's checkpoint drops it, so the restarted run's files are the uninterrupted run's (a
+    tester's restart kept the extra step's rows and its VTU file)."""
     out = tmp_path / "rod"
-    sets = [item for key, value in {**SHORT, "analysis.contact_output": '"frames"'}.items()
-            for item in ("--set", f"{key}={value}")]
-    assert main(["run", str(ROD), "--out", str(out), "--quiet", *sets]) == 1
+    every_step = {**SHORT, "analysis.contact_output": '"frames"',
+                  "analysis.checkpoint_interval": 0.05}
+    sets = [item for key, value in every_step.items() for item in ("--set", f"{key}={value}")]
+    with monkeypatch.context() as patch:
+        fail_from_the_seventh_step(patch)
+        assert main(["run", str(ROD), "--out", str(out), "--quiet", *sets]) == 1
     data = json.loads((out / "summary.json").read_text())
     assert data["status"] == "failed" and data["steps"] == 6
     assert frame_steps(out) == [0, 4, 6]
-    steps = read_csv_table(out / "contact.csv")["step"]
-    assert sorted(set(steps.tolist())) == [4, 6]
+    assert sorted(set(read_csv_table(out / "contact.csv")["step"].tolist())) == [4]
+    assert main(["run", str(ROD), "--out", str(out), "--quiet", "--restart", *sets]) == 0
+    assert (out / "contact.csv").read_bytes() == (runs["frames"] / "contact.csv").read_bytes()
+    assert frame_steps(out) == frame_steps(runs["frames"])
+    frames = sorted(path.name for path in (out / "fields").glob("*.vtu"))
+    assert frames == sorted(path.name for path in (runs["frames"] / "fields").glob("*.vtu"))
 
 
 def test_a_run_kept_in_memory_keeps_the_same_rows(runs):

@@ -431,26 +431,19 @@ class ResultWriter:
         an interrupted or failed run keeps the fields where it stopped (a tester's 48k-element
         run stopped at step 16 had frames up to step 10 only, ~10 s of compute lost). One
         frame, and best effort: a second signal (KeyboardInterrupt) or an error of its own
-        (the full disk that failed the run) gives it up, and the files are closed anyway."""
+        (the full disk that failed the run) gives it up, and the files are closed anyway.
+        Off the output schedule, so it adds no contact.csv rows under contact_output =
+        "frames", and a restart drops it: the restarted run's files are the uninterrupted
+        run's (a tester's restart kept the extra step's rows and its VTU file)."""
         last = self._last
         if last is None or last.state.step == self._framed_step:
             return
         try:
             self._write_fields(self.model, last, self._before)
-            self._write_framed_rows(last)
             if self.results.fields is not None and hasattr(self.results.fields, "flush"):
                 self.results.fields.flush()  # its error here, not in place of the run's
         except BaseException:  # noqa: BLE001 - the summary must still be written
             return
-
-    def _write_framed_rows(self, record: StepRecord) -> None:
-        """The contact rows of a step framed after the fact (an interrupted or failed run's
-        last step), when contact.csv keeps the frames' steps: the frame's pairs are then
-        in contact.csv as at every other frame."""
-        rows = record.extra.get("contact_rows")
-        if (self.model.analysis.contact_output == "frames" and rows is not None
-                and len(rows["node_1"])):
-            self.results.contact.write_step(record.state.step, record.state.time, rows)
 
     def _mesh_quality(self) -> dict:
         """Table 4.1 statistics of each body's current mesh (node positions x) at the end."""

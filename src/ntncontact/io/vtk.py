@@ -151,11 +151,14 @@ class VtuSeriesWriter:
 
     def resume(self, step: int, entries: Sequence[Sequence]) -> None:
         """A restart after output step ``step``: list ``entries`` (time, relative path, as
-        :attr:`entries` gave them at the checkpoint) and remove the frames of later steps."""
+        :attr:`entries` gave them at the checkpoint) and remove the frames of later steps, and
+        those the entries do not list: an interrupted run's frame of its last step, off the
+        schedule, when that step is the checkpoint's."""
         self._entries = [(float(time), str(relative)) for time, relative in entries]
+        listed = {Path(relative).name for _, relative in self._entries}
         for frame in self.vtu_directory.glob(f"{self.name}_*.vtu"):
             number = frame.stem.rsplit("_", 1)[-1]
-            if number.isdigit() and int(number) > step:
+            if number.isdigit() and (int(number) > step or frame.name not in listed):
                 frame.unlink()
         for leftover in self.vtu_directory.glob(f".{self.name}_*.tmp"):  # a kill mid-write
             leftover.unlink()
