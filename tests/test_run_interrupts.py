@@ -103,6 +103,10 @@ def test_a_lock_left_by_a_run_killed_during_its_build_reads_stale(tmp_path, caps
     (out / LOCK_FILE).unlink()
     assert main(["status", str(out)]) == 1  # no lock, no summary: no run
     assert "no summary.json" in capsys.readouterr().err
+    # a folder that is not there is named as such (a tester's typo read "holds no run")
+    assert main(["status", str(out / "typo")]) == 1
+    err = capsys.readouterr().err
+    assert "typo does not exist" in err and "holds no run" not in err
 
 
 def test_the_lock_phase_is_rewritten_whole(tmp_path):

@@ -86,7 +86,7 @@ def test_overwrite_removes_only_what_a_run_writes(tmp_path):
 def test_the_status_command_reports_a_finished_run(tmp_path, capsys):
     out = tmp_path / "spin"
     assert main(["status", str(out)]) == 1
-    assert "no summary.json" in capsys.readouterr().err
+    assert "spin does not exist" in capsys.readouterr().err  # not yet run: no folder
     assert run_spin(out) == 0
     capsys.readouterr()
     assert main(["status", str(out)]) == 0

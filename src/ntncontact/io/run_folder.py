@@ -318,6 +318,8 @@ def _read_json(path: Path) -> dict[str, Any]:
     try:
         return json.loads(path.read_text(encoding="utf-8"))
     except FileNotFoundError:
+        if not path.parent.is_dir():  # a mistyped folder is not "a folder without a run"
+            raise RunFolderError(f"{path.parent} does not exist") from None
         raise RunFolderError(f"{path.parent} holds no run (no summary.json)") from None
 
 
