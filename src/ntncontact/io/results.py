@@ -219,10 +219,10 @@ class ResultWriter:
         fields |= self._off_surface_summary(
             s.time, record.extra.get("penetration_off_surfaces_at"), summary)
         fields |= self._mismatch_summary(s.time, row.get("ale_mismatch", 0.0), summary)
-        fields |= self._unpaired_summary(s.time, record.extra.get("penetration_unpaired_at"),
-                                         summary)
-        fields |= self._surface_2_summary(s.time, record.extra.get("penetration_surface_2_at"),
-                                          summary)
+        for key, found in (("max_penetration_unpaired", "penetration_unpaired_at"),
+                           ("max_penetration_surface_2", "penetration_surface_2_at")):
+            fields |= self._interface_depth_summary(key, s.time, record.extra.get(found),
+                                                    summary)
         fields |= self._self_summary(s.time, record.extra.get("self_penetration_at"), summary)
         framed = self._due(s.time, model)  # before the rows: "frames" keeps those steps'
         rows = record.extra.get("contact_rows")
@@ -332,28 +332,18 @@ class ResultWriter:
                 "max_ale_mismatch_at": {"time": time,
                                         "element_size": min(self._spacing.values())}}
 
-    def _unpaired_summary(self, time: float, found, summary: dict) -> dict:
-        """The deepest contact-surface node in no pair inside its partner body so far, and
-        where (``engine.diagnostics.UnpairedCheck``), with its interface's surface spacing."""
-        if found is None or found.depth <= (summary.get("max_penetration_unpaired") or 0.0):
+    def _interface_depth_summary(self, key: str, time: float, found, summary: dict) -> dict:
+        """``key`` and ``key_at``: the deepest node so far that an interface's check found
+        inside a body, and where, with the interface's surface spacing: the surface-1 nodes
+        in no pair (``max_penetration_unpaired``, ``engine.diagnostics.UnpairedCheck``) and
+        the surface-2 nodes inside surface 1's body (``max_penetration_surface_2``,
+        ``SurfaceTwoCheck``)."""
+        if found is None or found.depth <= (summary.get(key) or 0.0):
             return {}
-        return {"max_penetration_unpaired": found.depth,
-                "max_penetration_unpaired_at": {"time": time, "interface": found.interface,
-                                                "node": found.node, "depth": found.depth,
-                                                "file_node": self._file_node(found.node),
-                                                "element_size": self._spacing[found.interface]}}
-
-    def _surface_2_summary(self, time: float, found, summary: dict) -> dict:
-        """The deepest surface-2 node inside its interface's surface-1 body so far, and where
-        (``engine.diagnostics.SurfaceTwoCheck``), with the interface's surface spacing."""
-        if found is None or found.depth <= (summary.get("max_penetration_surface_2") or 0.0):
-            return {}
-        return {"max_penetration_surface_2": found.depth,
-                "max_penetration_surface_2_at": {"time": time, "interface": found.interface,
-                                                 "node": found.node, "depth": found.depth,
-                                                 "file_node": self._file_node(found.node),
-                                                 "element_size":
-                                                     self._spacing[found.interface]}}
+        return {key: found.depth,
+                f"{key}_at": {"time": time, "interface": found.interface, "node": found.node,
+                              "depth": found.depth, "file_node": self._file_node(found.node),
+                              "element_size": self._spacing[found.interface]}}
 
     def _self_summary(self, time: float, found, summary: dict) -> dict:
         """The deepest boundary node inside its own body so far, and where
