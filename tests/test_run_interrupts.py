@@ -215,3 +215,24 @@ def test_a_run_whose_stderr_is_not_a_terminal_prints_progress_lines(tmp_path, ca
     monkeypatch.setattr(cli, "PROGRESS_INTERVAL", 0.0, raising=False)
     assert main(["run", str(SPIN), "--out", str(tmp_path / "quiet"), "--quiet", *SHORT]) == 0
     assert "step" not in capsys.readouterr().err
+
+
+def test_an_interrupted_run_prints_the_warnings_of_its_steps(tmp_path, capsys, monkeypatch):
+    """A tester's run stopped with Ctrl-C printed none of the warnings its summary called for
+    (a failed run printed them). The summary's warnings stand in for a real one here: which
+    lines a summary calls for is ``report.run_warnings``' own test."""
+    from ntncontact.report import run_warnings
+
+    seen = []
+
+    def one_warning(summary, static):
+        seen.append(summary["steps"])
+        return ["a stand-in warning"]
+
+    monkeypatch.setattr(run_warnings, "result_warnings", one_warning)
+    stop_at_call(monkeypatch, 4, lambda: os.kill(os.getpid(), signal.SIGINT))
+    out = tmp_path / "spin"
+    assert main(["run", str(SPIN), "--out", str(out), "--quiet", *SPARSE]) == 130
+    err = capsys.readouterr().err
+    assert "warning: a stand-in warning" in err
+    assert seen == [summary(out)["steps"]] and seen[0] >= 3

@@ -235,16 +235,17 @@ class ProgressLines:
 @contextlib.contextmanager
 def _finished_on_error(writer, stop: StopOnSignal, static: bool):
     """An exception before the time loop took over (a signal during start-up): the summary
-    says so too (after the time loop, ``writer.on_finish`` does nothing). A failed run's
-    warnings are printed before its error: a tester's gap-law runs whose energy grew 37 and
-    206 times until an element inverted showed only the inversion."""
+    says so too (after the time loop, ``writer.on_finish`` does nothing). A failed or
+    interrupted run's warnings are printed before its error: a tester's gap-law runs whose
+    energy grew 37 and 206 times until an element inverted showed only the inversion, and a
+    run stopped with Ctrl-C showed none of the penetrations its summary held."""
     try:
         yield
     except BaseException as err:
         interrupted = stop.signum is not None or isinstance(err, KeyboardInterrupt)
         writer.on_finish("interrupted" if interrupted else "failed",
                          stop.reason() or str(err) or "interrupted by the user")
-        if not interrupted and isinstance(err, Exception):
+        if interrupted or isinstance(err, Exception):
             _warn_results(writer.results.summary.data, static)
         raise
 
