@@ -216,16 +216,26 @@ def _friction_hint(model: Model, err: BaseException) -> str:
     cut-backs: |R| 2e4 after 40 iterations at step 10 with penalty_tangential 1e6, by either
     method, and it converges with 1e5; a tester's Cattaneo-Mindlin case with exact normal
     multipliers cycled between |R| 0.5 and 300, where the augmented Lagrangian converged:
-    the multipliers move the Coulomb cap mu t_N at every iteration)."""
+    the multipliers move the Coulomb cap mu t_N at every iteration). A tangential penalty
+    below :data:`SOFT_TANGENTIAL` of the normal one is not called stiff (a tester's 0.01 was)."""
     frictional = [ci for ci in model.interfaces if ci.law.frictional]
     if not isinstance(err, NewtonError) or not frictional:
         return ""
     ci = frictional[0]
-    exact = (", or method = \"augmented_lagrangian\" (its cap moves between augmentations "
-             "only)" if ci.law.method == "lagrange" else "")
-    return (f" (interface '{ci.name}' has friction: with a stiff penalty_tangential "
-            f"({ci.law.eps_T:.3g}) the pairs' stick and slip can cycle in Newton; a softer one"
-            f"{exact} may converge)")
+    if ci.law.method == "lagrange":  # no normal penalty to measure eps_T against
+        cure = ("the exact normal multipliers move the Coulomb cap at every iteration; "
+                "method = \"augmented_lagrangian\" (its cap moves between augmentations "
+                f"only), or a softer penalty_tangential ({ci.law.eps_T:.3g}), may converge")
+    elif ci.law.eps_T >= SOFT_TANGENTIAL * ci.law.eps_N:
+        cure = (f"with a stiff penalty_tangential ({ci.law.eps_T:.3g}) the pairs' stick "
+                "and slip can cycle in Newton; a softer one may converge")
+    else:
+        return ""
+    return f" (interface '{ci.name}' has friction: {cure})"
+
+
+#: A tangential penalty below this fraction of the normal one is soft for ``_friction_hint``.
+SOFT_TANGENTIAL = 0.01
 
 
 def _singular_where(model: Model, columns: NDArray) -> str:
