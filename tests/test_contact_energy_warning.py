@@ -193,3 +193,22 @@ def test_the_penalty_dashpot_s_loss_is_named(tmp_path, capsys):
     assert "warning: the contact forces took" in err and "is a dashpot" in err
     _, err = run_example("rod_impact.toml", tmp_path / "al", capsys, "analysis.t_end=2.5")
     assert "dashpot" not in err
+
+
+@pytest.mark.parametrize(("ale_2", "cause"), [(True, "load steps"), (False, "non-matching")])
+def test_a_static_gain_names_the_load_steps_where_a_body_is_ale(ale_2, cause):
+    """The report's Hertz cylinder (ALE foundation) loaded and unloaded to zero gained 6,599
+    of contact work by the trapezoid rule over its load steps (1,764 with steps half as long:
+    second order), and the warning blamed non-matching Lagrangian surfaces (a tester, session
+    40). The summary below is that run's, reduced to what the warning reads."""
+    from ntncontact.report.run_warnings import result_warnings
+
+    summary = {"integrator": None, "contact_work": 6598.8, "energy_initial": 0.0,
+               "energy_balance_max_error": 0.3, "energy_balance_max_relative_error": 0.3 / 8e4,
+               "contact_setup": {"cylinder_foundation": {
+                   "method": "augmented_lagrangian", "law": "gap", "detection": "predicted",
+                   "ale_1": False, "ale_2": ale_2, "gap_restoring": False,
+                   "spacing_1": 11.06, "spacing_2": 6.0}}}
+    [line] = [w for w in result_warnings(summary) if "contact forces added" in w]
+    assert cause in line
+    assert ("non-matching" in line) == (not ale_2)
