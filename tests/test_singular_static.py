@@ -135,3 +135,43 @@ def test_a_body_that_contact_lets_go_at_zero_load_is_not_moved(tmp_path):
     assert message.startswith("step 36 ")
     assert "numerically singular" in message
     assert "the free motion moves the dofs of body 'cylinder' (y)" in message
+
+
+APART = """
+title = "static block placed 0.001 above its base, held in x only"
+[analysis]
+kind = "static"
+dt = 1.0
+t_end = 1.0
+max_cutbacks = 2
+[[bodies]]
+name = "block"
+mesh = { type = "rectangle", width = 1.0, height = 0.5, nx = 4, ny = 2, origin = [0.0, 0.001] }
+material = { model = "neo_hookean", E = 1000.0, nu = 0.3, density = 1.0 }
+supports = [{ set = "left", x = 0.0 }]
+loads = [{ type = "pressure", set = "top", value = 10.0 }]
+[[bodies]]
+name = "base"
+mesh = { type = "rectangle", width = 2.0, height = 0.3, nx = 6, ny = 1, origin = [-0.5, -0.3] }
+material = { model = "neo_hookean", E = 1.0e5, nu = 0.3, density = 1.0 }
+supports = [{ set = "bottom", x = 0.0, y = 0.0 }]
+[[contact]]
+body_1 = "block"
+surface_1 = "bottom"
+body_2 = "base"
+surface_2 = "top"
+penalty_normal = 1.0e5
+"""
+
+
+def test_a_static_body_placed_apart_from_its_partner_is_told_to_start_touching(tmp_path,
+                                                                               capsys):
+    """A tester's block placed 0.001 above its base, pressed from above and held in x only:
+    nothing holds it in y until contact closes, so the step is singular; the message listed
+    every cause but that one (session 40)."""
+    path = tmp_path / "apart.toml"
+    path.write_text(APART)
+    assert main(["run", str(path), "--out", str(tmp_path / "out"), "--quiet"]) == 1
+    err = capsys.readouterr().err
+    assert "numerically singular" in err and "placed apart from its partner" in err
+    assert "body 'block' (y)" in err and "Traceback" not in err

@@ -80,8 +80,10 @@ PIVOT_CHECK_GROWTH = 1e6
 #: what a singular matrix usually means, for the error both backends raise
 SINGULAR_CAUSES = ("(a body whose supports leave a rigid motion free, in a static run also "
                    "one held only by contact pairs that all slip, as under a tangential load "
-                   "above the friction's limit, or that all opened, as at zero load; a "
-                   "mechanism, or coincident nodes that split a mesh?)")
+                   "above the friction's limit, or that all opened, as at zero load, or one "
+                   "placed apart from its partner, held by nothing until it touches (start it "
+                   "touching, or support it); a mechanism, or coincident nodes that split a "
+                   "mesh?)")
 #: SuperLU keeps a diagonal pivot at least this fraction of the largest entry of its column
 #: (partial pivoting otherwise); the static LU accepts a pivot on the same test, so it takes
 #: the pivots SuperLU would and falls back to SuperLU where SuperLU would interchange rows.
