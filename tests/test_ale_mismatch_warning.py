@@ -32,6 +32,8 @@ def test_a_slide_past_the_ale_surfaces_end_is_named(tmp_path, capsys):
     assert summary["max_ale_mismatch"] > MISMATCH_WARNING * at["element_size"]
     err = capsys.readouterr().err
     assert "warning: an ALE contact node ended" in err and "max_ale_mismatch" in err
+    # and the case no ALE setting helps, a partner surface running through the contact
+    assert "spinning or rolling body" in err and 'mesh_motion = "lagrangian"' in err
 
 
 def test_the_examples_ale_runs_keep_no_mismatch_worth_a_warning(tmp_path, capsys):
