@@ -266,3 +266,22 @@ def test_compare_says_when_the_run_did_not_complete(tmp_path, status, error, sai
     label, _ = compare(tmp_path)
     notes = [line for line in label.splitlines() if "the run is" in line]
     assert notes == ([] if said is None else [notes[0]]) and (said is None or said in notes[0])
+
+
+def test_compare_names_the_overrides_and_a_contact_that_had_not_ended(tmp_path):
+    """A tester's rod impact cut at t = 1.0, still in contact: compare said it had the
+    report's values of "rod_impact" among others, and of a shortened run it said nothing."""
+    (tmp_path / "summary.json").write_text(json.dumps({
+        "scenario": "examples/rod_impact.toml", "overrides": ["analysis.t_end=1.0"],
+        "status": "completed", "time": 1.0, "contact_start_time": 0.05,
+        "contact_end_time": 1.0, "max_penetration": 0.0, "max_active_pairs": 31}))
+    with HistoryWriter(tmp_path) as w:
+        for step, t in enumerate([0.0, 0.5, 1.0]):
+            w.write({"step": step, "time": t, "kinetic_energy": 5.0, "strain_energy": 0.0,
+                     "total_energy": 5.0, "linear_momentum_x": 10.0, "linear_momentum_y": 0.0,
+                     "angular_momentum": 0.0, "newton_iterations": 1})
+    label, rows = compare(tmp_path)
+    assert rows == []
+    assert "--set analysis.t_end=1.0" in label
+    assert "still in contact at the run's end (t = 1)" in label
+    assert "only" not in label  # not the list of examples compare knows

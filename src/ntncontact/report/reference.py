@@ -488,14 +488,30 @@ def _notes(example: str, summary: dict, ours: dict[str, float], static: bool,
             + ("" if balance is None else
                f", the energy balance closes to {balance:.3g} of the largest energy "
                "(summary.json energy_balance_max_relative_error)"))
+    if summary.get("overrides"):  # a tester's shortened runs read "pass" without a word
+        notes.append("note: the run was made with --set " + ", ".join(summary["overrides"])
+                     + "; the report's values are those of the example as shipped")
     if not has_rows:
-        checked = sorted({c.section for c in CASES
-                          if c.kind != "impact" and Path(c.example).stem == example})
-        where = (f"`ntncontact validate` checks {example} (report {', '.join(checked)}) by its "
-                 "own measures; " if checked else "")
-        notes.append(f"note: {where}`compare` has the report's values of "
-                     f"{', '.join(sorted(TEXT_VALUES))} only")
+        notes.append(_why_no_rows(example, summary))
     return notes
+
+
+def _why_no_rows(example: str, summary: dict) -> str:
+    """Why :func:`compare` has no row: the run's contact had not ended where the report gives
+    contact times only (a tester's rod impact cut at t = 1.0 was told that compare had the
+    report's values of rod_impact among others), or the example is not one of the report's
+    impacts."""
+    end = summary.get("contact_end_time")
+    if example in TEXT_VALUES and end is not None and abs(end - summary.get("time", -1.0)) \
+            <= 1e-9 * max(1.0, abs(end)):
+        return (f"note: the bodies were still in contact at the run's end (t = {end:.6g}), so "
+                "it has no contact end time or duration to compare with the report's")
+    checked = sorted({c.section for c in CASES
+                      if c.kind != "impact" and Path(c.example).stem == example})
+    where = (f"`ntncontact validate` checks {example} (report {', '.join(checked)}) by its "
+             "own measures; " if checked else "")
+    return (f"note: {where}`compare` has the report's values of "
+            f"{', '.join(sorted(TEXT_VALUES))} only")
 
 
 def format_value(value: float | str) -> str:
