@@ -189,3 +189,19 @@ def test_a_summary_that_is_not_json_is_named(tmp_path, capsys):
         ntc.read_results(tmp_path)
     assert main(["compare", str(tmp_path)]) == 1
     assert f"{tmp_path / 'summary.json'} is not valid JSON" in capsys.readouterr().err
+
+
+def test_a_progress_that_is_not_a_function_is_refused_before_the_run(tmp_path):
+    """A tester's progress=5 failed the run after its first step, naming no argument."""
+    with pytest.raises(TypeError, match="progress must be a function"):
+        ntc.run(ntc.load_scenario(SPIN, SHORT), tmp_path / "out", progress=5)
+    assert not (tmp_path / "out").exists()
+
+
+def test_an_out_that_is_a_file_is_refused_naming_it(tmp_path):
+    """A tester's out="oblique.toml" gave a bare FileExistsError."""
+    path = tmp_path / "oblique.toml"
+    path.write_text("")
+    with pytest.raises(ValueError, match="is a file: give the results folder"):
+        ntc.run(ntc.load_scenario(SPIN, SHORT), path)
+    assert path.read_text() == ""

@@ -205,6 +205,7 @@ def run(scenario: Scenario | str | Path, out: str | Path | None = None, *,
                         "of a dict with ntc.scenario_from_dict(data)")
     if not isinstance(scenario, Scenario):
         scenario = load_scenario(scenario)
+    _check_run_arguments(out, progress)
     static = scenario.config.analysis.kind == "static"
     failed = None
     try:
@@ -219,6 +220,19 @@ def run(scenario: Scenario | str | Path, out: str | Path | None = None, *,
         raise failed.error  # as the run raised it (outside the except: no chained context)
     _issue_warnings(results.summary, static)
     return results
+
+
+def _check_run_arguments(out: str | Path | None, progress: object) -> None:
+    """Refuse, before the build, what a tester's script passed and learnt of only later: a
+    ``progress`` that is not callable failed the run after its first step ("'int' object is
+    not callable", the folder's summary ``failed``), and an ``out`` naming a file gave a bare
+    FileExistsError."""
+    if progress is not None and not callable(progress):
+        raise TypeError(f"progress must be a function of the time t (or None), not "
+                        f"{type(progress).__name__} {progress!r}")
+    if out is not None and Path(out).exists() and not Path(out).is_dir():
+        raise ValueError(f"out = {str(out)!r} is a file: give the results folder's path (a "
+                         "folder, new or holding a run)")
 
 
 class _RunFailed(Exception):
