@@ -5,7 +5,9 @@ import json
 
 import numpy as np
 import pytest
+from helpers import EXAMPLES
 
+import ntncontact as ntc
 from ntncontact.cli import main
 from ntncontact.io.writers import HistoryWriter
 from ntncontact.report.reference import (
@@ -285,3 +287,13 @@ def test_compare_names_the_overrides_and_a_contact_that_had_not_ended(tmp_path):
     assert "--set analysis.t_end=1.0" in label
     assert "still in contact at the run's end (t = 1)" in label
     assert "only" not in label  # not the list of examples compare knows
+
+
+def test_the_summary_says_whether_contact_was_still_on_at_the_runs_end(tmp_path):
+    """A tester's rod impact cut at t = 1.0 read contact_end_time 1.0, a duration of 0.95
+    beside the full run's 2.05, with nothing to tell them apart."""
+    scenario = EXAMPLES / "rod_impact.toml"
+    cut = ntc.run(ntc.load_scenario(scenario, {"analysis.t_end": 1.0})).summary
+    full = ntc.run(ntc.load_scenario(scenario, {"analysis.t_end": 2.5})).summary
+    assert cut["contact_at_end"] is True and cut["contact_end_time"] == pytest.approx(1.0)
+    assert full["contact_at_end"] is False and full["contact_end_time"] < 2.5

@@ -108,6 +108,7 @@ class ResultWriter:
         if model.interfaces:
             extra_history = extra_history + CONTACT_HISTORY
             summary_extra = {"contact_start_time": None, "contact_end_time": None,
+                             "contact_at_end": False,
                              "max_penetration": 0.0, "max_penetration_at": None,
                              "max_active_pairs": 0, "unconverged_steps": 0,
                              "max_penetration_unpaired": 0.0,
@@ -226,6 +227,8 @@ class ResultWriter:
         fields |= self._self_summary(s.time, record.extra.get("self_penetration_at"), summary)
         framed = self._due(s.time, model)  # before the rows: "frames" keeps those steps'
         rows = record.extra.get("contact_rows")
+        if model.interfaces:  # set again below by a step that carries contact
+            fields["contact_at_end"] = False
         if rows is not None and len(rows["node_1"]):
             if self._keeps_contact_rows(framed):
                 self.results.contact.write_step(s.step, s.time, rows)
@@ -265,6 +268,8 @@ class ResultWriter:
             if summary.get("contact_start_time") is None:
                 fields["contact_start_time"] = time - dt
             fields["contact_end_time"] = time
+            # the last step's contact: its end time is then the run's, not the contact's
+            fields["contact_at_end"] = True
         return fields
 
     def _deepest_pair(self, time: float, rows: dict, summary: dict) -> dict:
