@@ -65,6 +65,7 @@ def write_run(folder: Path) -> None:
                     "tangential_traction": 0.1 * step * (x - 0.5),
                     "normal_force": -np.ones(3), "tangential_force": np.zeros(3),
                     "status": ["stick", "slip", "stick"], "end_gap": np.zeros(3),
+                    "normal_x": np.zeros(3), "normal_y": -np.ones(3),
                 })
 
 

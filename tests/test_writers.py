@@ -48,6 +48,8 @@ def contact_pairs(n: int) -> dict:
         "tangential_force": rng.standard_normal(n),
         "status": np.array(["stick", "slip"] * (n // 2) + ["stick"] * (n % 2)),
         "end_gap": -rng.random(n) * 1e-9,
+        "normal_x": np.zeros(n),
+        "normal_y": -np.ones(n),
     }
 
 

@@ -512,7 +512,8 @@ def contact_rows(
     """Columns of contact.csv for the active pairs of every interface."""
     cols: dict[str, list] = {k: [] for k in (
         "interface", "node_1", "node_2", "x", "y", "gap", "gap_rate", "normal_traction",
-        "tangential_traction", "normal_force", "tangential_force", "status", "end_gap")}
+        "tangential_traction", "normal_force", "tangential_force", "status", "end_gap",
+        "normal_x", "normal_y")}
     for ci, res in zip(interfaces, results, strict=True):
         if res is None:
             continue
@@ -530,5 +531,8 @@ def contact_rows(
         cols["status"] += ["slip" if s else "stick" for s in (res.status == 1)]
         # the law's gap is the solve's (at t_{n+1/2} in a dynamic step); the frame shows x
         cols["end_gap"].append(pair_gaps(x, ci.interface, res.pairs)[1])
+        # the normal the forces act along: without it their resultant cannot be formed
+        cols["normal_x"].append(res.normal[:, 0])
+        cols["normal_y"].append(res.normal[:, 1])
     return {k: (np.concatenate(v) if v and not isinstance(v[0], str) else np.asarray(v))
             for k, v in cols.items()}

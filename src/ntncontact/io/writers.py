@@ -65,6 +65,8 @@ CONTACT_COLUMNS = (
     "tangential_force",
     "status",
     "end_gap",
+    "normal_x",
+    "normal_y",
 )
 SUMMARY_STATUSES = ("running", "completed", "failed", "interrupted")
 _STOP_SIGNALS = {signal.SIGINT, signal.SIGTERM}
