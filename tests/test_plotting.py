@@ -7,9 +7,11 @@ from pathlib import Path
 import matplotlib.image as mpimg
 import numpy as np
 import pytest
+from matplotlib.backends.backend_agg import FigureCanvasAgg
 
 from ntncontact.io.vtk import stack_bodies
 from ntncontact.io.writers import HISTORY_COLUMNS, ResultsDirectory
+from ntncontact.report import plotting
 from ntncontact.report.plotting import (
     DPI,
     ResultsNotFoundError,
@@ -263,3 +265,43 @@ def test_the_pair_history_leaves_out_the_steps_without_contact():
                                  np.array([1.0, 2.0, 3.0]))
     assert np.array_equal(time, [0.3, 0.4, np.nan, 0.7], equal_nan=True)
     assert np.array_equal(value, [1.0, 2.0, np.nan, 3.0], equal_nan=True)
+
+
+def write_three_interfaces(folder: Path) -> None:
+    """contact.csv of a 4-block stack: 3 interfaces over the same x, 8 output steps."""
+    x = np.linspace(-0.75, 0.75, 7)
+    with ResultsDirectory(folder, ("active_pairs",), scenario="synthetic") as out:
+        for step in range(1, 9):
+            for k, name in enumerate(("i1", "i2", "i3")):
+                n = len(x)
+                out.contact.write_step(step, 0.15 * step, {
+                    "interface": name, "node_1": np.arange(n), "node_2": np.arange(n) + 50,
+                    "x": x, "y": np.full(n, 0.5 * k), "gap": np.zeros(n),
+                    "gap_rate": np.zeros(n), "normal_traction": (3 - k) * step * (1.0 - x**2),
+                    "tangential_traction": np.zeros(n), "normal_force": -np.ones(n),
+                    "tangential_force": np.zeros(n), "status": ["stick"] * n,
+                    "end_gap": np.zeros(n),
+                })
+
+
+def test_contact_traction_legend_of_three_interfaces_stays_clear_of_the_ticks(tmp_path,
+                                                                             monkeypatch):
+    """A tester's 4-block stack: a legend entry per time and interface (18) overflowed the
+    top panel and hid its x tick labels; the times are now a colour bar."""
+    write_three_interfaces(tmp_path)
+    figures = []
+    save = plotting._save
+    monkeypatch.setattr(plotting, "_save", lambda fig, path: figures.append(fig) or save(fig, path))
+    assert_real_image(plot_contact_tractions(tmp_path))
+    fig = figures[0]
+    canvas = FigureCanvasAgg(fig)
+    canvas.draw()
+    renderer = canvas.get_renderer()
+    top = fig.axes[0]
+    legend = top.get_legend()
+    assert len(legend.get_texts()) == 3  # one per interface
+    box = legend.get_window_extent(renderer)
+    assert top.get_window_extent(renderer).contains(box.x0, box.y0)
+    ticks = [label.get_window_extent(renderer) for ax in fig.axes[:2]
+             for label in ax.get_xticklabels() + ax.get_yticklabels() if label.get_text()]
+    assert ticks and not any(box.overlaps(tick) for tick in ticks)

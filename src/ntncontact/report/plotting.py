@@ -29,7 +29,8 @@ PVD_FILE = "fields.pvd"
 XDMF_FILE = "fields.xdmf"  # analysis.field_format = "xdmf"
 EVENLY_SPACED_PANELS = 6  # meshes in deformed_<field>.png when no times are asked for
 DPI = 110
-FIELD_CMAP = "viridis"  # colour map of the mesh fields
+FIELD_CMAP = "viridis"  # colour map of the mesh fields (and of the times of several interfaces)
+MARKERS = "os^Dv<>P"  # markers of the interfaces in contact_tractions.png
 
 #: (rows, columns, size in inches) of the figures
 HISTORY_SHAPE = (2, 1, (7.0, 6.0))  # energies, momenta, tractions
@@ -326,30 +327,72 @@ def plot_contact_tractions(
 ) -> Path:
     """Normal and tangential traction along each interface against x at chosen output steps."""
     folder = Path(directory)
-    contact = _load_table(folder, CONTACT_FILE)
+    fig = tractions_figure(_load_table(folder, CONTACT_FILE), steps)
+    return _save(fig, Path(path) if path else folder / "contact_tractions.png")
+
+
+def tractions_figure(contact: dict[str, NDArray], steps: Sequence[int] | None = None) -> Figure:
+    """The figure of :func:`plot_contact_tractions` from contact.csv's columns. One interface:
+    a colour and a legend entry per time. Several: a legend entry per time and interface
+    overflowed the axes (a tester's 4-block stack: 18 entries over the x tick labels), so
+    the time is a colour on a colour bar and the interface a marker in a legend of its own."""
     chosen = _pick_steps(np.unique(contact["step"]), steps)
     interfaces = list(dict.fromkeys(contact["interface"].tolist()))
     fig, axes = _new_figure(*HISTORY_SHAPE)
     top, bottom = axes[0, 0], axes[1, 0]
-    for step in chosen:
-        for interface in interfaces:
+    colours = _time_colours(fig, axes, contact, chosen) if len(interfaces) > 1 else None
+    for k, step in enumerate(chosen):
+        for i, interface in enumerate(interfaces):
             rows = (contact["step"] == step) & (contact["interface"] == interface)
             if not np.any(rows):
                 continue
             order = np.argsort(contact["x"][rows])
-            label = f"t = {contact['time'][rows][0]:.4g}"
-            label += f" ({interface})" if len(interfaces) > 1 else ""
             x = contact["x"][rows][order]
-            line = top.plot(x, contact["normal_traction"][rows][order], "o-", ms=3, label=label)
-            bottom.plot(x, contact["tangential_traction"][rows][order], "o-", ms=3,
-                        color=line[0].get_color())
+            style = {"ms": 3, "marker": "o", "label": f"t = {contact['time'][rows][0]:.4g}"}
+            if colours is not None:
+                style = {"ms": 4, "color": colours[k], "marker": MARKERS[i % len(MARKERS)]}
+            line = top.plot(x, contact["normal_traction"][rows][order], "-", **style)[0]
+            bottom.plot(x, contact["tangential_traction"][rows][order], "-", ms=style["ms"],
+                        color=line.get_color(), marker=line.get_marker())
     top.set_ylabel("normal traction")
     bottom.set_ylabel("tangential traction")
     bottom.set_xlabel("x")
-    top.legend(loc="best", fontsize="small")
+    if colours is None:
+        top.legend(loc="best", fontsize="small")
+    else:
+        _interface_legend(top, interfaces)
     for ax in (top, bottom):
         ax.grid(True, alpha=0.3)
-    return _save(fig, Path(path) if path else folder / "contact_tractions.png")
+    return fig
+
+
+def _time_colours(fig: Figure, axes: NDArray, contact: dict[str, NDArray],
+                  chosen: list[int]) -> list[Any]:
+    """A colour per chosen step, with a colour bar beside the axes whose ticks are the steps'
+    times: as many entries as times, whatever the number of interfaces."""
+    from matplotlib import colormaps
+    from matplotlib.cm import ScalarMappable
+    from matplotlib.colors import BoundaryNorm, ListedColormap
+
+    # viridis without its pale yellow end, which is faint on white
+    colours = list(colormaps[FIELD_CMAP](np.linspace(0.0, 0.85, len(chosen))))
+    norm = BoundaryNorm(np.arange(len(chosen) + 1) - 0.5, len(chosen))
+    bar = fig.colorbar(ScalarMappable(norm=norm, cmap=ListedColormap(colours)),
+                       ax=axes.ravel().tolist(), ticks=range(len(chosen)))
+    times = [contact["time"][contact["step"] == step][0] for step in chosen]
+    bar.ax.set_yticklabels([f"{t:.4g}" for t in times])
+    bar.set_label("t")
+    return colours
+
+
+def _interface_legend(ax: Any, interfaces: list[str]) -> None:
+    """One legend entry per interface, its marker in grey (the colour is the time)."""
+    from matplotlib.lines import Line2D
+
+    handles = [Line2D([], [], color="0.4", marker=MARKERS[i % len(MARKERS)], ms=4, label=name)
+               for i, name in enumerate(interfaces)]
+    ax.legend(handles=handles, loc="best", fontsize="small", title="interface",
+              title_fontsize="small")
 
 
 def broken_at_gaps(steps: NDArray, *columns: NDArray) -> list[NDArray]:
