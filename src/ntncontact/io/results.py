@@ -42,8 +42,8 @@ def tie_history(model: Model) -> tuple[str, ...]:
 def contact_setup(model: Model) -> dict[str, dict]:
     """Per interface, what its penetration warning's advice depends on (report.run_warnings):
     its ``[[contact]]`` index, method, law and detection, both surfaces' median edge lengths
-    in the original mesh, whether each side's body is ALE, and whether its persistency law
-    has ``gap_restoring``."""
+    in the original mesh, whether each side's body is ALE, whether its persistency law
+    has ``gap_restoring``, and whether its pair forces are ``moment_free``."""
     body = model.body_of_node()
     setup = {}
     for index, ci in enumerate(model.interfaces):
@@ -57,7 +57,9 @@ def contact_setup(model: Model) -> dict[str, dict]:
                           "spacing_1": spacings[0], "spacing_2": spacings[1],
                           "ale_1": ale[0], "ale_2": ale[1],
                           # the energy warning names it as the cause of a gain
-                          "gap_restoring": bool(ci.law.gap_restoring and ci.persistency)}
+                          "gap_restoring": bool(ci.law.gap_restoring and ci.persistency),
+                          # and the report's forces (false) where pairs drift apart
+                          "moment_free": bool(ci.law.moment_free)}
     return setup
 
 

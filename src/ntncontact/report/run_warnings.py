@@ -308,9 +308,9 @@ def _contact_energy(summary: dict, static: bool) -> str | None:
     """The contact forces did net positive work on the bodies (summary.json
     ``contact_work``): the energy balance closes, since the ledger counts that work, but the
     energy came from contact, which frictionless contact cannot give. Dynamic runs: the gap
-    law (report 5.5). Static runs, where the gap law is the only one: pairs whose nodes do not
-    face each other (a tester's press of a 7-element block on a 10-element base, both
-    Lagrangian: 0.0038 of the energy scale; 0 with matching nodes). A persistency-law run
+    law (report 5.5). Static runs, where the gap law is the only one: the report's pair forces
+    on pairs whose nodes move apart along the surface, or the load steps
+    (:func:`_static_gain_cause`). A persistency-law run
     with ``gap_restoring`` was told the gap law did it and advised the law it had (a tester:
     +20 %): that option is named instead when an interface that adds energy has it."""
     gain = summary.get("contact_work") or 0.0
@@ -341,17 +341,33 @@ def _contact_energy(summary: dict, static: bool) -> str | None:
 
 
 def _static_gain_cause(summary: dict) -> str:
-    """Why contact gained energy in a quasi-static run: pairs whose nodes do not face each
-    other where both bodies of an interface are Lagrangian; else the load steps. The work is
-    summed by the trapezoid rule, exact only for a force linear over each step: the report's
-    Hertz cylinder (ALE foundation) loaded and unloaded to zero gained 6,599 in its steps and
-    1,764 in steps half as long (a tester), where the non-matching surfaces were blamed."""
-    setups = (summary.get("contact_setup") or {}).values()
-    if any(not (setup.get("ale_1") or setup.get("ale_2")) for setup in setups):
-        return ("node-to-node pairs whose nodes do not face each other (non-matching "
-                "Lagrangian surfaces) do so, their forces along surface 1's normal at nodes "
-                "offset along it; matching surface nodes, or an ALE body (mesh_motion = "
-                "\"ale\") that moves its contact nodes onto their partners, remove it")
+    """Why contact gained energy in a quasi-static run. Between Lagrangian bodies under the
+    report's pair forces (``moment_free = false``, the static default): pairs whose nodes
+    move apart along the surface, whose two forces along surface 1's normal then make a
+    couple that does work. Matching nodes at t = 0 drift apart too where the bodies stretch
+    sideways differently: a tester's 3-block stack (matching nodes, pairs up to 0.0039 apart
+    at the end) gained 2.3e-4 at any load step (0.000228, 0.000231, 0.000231 at dt = 0.125,
+    0.0625, 0.03125) and was told its surfaces did not match; with moment_free = true,
+    -5.2e-6 and -1.3e-6 (dt = 0.125, 0.0625). Else the load steps: the work is summed by the
+    trapezoid rule, exact only for a force linear over each step: the report's Hertz
+    cylinder (ALE foundation) loaded and unloaded to zero gained 6,599 in its steps and 1,764
+    in steps half as long (a tester), where the non-matching surfaces were blamed."""
+    report_forces = {name: setup for name, setup in (summary.get("contact_setup") or {}).items()
+                     if not (setup.get("ale_1") or setup.get("ale_2"))
+                     and not setup.get("moment_free")}  # absent: a summary before it, static
+    if report_forces:
+        cures = " and ".join(f"contact.{setup['index']}.moment_free = true"
+                             for setup in report_forces.values())
+        verb = "give" if len(report_forces) > 1 else "gives"
+        return (f"the report's pair forces (moment_free = false, the static default) on "
+                f"{', '.join(report_forces)} do so where a pair's nodes move apart along the "
+                "surface (bodies that stretch sideways differently, matching nodes at t = 0 "
+                "too, or non-matching Lagrangian surfaces): its forces along surface 1's "
+                "normal at the two nodes make a couple that does work, which smaller load "
+                f"steps do not remove; {cures} {verb} the pairs the gap's full gradient, "
+                "whose work vanishes with the step (docs/theory.md, \"Moment-free pair "
+                "forces\"), as does an ALE body (mesh_motion = \"ale\") that keeps its "
+                "contact nodes on their partners")
     return ("the load steps: each step's work is taken by the trapezoid rule, exact only "
             "where the contact forces change linearly over the step (a contact zone that "
             "grows or shrinks does not), and on a path that comes back the errors do not "
