@@ -413,3 +413,24 @@ def test_nodes_between_the_pairs_are_reported_where_they_go_deeper(tmp_path, cap
         assert "in no pair, went" in err and "max_penetration_unpaired" in err
     else:
         assert unpaired <= pairs and "in no pair" not in err
+
+
+@pytest.mark.parametrize("ratio", [1.0, 4.0])
+def test_crossing_advice_on_spacing_only_where_the_ale_surface_is_coarser(ratio):
+    """"Would swap order" advises refining the ALE surface only where it is more than 2x
+    coarser than its partner: a tester's spinning ALE disk in a ring (spacings 0.098 and
+    0.098) was told to refine it, where only a shorter dt helped. The motion's own message
+    names dt alone (the body does not know its partner); the time loop adds the rest."""
+    model = model_from_dict(sliding_block(ratio, 1.0, 0.0))
+    surfaces = model.interfaces[0].interface
+    block, base = int(surfaces.surface1.nodes[0]), int(surfaces.surface2.nodes[0])
+    err = mesh_motion.AleCrossingError(
+        "body 'base': ALE surface nodes 3 and 4 (at ...) would swap order: ... exists; "
+        "shorten the time step (analysis.dt)", (3, 4))
+    message = str(mesh_motion._with_spacing_advice(err, model, base, block))
+    assert message.startswith(str(err))
+    if ratio == 1.0:
+        assert message == str(err)  # equal spacings: no refining advice
+    else:
+        assert "refine the ALE surface to at most 2x" in message
+        assert "0.125 against 0.0312" in message

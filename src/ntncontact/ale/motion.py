@@ -611,13 +611,13 @@ def _move_surface(
 
 
 def _crossing_message(body: AleBody, x: NDArray, a: int, b: int) -> str:
-    """Which nodes would swap, where, and what to change (one line)."""
+    """Which nodes would swap, where, and what to change (one line). The body does not know
+    its partners' spacing: the time loop adds the advice on it where it applies
+    (``engine.mesh_motion``)."""
     where = " and ".join(f"({x[n, 0]:.6g}, {x[n, 1]:.6g})" for n in (a, b))
     return (f"body '{body.name}': ALE surface nodes {a} and {b} (at {where}) would swap order: "
             "the contact partners they follow cross, so no valid motion of the ALE mesh "
-            "exists; shorten the time step (analysis.dt), or refine the ALE surface to at most "
-            "2x the partner surface's spacing (or coarsen the partner) so that each ALE node "
-            "has one partner nearby")
+            "exists; shorten the time step (analysis.dt)")
 
 
 def _changes(body: AleBody, tn: _TnState, x_new: NDArray) -> tuple[NDArray, NDArray, bool, bool]:

@@ -174,7 +174,7 @@ def _move_body(model: Model, setup: AleSetup, base: StepState, last: tuple,
                         & ~_pressed(model, contact, own, partner))
             if not crossing.any():
                 raise _crossing_with_partners(err, model, base, own - setup.node_offset,
-                                              partner, x_pred) from None
+                                              partner, x_pred, setup.node_offset) from None
             unfollowed.update(zip(own[crossing].tolist(), partner[crossing].tolist(), strict=True))
             continue
         _hold_clamped(masses, own, partner, up.clamped + setup.node_offset)
@@ -208,7 +208,7 @@ def _pressed(model: Model, contact: Sequence[PairState], own: NDArray, partner: 
 
 
 def _crossing_with_partners(err: AleCrossingError, model: Model, base: StepState,
-                            local: NDArray, partners: NDArray, x_pred: NDArray
+                            local: NDArray, partners: NDArray, x_pred: NDArray, offset: int
                             ) -> AleCrossingError:
     """``err`` with what its partners did. Where the partner body's surface between the two
     partners is crushed (shorter than ``_CRUSHED`` of its reference length at the step start
@@ -223,7 +223,7 @@ def _crossing_with_partners(err: AleCrossingError, model: Model, base: StepState
     x_start = base.X + base.d
     now = min(np.linalg.norm(x_start[pb] - x_start[pa]), np.linalg.norm(x_pred[pb] - x_pred[pa]))
     if not now < _CRUSHED * reference:
-        return err
+        return _with_spacing_advice(err, model, int(local[found[0][0]]) + offset, pa)
     body = model.bodies[int(model.body_of_node()[pa])]
     where = " and ".join(f"({x_start[n, 0]:.6g}, {x_start[n, 1]:.6g})" for n in (pa, pb))
     message = (f"{err}. But their partners, nodes {pa - body.node_offset} and "
@@ -238,6 +238,40 @@ def _crossing_with_partners(err: AleCrossingError, model: Model, base: StepState
                "docs/examples.md, \"Refined meshes\"); else round the corner, lower the "
                "friction, or use a coarser mesh there")
     return AleCrossingError(message, err.nodes)
+
+
+#: an ALE surface up to this many times coarser than its partner gives each ALE node one
+#: partner nearby (docs/theory.md, "Partners at any spacing ratio")
+_COARSER = 2.0
+
+
+def _with_spacing_advice(err: AleCrossingError, model: Model, node: int, partner: int
+                         ) -> AleCrossingError:
+    """``err`` with the advice to refine the ALE surface (or coarsen the partner) where the
+    ALE surface of global ``node`` is more than ``_COARSER`` times coarser than the surface of
+    its ``partner`` (median edge lengths in the original mesh): only then do several partner
+    nodes share an ALE node's reach. A tester's spinning ALE disk in a ring (spacings 0.098
+    and 0.098) was told to refine anyway; halving dt was what helped."""
+    ale, other = _median_spacing(model, node), _median_spacing(model, partner)
+    if not ale > _COARSER * other:
+        return err
+    return AleCrossingError(
+        f"{err}, or refine the ALE surface to at most {_COARSER:g}x the partner surface's "
+        f"spacing (now {ale:.3g} against {other:.3g}; or coarsen the partner) so that each "
+        "ALE node has one partner nearby", err.nodes)
+
+
+def _median_spacing(model: Model, node: int) -> float:
+    """Median edge length, in the original mesh, of the first contact surface that holds
+    global ``node`` (NaN on none)."""
+    for ci in model.interfaces:
+        for surface in (ci.interface.surface1, ci.interface.surface2):
+            if node in surface.nodes:
+                chain = surface.nodes if not surface.closed else np.append(surface.nodes,
+                                                                           surface.nodes[0])
+                return float(np.median(np.linalg.norm(np.diff(model.X0[chain], axis=0),
+                                                      axis=1)))
+    return float("nan")
 
 
 class _AleMasses:
