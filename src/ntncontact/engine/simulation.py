@@ -254,7 +254,7 @@ class Simulation:
         self._last_contact: tuple = ((), 0)
         self.ledger = dict.fromkeys(LEDGER, 0.0)  # cumulative energy ledger
         self._step_work = dict.fromkeys(LEDGER, 0.0)
-        self._last_mismatch = 0.0
+        self._last_mismatch, self._last_mismatch_at = 0.0, None
         self._augmentations_converged = True  # False: a sub-step accepted its last augmentation
         self._last_tie_forces: dict = {}
         self._supports = support_sets(model)
@@ -354,9 +354,10 @@ class Simulation:
         results = solved.results
         committed = commit_all(interfaces, solved.used, results) if interfaces else ()
         self._last_contact = (results if interfaces else (), solved.augmentations)
-        self._last_mismatch = (max(solved.mismatch, end_of_step_mismatch(
-            self.model, results, s.X + d1)) if self.model.ale_bodies and interfaces else
-            solved.mismatch)
+        # over the pressed pairs at the step's end (end_of_step_mismatch), and where
+        self._last_mismatch, self._last_mismatch_at = (
+            end_of_step_mismatch(self.model, results, s.X + d1)
+            if self.model.ale_bodies and interfaces else (solved.mismatch, None))
         self._last_tie_forces = solved.tie_forces
         self._last_reactions = solved.reactions
         out_of_balance = (self._remap_out_of_balance_work(s, state, d1)
@@ -950,6 +951,7 @@ class Simulation:
             "augmentations": augmentations,
             "augmentations_converged": int(self._augmentations_converged),
             "ale_mismatch": self._last_mismatch,
+            "ale_mismatch_at": self._last_mismatch_at,
             "ale_remap_energy": self.ledger["ale_remap_energy"],
             "ale_unreturned_energy": self.ledger["ale_unreturned_energy"],
             "energy_multiplier": self._energy_multiplier,

@@ -221,7 +221,8 @@ class ResultWriter:
             fields["unconverged_steps"] = summary["unconverged_steps"] + 1
         fields |= self._off_surface_summary(
             s.time, record.extra.get("penetration_off_surfaces_at"), summary)
-        fields |= self._mismatch_summary(s.time, row.get("ale_mismatch", 0.0), summary)
+        fields |= self._mismatch_summary(s.time, row.get("ale_mismatch", 0.0),
+                                         record.extra.get("ale_mismatch_at"), summary)
         for key, found in (("max_penetration_unpaired", "penetration_unpaired_at"),
                            ("max_penetration_surface_2", "penetration_surface_2_at")):
             fields |= self._interface_depth_summary(key, s.time, record.extra.get(found),
@@ -328,16 +329,22 @@ class ResultWriter:
                     "file_node": self._file_node(rows["node_1"][widest]),
                     "opening": float(opening[widest]), "element_size": self._spacing[name]}}
 
-    def _mismatch_summary(self, time: float, mismatch: float, summary: dict) -> dict:
+    def _mismatch_summary(self, time: float, mismatch: float, where: dict | None,
+                          summary: dict) -> dict:
         """``max_ale_mismatch`` and when, with the smallest surface spacing of the interfaces
-        (``ntncontact run`` compares the two): an ALE node that ends far from its partner's
-        place is a pair the mesh motion did not follow (a tester's slide on a locally
-        respaced ALE base: 0.265, 2.1 spacings, where it is ~1e-9 when the motion follows)."""
+        (``ntncontact run`` compares the two) and where (``where``: the interface, the ALE
+        node and its partner, ``engine.mesh_motion.end_of_step_mismatch``; the file numbers
+        added): an ALE node that ends far from its partner's place is a pair the mesh motion
+        did not follow (a tester's slide on a locally respaced ALE base: 0.265, 2.1 spacings,
+        where it is ~1e-9 when the motion follows). Without the place a run with several
+        interfaces and ALE bodies could not tell which pair it was."""
         if "max_ale_mismatch" not in summary or mismatch <= summary["max_ale_mismatch"]:
             return {}
-        return {"max_ale_mismatch": float(mismatch),
-                "max_ale_mismatch_at": {"time": time,
-                                        "element_size": min(self._spacing.values())}}
+        at = {"time": time, "element_size": min(self._spacing.values())}
+        if where is not None:
+            at |= where | {"file_node": self._file_node(where["node"]),
+                           "partner_file_node": self._file_node(where["partner"])}
+        return {"max_ale_mismatch": float(mismatch), "max_ale_mismatch_at": at}
 
     def _interface_depth_summary(self, key: str, time: float, found, summary: dict) -> dict:
         """``key`` and ``key_at``: the deepest node so far that an interface's check found

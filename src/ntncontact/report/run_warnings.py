@@ -278,22 +278,45 @@ def _mismatch(summary: dict) -> str | None:
     the pair is then no longer node to node. The ring impact with the ring spinning at 3
     rad/s (a tester) dragged the obstacle's surface nodes with the ring's: its segments
     went from 0.1 to 0.58 and 0.028 and pairs pressed 0.55 apart; no ALE setting helped,
-    and with a Lagrangian obstacle no pressed pair is more than 0.125 apart."""
+    and with a Lagrangian obstacle no pressed pair is more than 0.125 apart. At a fixed end
+    of the ALE surface (``fixed_end``) nothing slides: a partner node off the ALE grid there
+    (a tester's head-on hit and static stack, offset from t = 0) is out of every node's
+    reach, and the slide advice does not apply."""
     at = summary.get("max_ale_mismatch_at")
     if not at or summary["max_ale_mismatch"] <= MISMATCH_WARNING * at["element_size"]:
         return None
     mismatch = summary["max_ale_mismatch"]
-    return (f"an ALE contact node ended {mismatch:.3g} from its partner's place "
-            f"({mismatch / at['element_size']:.2g} of the surface spacing, t = "
+    head = (f"an ALE contact node{_mismatch_where(at)} ended {mismatch:.3g} from its "
+            f"partner's place ({mismatch / at['element_size']:.2g} of the surface spacing, t = "
             f"{at['time']:.6g}; summary.json max_ale_mismatch): the mesh motion did not follow "
-            "that pair, which is no longer node to node. A larger ale.max_stretch (a node "
-            "leaves a fixed end behind by at most that times their original distance, so a "
-            "slide away from an end runs out of it even on a long surface), an ALE surface "
-            "longer than the slide (its ends and corners stay fixed, its kinks too: no node "
-            "crosses them) or ale.respace = \"reference\" may let it follow. Where the "
-            "partner's surface runs on through the contact (a spinning or rolling body) none "
-            "does: the partner's nodes carry this body's along and bunch them up; make the ALE "
-            "body Lagrangian there (mesh_motion = \"lagrangian\")")
+            "that pair, which is no longer node to node. ")
+    if at.get("fixed_end"):
+        return head + (
+            "That node is a fixed end of its ALE surface (a corner or a chain end: it stays "
+            "in place whatever the ALE settings), and its partner is off the ALE surface's "
+            "grid there (placed so from the start, or slid past that end), beyond the reach "
+            "of every ALE node; start the two surfaces with matching end nodes, or extend "
+            "the ALE surface past the partner's end (or past its slide)")
+    return head + (
+        "A larger ale.max_stretch (a node "
+        "leaves a fixed end behind by at most that times their original distance, so a "
+        "slide away from an end runs out of it even on a long surface), an ALE surface "
+        "longer than the slide (its ends and corners stay fixed, its kinks too: no node "
+        "crosses them) or ale.respace = \"reference\" may let it follow. Where the "
+        "partner's surface runs on through the contact (a spinning or rolling body, or one "
+        "sliding on along the surface) none does: the partner's nodes carry this body's "
+        "along and bunch them up; make the ALE body Lagrangian there "
+        "(mesh_motion = \"lagrangian\")")
+
+
+def _mismatch_where(at: dict) -> str:
+    """" (node N of body 'B', paired with node M of 'P' in interface 'I')", or "" for a
+    summary written before the place was recorded."""
+    if "body" not in at:
+        return ""
+    return (f" (node {at['body_node']} of body '{at['body']}', paired with node "
+            f"{at['partner_body_node']} of '{at['partner_body']}' in interface "
+            f"'{at['interface']}')")
 
 
 def _energy_scale(summary: dict) -> float | None:
