@@ -611,3 +611,28 @@ def test_a_reflex_cell_left_by_the_deformation_does_not_block_a_move_that_improv
     assert out.moved[node]
     after = cell_min_sines(out.x_mesh, mesh.cells)
     assert before[cell] < after[cell] < 0.0
+
+
+def test_an_inverted_cell_beside_slid_surface_nodes_names_the_cause():
+    """Tester C (session 41): a frictionless disk sliding around the inside of an ALE ring
+    dragged the ring's surface nodes along (segments 0.098 -> 0.019 ahead of it) until "body
+    'ring': element 142 is inverted", with no advice; a Lagrangian ring completes. A refused
+    cell that holds a surface node the move slid now names the drag and the cure; any other
+    refused cell keeps the plain message."""
+    from ntncontact.ale.motion import _explained
+
+    mesh = annulus(1.0, 1.3, 2, 16, name="ring")
+    body = AleBody.from_mesh(mesh, "inner")
+    old = mesh.nodes.copy()
+    surface = body.surface[3]
+    cell = int(np.flatnonzero((mesh.cells == surface).any(axis=1))[0])
+    new = old.copy()
+    new[surface] *= 1.3  # pushed past the next ring of nodes: its cells invert
+    assert (cell_min_sines(new, mesh.cells[[cell]]) < 0).all()
+    err = MeshError(f"body 'ring': element {cell} is inverted")
+    message = str(_explained(body, np.array([surface]), err, new, old, None))
+    assert message.startswith(str(err)) and "\n" not in message
+    assert "runs on through the contact" in message
+    assert "make body 'ring' Lagrangian (mesh_motion = \"lagrangian\")" in message
+    # the same cell, no surface node slid (an interior move): no guess at the cause
+    assert _explained(body, np.array([], np.int64), err, new, old, None) is err

@@ -126,6 +126,7 @@ from ntncontact.ale.remap import (
     remap_topology,
 )
 from ntncontact.ale.smoothing import (
+    SmoothedInversion,
     Smoother,
     SmoothingMethod,
     SmoothingResult,
@@ -753,15 +754,19 @@ def move_ale_body(
     chain = _open_chain(body, active)
     wanted_xy = np.asarray(x_target, dtype=float).reshape(-1, 2) - increment
     x_surf, slides, clamped, mismatch, resets = _move_surface(body, tn, chain, wanted_xy)
-    x_new, (moved, touched, _, degenerate), smoothing, stage, seeds = _move_interior(
-        body, tn, x_surf, least_interior, least_seeds)
+    slid = chain.nodes[slides != 0.0]
+    try:
+        x_new, (moved, touched, _, degenerate), smoothing, stage, seeds = _move_interior(
+            body, tn, x_surf, least_interior, least_seeds)
+    except SmoothedInversion as err:
+        raise _explained(body, slid, err, err.nodes, x_old, None) from None
     if not moved.any():
         return _unchanged(X, d, v, a, mismatch, active[clamped])
     if degenerate:
-        check_move(x_new, x_old, body.cells, body.name, touched)
+        _check_move(body, slid, x_new, x_old, body.name, touched)
     X_new, v_new, a_new = _remapped(body, tn, chain, slides, x_new, moved, (X, v, a))
     if min_sines_below(X_new, body.cells, touched, _DEGENERATE):
-        check_move(X_new, X, body.cells, f"{body.name} (reference image)", touched)
+        _check_move(body, slid, X_new, X, f"{body.name} (reference image)", touched)
     mass_new = tn.masses_after(X_new, touched)
     v_fixed, change = _conserve_momentum(tn, mass_new, x_new, v_new, moved, touched)
     if body.conserve_momentum and body.convection == "remap":
@@ -772,6 +777,50 @@ def move_ale_body(
         moved=moved, momentum_change=change, smoothing=smoothing, interior=stage,
         seeds=seeds, resets=resets,
     )
+
+
+def _check_move(body: AleBody, slid: NDArray, new: NDArray, old: NDArray, name: str,
+                touched: NDArray) -> None:
+    """``check_move`` of the cells ``touched``, its error ``_explained``."""
+    try:
+        check_move(new, old, body.cells, name, touched)
+    except MeshError as err:
+        raise _explained(body, slid, err, new, old, touched) from None
+
+
+def _explained(body: AleBody, slid: NDArray, err: MeshError, new: NDArray, old: NDArray,
+               which: NDArray | None) -> MeshError:
+    """``err`` (a move from ``old`` to ``new`` refused, ``check_move`` of the cells ``which``,
+    default all), with why and what to change where the cell it names holds a surface node
+    this move slid (``slid``). A partner surface that runs on through the contact (a disk
+    sliding around the inside of an ALE ring: a tester's ring segments went from 0.098 to
+    0.019 ahead of the disk and 0.21 behind it) drags the ALE nodes along until a surface
+    cell inverts, and the plain "element N is inverted" named no cause; with a Lagrangian
+    ring the same run completed. Neither a finer ring, nor ``ale.respace = "reference"``
+    helped (docs/theory.md, "An ALE body under a surface that runs through the contact")."""
+    cell = _refused_cell(body.cells, new, old, which)
+    if cell < 0 or not np.isin(body.cells[cell], slid).any():
+        return err
+    return MeshError(
+        f"{err}, a cell beside the contact-surface nodes this move slid after their "
+        "partners: where the partner's surface runs on through the contact (a body "
+        "sliding or spinning along this one, around a curved surface or far along a flat "
+        "one), its nodes drag this body's along and bunch them up until a cell inverts, "
+        f"which no ALE setting or smaller dt prevents; make body '{body.name}' Lagrangian "
+        "(mesh_motion = \"lagrangian\")")
+
+
+def _refused_cell(cells: NDArray, new: NDArray, old: NDArray, which: NDArray | None) -> int:
+    """The cell ``check_move`` names (-1 on none): the first of ``which`` that the move
+    leaves inverted or degenerate and worse than it was."""
+    which = np.arange(len(cells)) if which is None else np.asarray(which, np.int64).reshape(-1)
+    q_new, q_old = cell_min_sines(new, cells[which]), cell_min_sines(old, cells[which])
+    refused = np.flatnonzero(~(q_new > _REFUSED) & ~(q_new >= q_old))
+    return int(which[refused[0]]) if refused.size else -1
+
+
+#: ``check_move``'s tolerance on a cell's smallest corner sine
+_REFUSED = 1e-10
 
 
 def _remapped(body: AleBody, tn: _TnState, chain: _Chain, slides: NDArray, x_new: NDArray,

@@ -39,6 +39,7 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 from numpy.typing import ArrayLike, NDArray
 
+from ntncontact.mesh.quadmesh import MeshError
 from ntncontact.mesh.quality import check_elements, check_move, corner_jacobians, unique_edges
 
 __all__ = [
@@ -154,6 +155,15 @@ def _angle_weights(beta: NDArray, alpha1: NDArray, alpha2: NDArray) -> NDArray:
     total = np.abs(alpha1) + np.abs(alpha2)
     ratio = np.divide(2.0 * np.abs(beta), total, out=np.zeros_like(total), where=total > 0)
     return 2.0 ** np.digitize(ratio, [0.3, 0.5, 0.8])
+
+
+class SmoothedInversion(MeshError):
+    """A smoothed mesh with an inverted or degenerate cell (``Smoother.run``); ``nodes``: the
+    smoothed positions, so that the ALE move can tell which cell it was and why."""
+
+    def __init__(self, message: str, nodes: NDArray) -> None:
+        super().__init__(message)
+        self.nodes = nodes
 
 
 @dataclass(frozen=True)
@@ -322,10 +332,13 @@ class Smoother:
             result = replace(result, nodes=x)
         else:
             result = self._sweeps(x, max_sweeps, rel_tol, scale)
-        if reference is None:
-            check_elements(result.nodes, self.cells, self.body_name)
-        else:
-            check_move(result.nodes, reference, self.cells, self.body_name)
+        try:
+            if reference is None:
+                check_elements(result.nodes, self.cells, self.body_name)
+            else:
+                check_move(result.nodes, reference, self.cells, self.body_name)
+        except MeshError as err:
+            raise SmoothedInversion(str(err), result.nodes) from None
         return result
 
     def _around_free(self, around: NDArray[np.bool_]) -> tuple[Smoother, NDArray[np.int64]]:
