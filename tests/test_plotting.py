@@ -280,7 +280,8 @@ def write_three_interfaces(folder: Path) -> None:
                     "gap_rate": np.zeros(n), "normal_traction": (3 - k) * step * (1.0 - x**2),
                     "tangential_traction": np.zeros(n), "normal_force": -np.ones(n),
                     "tangential_force": np.zeros(n), "status": ["stick"] * n,
-                    "end_gap": np.zeros(n),
+                    "end_gap": np.zeros(n), "normal_x": np.zeros(n),
+                    "normal_y": -np.ones(n),
                 })
 
 
