@@ -21,8 +21,13 @@ import numpy as np
 import scipy.sparse as sp
 from numpy.typing import NDArray
 
-from ..dynamics.midpoint import inertia_factor, midpoint_acceleration, midpoint_velocity
-from ..fem.loads import dirichlet_values
+from ..dynamics.midpoint import (
+    inertia_factor,
+    midpoint_acceleration,
+    midpoint_velocity,
+    prescribed_acceleration,
+)
+from ..fem.loads import dirichlet_rates, dirichlet_values
 from ..fem.sparse import TripletUnion
 from ..solvers.newton import norm2
 from .model import Model
@@ -104,9 +109,11 @@ class StepProblem:
         self.length_scale = float(np.ptp(self.model.X0, axis=0).max())
         t0, t1 = self.state.time, self.state.time + self.dt
         dofs, values = dirichlet_values(self.model.prescribed, t1, ndof)
+        self.fixed_rates = np.zeros(dofs.size)
         if self.dynamic:
             _, values0 = dirichlet_values(self.model.prescribed, t0, ndof)
             values = 0.5 * (values + values0)
+            _, self.fixed_rates = dirichlet_rates(self.model.prescribed, t1, ndof)
         self.fixed_dofs, self.fixed_values = dofs, values
         free = np.ones(ndof, dtype=bool)
         free[dofs] = False
@@ -155,13 +162,13 @@ class StepProblem:
         scale = max(norm2(f_int), norm2(self.f_ext))
         v_eval, rate = None, None
         if self.dynamic:
-            d_n, v_n = self.state.d.ravel(), self.state.v.ravel()
-            inertia = self.mass @ midpoint_acceleration(d, d_n, v_n, self.dt)
+            inertia = self.mass @ self._acceleration(d)
             R = R + inertia
             if K is not None:
                 K = self._add_mass(K, inertia_factor(self.dt))
             scale = max(scale, norm2(inertia))
-            v_eval, rate = midpoint_velocity(d, d_n, self.dt).reshape(-1, 2), 2.0 / self.dt
+            v_eval = midpoint_velocity(d, self.state.d.ravel(), self.dt).reshape(-1, 2)
+            rate = 2.0 / self.dt
         triplets, reserves = [], []
         for term in self.extra:
             f, coo = term(x.reshape(-1, 2), v_eval, rate, self.state.x)
@@ -185,6 +192,18 @@ class StepProblem:
         self._blocks = (h, G, B)
         self._scale = float(max(scale, self.scale_floor))
         return R, K
+
+    def _acceleration(self, d: NDArray) -> NDArray:
+        """a_{n+1/2} at d = d_{n+1/2}: the mid-point rule's on the free dofs; on the prescribed
+        ones the step's mean (v_{n+1} - v_n)/dt of their motion (``fixed_rates``), as
+        ``dynamics.midpoint.end_of_step`` reports it. The rule's 2 (v_{n+1/2} - v_n)/dt there
+        was twice the kink of a support's motion, and through a consistent mass it pushed the
+        free neighbours with the odd-even velocity the rule left at the support."""
+        d_n, v_n = self.state.d.ravel(), self.state.v.ravel()
+        a = midpoint_acceleration(d, d_n, v_n, self.dt)
+        a[self.fixed_dofs] = prescribed_acceleration(v_n[self.fixed_dofs], self.fixed_rates,
+                                                     self.dt)
+        return a
 
     def _balanced_rows(self, h: NDArray, G: sp.csr_matrix) -> tuple[NDArray, sp.csr_matrix]:
         """h, G and C with every constraint row in force units: row p times k / |G_p|, k the

@@ -16,7 +16,7 @@ from ..contact import SLIP, PairState, extrapolated_update, lagrange_blocks, new
 from ..dynamics.energy import EndEnergy, EnergyConsistentContact
 from ..dynamics.mass import MovingMass
 from ..dynamics.midpoint import end_of_step, midpoint_velocity, velocity_factor
-from ..fem.loads import dirichlet_values
+from ..fem.loads import dirichlet_rates, dirichlet_values
 from ..fem.q4 import InvertedElementError
 from ..fem.sparse import TripletUnion
 from ..solvers.linear import LinearSolver, LinearSolverError, Precision
@@ -347,7 +347,7 @@ class Simulation:
             contact, start = grown, (solved.d.ravel(), solved.state.d)
         s, d = solved.state, solved.d
         if self.dynamic:
-            d1, v1, a1 = end_of_step(d, s.d, s.v, dt)
+            d1, v1, a1 = end_of_step(d, s.d, s.v, dt, self._prescribed_rates(s.time + dt))
         else:
             d1, v1, a1 = d, (d - s.d) / dt, np.zeros_like(d)
         check_end_of_step(self.model, s.X + d1, s.time + dt)  # inverted: cut back (issue 14)
@@ -367,6 +367,11 @@ class Simulation:
         self._step_work["ale_unreturned_energy"] += solved.unreturned_energy
         new = StepState(s.step + 1, s.time + dt, s.X, d1, v1, a1, committed)
         return new, iterations
+
+    def _prescribed_rates(self, time: float) -> tuple[NDArray, NDArray]:
+        """The prescribed dofs and their velocities at the end ``time`` of a dynamic step
+        (``fem.loads.dirichlet_rates``), which ``end_of_step`` gives them."""
+        return dirichlet_rates(self.model.prescribed, time, self.model.ndof)
 
     def _remap_out_of_balance_work(self, moved: StepState, state: StepState,
                                    d1: NDArray) -> float:
@@ -398,7 +403,7 @@ class Simulation:
                 or any(r.size for r in retake)):
             return None
         s = solved.state
-        d1, v1, _ = end_of_step(solved.d, s.d, s.v, dt)
+        d1, v1, _ = end_of_step(solved.d, s.d, s.v, dt, self._prescribed_rates(s.time + dt))
         return entered_at_step_end(self.model.interfaces, solved.used, s.X + d1, v1, retake,
                                    let_go)
 

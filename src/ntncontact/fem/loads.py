@@ -45,6 +45,16 @@ class TimeFunction:
         t0, t1 = self.times[k - 1], self.times[k]
         return (self.values[k] - self.values[k - 1]) / (t1 - t0)
 
+    def rate_before(self, t: float) -> float:
+        """ds/dt just before t: the slope of the segment that ends at t (0 outside the times).
+        A step ending at t gives its prescribed dofs this rate (docs/theory.md, "Prescribed
+        motion"): the segment after t is motion the step has not made."""
+        k = int(np.searchsorted(self.times, t, side="left"))
+        if k == 0 or k == len(self.times):
+            return 0.0
+        t0, t1 = self.times[k - 1], self.times[k]
+        return (self.values[k] - self.values[k - 1]) / (t1 - t0)
+
 
 def edge_traction_vector(
     X: NDArray, edges: NDArray, traction: NDArray | None, pressure: float | None, ndof: int
@@ -132,6 +142,11 @@ class Prescribed:
     def at(self, t: float) -> NDArray:
         return self.values * self.function(t)
 
+    def rate_before(self, t: float) -> NDArray:
+        """The dofs' velocity at t as a step ending at t reaches it
+        (``TimeFunction.rate_before``)."""
+        return self.values * self.function.rate_before(t)
+
 
 def dirichlet_values(prescribed: tuple[Prescribed, ...], t: float, ndof: int) -> tuple[NDArray,
                                                                                         NDArray]:
@@ -143,3 +158,16 @@ def dirichlet_values(prescribed: tuple[Prescribed, ...], t: float, ndof: int) ->
         vals[p.dofs] = p.at(t)
     dofs = np.flatnonzero(~np.isnan(vals))
     return dofs, vals[dofs]
+
+
+def dirichlet_rates(prescribed: tuple[Prescribed, ...], t: float, ndof: int) -> tuple[NDArray,
+                                                                                       NDArray]:
+    """The dofs of :func:`dirichlet_values` and their velocities at the end t of a step (the
+    rate of the segment that ends at t; later entries win, as for the values)."""
+    if not prescribed:
+        return np.zeros(0, dtype=np.int64), np.zeros(0)
+    rates = np.full(ndof, np.nan)
+    for p in prescribed:
+        rates[p.dofs] = p.rate_before(t)
+    dofs = np.flatnonzero(~np.isnan(rates))
+    return dofs, rates[dofs]
