@@ -72,7 +72,7 @@ def test_a_stopped_support_rests_and_its_reaction_does_not_alternate(mass):
 def test_the_ledger_closes_with_the_supports_work(mass):
     """E - E0 - W_ext - W_support, W_support the sum of reaction . displacement increment,
     is round-off at every step but the stop's, where it is the energy of the held nodes'
-    velocity jump: m Δv^2 / 2 with a lumped mass (docs/theory.md, "Prescribed motion")."""
+    velocity jump: m dv^2 / 2 with a lumped mass (docs/theory.md, "Prescribed motion")."""
     h = push_stop(mass).history
     t = h["time"].to_numpy()
     u = np.interp(t, [0.0, STOP, 1.0], [0.0, SPEED * STOP, SPEED * STOP])
