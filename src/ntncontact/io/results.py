@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 
 from ..contact.evaluate import TOUCH_ROUNDOFF
-from ..engine.diagnostics import EnergyAudit, largest_linear_rotation
+from ..engine.diagnostics import EnergyAudit, linear_elastic_measures
 from ..engine.model import Model
 from ..engine.postprocess import (
     contact_node_fields,
@@ -87,6 +87,9 @@ def outside_ledger(model: Model) -> list[str]:
     return terms
 
 
+#: the figures summary.json keeps of linear elastic bodies, max_linear_elastic_<key>(_at)
+LINEAR_MEASURES = ("rotation", "stretch", "strain")
+
 class ResultWriter:
     """Writes history.csv, summary.json and fields.pvd/VTU as the simulation advances (or,
     with ``directory`` None, keeps the same results in memory: :class:`MemoryResults`)."""
@@ -103,8 +106,8 @@ class ResultWriter:
             extra_history = extra_history + OFF_SURFACE_HISTORY
             summary_extra = OFF_SURFACE_SUMMARY | summary_extra
         if any(body.material.kind == "linear_elastic" for body in model.bodies):
-            summary_extra = {"max_linear_elastic_rotation": 0.0,
-                             "max_linear_elastic_rotation_at": None} | summary_extra
+            summary_extra = {f"max_linear_elastic_{key}{at}": None if at else 0.0
+                             for key in LINEAR_MEASURES for at in ("", "_at")} | summary_extra
         if model.ale_bodies and model.interfaces:
             summary_extra = {"max_ale_mismatch": 0.0, "max_ale_mismatch_at": None} | summary_extra
         if model.interfaces:
@@ -295,15 +298,17 @@ class ResultWriter:
 
     @staticmethod
     def _rotation_summary(model: Model, s, summary: dict) -> dict:
-        """``max_linear_elastic_rotation`` and when and where: the largest element rotation
-        of a linear elastic body so far (``engine.diagnostics.largest_linear_rotation``)."""
+        """``max_linear_elastic_rotation``, ``_stretch`` and ``_strain`` and when and where:
+        the largest of a linear elastic body so far
+        (``engine.diagnostics.linear_elastic_measures``)."""
         if "max_linear_elastic_rotation" not in summary:
             return {}
-        angle, body = largest_linear_rotation(model, s.X, s.d)
-        if angle <= summary["max_linear_elastic_rotation"]:
-            return {}
-        return {"max_linear_elastic_rotation": angle,
-                "max_linear_elastic_rotation_at": {"time": s.time, "body": body}}
+        fields: dict = {}
+        for key, (value, body) in linear_elastic_measures(model, s.X, s.d).items():
+            if value > (summary.get(f"max_linear_elastic_{key}") or 0.0):
+                fields |= {f"max_linear_elastic_{key}": value,
+                           f"max_linear_elastic_{key}_at": {"time": s.time, "body": body}}
+        return fields
 
     def _file_node(self, node: int) -> int:
         """A global node's number in its body's mesh file (-1: a generated mesh)."""
