@@ -282,6 +282,7 @@ def _check_analysis_options(config: ScenarioConfig) -> None:
             if c.law == "persistency":  # the rate law of 2.34 needs velocities
                 raise ScenarioError(f"contact.{i}.law = \"persistency\": the rate law needs a "
                                     "dynamic analysis; a static run takes the gap law")
+        _check_static_inertia(config)
     if a.energy_conserving and not any(
             c.method == "lagrange" and (c.law or "persistency") == "gap" for c in config.contact):
         raise ScenarioError("analysis.energy_conserving: report 5.5's variant acts on the "
@@ -290,6 +291,21 @@ def _check_analysis_options(config: ScenarioConfig) -> None:
                             "itself)")
     if a.energy_conserving:
         _check_energy_equation(config)
+
+
+def _check_static_inertia(config: ScenarioConfig) -> None:
+    """A static run has no inertia: an initial velocity and the mass matrix were dropped in
+    silence (a tester's block given velocity [1, 0] ran with zero kinetic energy, told only that
+    its supported nodes start at their supports' velocity), so they are refused, naming the
+    key, as analysis.integrator is."""
+    if "mass" in config.analysis.model_fields_set:
+        raise ScenarioError("analysis.mass: only for dynamic analyses (a static run has no "
+                            "inertia)")
+    for i, body in enumerate(config.bodies):
+        for key in ("velocity", "angular_velocity"):
+            if key in body.initial.model_fields_set:
+                raise ScenarioError(f"bodies.{i}.initial.{key} (body '{body.name}'): only for "
+                                    "dynamic analyses (a static run starts at rest)")
 
 
 def _check_energy_equation(config: ScenarioConfig) -> None:
