@@ -24,7 +24,7 @@ BLOWN_UP = {"integrator": "midpoint", "outside_ledger": [], "energy_initial": 6.
 def test_an_energy_blow_up_is_quoted_against_the_initial_energy():
     (line,) = [w for w in result_warnings(BLOWN_UP) if "energy balance is off" in w]
     assert "0.99 of the energy scale" in line  # the documented figure stays
-    assert "125 times the initial energy E0 = 6.96" in line
+    assert "by 125 times the initial energy E0 = 6.96" in line
 
 
 def test_a_small_balance_error_is_not_quoted_against_the_initial_energy():

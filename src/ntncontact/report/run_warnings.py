@@ -521,9 +521,9 @@ def _balance(summary: dict, static: bool) -> str | None:
         cause = ("the mid-point rule (analysis.integrator = \"midpoint\") does not conserve "
                  "energy with a nonlinear (Neo-Hookean) material; analysis.integrator = "
                  "\"energy_momentum\" (the default) does")
-    return (f"the energy balance is off by {relative:.2g} of the energy scale"
-            f"{_against_initial(summary)} (summary.json energy_balance_max_relative_error: "
-            f"energy that no load, contact or remap accounts for): {cause}")
+    return (f"the energy balance is off by {relative:.2g} of the energy scale (summary.json "
+            "energy_balance_max_relative_error: energy that no load, contact or remap "
+            f"accounts for){_against_initial(summary)}: {cause}")
 
 
 def _against_initial(summary: dict) -> str:
@@ -533,6 +533,7 @@ def _against_initial(summary: dict) -> str:
     initial, error = summary.get("energy_initial"), summary.get("energy_balance_max_error")
     if not initial or not error or error <= abs(initial):
         return ""
-    return (f", {error / abs(initial):.3g} times the initial energy E0 = {initial:.3g} "
-            "(energy_balance_max_error; energy_max_relative_variation = "
-            f"{summary.get('energy_max_relative_variation') or 0.0:.3g})")
+    return (f", by {error / abs(initial):.3g} times the initial energy E0 = {initial:.3g} "
+            "(energy_balance_max_error / energy_initial; the energy changed by up to "
+            f"{summary.get('energy_max_relative_variation') or 0.0:.3g} E0, "
+            "energy_max_relative_variation)")
