@@ -301,3 +301,24 @@ def test_a_figure_of_a_column_the_table_will_not_have_is_refused_before_any_case
                    'ke = "kinetic_energy:last"\n[[figures]]\nx = "analysis.dt"\ny = "ke"\n'
                    'by = "max_penetration"\n')
     assert load_sweep(bad)[0].figures[0].y == "ke"
+
+
+def test_a_completed_case_whose_edited_base_no_longer_builds_is_failed_without_old_results(
+        sweep_file, tmp_path):
+    """A tester's rerun after an edit that made the base unbuildable (bodies overlapping)
+    reported every case `completed` with the old geometry's results and the build error: the
+    error's row took the folder's old summary, status and all."""
+    from ntncontact.studies.sweep import run_case
+
+    block = sweep_file.parent / "block.toml"
+    reductions = {"final_kinetic": "kinetic_energy:last"}
+    folder = str(tmp_path / "case")
+    first = run_case(str(block), {"analysis.mass": "lumped"}, folder, reductions)
+    assert first["status"] == "completed" and first["steps"] == 3
+    block.write_text(BLOCK.replace("max_cutbacks = 0", "max_cutbacks = 0\n"
+                                   "energy_conserving = true"))  # refused when built
+    again = run_case(str(block), {"analysis.mass": "lumped"}, folder, reductions)
+    assert again["status"] == "failed" and not again["skipped"]
+    assert "energy_conserving" in again["error"]
+    for key in ("steps", "final_kinetic", "wall_time_s", "energy_final"):
+        assert key not in again, key  # the old scenario's numbers are not this case's

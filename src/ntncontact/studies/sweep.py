@@ -162,6 +162,7 @@ def run_case(scenario_path: str, overrides: Mapping[str, Any], folder: str,
     and return its sweep.csv row. Never raises: a failure becomes the row's ``error``."""
     items = override_strings(overrides)
     row: dict[str, Any] = {"case": Path(folder).name, **overrides}
+    started = time.time()  # what the folder holds from before is not this case's
     try:
         scenario = load_scenario(scenario_path, list(items))
         done = _completed(Path(folder), scenario)
@@ -173,18 +174,25 @@ def run_case(scenario_path: str, overrides: Mapping[str, Any], folder: str,
                 results = run(scenario, Path(folder), overwrite=True)  # read back from it
         row |= {"skipped": done} | _results_row(results, reductions)
     except Exception as err:  # recorded, the other cases go on
-        row |= {"status": "failed", "skipped": False} | _written_so_far(folder, reductions)
-        row["error"] = f"{type(err).__name__}: {err}".strip()
+        row |= _written_so_far(folder, reductions, started)
+        row |= {"status": "failed", "skipped": False,
+                "error": f"{type(err).__name__}: {err}".strip()}
         if not isinstance(err, ScenarioError | ValueError):
             row["traceback"] = traceback.format_exc(limit=3)
     return row
 
 
-def _written_so_far(folder: str, reductions: Mapping[str, str]) -> dict[str, Any]:
+def _written_so_far(folder: str, reductions: Mapping[str, str],
+                    started: float) -> dict[str, Any]:
     """A failed case's headline figures and reductions from what its folder holds (how far it
     got: a tester's failed case had steps, times and energies in its summary and NaN in
-    sweep.csv); nothing where the folder holds no results."""
+    sweep.csv); nothing where the folder holds no results, or only results from before
+    ``started`` (a time.time()): a case whose edited base no longer built was recorded with
+    the old scenario's results, and their ``completed``, as its own."""
+    summary = Path(folder) / "summary.json"
     try:
+        if summary.stat().st_mtime < started:
+            return {}
         return _results_row(read_results(folder), reductions)
     except (OSError, ValueError):
         return {}
@@ -310,11 +318,10 @@ def _checked_cost(spec: str | Path, k: int, case: Mapping[str, Any], scenario_pa
 
 def case_cost(scenario: Scenario, folder: Path, meshes: dict[str, int] | None = None) -> float:
     """A case's expected run time up to a constant, to start the longest cases first: its
-    steps times its elements; 0 for a case its folder says completed (a rerun only reads
+    steps times its elements; 0 for a case its folder says completed (a rerun may only read
     it). ``meshes`` caches element counts by mesh settings (a grid repeats the same meshes);
-    a mesh that cannot be built raises."""
-    if _completed_summary(folder, scenario.overrides) is not None:  # an order, not a check
-        return 0.0
+    a mesh that cannot be built raises, also for a completed case (a tester's mesh file,
+    broken after a sweep, was not read here and the rerun reported the old results)."""
     meshes = {} if meshes is None else meshes
     cells = 0
     for body in scenario.config.bodies:
@@ -322,6 +329,8 @@ def case_cost(scenario: Scenario, folder: Path, meshes: dict[str, int] | None = 
         if key not in meshes:
             meshes[key] = len(build_mesh(body.mesh, body.name, scenario.base_dir).cells)
         cells += meshes[key]
+    if _completed_summary(folder, scenario.overrides) is not None:  # an order, not a check
+        return 0.0
     analysis = scenario.config.analysis
     return cells * analysis.t_end / analysis.dt
 
