@@ -322,3 +322,51 @@ def test_a_completed_case_whose_edited_base_no_longer_builds_is_failed_without_o
     assert "energy_conserving" in again["error"]
     for key in ("steps", "final_kinetic", "wall_time_s", "energy_final"):
         assert key not in again, key  # the old scenario's numbers are not this case's
+
+
+def test_repeated_cases_are_refused_and_key_order_does_not_make_another_case(tmp_path):
+    """A tester's repeated [[cases]] table shared one folder and was recorded `running` (the
+    first case's lock); the same overrides in another key order ran twice in two folders."""
+    bad = tmp_path / "bad.toml"
+    bad.write_text('scenario = "x.toml"\n[[cases]]\n"a.b" = 0.3\n[[cases]]\n"c" = 1\n'
+                   '[[cases]]\n"a.b" = 0.3\n')
+    with pytest.raises(ScenarioError, match=r"cases 0 and 2 are the same case \(a\.b=0\.3\)"):
+        load_sweep(bad)
+    bad.write_text('scenario = "x.toml"\n[[cases]]\n"a" = 1\n"b" = "x"\n'
+                   '[[cases]]\n"b" = "x"\n"a" = 1\n')
+    with pytest.raises(ScenarioError, match=r"cases 0 and 1 are the same case"):
+        load_sweep(bad)
+    # a grid's cases keep their keys' order, so their folders keep their names
+    ok = tmp_path / "ok.toml"
+    ok.write_text('scenario = "x.toml"\n[set]\n"z" = 2\n[grid]\n"b" = [1]\n"a" = [3]\n'
+                  '[[cases]]\n"a" = 4\n"b" = 5\n')
+    spec = load_sweep(ok)[0]
+    assert [list(c) for c in spec.case_overrides()] == [["z", "b", "a"], ["z", "b", "a"]]
+    assert case_name(["z=2", "b=1", "a=3"]) == "case-" + __import__("hashlib").sha1(
+        b"z=2\nb=1\na=3").hexdigest()[:10]
+
+
+def test_a_key_in_both_set_and_grid_is_refused_and_a_case_overrides_set(tmp_path):
+    bad = tmp_path / "bad.toml"
+    bad.write_text('scenario = "x.toml"\n[set]\n"a" = 0.9\n[grid]\n"a" = [0.0, 0.4]\n')
+    with pytest.raises(ScenarioError, match="'a' is in both \\[set\\] and \\[grid\\]"):
+        load_sweep(bad)
+    bad.write_text('scenario = "x.toml"\n[set]\n"a" = 0.9\n"b" = 1\n[[cases]]\n"a" = 0.1\n'
+                   '[[cases]]\n"b" = 2\n')
+    assert load_sweep(bad)[0].case_overrides() == [{"a": 0.1, "b": 1}, {"a": 0.9, "b": 2}]
+
+
+def test_a_reduction_of_a_column_history_csv_never_has_is_refused_naming_close_ones(
+        tmp_path):
+    """A tester's misspelt reduction column gave an empty sweep.csv column, silently."""
+    bad = tmp_path / "bad.toml"
+    bad.write_text('scenario = "x.toml"\n[grid]\na = [1]\n[reductions]\n'
+                   'd = "frictional_dissipaton:last"\n')
+    with pytest.raises(ScenarioError, match="reductions.d = 'frictional_dissipaton:last': "
+                       "history.csv has no column 'frictional_dissipaton' "
+                       r"\(did you mean frictional_dissipation\?\)"):
+        load_sweep(bad)
+    bad.write_text('scenario = "x.toml"\n[grid]\na = [1]\n[reductions]\n'
+                   'r = "reaction_base_bottom_y:max_abs"\nw = "external_work:last"\n'
+                   'p = "penetration_off_surfaces:max"\n')
+    assert len(load_sweep(bad)[0].reductions) == 3  # the model's own columns pass

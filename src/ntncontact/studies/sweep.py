@@ -24,6 +24,7 @@ is recorded with its error without stopping the others.
 from __future__ import annotations
 
 import contextlib
+import difflib
 import hashlib
 import itertools
 import json
@@ -43,7 +44,9 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_valida
 from ..api import Scenario, load_scenario, override_strings, read_results, run
 from ..engine.builder import build_mesh, build_model
 from ..io.checkpoint import run_identity
+from ..io.results import CONTACT_HISTORY, OFF_SURFACE_HISTORY
 from ..io.scenario import ScenarioError, read_toml
+from ..io.writers import HISTORY_COLUMNS
 from ..report.run_warnings import result_warnings
 from ..threads import single_threaded
 
@@ -112,8 +115,35 @@ class SweepSpec(_Strict):
             if not column or op not in REDUCTIONS:
                 raise ValueError(f"reductions.{name} = '{spec}': expected 'COLUMN:OP' with OP "
                                  f"one of {', '.join(REDUCTIONS)}")
+            _check_history_column(f"reductions.{name} = '{spec}'", column)
+        both = [key for key in self.grid if key in self.set]
+        if both:  # a tester's [set] value was dropped without a word
+            raise ValueError(f"'{both[0]}' is in both [set] and [grid]: the grid's values "
+                             "would replace [set]'s in every case; give it in one of them")
         self._check_figures()
+        self._check_repeats()
         return self
+
+    def _check_repeats(self) -> None:
+        """Two equal cases (as mappings: in any key order) would run in one folder, the second
+        stopped by the first's lock (a tester's repeated [[cases]] table was recorded
+        ``running``): refused, naming both."""
+        seen: dict[tuple[str, ...], int] = {}
+        for k, case in enumerate(self.case_overrides()):
+            items = override_strings(case)
+            if items in seen:
+                raise ValueError(f"cases {seen[items]} and {k} are the same case "
+                                 f"({', '.join(items) or 'no overrides'}): give each once")
+            seen[items] = k
+
+    def key_order(self) -> list[str]:
+        """Every override key in the order it first appears: [set], [grid], then [[cases]].
+        A case's overrides are put in this order, which names its folder, so that two cases
+        equal as mappings are one case (the same keys in another order made two folders)."""
+        keys = dict.fromkeys(self.set) | dict.fromkeys(self.grid)
+        for case in self.cases:
+            keys |= dict.fromkeys(case)
+        return list(keys)
 
     def _check_figures(self) -> None:
         """Each figure's columns are sweep.csv's: refused here, not after every case ran (a
@@ -130,11 +160,32 @@ class SweepSpec(_Strict):
 
     def case_overrides(self) -> list[dict[str, Any]]:
         """The cases in order: the grid's combinations (last key fastest), then ``cases``;
-        each after the overrides of ``set``."""
+        each after the overrides of ``set`` (a case's own value of a key wins), its keys in
+        :meth:`key_order`."""
         keys = list(self.grid)
         combos = [dict(zip(keys, values, strict=True))
                   for values in itertools.product(*self.grid.values())] if keys else []
-        return [self.set | case for case in combos + [dict(c) for c in self.cases]]
+        order = self.key_order()
+        merged = [self.set | case for case in combos + [dict(c) for c in self.cases]]
+        return [{key: case[key] for key in order if key in case} for case in merged]
+
+
+#: history.csv's columns that depend on the model's supports and ties (engine.reactions,
+#: io.results.tie_history): known only once the model is built
+MODEL_HISTORY_PREFIXES = ("reaction_", "tie_")
+
+
+def _check_history_column(where: str, column: str) -> None:
+    """Refuse a reduction of a column history.csv never has, naming the close ones (a
+    tester's misspelt column gave an empty sweep.csv column without a word). The columns come
+    from the writers' lists, not from a run: they are checked before any case runs."""
+    known = (*HISTORY_COLUMNS, "external_work", *CONTACT_HISTORY, *OFF_SURFACE_HISTORY)
+    if column in known or column.startswith(MODEL_HISTORY_PREFIXES):
+        return
+    close = difflib.get_close_matches(column, known, n=3)
+    hint = f" (did you mean {', '.join(close)}?)" if close else (
+        f" (one of {', '.join(dict.fromkeys(known))}, or reaction_*/tie_* of the model)")
+    raise ValueError(f"{where}: history.csv has no column '{column}'{hint}")
 
 
 def load_sweep(path: str | Path) -> tuple[SweepSpec, Path]:
