@@ -71,6 +71,11 @@ def test_a_sweep_runs_every_case_records_the_failure_and_skips_finished_ones_on_
     assert ok["analysis.mass"].tolist() == ["consistent", "lumped"] * 2
     assert (ok["final_kinetic"].iloc[2:].to_numpy() > ok["final_kinetic"].iloc[:2].to_numpy()).all()
     assert (ok["momentum_change"] < 1e-10).all()  # a free body keeps its angular momentum
+    # the [[cases]] case sets neither grid key: its cells hold the base's values (NaN before)
+    assert bad["analysis.mass"] == "consistent"
+    assert bad["bodies.0.initial.angular_velocity"] == 2.0
+    assert list(table.columns[:3]) == ["case", "bodies.0.initial.angular_velocity",
+                                       "analysis.mass"]
     assert (out / "sweep_final_kinetic_vs_bodies_0_initial_angular_velocity.png").is_file()
     written = pd.read_csv(out / "sweep.csv")
     assert written["case"].tolist() == table["case"].tolist()
@@ -262,9 +267,10 @@ def test_a_signalled_sweep_stops_and_keeps_the_cases_done(sweep_file, tmp_path, 
     assert child.returncode == 130, err
     assert "interrupted" in err and "Traceback" not in err
     done = pd.read_csv(out / "sweep.csv")
-    assert 1 <= len(done) < 5 and set(done["status"]) <= {"completed", "failed"}
+    ran = done[done["status"] != "interrupted"]  # the case running then is listed as such
+    assert 1 <= len(ran) < 5 and set(done["status"]) <= {"completed", "failed", "interrupted"}
     again = sweep(sweep_file, out, workers=1, progress=False)
-    assert len(again) == 5 and again["skipped"].sum() >= len(done)
+    assert len(again) == 5 and again["skipped"].sum() >= (ran["status"] == "completed").sum()
 
 
 def test_an_interrupted_sweep_keeps_a_case_completed_on_disk_whose_result_was_in_flight(
@@ -287,6 +293,11 @@ def test_an_interrupted_sweep_keeps_a_case_completed_on_disk_whose_result_was_in
     # a folder completed before this sweep started may be another base scenario's (a
     # tester's interrupted rerun after an edit listed such rows as this run's)
     assert _rows_on_disk(work, [None, None], reductions, time.time() + 1.0) == []
+    # a case running at the interrupt is listed as such (a tester's sweep.csv had none)
+    (running,) = _rows_on_disk(work, [None, None], reductions, time.time() + 1.0, {1})
+    assert running["case"] == "case1" and running["status"] == "interrupted"
+    assert running["analysis.mass"] == "consistent" and "steps" not in running
+    assert _rows_on_disk(work, [None, None], reductions, started, {0, 1})[0] == returned
 
 
 def test_a_figure_of_a_column_the_table_will_not_have_is_refused_before_any_case_runs(
@@ -370,3 +381,52 @@ def test_a_reduction_of_a_column_history_csv_never_has_is_refused_naming_close_o
                    'r = "reaction_base_bottom_y:max_abs"\nw = "external_work:last"\n'
                    'p = "penetration_off_surfaces:max"\n')
     assert len(load_sweep(bad)[0].reductions) == 3  # the model's own columns pass
+
+
+def test_figures_of_vectors_and_blanks_are_drawn_and_one_that_cannot_be_is_a_warning(
+        tmp_path):
+    """A tester's figure by velocity vectors, and one of a text x with a blank, raised after
+    every case had run: the command said "internal error" and the API lost the table."""
+    from ntncontact.studies.sweep import FigureSpec, _draw_figures
+
+    table = pd.DataFrame({"v": [[1.0, -1.0], [2.0, -2.0], [1.0, -1.0], None],
+                          "mass": ["consistent", "lumped", None, "lumped"],
+                          "mu": [0.1, 0.1, 0.3, 0.3], "d": [1.0, 2.0, 3.0, 4.0]})
+    figures = [FigureSpec(x="mu", y="d", by="v"), FigureSpec(x="mass", y="d", by="v"),
+               FigureSpec(x="mu", y="d", by="mass"), FigureSpec(x="mu", y="nope")]
+    with pytest.warns(RuntimeWarning, match="figure nope against mu not drawn: .*no column "
+                      "nope") as caught:
+        _draw_figures(table, figures, tmp_path)
+    assert len(caught) == 1
+    for name in ("sweep_d_vs_mu.png", "sweep_d_vs_mass.png"):
+        assert (tmp_path / name).stat().st_size > 0
+
+
+def test_a_figure_of_vectors_on_its_x_axis_is_refused_before_any_case_runs(tmp_path):
+    bad = tmp_path / "bad.toml"
+    bad.write_text('scenario = "x.toml"\n[grid]\n"v" = [[1, -1], [2, -2]]\n"mu" = [0.1]\n'
+                   '[[figures]]\nx = "v"\ny = "steps"\n')
+    with pytest.raises(ScenarioError, match=r"figures\.0\.x = 'v': its values are not numbers "
+                       r"or text \(\[1, -1\]\).*can be `by`"):
+        load_sweep(bad)
+    bad.write_text(bad.read_text().replace('x = "v"', 'x = "mu"\nby = "v"'))
+    assert load_sweep(bad)[0].figures[0].by == "v"
+
+
+def test_a_case_that_does_not_set_a_sweep_key_gets_the_value_it_ran_with(sweep_file):
+    """A tester's case without `analysis.mass` had NaN there in sweep.csv (it ran with the
+    consistent mass), and the figure by mass dropped it silently."""
+    from ntncontact.api import load_scenario
+    from ntncontact.studies.sweep import _filled, _values
+
+    keys = ["contact.0.friction", "analysis.mass", "bodies.0.initial.velocity",
+            "bodies.0.initial.angular_velocity"]
+    scenario = load_scenario(sweep_file.parent / "block.toml", {"analysis.dt": 0.01})
+    values = _values(scenario, keys)
+    assert values == {"contact.0.friction": None, "analysis.mass": "consistent",
+                      "bodies.0.initial.velocity": [1.0, 0.0],
+                      "bodies.0.initial.angular_velocity": 2.0}
+    row = {"case": "c1", "analysis.mass": "lumped", "status": "completed"}
+    filled = _filled(row, {"c1": values})
+    assert list(filled) == ["case", *keys, "status"]
+    assert filled["analysis.mass"] == "lumped" and filled["bodies.0.initial.velocity"] == [1.0, 0.0]

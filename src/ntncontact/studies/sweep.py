@@ -33,7 +33,7 @@ import sys
 import time
 import traceback
 import warnings
-from collections.abc import Callable, Iterator, Mapping, Sequence
+from collections.abc import Callable, Collection, Iterator, Mapping, Sequence
 from pathlib import Path
 from typing import Annotated, Any, Literal
 
@@ -41,7 +41,7 @@ import numpy as np
 import pandas as pd
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
-from ..api import Scenario, load_scenario, override_strings, read_results, run
+from ..api import Scenario, load_scenario, override_strings, read_results, run, toml_value
 from ..engine.builder import build_mesh, build_model
 from ..io.checkpoint import run_identity
 from ..io.results import CONTACT_HISTORY, OFF_SURFACE_HISTORY
@@ -151,12 +151,22 @@ class SweepSpec(_Strict):
         known = (set(self.set) | set(self.grid) | {k for c in self.cases for k in c}
                  | set(self.reductions) | set(HEADLINE) | {"contact_duration"})
         for k, figure in enumerate(self.figures):
+            listed = [v for v in self._values_of(figure.x) if isinstance(v, list | dict)]
+            if listed:  # a tester's velocity vectors as x crashed the figure after the run
+                raise ValueError(f"figures.{k}.x = '{figure.x}': its values are not numbers "
+                                 f"or text ({toml_value(listed[0])}): give a scalar key as x "
+                                 "(a vector key can be `by`)")
             for key in ("x", "y", "by"):
                 column = getattr(figure, key)
                 if column is not None and column not in known:
                     raise ValueError(f"figures.{k}.{key} = '{column}': not a column of "
                                      f"sweep.csv (an override key, a reduction, or one of "
                                      f"{', '.join(HEADLINE)}, contact_duration)")
+
+    def _values_of(self, key: str) -> list[Any]:
+        """The values the file gives override ``key`` (none for another column)."""
+        values = list(self.grid.get(key, []))
+        return values + [c[key] for c in [self.set, *self.cases] if key in c]
 
     def case_overrides(self) -> list[dict[str, Any]]:
         """The cases in order: the grid's combinations (last key fastest), then ``cases``;
@@ -263,19 +273,27 @@ def _results_row(results: Any, reductions: Mapping[str, str]) -> dict[str, Any]:
 
 
 def _rows_on_disk(work: list[tuple[dict, str, float]], rows: list[dict | None],
-                  reductions: Mapping[str, str], started: float) -> list[dict]:
+                  reductions: Mapping[str, str], started: float,
+                  in_flight: Collection[int] = ()) -> list[dict]:
     """The rows of an interrupted sweep: those returned, and those of cases whose folder
     completed during this sweep (its summary written after ``started``, a time.time()) but
     whose result had not reached the client yet (CI caught a SIGINT in that window, and
     sweep.csv was written empty). A folder completed before it may hold another base
-    scenario's results (a tester's rerun after an edit listed them as this run's)."""
+    scenario's results (a tester's rerun after an edit listed them as this run's). A case
+    still running (``in_flight``, indices of ``work``) is listed ``interrupted``: its worker
+    is stopped when the sweep's cluster closes, or, on a running scheduler, may still
+    complete its folder, which a rerun then reads back (a tester's sweep.csv listed none of
+    the cases that were running)."""
     kept = []
-    for (case, folder, _), row in zip(work, rows, strict=True):
+    for i, ((case, folder, _), row) in enumerate(zip(work, rows, strict=True)):
         summary = Path(folder) / "summary.json"
         if (row is None and summary.is_file() and summary.stat().st_mtime >= started
                 and _completed_summary(Path(folder), override_strings(case))):
             row = {"case": Path(folder).name, **case, "skipped": False}
             row |= _results_row(read_results(folder), reductions)
+        elif row is None and i in in_flight:
+            row = {"case": Path(folder).name, **case, "status": "interrupted",
+                   "skipped": False, "error": "the sweep was interrupted while the case ran"}
         if row is not None:
             kept.append(row)
     return kept
@@ -329,22 +347,28 @@ def sweep(spec: str | Path, out: str | Path, *, scheduler: str | None = None,
     out = Path(out)
     folders = [str(out / "cases" / case_name(override_strings(c))) for c in cases]
     meshes: dict[str, int] = {}
-    costs = [_checked_cost(spec, k, case, scenario_path, Path(folder), meshes)
-             for k, (case, folder) in enumerate(zip(cases, folders, strict=True))]
+    keys = sweep_spec.key_order()
+    checked = [_checked_case(spec, k, case, scenario_path, Path(folder), meshes, keys)
+               for k, (case, folder) in enumerate(zip(cases, folders, strict=True))]
+    costs = [cost for cost, _ in checked]
+    ran_with = {Path(folder).name: values for folder, (_, values) in zip(folders, checked,
+                                                                          strict=True)}
     (out / "cases").mkdir(parents=True, exist_ok=True)
     work = [(case, folder, cost) for case, folder, cost in zip(cases, folders, costs, strict=True)]
     rows: list[dict | None] = [None] * len(work)
+    in_flight: set[int] = set()  # the cases submitted whose rows are not in yet
     started = time.time()  # folders completed from now on are this sweep's
     with _dask_client(scheduler, workers) as (client, cluster):
         try:
             _run_cases(client, cluster is not None, sweep_spec, str(scenario_path), work,
-                       progress, rows)
+                       progress, rows, in_flight)
         except KeyboardInterrupt:  # the cases done so far are kept in sweep.csv
-            done = _rows_on_disk(work, rows, sweep_spec.reductions, started)
+            done = [_filled(row, ran_with) for row in _rows_on_disk(
+                work, rows, sweep_spec.reductions, started, in_flight)]
             pd.DataFrame(done, columns=None if done else ["case"]).to_csv(out / SWEEP_FILE,
                                                                           index=False)
             raise
-        rows = [r for r in rows if r is not None]
+        rows = [_filled(r, ran_with) for r in rows if r is not None]
         if cluster is not None:
             client.run(_quiet_worker_logs)  # every case's result is in
             cluster.scale(0)  # its workers shut down while the results are written
@@ -354,17 +378,48 @@ def sweep(spec: str | Path, out: str | Path, *, scheduler: str | None = None,
     return table
 
 
-def _checked_cost(spec: str | Path, k: int, case: Mapping[str, Any], scenario_path: Path,
-                  folder: Path, meshes: dict[str, int]) -> float:
+def _checked_case(spec: str | Path, k: int, case: Mapping[str, Any], scenario_path: Path,
+                  folder: Path, meshes: dict[str, int],
+                  keys: Sequence[str]) -> tuple[float, dict[str, Any]]:
     """:func:`case_cost` of case ``k``, whose scenario and meshes are checked here, before any
-    case runs; an error names the sweep file and the case (a tester's bad key in ``[[cases]]``
-    was reported as the base scenario's, and a missing mesh file failed only on its worker
-    after the other cases had run)."""
+    case runs, and the value of each sweep key ``keys`` it runs with; an error names the sweep
+    file and the case (a tester's bad key in ``[[cases]]`` was reported as the base
+    scenario's, and a missing mesh file failed only on its worker after the other cases had
+    run)."""
     try:
-        return case_cost(load_scenario(scenario_path, case), folder, meshes)
+        scenario = load_scenario(scenario_path, case)
+        return case_cost(scenario, folder, meshes), _values(scenario, keys)
     except (ScenarioError, ValueError, OSError) as err:
         raise ScenarioError(f"{spec}: case {k} ({', '.join(override_strings(case))}): "
                             f"{err}") from None
+
+
+def _values(scenario: Scenario, keys: Sequence[str]) -> dict[str, Any]:
+    """Each dotted key's value in the case's validated scenario (the base's, or the default):
+    a case that does not set a sweep key left its sweep.csv cell empty, and a figure dropped
+    the case without a word (a tester's 1 point of 3)."""
+    data = scenario.config.model_dump(mode="json")
+    values = {}
+    for key in keys:
+        value: Any = data
+        for part in key.split("."):
+            if isinstance(value, list) and part.isdigit() and int(part) < len(value):
+                value = value[int(part)]
+            elif isinstance(value, dict) and part in value:
+                value = value[part]
+            else:
+                value = None
+                break
+        values[key] = value
+    return values
+
+
+def _filled(row: dict[str, Any], ran_with: Mapping[str, Mapping[str, Any]]) -> dict[str, Any]:
+    """A case's row with every sweep key's column, in the file's key order after ``case``:
+    the case's own value, else the one it ran with (:func:`_values`)."""
+    values = dict(ran_with.get(row["case"], {}))
+    values |= {key: row[key] for key in values if key in row}
+    return {"case": row["case"]} | values | row
 
 
 def case_cost(scenario: Scenario, folder: Path, meshes: dict[str, int] | None = None) -> float:
@@ -434,9 +489,10 @@ def _wait_until_workers_left(client: Any) -> None:
 
 def _run_cases(client: Any, own_cluster: bool, spec: SweepSpec, scenario_path: str,
                work: list[tuple[dict, str, float]], progress: bool,
-               rows: list[dict | None]) -> None:
+               rows: list[dict | None], in_flight: set[int] | None = None) -> None:
     """The cases' rows into ``rows``, in the order of ``work`` (case, folder, cost), run
-    longest first; the caller's list keeps the rows of the cases done if it is interrupted.
+    longest first; the caller's list keeps the rows of the cases done if it is interrupted,
+    and ``in_flight`` the indices of those submitted and not back yet.
 
     On the sweep's own LocalCluster one case per worker thread is in flight and the next
     longest goes to the first worker that is free (list scheduling: Dask assigns a few long
@@ -450,12 +506,14 @@ def _run_cases(client: Any, own_cluster: bool, spec: SweepSpec, scenario_path: s
     slots = max(sum(client.nthreads().values()), 1) if own_cluster else len(work)
     waiting = iter(enumerate(sorted(range(len(work)), key=lambda i: -work[i][2])))
     index: dict[str, int] = {}
+    in_flight = set() if in_flight is None else in_flight
 
     def submit(rank: int, i: int) -> Any:
         case, folder, _ = work[i]
         future = client.submit(run_case, scenario_path, case, folder, spec.reductions,
                                pure=False, priority=len(work) - rank)
         index[future.key] = i
+        in_flight.add(i)
         return future
 
     running = as_completed([submit(*item) for item in itertools.islice(waiting, slots)])
@@ -463,6 +521,7 @@ def _run_cases(client: Any, own_cluster: bool, spec: SweepSpec, scenario_path: s
               file=sys.stderr) as bar:
         for future in running:
             rows[index[future.key]] = future.result()
+            in_flight.discard(index[future.key])
             # released now, so that scaling the workers down after the last case does not
             # find a result still wanted ("... lose already computed task(s)" warnings)
             future.release()
@@ -472,27 +531,55 @@ def _run_cases(client: Any, own_cluster: bool, spec: SweepSpec, scenario_path: s
 
 
 def _draw_figures(table: pd.DataFrame, figures: Sequence[FigureSpec], out: Path) -> None:
+    """Each figure's PNG; one that cannot be drawn is a one-line warning, never an error: the
+    cases ran, and their table must reach the caller (a tester's figure of velocity vectors
+    raised, and the script lost the table)."""
     if not figures:
         return  # nothing to draw: no plotting library to load (~0.5 s) after the last case
     import matplotlib.pyplot as plt
 
     for fig_spec in figures:
-        missing = [c for c in (fig_spec.x, fig_spec.y, fig_spec.by) if c and c not in table]
-        if missing:
-            raise ScenarioError(f"figure {fig_spec.y} against {fig_spec.x}: no column "
-                                f"{', '.join(missing)} in {SWEEP_FILE}")
-        fig, ax = plt.subplots(layout="constrained", figsize=(5, 3.5))
-        groups = table.groupby(fig_spec.by, sort=False) if fig_spec.by else [(None, table)]
-        for label, group in groups:
-            ok = group.sort_values(fig_spec.x)
-            ax.plot(ok[fig_spec.x], ok[fig_spec.y], "o-",
-                    label=f"{fig_spec.by} = {label}" if fig_spec.by else None)
-        ax.set_xlabel(fig_spec.x)
-        ax.set_ylabel(fig_spec.y)
-        if fig_spec.by:
-            ax.legend()
-        fig.savefig(out / f"sweep_{_slug(fig_spec.y)}_vs_{_slug(fig_spec.x)}.png", dpi=120)
-        plt.close(fig)
+        try:
+            _draw_figure(plt, table, fig_spec, out)
+        except Exception as err:  # noqa: BLE001 - the figure is lost, not the sweep
+            plt.close("all")
+            warnings.warn(f"figure {fig_spec.y} against {fig_spec.x} not drawn: "
+                          f"{type(err).__name__}: {err}", RuntimeWarning, stacklevel=2)
+
+
+def _draw_figure(plt: Any, table: pd.DataFrame, fig_spec: FigureSpec, out: Path) -> None:
+    """One figure: ``y`` against ``x``, a line per value of ``by`` (vectors by their text)."""
+    missing = [c for c in (fig_spec.x, fig_spec.y, fig_spec.by) if c and c not in table]
+    if missing:
+        raise ScenarioError(f"no column {', '.join(missing)} in {SWEEP_FILE}")
+    data = table[table[fig_spec.x].notna()]  # a case that failed to load has no value
+    if data[fig_spec.x].dtype == object:  # text on a categorical axis
+        data = data.assign(**{fig_spec.x: data[fig_spec.x].astype(str)})
+    fig, ax = plt.subplots(layout="constrained", figsize=(5, 3.5))
+    if fig_spec.by:
+        labels = data[fig_spec.by].map(_label)
+        groups = data.groupby(labels, sort=False)
+    else:
+        groups = [(None, data)]
+    for label, group in groups:
+        ok = group.sort_values(fig_spec.x)
+        ax.plot(ok[fig_spec.x], ok[fig_spec.y], "o-",
+                label=f"{fig_spec.by} = {label}" if fig_spec.by else None)
+    ax.set_xlabel(fig_spec.x)
+    ax.set_ylabel(fig_spec.y)
+    if fig_spec.by:
+        ax.legend()
+    fig.savefig(out / f"sweep_{_slug(fig_spec.y)}_vs_{_slug(fig_spec.x)}.png", dpi=120)
+    plt.close(fig)
+
+
+def _label(value: Any) -> str:
+    """A ``by`` value as a legend's text: a vector as TOML writes it, no value as "none"."""
+    if isinstance(value, list | tuple | dict):
+        return toml_value(value)
+    if value is None or (isinstance(value, float) and np.isnan(value)):
+        return "none"
+    return str(value)
 
 
 def _slug(name: str) -> str:
