@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import signal
 import socket
 import subprocess
@@ -171,6 +172,12 @@ def test_a_case_costs_its_steps_times_its_elements_and_nothing_once_completed(
     assert case_cost(finer, done) == 0.0  # a rerun only reads it back
     assert case_cost(load_scenario(block, {"bodies.0.mesh.nx": 12, "analysis.dt": 0.01}),
                      done) > 0  # other overrides: run again
+    # a folder completed before its mesh broke is checked all the same (a tester's rerun
+    # after a gmsh file was damaged reported the old results as completed)
+    (done / "summary.json").write_text(json.dumps({"status": "completed",
+                                                   "overrides": list(broken.overrides)}))
+    with pytest.raises(ScenarioError, match="mesh file not found"):
+        case_cost(broken, done)
 
 
 def test_the_cases_start_longest_first_and_come_back_in_the_files_order(monkeypatch, tmp_path):
