@@ -437,3 +437,20 @@ def test_a_case_that_does_not_set_a_sweep_key_gets_the_value_it_ran_with(sweep_f
     filled = _filled(row, {"c1": values})
     assert list(filled) == ["case", *keys, "status"]
     assert filled["analysis.mass"] == "lumped" and filled["bodies.0.initial.velocity"] == [1.0, 0.0]
+
+
+@pytest.mark.parametrize(("at_end", "duration"), [(False, 2.05), (True, None)])
+def test_a_run_that_ended_in_contact_has_no_contact_duration(at_end, duration):
+    """A tester's rod impact cut at t = 1.0 read a duration of 0.95 beside the full run's 2.05:
+    its contact_end_time was the run's end (summary.json contact_at_end)."""
+    from types import SimpleNamespace
+
+    import pandas as pd
+
+    from ntncontact.studies.sweep import _results_row
+
+    summary = {"status": "completed", "contact_start_time": 0.05, "contact_end_time": 2.1,
+               "contact_at_end": at_end}
+    row = _results_row(SimpleNamespace(summary=summary, history=pd.DataFrame()), {})
+    assert row["contact_at_end"] is at_end
+    assert row.get("contact_duration") == (None if duration is None else pytest.approx(duration))
