@@ -39,7 +39,15 @@ from ..mesh.quality import check_elements
 from .diagnostics import PhysicsWarning
 from .initial import warn_overridden_velocities, warn_tied_velocities
 from .model import AleSetup, AnalysisSettings, Body, ContactInterface, Model, stack_bodies
-from .ties import Tie, TieError, held_on_edges, make_tie, pair_tie
+from .ties import (
+    Tie,
+    TieError,
+    held_on_edges,
+    make_tie,
+    pair_tie,
+    redundant_tie,
+    tied_partner,
+)
 
 
 def build_mesh(cfg: MeshConfig, name: str, base_dir: Path) -> QuadMesh:
@@ -103,7 +111,8 @@ def _warn_penalty_rate_law(config: ScenarioConfig) -> None:
     if config.analysis.kind != "dynamic":
         return
     for i, c in enumerate(config.contact):
-        loads = _sustained_loads(config, _joined(config, {c.body_1, c.body_2}))
+        loads = _sustained_loads(config, _joined(config, {c.body_1, c.body_2}),
+                                 first=(c.body_1, c.body_2))
         if c.method == "penalty" and (c.law or "persistency") == "persistency" and loads:
             warnings.warn(f"contact.{i} ('{c.name or f'interface{i}'}'): method = \"penalty\" "
                           f"under the persistency law cannot carry the sustained {loads[0]}: its "
@@ -146,15 +155,22 @@ def _warn_support_jumps(config: ScenarioConfig) -> None:
                               "at 0 (a ramp)", PhysicsWarning, stacklevel=3)
 
 
-def _sustained_loads(config: ScenarioConfig, bodies: set[str]) -> list[str]:
+def _sustained_loads(config: ScenarioConfig, bodies: set[str],
+                     first: tuple[str, ...] = ()) -> list[str]:
     """The loads on ``bodies`` still on at t_end, as "gravity on 'block'" (a time function
     ending at zero is a load that returns; a load on a body the interface does not join was
     warned about too, a tester's third body 10 units away). Only unsupported bodies: a
     supported body's own load goes to its supports (a tester's supported slab under gravity
-    was told its bodies sink without bound; 1.7e-5 in 2 s)."""
+    was told its bodies sink without bound; 1.7e-5 in 2 s). The loads on the ``first``
+    bodies (an interface's own two) come first, in that order: a tester's 4-block stack was
+    told for every interface, the top one's too, that it could not carry the gravity on the
+    lowest free block."""
     t_end = config.analysis.t_end
-    return [f"{load.type} on '{body.name}'" for body in config.bodies for load in body.loads
-            if body.name in bodies and not body.supports and _nonzero(load)
+    rank = {name: k for k, name in enumerate(first)}
+    loaded = sorted((body for body in config.bodies if body.name in bodies),
+                    key=lambda body: rank.get(body.name, len(first)))
+    return [f"{load.type} on '{body.name}'" for body in loaded for load in body.loads
+            if not body.supports and _nonzero(load)
             and (load.function is None
                  or np.interp(t_end, load.function.times, load.function.values) != 0.0)]
 
@@ -259,6 +275,8 @@ def build_model(config: ScenarioConfig, base_dir: str | Path = ".") -> Model:
     ties = tuple(_tie(t, i, bodies, fixed) for i, t in enumerate(config.tie))
     _check_ale_ties(ties, ale_bodies, bodies)
     _check_tied_multipliers(ties, interfaces, config.contact, bodies)
+    _check_redundant_ties(ties, bodies, fixed)
+    _check_tied_lagrange_pairs(ties, interfaces, config.contact, bodies)
     loads = LoadCase(tuple(patterns), tuple(functions), tuple(on_mesh), X0)
     model = Model(bodies, analysis, loads,
                   tuple(prescribed), X0, cells, assembler, interfaces, ale_bodies, ties)
@@ -535,6 +553,59 @@ def _refuse_tied_twice(tie: Tie, both: list[int], tied: dict, i: int, j: int,
         f"tie '{tie.name}', against the same surface: their two gap constraints are one and "
         f"the multiplier system is singular. Exclude those nodes from one interface "
         f"(contact.{j}.exclude), or use method = \"augmented_lagrangian\" there")
+
+
+def _node_where(bodies: tuple[Body, ...], node: int) -> str:
+    """A global node as "node 4 of body 'A' at (0, 0.5)"."""
+    body = next(b for b in bodies if b.node_offset <= node < b.node_offset + b.mesh.n_nodes)
+    x, y = body.mesh.nodes[node - body.node_offset]
+    return f"node {node - body.node_offset} of body '{body.name}' at ({x:.6g}, {y:.6g})"
+
+
+def _check_redundant_ties(ties: tuple[Tie, ...], bodies: tuple[Body, ...],
+                          fixed: np.ndarray) -> None:
+    """Refuse a tied pair that other ties (or the supports) already hold together: its
+    constraint repeats theirs and the step's matrix is singular (a tester's three parts tied
+    around one corner, A-B, C-B and A-C, ended "SuperLU: Factor is exactly singular" after
+    every halving; without the A-C tie it ran, exact)."""
+    found = redundant_tie(ties, fixed)
+    if found is None:
+        return
+    through = "the supports and " * found.supports
+    ties_named = ", ".join(f"'{name}'" for name in found.route)
+    raise ScenarioError(
+        f"tie '{found.tie}' holds {_node_where(bodies, found.node_1)} to "
+        f"{_node_where(bodies, found.node_2)}, which {through}tie(s) {ties_named} already "
+        "hold together: the constraint is given twice and the step's matrix is singular; "
+        f"drop one of the ties there (tie '{found.tie}', or give it a node set without "
+        "that node)")
+
+
+def _check_tied_lagrange_pairs(ties: tuple[Tie, ...],
+                               interfaces: tuple[ContactInterface, ...],
+                               configs: list[ContactConfig], bodies: tuple[Body, ...]) -> None:
+    """Refuse a candidate of a ``method = "lagrange"`` interface tied (directly or through
+    other ties) to a node of its partner surface: the two coincide, so they pair at once and
+    the pair's exact gap constraint repeats the tie's (the delamination example with
+    ``method = "lagrange"`` and ``exclude = []`` ended "SuperLU: Factor is exactly singular"
+    after 6 halvings; its ``exclude = ["tips"]`` avoids it). A penalty or augmented
+    Lagrangian pair adds a force, no constraint, and is not refused."""
+    for i, (face, cfg) in enumerate(zip(interfaces, configs, strict=True)):
+        if cfg.method != "lagrange":
+            continue
+        found = tied_partner(ties, face.candidates, face.interface.surface2.nodes)
+        if found is None:
+            continue
+        node, partner, route = found
+        ties_named = ", ".join(f"'{name}'" for name in route)
+        raise ScenarioError(
+            f"contact.{i} ('{face.name}', method = \"lagrange\"): {_node_where(bodies, node)} "
+            f"is a contact candidate and tie(s) {ties_named} hold it to "
+            f"{_node_where(bodies, partner)} on its partner surface: the pair's gap "
+            "constraint repeats the tie and the step's matrix is singular; leave the tied "
+            f"nodes out of the interface (contact.{i}.exclude = [a node set of them], as the "
+            "delamination example's exclude = [\"tips\"] does), or use method = "
+            "\"augmented_lagrangian\" there")
 
 
 def _check_not_both_ways(i: int, j: int, face_i: ContactInterface,

@@ -204,3 +204,94 @@ def held_on_edges(X_free: NDArray, X1: NDArray, edges: NDArray, tolerance: float
     nearest = np.argmin(dist, axis=1)
     rows = np.arange(len(X_free))
     return np.where(dist[rows, nearest] <= tolerance, nearest, -1), xi[rows, nearest]
+
+
+#: The vertex that stands for every prescribed dof in ``redundant_tie``: a tied component whose
+#: two dofs are both held by supports is left out (``make_tie``), so two ties reaching the
+#: supports from one node hold it twice.
+GROUND = -1
+
+
+def _root(parent: dict[int, int], dof: int) -> int:
+    """The union-find root of ``dof`` (halving the path as it goes)."""
+    while parent.get(dof, dof) != dof:
+        parent[dof] = parent.get(parent[dof], parent[dof])
+        dof = parent[dof]
+    return dof
+
+
+def _route(links: dict[int, list[tuple[int, str]]], start: int, goal: int
+           ) -> tuple[list[str], bool]:
+    """The names of the ties along the chain of tied pairs from ``start`` to ``goal``
+    (breadth first; the two are known to be joined), and whether it passes the supports
+    (``GROUND``)."""
+    came: dict[int, tuple[int, str] | None] = {start: None}
+    queue = [start]
+    while queue and goal not in came:
+        here = queue.pop(0)
+        for there, name in links.get(here, []):
+            if there not in came:
+                came[there] = (here, name)
+                queue.append(there)
+    names, grounded, step = [], GROUND in (start, goal), came.get(goal)
+    while step is not None:
+        names.append(step[1])
+        grounded |= step[0] == GROUND
+        step = came[step[0]]
+    return list(dict.fromkeys(reversed(names))), grounded
+
+
+@dataclass(frozen=True)
+class Redundant:
+    """A tied pair whose constraint the ties before it already impose."""
+
+    tie: str  # the tie of the pair that closes the loop
+    node_1: int  # its global nodes
+    node_2: int
+    route: list[str]  # the ties that already join the two
+    supports: bool  # the chain passes through prescribed dofs
+
+
+def redundant_tie(ties: Sequence[Tie], fixed_dofs: NDArray) -> Redundant | None:
+    """The first tied pair whose two dofs the earlier pairs already join (three parts tied
+    around one corner: A-B, C-B and A-C hold the corner node's x_A = x_C twice), or None.
+    Its constraint row is a combination of the others', so the bordered system is singular
+    (a tester's T-junction: "SuperLU: Factor is exactly singular" after every halving).
+    Prescribed dofs count as one vertex: a node tied to two supported nodes is held twice.
+    Nodes held on edges are left out (their rows mix three nodes)."""
+    fixed = set(np.asarray(fixed_dofs).tolist())
+    parent: dict[int, int] = {}
+    links: dict[int, list[tuple[int, str]]] = {}
+    for tie in ties:
+        for d1, d2 in zip(tie.dofs_1.tolist(), tie.dofs_2.tolist(), strict=True):
+            u, w = (GROUND if d in fixed else d for d in (d1, d2))
+            if _root(parent, u) == _root(parent, w):
+                return Redundant(tie.name, d1 // 2, d2 // 2, *_route(links, u, w))
+            parent[_root(parent, u)] = _root(parent, w)
+            links.setdefault(u, []).append((w, tie.name))
+            links.setdefault(w, []).append((u, tie.name))
+    return None
+
+
+def tied_partner(ties: Sequence[Tie], candidates: NDArray, partners: NDArray
+                 ) -> tuple[int, int, list[str]] | None:
+    """A node of ``candidates`` that a chain of tied pairs joins to a node of ``partners``
+    (both global), as (candidate, partner, the ties along the chain), or None. The two
+    coincide, so an exact (Lagrange) contact pair between them repeats the ties' constraint:
+    the delamination example's crack tips with ``method = "lagrange"`` and no ``exclude``
+    ended "SuperLU: Factor is exactly singular" after 6 halvings."""
+    parent: dict[int, int] = {}
+    links: dict[int, list[tuple[int, str]]] = {}
+    for tie in ties:
+        for a, b in zip(tie.nodes_1.tolist(), tie.nodes_2.tolist(), strict=True):
+            parent[_root(parent, a)] = _root(parent, b)
+            links.setdefault(a, []).append((b, tie.name))
+            links.setdefault(b, []).append((a, tie.name))
+    if not links:
+        return None
+    reached = {_root(parent, p): p for p in partners.tolist() if p in links}
+    for a in candidates.tolist():
+        p = reached.get(_root(parent, a)) if a in links else None
+        if p is not None and p != a:
+            return a, p, _route(links, a, p)[0]
+    return None

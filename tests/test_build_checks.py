@@ -1,0 +1,109 @@
+"""Scenarios the builder refuses or warns about because they cannot run as written: redundant
+tie and Lagrange constraints (a singular matrix), a penalty interface that cannot carry the
+load it is named for (tester C, session 41)."""
+
+from __future__ import annotations
+
+import copy
+import warnings
+
+import pytest
+from helpers import model_from_dict, model_from_example
+
+from ntncontact.engine.diagnostics import PhysicsWarning
+from ntncontact.io.scenario import ScenarioError
+
+
+def _block(name: str, width: float, height: float, nx: int, ny: int, origin: list[float],
+           **extra) -> dict:
+    return {"name": name, "mesh": {"type": "rectangle", "width": width, "height": height,
+                                   "nx": nx, "ny": ny, "origin": origin},
+            "material": {"model": "neo_hookean", "E": 1000.0, "nu": 0.3, "density": 1.0},
+            **extra}
+
+
+def _tie(name: str, body_1: str, surface_1: str, body_2: str, surface_2: str) -> dict:
+    return {"name": name, "body_1": body_1, "surface_1": surface_1, "body_2": body_2,
+            "surface_2": surface_2}
+
+
+def _t_junction(close_loop: bool) -> dict:
+    """A and C side by side on B, tied to it; ``close_loop``: A and C tied to each other too,
+    so the corner node where the three meet is held twice (tester C's tie_tjunction.toml)."""
+    ties = [_tie("AB", "A", "bottom", "B", "top"), _tie("CB", "C", "bottom", "B", "top")]
+    if close_loop:
+        ties.append(_tie("AC", "A", "right", "C", "left"))
+    load = [{"type": "traction", "set": "top", "vector": [10.0, -50.0]}]
+    return {"analysis": {"kind": "static", "dt": 0.5, "t_end": 1.0},
+            "bodies": [_block("B", 2.0, 0.5, 8, 2, [-1.0, 0.0],
+                              supports=[{"set": "bottom", "x": 0.0, "y": 0.0}]),
+                       _block("A", 1.0, 0.5, 4, 2, [-1.0, 0.5], loads=load),
+                       _block("C", 1.0, 0.5, 4, 2, [0.0, 0.5], loads=load)],
+            "tie": ties}
+
+
+def test_three_ties_around_one_corner_are_refused_naming_the_node_and_the_ties():
+    model_from_dict(_t_junction(close_loop=False))  # runs today: exact tie forces
+    with pytest.raises(ScenarioError) as err:
+        model_from_dict(_t_junction(close_loop=True))
+    line = str(err.value)
+    assert "\n" not in line
+    assert line.startswith("tie 'AC' holds node 4 of body 'A' at (0, 0.5) to node 0 of body "
+                           "'C' at (0, 0.5), which tie(s) 'AB', 'CB' already hold together")
+    assert "drop one of the ties" in line
+
+
+def test_a_node_tied_to_two_supported_nodes_is_refused_through_the_supports():
+    data = _t_junction(close_loop=False)
+    data["bodies"][1]["supports"] = [{"set": "right", "x": 0.0, "y": 0.0}]
+    data["bodies"][2]["supports"] = [{"set": "left", "x": 0.0, "y": 0.0}]
+    # A's and C's touching faces both held: the corner of B is tied to two held nodes
+    with pytest.raises(ScenarioError, match="which the supports and tie"):
+        model_from_dict(data)
+
+
+def test_a_tied_node_in_a_lagrange_interface_is_refused_with_the_exclude_advice():
+    lagrange = ["analysis.t_end=1.0", 'contact.0.method="lagrange"']
+    with pytest.raises(ScenarioError) as err:
+        model_from_example("delamination.toml", [*lagrange, "contact.0.exclude=[]"])
+    line = str(err.value)
+    assert line.startswith("contact.0 ('delamination', method = \"lagrange\"): node 8 of "
+                           "body 'upper' at (16, 10) is a contact candidate and tie(s) 'bond' "
+                           "hold it to node 173 of body 'lower' at (16, 10)")
+    assert 'exclude = ["tips"]' in line and "\n" not in line
+    # as shipped (exclude = ["tips"]), and the augmented Lagrangian without exclude, run
+    model_from_example("delamination.toml", lagrange)
+    model_from_example("delamination.toml", ["contact.0.exclude=[]"])
+
+
+def _stack4(loaded: tuple[str, ...]) -> dict:
+    """Tester C's stack4_pen.toml: base, b1, b2, b3 stacked, penalty interfaces i1 = b1/base,
+    i2 = b2/b1, i3 = b3/b2, gravity on the ``loaded`` bodies."""
+    gravity = [{"type": "gravity", "vector": [0.0, -10.0]}]
+    bodies = [_block("base", 2.0, 0.5, 4, 1, [-1.0, -0.5],
+                     supports=[{"set": "bottom", "x": 0.0, "y": 0.0}])]
+    bodies += [_block(f"b{k}", 1.0, 0.5, 2, 1, [-0.5, 0.5 * (k - 1)]) for k in (1, 2, 3)]
+    for body in bodies:
+        body["loads"] = copy.deepcopy(gravity) if body["name"] in loaded else []
+    contact = [{"name": f"i{k}", "body_1": f"b{k}", "surface_1": "bottom",
+                "body_2": "base" if k == 1 else f"b{k - 1}", "surface_2": "top",
+                "method": "penalty", "penalty_normal": 100.0} for k in (1, 2, 3)]
+    return {"analysis": {"kind": "dynamic", "dt": 0.01, "t_end": 1.0},
+            "bodies": bodies, "contact": contact}
+
+
+def _penalty_lines(data: dict) -> list[str]:
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        model_from_dict(data)
+    return [str(w.message) for w in caught
+            if w.category is PhysicsWarning and "cannot carry" in str(w.message)]
+
+
+def test_the_penalty_rate_law_warning_names_a_loaded_body_of_each_interface():
+    lines = _penalty_lines(_stack4(("base", "b1", "b2", "b3")))
+    named = [line.split("sustained gravity on ")[1].split(":")[0] for line in lines]
+    assert named == ["'b1'", "'b2'", "'b3'"]
+    # gravity on the top block only: it presses every interface below it
+    lines = _penalty_lines(_stack4(("base", "b3")))
+    assert all("gravity on 'b3'" in line for line in lines) and len(lines) == 3
