@@ -107,3 +107,61 @@ def test_the_penalty_rate_law_warning_names_a_loaded_body_of_each_interface():
     # gravity on the top block only: it presses every interface below it
     lines = _penalty_lines(_stack4(("base", "b3")))
     assert all("gravity on 'b3'" in line for line in lines) and len(lines) == 3
+
+
+def _row(surface_b: str = "right", origin_c: tuple[float, float] = (0.1, 0.05)) -> dict:
+    """Tester C's cradle3.toml: blocks A, B, C in a row, interfaces A/B and B/C."""
+    bodies = [_block("A", 0.5, 0.5, 5, 5, [-1.1, 0.1], initial={"velocity": [3.0, 0.0]}),
+              _block("B", 0.5, 0.6, 6, 6, [-0.5, 0.0]),
+              _block("C", 0.5, 0.5, 5, 5, list(origin_c))]
+    contact = [{"name": "AB", "body_1": "A", "surface_1": "right", "body_2": "B",
+                "surface_2": "left", "penalty_normal": 3000.0},
+               {"name": "BC", "body_1": "B", "surface_1": surface_b, "body_2": "C",
+                "surface_2": "left", "penalty_normal": 3000.0}]
+    return {"analysis": {"kind": "dynamic", "dt": 0.002, "t_end": 0.02},
+            "bodies": bodies, "contact": contact}
+
+
+def test_a_surface_on_the_far_side_of_its_body_is_refused_naming_the_key():
+    model_from_dict(_row())
+    with pytest.raises(ScenarioError) as err:
+        model_from_dict(_row(surface_b="left"))
+    line = str(err.value)
+    assert line.startswith("contact.1 ('BC'): surface_1 'left' of 'B' and surface_2 'left' of "
+                           "'C' face away from each other at t = 0")
+    assert "change contact.1.surface_1 or surface_2" in line and "\n" not in line
+    # the same row far apart, C 10 units on: still facing each other, still built
+    model_from_dict(_row(origin_c=(10.0, 0.05)))
+
+
+def test_surfaces_that_face_each_other_are_built_whatever_their_shape():
+    """Concave partners (a disk in a ring, near and far from its wall) and the examples with
+    curved surfaces: their nearest normals are opposed."""
+    ring = {"name": "ring", "mesh": {"type": "annulus", "r_inner": 1.0, "r_outer": 1.3,
+                                     "n_radial": 2, "n_circ": 48},
+            "material": {"model": "neo_hookean", "E": 1000.0, "nu": 0.3, "density": 1.0}}
+    for center in ([0.0, 0.0], [0.0, -0.69]):
+        disk = {"name": "disk", "mesh": {"type": "disk", "radius": 0.3, "n_circ": 32,
+                                         "n_radial": 3, "center": center},
+                "material": ring["material"]}
+        data = {"analysis": {"kind": "dynamic", "dt": 0.01, "t_end": 0.1},
+                "bodies": [disk, ring],
+                "contact": [{"body_1": "disk", "surface_1": "outer", "body_2": "ring",
+                             "surface_2": "inner", "penalty_normal": 100.0}]}
+        model_from_dict(data)
+        data["contact"][0]["surface_2"] = "outer"  # the ring's far side: refused
+        with pytest.raises(ScenarioError, match="face away from each other"):
+            model_from_dict(data)
+    for name in ("ring_impact.toml", "hertz.toml", "disk_drop.toml", "rod_impact.toml"):
+        model_from_example(name)
+
+
+def test_bodies_overlapping_at_t0_with_no_interface_are_refused_naming_node_and_depth():
+    with pytest.raises(ScenarioError) as err:
+        model_from_dict(_row(origin_c=(-0.9, 0.4)))  # C 0.2 deep inside A, no A/C interface
+    assert str(err.value) == (
+        "bodies 'A' and 'C' overlap at t = 0 and no [[contact]] joins them: node 34 of 'A' at "
+        "(-0.7, 0.6) is 0.2 deep inside 'C', and nothing would push it out; place the bodies "
+        "apart (bodies.*.mesh origin, center or transform)")
+    # touching bodies are no overlap: tied parts (the T-junction)
+    model_from_dict(_t_junction(close_loop=False))

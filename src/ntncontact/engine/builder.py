@@ -33,7 +33,7 @@ from ..io.scenario import (
 from ..materials.models import Material, MaterialError
 from ..mesh import generators
 from ..mesh.boundary import chain_edge_lengths, surface_chain
-from ..mesh.overlap import boundary_edges, deepest_overlap
+from ..mesh.overlap import boundary_edges, deepest_overlap, facing_away
 from ..mesh.quadmesh import MeshError, QuadMesh
 from ..mesh.quality import check_elements
 from .diagnostics import PhysicsWarning
@@ -257,7 +257,9 @@ def build_model(config: ScenarioConfig, base_dir: str | Path = ".") -> Model:
     interfaces = tuple(_interface(c, i, bodies, a.kind) for i, c in enumerate(config.contact))
     for i, (c, ci) in enumerate(zip(config.contact, interfaces, strict=True)):
         _check_no_overlap(i, c, ci, bodies)
+        _check_facing(i, c, ci, bodies)
     _check_paired_once(interfaces, config.contact, bodies)
+    _check_unjoined_overlaps(config, bodies)
     _check_analysis_options(config)
     _warn_penalty_rate_law(config)
     _warn_support_jumps(config)
@@ -679,6 +681,57 @@ def _check_no_overlap(index: int, cfg: ContactConfig, ci: ContactInterface,
                 f"contact.{index}: bodies '{body.name}' and '{other.name}' overlap at t = 0: "
                 f"{where} '{other.name}'; place the bodies apart "
                 "(bodies.*.mesh origin, center or transform)")
+
+
+def _check_facing(index: int, cfg: ContactConfig, ci: ContactInterface,
+                  bodies: tuple[Body, ...]) -> None:
+    """Refuse an interface whose surfaces face away from each other at t = 0
+    (``mesh.overlap.facing_away``): a surface declared on the far side of its body lets the
+    partner in through the near side unresisted. Refused, not warned: no run of such a pair
+    is valid, and surfaces facing each other (a ring far above a floor, a disk in a ring, a
+    pin in a hole) have opposed normals at their nearest points, near or far."""
+    by_name = {b.name: b for b in bodies}
+    b1, b2 = by_name[cfg.body_1], by_name[cfg.body_2]
+    s1, s2 = ci.interface.surface1, ci.interface.surface2
+    found = facing_away(b1.mesh.nodes[s1.nodes - b1.node_offset], s1.closed,
+                        b2.mesh.nodes[s2.nodes - b2.node_offset], s2.closed)
+    if found is None:
+        return
+    node = int(s1.nodes[found] - b1.node_offset)
+    x, y = b1.mesh.nodes[node]
+    raise ScenarioError(
+        f"contact.{index} ('{ci.name}'): surface_1 '{cfg.surface_1}' of '{b1.name}' and "
+        f"surface_2 '{cfg.surface_2}' of '{b2.name}' face away from each other at t = 0 (at "
+        f"node {node} of '{b1.name}' at ({x:.6g}, {y:.6g}), the nearest to '{b2.name}', both "
+        "outward normals point the same way and the partner lies behind a surface): one is "
+        f"the face on the far side of its body; change contact.{index}.surface_1 or "
+        "surface_2 to the faces that meet")
+
+
+def _check_unjoined_overlaps(config: ScenarioConfig, bodies: tuple[Body, ...]) -> None:
+    """Refuse two bodies that no interface joins and that overlap at t = 0: nothing pushes
+    them apart (a tester's block placed 0.2 deep inside another ran to "completed", warned of
+    a node "0.209 inside 'C' (t = 0.02)" as if it had gone there in the run). Each body's
+    boundary nodes are tested against the other's elements (``deepest_overlap``); bodies that
+    touch, tied ones too, are not an overlap."""
+    joined = {frozenset((c.body_1, c.body_2)) for c in config.contact}
+    outline = {b.name: boundary_edges(b.mesh.cells) for b in bodies}
+    for j, other in enumerate(bodies):
+        for body in bodies[:j]:
+            if frozenset((body.name, other.name)) in joined:
+                continue  # the interface's own check names its surfaces (_check_no_overlap)
+            for one, two in ((body, other), (other, body)):
+                nodes = np.unique(outline[one.name])
+                found = deepest_overlap(one.mesh.nodes[nodes], two.mesh.nodes, two.mesh.cells,
+                                        outline[two.name])
+                if found is not None:
+                    x, y = found.position
+                    raise ScenarioError(
+                        f"bodies '{one.name}' and '{two.name}' overlap at t = 0 and no "
+                        f"[[contact]] joins them: node {int(nodes[found.point])} of "
+                        f"'{one.name}' at ({x:.6g}, {y:.6g}) is {found.depth:.3g} deep inside "
+                        f"'{two.name}', and nothing would push it out; place the bodies apart "
+                        "(bodies.*.mesh origin, center or transform)")
 
 
 def _xy(body: Body, surface: ContactSurface) -> np.ndarray:
