@@ -7,6 +7,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..contact import ContactLaw
 from ..contact.evaluate import TOUCH_ROUNDOFF
 from ..engine.diagnostics import EnergyAudit, linear_elastic_measures
 from ..engine.model import Model
@@ -61,6 +62,15 @@ def contact_setup(model: Model) -> dict[str, dict]:
                           # and the report's forces (false) where pairs drift apart
                           "moment_free": bool(ci.law.moment_free)}
     return setup
+
+
+def used_penalties(law: ContactLaw) -> dict[str, float | None]:
+    """The ``normal`` and ``tangential`` penalties an interface's run used (from
+    ``penalty_factor`` too), None for one it does not use: the normal one under Lagrange
+    (exact multipliers) and the tangential one without friction. A tester's Lagrange runs at
+    penalty_normal = 1000 and 10 were bit-identical, yet summary.json gave 1000 and 10."""
+    return {"normal": None if law.method == "lagrange" else law.eps_N,
+            "tangential": law.eps_T if law.frictional else None}
 
 
 def outside_ledger(model: Model) -> list[str]:
@@ -123,9 +133,8 @@ class ResultWriter:
                              "max_separation_under_traction": 0.0,
                              "max_separation_under_traction_at": None,
                              **OFF_SURFACE_SUMMARY, "ale_unreturned_energy": 0.0,
-                             "contact_penalties": {  # as used (contact.N.penalty_factor)
-                                 ci.name: {"normal": ci.law.eps_N, "tangential": ci.law.eps_T}
-                                 for ci in model.interfaces},
+                             "contact_penalties": {ci.name: used_penalties(ci.law)
+                                                   for ci in model.interfaces},
                              # what `compare` picks the report's case by
                              "contact_friction": {ci.name: ci.law.mu
                                                   for ci in model.interfaces},

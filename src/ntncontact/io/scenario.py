@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import sys
+import warnings
 from pathlib import Path
 from typing import Annotated, Any, Literal, get_args
 
@@ -15,6 +16,7 @@ from pydantic import (
     model_validator,
 )
 
+from ..engine.diagnostics import PhysicsWarning
 from ..solvers.linear import Precision
 
 if sys.version_info >= (3, 11):
@@ -332,6 +334,58 @@ class ContactConfig(Strict):
             raise ValueError("friction > 0 needs penalty_tangential > 0 (or penalty_factor)")
         return self
 
+    def ineffective_keys(self) -> list[str]:
+        """The keys given here that this interface's method and friction never read, each
+        group as a clause naming the keys and why: a tester's penalty run with an
+        augmentation table and Lagrange runs with penalty_normal = 1000, 10 or 0 were
+        bit-identical to runs without, and nothing said so. Warned of, not refused: one
+        scenario file serves every method through ``--set contact.N.method=...``.
+        ``penalty_tangential`` without friction is not among them: friction > 0 requires it,
+        so files that ``--set contact.N.friction`` switches on carry it (three examples)."""
+        given = [k for k in AugmentationConfig.model_fields
+                 if k in self.augmentation.model_fields_set]
+        frictionless = self.friction == 0.0
+        notes = []
+        if self.method == "penalty" and given:
+            notes.append(f"{_keys(given, 'augmentation.')} no effect with method = "
+                         "\"penalty\": a penalty interface is solved once a step, without "
+                         "augmentations")
+        if self.method == "lagrange":
+            notes += self._lagrange_notes(given, frictionless)
+        if self.method == "augmented_lagrangian" and frictionless:
+            tangential = [k for k in given if k in ("slip_tolerance", "traction_tolerance")]
+            if tangential:
+                notes.append(f"{_keys(tangential, 'augmentation.')} no effect on a "
+                             "frictionless interface (friction = 0): they test the "
+                             "tangential multipliers, which only friction has")
+        return notes
+
+    def _lagrange_notes(self, given: list[str], frictionless: bool) -> list[str]:
+        """:meth:`ineffective_keys` of a Lagrange interface: its normal tractions are exact
+        multipliers (no eps_N), and it is not augmented; only friction's eps_T is a penalty
+        (``penalty_factor`` sets it when ``penalty_tangential`` is not given)."""
+        notes = []
+        if self.penalty_normal > 0.0:
+            notes.append(f"penalty_normal = {self.penalty_normal!r} has no effect with method "
+                         "= \"lagrange\": its normal tractions are exact multipliers")
+        if self.penalty_factor is not None and (frictionless or self.penalty_tangential > 0.0):
+            why = ("without friction no tangential penalty acts" if frictionless
+                   else "penalty_tangential gives the tangential one")
+            notes.append(f"penalty_factor = {self.penalty_factor!r} has no effect with method "
+                         f"= \"lagrange\": its normal tractions are exact multipliers, and {why}")
+        unread = [k for k in given if k not in ("max_iterations", "on_limit")]
+        if unread:
+            notes.append(f"{_keys(unread, 'augmentation.')} no effect with method = "
+                         "\"lagrange\": its exact multipliers are not augmented "
+                         "(augmentation.max_iterations and on_limit bound its passes that "
+                         "release pairs in tension)")
+        return notes
+
+
+def _keys(names: list[str], prefix: str) -> str:
+    """"a.x has" or "a.x, a.y have": the subject of a clause on the keys ``names``."""
+    return ", ".join(prefix + n for n in names) + (" has" if len(names) == 1 else " have")
+
 
 class TieConfig(Strict):
     """Nodes of surface 1 held at their coincident partners on surface 2 (x_a = x_b)."""
@@ -374,6 +428,17 @@ class ScenarioConfig(Strict):
             raise ValueError(f"contact names must be unique, got {interfaces}")
         return self
 
+
+def warn_ineffective_keys(config: ScenarioConfig) -> None:
+    """Warn, once per interface and reason, of the keys given that the interface's method
+    and friction never read (:meth:`ContactConfig.ineffective_keys`). Called inside the run's
+    ``warnings_noted`` (ntncontact run, ntncontact.run), so that the lines are also summary.json's
+    ``build_warnings``; validation itself stays silent, since a scenario is validated again
+    for every override and sweep case."""
+    for i, c in enumerate(config.contact):
+        for note in c.ineffective_keys():
+            warnings.warn(f"contact.{i} ('{c.name or f'interface{i}'}'): {note}",
+                          PhysicsWarning, stacklevel=2)
 
 
 def _format_error(path: Path, err: ValidationError) -> str:
