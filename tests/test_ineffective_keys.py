@@ -11,7 +11,7 @@ import pytest
 import ntncontact as ntc
 from ntncontact import api
 from ntncontact.cli import main
-from ntncontact.io.scenario import warn_ineffective_keys
+from ntncontact.engine.builder import _warn_ineffective_keys as warn_ineffective_keys
 
 
 def pressed_block(contact: dict) -> dict:

@@ -38,7 +38,6 @@ from .io.scenario import (
     apply_override,
     parse_scenario,
     read_toml,
-    warn_ineffective_keys,
 )
 from .io.vtk import find_field_series, read_frame_mesh, read_series
 from .io.writers import CONTACT_FILE, HISTORY_FILE, SUMMARY_FILE, MemoryResults, to_jsonable
@@ -257,7 +256,6 @@ def _run_in_folder(scenario: Scenario, out: Path, progress: Callable[[float], No
         raise ValueError("run: restart continues the run in out, overwrite replaces it: "
                          "give one of them")
     with warnings_noted() as build_warnings:  # issued, and kept in the summary
-        warn_ineffective_keys(scenario.config)
         model = build_model(scenario.config, scenario.base_dir)
     identity = checkpoint.run_identity(scenario.config, scenario.overrides, model)
     resume = checkpoint.load_latest(out, identity) if restart else None
@@ -281,7 +279,6 @@ def _run_in_memory(scenario: Scenario, progress: Callable[[float], None] | None,
         raise ScenarioError(f"{scenario.source}: checkpoints and restarts need a results "
                             "folder: give out=...")
     with warnings_noted() as build_warnings:
-        warn_ineffective_keys(scenario.config)
         model = build_model(scenario.config, scenario.base_dir)
     identity = checkpoint.run_identity(scenario.config, scenario.overrides, model)
     writer = ResultWriter(None, model, build_warnings=build_warnings, scenario=scenario.source,

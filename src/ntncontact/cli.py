@@ -113,7 +113,7 @@ def _run_until_stopped(args: argparse.Namespace, stop: StopOnSignal) -> int:
     from .engine.simulation import RunInterrupted, Simulation
     from .io import checkpoint
     from .io.results import ResultWriter
-    from .io.scenario import load_scenario, warn_ineffective_keys
+    from .io.scenario import load_scenario
 
     started = time.monotonic()
     scenario = Path(args.scenario)
@@ -126,7 +126,6 @@ def _run_until_stopped(args: argparse.Namespace, stop: StopOnSignal) -> int:
     lock = _lock_before_build(out)
     try:
         with warnings_noted() as build_warnings:  # printed as issued, and kept in the summary
-            warn_ineffective_keys(config)
             model = _build(build_model, config, scenario.parent, stop)
         if stop.signum is not None:  # before any file is written
             raise RunInterrupted(stop.reason())

@@ -135,6 +135,19 @@ def _joined(config: ScenarioConfig, bodies: set[str]) -> set[str]:
         grown |= more
 
 
+def _warn_ineffective_keys(config: ScenarioConfig) -> None:
+    """Warn, once per interface and reason, of the keys given that the interface's method
+    and friction never read (:meth:`ContactConfig.ineffective_keys`): a tester's penalty run
+    with an augmentation table and Lagrange runs at penalty_normal = 1000 / 10 were identical
+    to runs without, silently. Warnings, not errors: one file serves every method through
+    --set. Issued by the build, as the other build warnings, so that a run prints them once
+    and keeps them in summary.json ``build_warnings``."""
+    for i, c in enumerate(config.contact):
+        for note in c.ineffective_keys():
+            warnings.warn(f"contact.{i} ('{c.name or f'interface{i}'}'): {note}",
+                          PhysicsWarning, stacklevel=3)
+
+
 def _warn_support_jumps(config: ScenarioConfig) -> None:
     """A dynamic run's support that prescribes a displacement other than 0 at t = 0: the run
     starts from the reference (d = 0), so the held nodes jump there in the first step and the
@@ -262,6 +275,7 @@ def build_model(config: ScenarioConfig, base_dir: str | Path = ".") -> Model:
     _check_unjoined_overlaps(config, bodies)
     _check_analysis_options(config)
     _warn_penalty_rate_law(config)
+    _warn_ineffective_keys(config)
     _warn_support_jumps(config)
     ale_bodies = tuple(_ale_setup(i, body, bc, config) for i, (body, bc)
                        in enumerate(zip(bodies, config.bodies, strict=True))

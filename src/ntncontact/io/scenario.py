@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import sys
-import warnings
 from pathlib import Path
 from typing import Annotated, Any, Literal, get_args
 
@@ -16,7 +15,6 @@ from pydantic import (
     model_validator,
 )
 
-from ..engine.diagnostics import PhysicsWarning
 from ..solvers.linear import Precision
 
 if sys.version_info >= (3, 11):
@@ -427,18 +425,6 @@ class ScenarioConfig(Strict):
         if len(set(interfaces)) != len(interfaces):
             raise ValueError(f"contact names must be unique, got {interfaces}")
         return self
-
-
-def warn_ineffective_keys(config: ScenarioConfig) -> None:
-    """Warn, once per interface and reason, of the keys given that the interface's method
-    and friction never read (:meth:`ContactConfig.ineffective_keys`). Called inside the run's
-    ``warnings_noted`` (ntncontact run, ntncontact.run), so that the lines are also summary.json's
-    ``build_warnings``; validation itself stays silent, since a scenario is validated again
-    for every override and sweep case."""
-    for i, c in enumerate(config.contact):
-        for note in c.ineffective_keys():
-            warnings.warn(f"contact.{i} ('{c.name or f'interface{i}'}'): {note}",
-                          PhysicsWarning, stacklevel=2)
 
 
 def _format_error(path: Path, err: ValidationError) -> str:
