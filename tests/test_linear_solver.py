@@ -517,3 +517,52 @@ def test_a_non_finite_right_hand_side_is_reported_and_keeps_single_precision():
     assert all(impl.single for impl in solver._impls.values())
     x = factor(np.ones(A.shape[0]))
     assert relative_residuals(A, np.ones(A.shape[0]), x) <= linear.MIXED_RTOL
+
+
+def bordered(stress: float, free: bool = False, redundant: bool = False):
+    """The bordered Newton matrix of exact contact constraints as ``engine/problem.py`` builds
+    it: stiffness x ``stress`` (E in another stress unit), 5 constraints tying dof pairs with
+    columns B of O(L_c) = 0.25 (untouched by the unit) and rows G = B^T scaled to the largest
+    diagonal stiffness k (``StepProblem._balanced_rows``). ``free``: an unsupported block (a
+    rigid motion the constraints do not hold); ``redundant``: the first constraint twice."""
+    K, nodes = block(stretch=0.0, kind="linear_elastic")
+    K = stress * (K if free else supported(K, nodes))
+    n, m = K.shape[0], 6 if redundant else 5
+    pairs = np.r_[np.arange(5), 0][:m]
+    rows = np.repeat(np.arange(m), 2)
+    cols = np.column_stack([pairs * 7, pairs * 7 + 40]).ravel()
+    B = sp.csr_matrix((np.tile([0.25, -0.25], m), (rows, cols)), shape=(m, n)).T
+    k = np.abs(K.diagonal()).max()
+    G = sp.diags(np.full(m, k / np.hypot(0.25, 0.25))) @ B.T
+    return sp.bmat([[K, B], [G, None]], format="csr"), k / np.hypot(0.25, 0.25)
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+@pytest.mark.parametrize("stress", [1e-10, 1e-6, 1e6, 1e10, 1e12])
+def test_a_bordered_system_solves_alike_in_any_stress_unit(backend, stress):
+    """Scaling E (and the loads) changes only the units of the answer: the same displacements,
+    multipliers x ``stress``. Before, the multiplier pivots (Schur complement ~ L_c, the
+    stiffness's ~ E) fell below PIVOT_RTOL x the largest from E ~ 1e10 on and SuperLU's
+    check called the matrix singular (tester B, session 41: lagrange contact of steel in SI
+    units failed at its first contact step); an LU is the same with the multiplier columns
+    scaled, so the check now weighs their pivots so (``_check_pivots``)."""
+    rng = np.random.default_rng(5)
+    A1, r1 = bordered(1.0)
+    n = A1.shape[0] - 5
+    f, h = rng.standard_normal(n), 0.01 * rng.standard_normal(5)
+    x1 = LinearSolver(backend, check_pivots=True).solve(A1, np.r_[f, r1 * h])
+    A, r = bordered(stress)
+    x = LinearSolver(backend, check_pivots=True).solve(A, np.r_[stress * f, r * h])
+    assert np.allclose(x[:n], x1[:n], rtol=1e-10, atol=1e-10 * np.abs(x1[:n]).max())
+    assert np.allclose(x[n:], stress * x1[n:], rtol=1e-10)
+
+
+@pytest.mark.parametrize("stress", [1.0, 1e12])
+@pytest.mark.parametrize("case", ["free", "redundant"])
+def test_a_singular_bordered_system_is_still_detected(stress, case):
+    """The weighted check still finds a rigid motion the constraints leave free, and a
+    constraint given twice (its multipliers then undetermined), in any unit."""
+    A, r = bordered(stress, **{case: True})
+    b = A @ np.random.default_rng(2).standard_normal(A.shape[0])  # in the range: no growth
+    with pytest.raises(LinearSolverError, match="singular"):
+        LinearSolver("superlu", check_pivots=True).solve(A, b)

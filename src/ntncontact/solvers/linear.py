@@ -258,11 +258,34 @@ class _Pattern:
         self.upper_indices = self.indices[self.upper].astype(np.int32)
         self.indptr32 = self.indptr.astype(np.int32, copy=False)
         self.indices32 = self.indices.astype(np.int32, copy=False)
+        # position of each row's diagonal entry, -1 where the pattern has none (the zero
+        # block of a bordered system): for the border columns of ``column_weights``
+        on_diagonal = np.flatnonzero(self.indices == rows)
+        self.diagonal = np.full(self.n, -1, dtype=np.int64)
+        self.diagonal[rows[on_diagonal]] = on_diagonal
 
     def matches(self, A: sp.csr_matrix) -> bool:
         return (A.shape[0] == self.n and A.nnz == self.indices.size
                 and np.array_equal(A.indptr, self.indptr)
                 and np.array_equal(A.indices, self.indices))
+
+    def column_weights(self, data: NDArray) -> NDArray | None:
+        """Per column, the factor that brings a border column (zero diagonal: a multiplier's,
+        in traction units) to the largest diagonal entry (the stiffness); None without border
+        columns. Its pivots are then weighed as those of A W (see ``_check_pivots``)."""
+        diagonal = np.where(self.diagonal >= 0, data[self.diagonal], 0.0)
+        border = diagonal == 0.0
+        if not border.any():
+            return None
+        in_border = border[self.indices]
+        column_max = np.zeros(self.n)
+        np.maximum.at(column_max, self.indices[in_border], np.abs(data[in_border]))
+        stiffness = np.abs(diagonal).max(initial=0.0)
+        weights = np.ones(self.n)
+        scaled = border & (column_max > 0.0) & (stiffness > 0.0)
+        weights[scaled] = stiffness / column_max[scaled]
+        weights[~border] = np.nan  # not a border column: its pivot is read as it is
+        return weights
 
     def is_symmetric(self, data: NDArray) -> bool:
         """Structurally symmetric and |A_ij - A_ji| <= SYMMETRY_RTOL max|A|."""
@@ -525,6 +548,7 @@ class _SuperLUBackend:
         self.lu_is_permuted = False
         self.scale = 0.0  # max |A| of the current factor
         self.unchecked = False  # the factor's pivots are to be checked before its first use
+        self.weights: NDArray | None = None  # the factor's border-column weights, if any
 
     def factor(self, data: NDArray) -> None:
         p = self.pattern
@@ -550,6 +574,9 @@ class _SuperLUBackend:
             raise LinearSolverError(f"SuperLU: {err}: the matrix is singular") from None
         self.stats.factorizations += 1
         self.scale = float(np.abs(data).max(initial=0.0))
+        self.weights = p.column_weights(data)
+        if self.weights is not None and self.lu_is_permuted:
+            self.weights = self.weights[self.perm]  # the factor's column c is A's perm[c]
 
     def _permutation_map(self) -> tuple[NDArray, NDArray, NDArray]:
         """CSC structure of A[p][:, p] and, per entry, its position in the CSR data of A."""
@@ -567,11 +594,11 @@ class _SuperLUBackend:
         pivot: reading them costs ~0.4 ms (SciPy copies U into a matrix), a third of a small
         factorization, and a well-conditioned solve cannot hide one. They are checked before
         the first use of a factor that ``unchecked`` marks (see PIVOT_CHECK_GROWTH)."""
-        lu, perm, scale, stats = self.lu, self.perm, self.scale, self.stats
+        lu, perm, scale, stats, weights = self.lu, self.perm, self.scale, self.stats, self.weights
         if self.unchecked:
             self.unchecked = False
             stats.pivot_checks += 1
-            _check_pivots(lu, perm if self.lu_is_permuted else None)  # raises if singular
+            _check_pivots(lu, perm if self.lu_is_permuted else None, weights)  # raises if singular
         permuted, checked = self.lu_is_permuted, []
 
         def solve(b: NDArray) -> NDArray:
@@ -583,7 +610,7 @@ class _SuperLUBackend:
             if not checked and (np.abs(x).max(initial=0.0) * scale
                                 > PIVOT_CHECK_GROWTH * np.abs(b).max(initial=0.0)):
                 stats.pivot_checks += 1
-                _check_pivots(lu, perm if permuted else None)  # raises if singular
+                _check_pivots(lu, perm if permuted else None, weights)  # raises if singular
                 checked.append(True)
             return x
         return solve
@@ -639,10 +666,27 @@ class _StaticLUBackend(_SuperLUBackend):
         self.static = None
 
 
-def _check_pivots(lu: spla.SuperLU, perm: NDArray | None = None) -> None:
-    """Raise for a factor with tiny pivots. ``perm``: the factor is of A[perm][:, perm]."""
+def _check_pivots(lu: spla.SuperLU, perm: NDArray | None = None,
+                  weights: NDArray | None = None) -> None:
+    """Raise for a factor with tiny pivots. ``perm``: the factor is of A[perm][:, perm].
+
+    ``weights`` (``_Pattern.column_weights``, in the factored matrix's column order): the
+    pivots of border columns are read times their weight, i.e. as the pivots of A W, the
+    multipliers rescaled to the stiffness (an LU with partial pivoting is the same up to that
+    column scale, so the solve needs no change). Unweighed, a multiplier pivot is O(L_c)
+    (traction unknowns, rows in force units) against the stiffness's O(E): steel in SI units
+    (E = 2e11) was called singular at its first Lagrange contact step (tester B, session 41).
+    The largest pivot stays the largest of the other columns, so the check of the stiffness
+    itself is as before."""
     d = np.abs(lu.U.diagonal())
-    small = np.flatnonzero(d <= PIVOT_RTOL * d.max(initial=0.0))
+    largest = d.max(initial=0.0)
+    if weights is not None:
+        weights = weights[np.argsort(lu.perm_c)]  # U's column k is the factor's perm_c^-1[k]
+        border = ~np.isnan(weights)
+        if (~border).any():
+            largest = d[~border].max()
+        d = d * np.where(border, weights, 1.0)
+    small = np.flatnonzero(d <= PIVOT_RTOL * largest)
     if small.size:
         raise LinearSolverError(
             f"matrix is numerically singular: {small.size} pivot(s) below "
