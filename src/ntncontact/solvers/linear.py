@@ -270,9 +270,10 @@ class _Pattern:
                 and np.array_equal(A.indices, self.indices))
 
     def column_weights(self, data: NDArray) -> NDArray | None:
-        """Per column, the factor that brings a border column (zero diagonal: a multiplier's,
-        in traction units) to the largest diagonal entry (the stiffness); None without border
-        columns. Its pivots are then weighed as those of A W (see ``_check_pivots``)."""
+        """Per column, the factor that brings a border column (zero diagonal: a contact or tie
+        multiplier, or theta) to the largest diagonal entry (the stiffness), NaN for the other
+        columns; None without border columns. Its pivots are then weighed as those of A W
+        (see ``_check_pivots``)."""
         diagonal = np.where(self.diagonal >= 0, data[self.diagonal], 0.0)
         border = diagonal == 0.0
         if not border.any():
@@ -676,8 +677,8 @@ def _check_pivots(lu: spla.SuperLU, perm: NDArray | None = None,
     column scale, so the solve needs no change). Unweighed, a multiplier pivot is O(L_c)
     (traction unknowns, rows in force units) against the stiffness's O(E): steel in SI units
     (E = 2e11) was called singular at its first Lagrange contact step (tester B, session 41).
-    The largest pivot stays the largest of the other columns, so the check of the stiffness
-    itself is as before."""
+    The largest pivot is taken over the other columns (the stiffness's), which at a small
+    stress unit no longer lets the multipliers' O(L_c) set the bar for the stiffness."""
     d = np.abs(lu.U.diagonal())
     largest = d.max(initial=0.0)
     if weights is not None:
