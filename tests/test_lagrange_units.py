@@ -43,9 +43,10 @@ def pressed_block(s: float) -> dict:
     }
 
 
-def rods(E: float, density: float, length: float, nx: int = 10) -> dict:
+def rods(E: float, density: float, length: float, nx: int = 10, law: str = "persistency") -> dict:
     """Two equal rods, the left one hitting the resting right one at v = 1 on a step
-    boundary (dt = 2 h / c, the gap v dt), lagrange with the persistency law."""
+    boundary (dt = 2 h / c, the gap v dt), lagrange; with the gap law energy-conserving
+    (report 5.5: one more border column, theta)."""
     c = np.sqrt(E / density)
     dt = 2.0 * length / nx / c
     rod = {"model": "linear_elastic", "E": E, "nu": 0.0, "density": density}
@@ -53,7 +54,7 @@ def rods(E: float, density: float, length: float, nx: int = 10) -> dict:
     return {
         "title": "two rods, lagrange",
         "analysis": {"kind": "dynamic", "dt": dt, "t_end": 12.0 * dt, "mass": "consistent",
-                     "output_interval": dt},
+                     "output_interval": dt, "energy_conserving": law == "gap"},
         "bodies": [
             {"name": "left", "mesh": {"type": "rectangle", "width": length, "height": height,
                                       "nx": nx, "ny": 1, "origin": [-length - dt, 0.0]},
@@ -64,7 +65,7 @@ def rods(E: float, density: float, length: float, nx: int = 10) -> dict:
              "material": rod},
         ],
         "contact": [{"name": "ends", "body_1": "left", "surface_1": "right", "body_2": "right",
-                     "surface_2": "left", "method": "lagrange", "law": "persistency"}],
+                     "surface_2": "left", "method": "lagrange", "law": law}],
     }
 
 
@@ -76,18 +77,22 @@ def displacement(results: api.Results) -> np.ndarray:
     return results.fields(results.times[-1]).point_data["displacement"]
 
 
-def assert_same_run(scaled: api.Results, unit: api.Results, s: float) -> None:
-    """The same displacements and contact times; tractions and energies times s."""
+def assert_same_run(scaled: api.Results, unit: api.Results, s: float,
+                    pairs: bool = True) -> None:
+    """The same displacements and contact times; tractions and energies times s.
+    ``pairs=False``: only displacements and energies (see the gap law's rods)."""
     assert scaled.summary["status"] == "completed"
     u, u1 = displacement(scaled), displacement(unit)
     assert np.abs(u - u1).max() <= RTOL * np.abs(u1).max()
+    energy, energy1 = scaled.history["total_energy"], unit.history["total_energy"]
+    assert np.abs(energy / s - energy1).max() <= RTOL * energy1.abs().max()
+    if not pairs:
+        return
     for key in ("contact_start_time", "contact_end_time"):
         assert scaled.summary[key] == pytest.approx(unit.summary[key], rel=RTOL)
     t_n, t_n1 = scaled.contact["normal_traction"], unit.contact["normal_traction"]
     assert len(t_n) == len(t_n1) and t_n1.abs().max() > 0.0
     assert np.abs(t_n / s - t_n1).max() <= RTOL * t_n1.abs().max()
-    energy, energy1 = scaled.history["total_energy"], unit.history["total_energy"]
-    assert np.abs(energy / s - energy1).max() <= RTOL * energy1.abs().max()
 
 
 @pytest.mark.parametrize("s", [1e-10, 1e10])
@@ -97,10 +102,16 @@ def test_a_static_lagrange_block_is_the_same_in_any_stress_unit(s):
     assert_same_run(run(pressed_block(s)), unit, s)
 
 
-def test_a_lagrange_rod_impact_is_the_same_in_any_stress_unit():
-    """The report's rods (E = 100, rho = 1) and E = 1e12, rho = 1e10: the same wave speed."""
-    unit = run(rods(100.0, 1.0, 10.0))
-    assert_same_run(run(rods(1e12, 1e10, 10.0)), unit, 1e10)
+@pytest.mark.parametrize("law", ["persistency", "gap"])
+def test_a_lagrange_rod_impact_is_the_same_in_any_stress_unit(law):
+    """The report's rods (E = 100, rho = 1) and E = 1e12, rho = 1e10: the same wave speed.
+    The gap law's pair enters a step before the touch and carries a round-off multiplier
+    there (6e-14 of the peak at s = 1, none at s = 1e10): Lagrange counts any t_N > 0 as
+    contact (docs/outputs.md), so its pairs and contact start differ by that step; the
+    motion does not."""
+    unit = run(rods(100.0, 1.0, 10.0, law=law))
+    assert_same_run(run(rods(1e12, 1e10, 10.0, law=law)), unit, 1e10,
+                    pairs=law == "persistency")
 
 
 def test_steel_rods_in_si_units_run_with_lagrange():
