@@ -166,23 +166,36 @@ def test_augmentations_shrink_the_penetration_towards_the_lagrange_solution():
     assert np.all(np.diff(gaps) < 0) and gaps[-1] < 1e-2 * gaps[0], gaps
 
 
-@pytest.mark.parametrize(("iterations", "why"), [
-    (1, "one augmentation only, and the test compares two"),
-    (3, "change of the gap"),  # the gap law's test (it said "normal rate")
-])
-def test_a_step_whose_augmentations_run_out_is_cut_back_then_fails(iterations, why):
+def test_a_step_whose_augmentations_run_out_is_cut_back_then_fails():
     """By default the limit of augmentations is a failed step (not a silently accepted one):
     it is halved, and once the halvings run out the error names the interface and the test
     that failed."""
-    model = _off_centre_load({"max_iterations": iterations, "gap_tolerance": 1e-14},
-                             max_cutbacks=2)
+    model = _off_centre_load({"max_iterations": 3, "gap_tolerance": 1e-14}, max_cutbacks=2)
     with pytest.raises(SimulationError) as err:
         Simulation(model).run()
     message = str(err.value)
     assert "failed after 2 halvings" in message
-    assert f"did not converge in {iterations}" in message
-    assert f"interface 'glued': {why}" in message
+    assert "did not converge in 3" in message
+    assert "interface 'glued': change of the gap" in message  # (it said "normal rate")
     assert 'try augmentation.update = "newton"' in message  # Uzawa updates (the default)
+
+
+@pytest.mark.parametrize(("augmentation", "why"), [
+    ({"max_iterations": 1}, "one augmentation only, and the test compares two"),
+    # below one ulp of the coordinates: the tester's 1e-20 was halved 4 times and told to
+    # try Newton updates
+    ({"max_iterations": 3, "gap_tolerance": 1e-20}, "is below the round-off of the gaps"),
+])
+def test_augmentations_no_shorter_step_can_converge_fail_at_once(augmentation, why):
+    """One augmentation (the test compares two) or a gap_tolerance below round-off: no halving
+    and no update rule can pass the test, so the step fails unhalved and says so (tester B
+    F6)."""
+    model = _off_centre_load(augmentation, max_cutbacks=2)
+    with pytest.raises(SimulationError) as err:
+        Simulation(model).run()
+    message = str(err.value)
+    assert "halvings" not in message and "the step was not halved" in message, message
+    assert why in message and "augmentation.update" not in message, message
 
 
 def test_an_interface_with_newton_updates_is_not_told_to_take_them():

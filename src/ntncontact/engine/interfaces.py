@@ -457,10 +457,14 @@ def augment_all(
 def unconverged_interfaces(
     interfaces: Sequence[ContactInterface], states: Sequence[PairState],
     previous: Sequence[ContactResult | None] | None, current: Sequence[ContactResult | None],
-) -> list[tuple[ContactInterface, str]]:
+    gap_roundoff: float = 0.0, dt: float = 1.0,
+) -> list[tuple[ContactInterface, str, bool]]:
     """The interfaces that fail report 5.4's test between their last two augmentations
-    (Lagrange interfaces: that still release pairs in tension), each with what failed: the
-    message of a step whose augmentations ran out."""
+    (Lagrange interfaces: that still release pairs in tension), each with what failed and
+    whether a shorter step can help: not with one augmentation allowed, nor with a
+    gap_tolerance below the round-off of what it bounds (``gap_roundoff``: that of the gaps,
+    :func:`gap_roundoff`; the persistency law's rates 2 gap_roundoff / dt). The message of a
+    step whose augmentations ran out."""
     failed = []
     for i, (ci, state, res) in enumerate(zip(interfaces, states, current, strict=True)):
         prev = None if previous is None else previous[i]
@@ -468,21 +472,31 @@ def unconverged_interfaces(
             continue
         if ci.law.method == "lagrange":
             if release_tensile_pairs(state, state.lambda_N)[1].any():
-                failed.append((ci, "pairs still released in tension"))
+                failed.append((ci, "pairs still released in tension", True))
         elif ci.law.method == "augmented_lagrangian":
-            reason = _augmentation_failure(ci, prev, res)
+            roundoff = gap_roundoff * (2.0 / dt if ci.persistency else 1.0)
+            reason, helps = _augmentation_failure(ci, prev, res, roundoff)
             if reason:
-                failed.append((ci, reason))
+                failed.append((ci, reason, helps))
     return failed
 
 
+def gap_roundoff(x: NDArray) -> float:
+    """The round-off of a gap between nodes at the positions x: one ulp of the largest
+    coordinate (a tester's block at coordinates up to 4: augmentations changed its gaps by
+    2.2e-16 and never met gap_tolerance = 1e-20)."""
+    return float(np.finfo(float).eps * np.abs(x).max()) if x.size else 0.0
+
+
 def _augmentation_failure(ci: ContactInterface, prev: ContactResult | None,
-                          res: ContactResult) -> str:
+                          res: ContactResult, roundoff: float) -> tuple[str, bool]:
+    """Why an interface failed report 5.4's test ("" if it passed), and whether a shorter
+    step can help (not where the test cannot be met at all)."""
     if prev is None:
-        return "one augmentation only, and the test compares two"
+        return "one augmentation only, and the test compares two", False
     check = check_augmentation(prev, res, ci.law, ci.tolerances)
     if check.converged:
-        return ""
+        return "", True
     tol = ci.tolerances
     measure = "normal rate" if ci.persistency else "gap"  # report 5.4's test of each law
     out = [f"change of the {measure} {check.normal_change:.3g} (gap_tolerance {tol.normal:.3g})"]
@@ -492,7 +506,12 @@ def _augmentation_failure(ci: ContactInterface, prev: ContactResult | None,
                 f"{check.status_changes} stick/slip switches"]
     if check.tensile_pairs:
         out.append(f"{check.tensile_pairs} pairs in tension")
-    return ", ".join(out)
+    if tol.normal < roundoff:
+        out.append(f"gap_tolerance {tol.normal:.3g} is below the round-off of the {measure}s "
+                   f"({roundoff:.3g}, one ulp of the coordinates), which no augmentation, "
+                   "update rule or shorter step can meet: raise it above that")
+        return ", ".join(out), False
+    return ", ".join(out), True
 
 
 def commit_all(
@@ -536,3 +555,4 @@ def contact_rows(
         cols["normal_y"].append(res.normal[:, 1])
     return {k: (np.concatenate(v) if v and not isinstance(v[0], str) else np.asarray(v))
             for k, v in cols.items()}
+

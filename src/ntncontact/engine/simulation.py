@@ -43,6 +43,7 @@ from .interfaces import (
     detect_all,
     entered_at_step_end,
     evaluate_all,
+    gap_roundoff,
     lagrange_terms,
     persistent_velocities,
     unconverged_interfaces,
@@ -113,6 +114,24 @@ def _same_problem(model: Model, state: StepState, h: float) -> bool:
     return all(_constant_over(f, state.time + 0.5 * h, state.time + h) for f in functions)
 
 
+def _tried_before(grown: tuple, tried: tuple) -> bool:
+    """Whether every pair of the active sets ``grown`` has a surface-1 node in ``tried``."""
+    return all(bool(np.isin(g.pairs[:, 0], t).all()) for g, t in zip(grown, tried, strict=True))
+
+
+def _cycling_active_set(interfaces, used: tuple) -> str:
+    """The message of a step whose active set did not settle (:data:`ACTIVE_SET_REPEATS`):
+    what it means and its usual cause."""
+    released = [ci.name for ci in interfaces if ci.law.method == "lagrange"]
+    why = (f"; Lagrange interface(s) {released} release their pairs in tension at each solve, "
+           "and the released pairs penetrate again" if released else "")
+    pressed = sum(len(u) for u in used)
+    return (f"the contact active set did not settle: {ACTIVE_SET_REPEATS + 1} passes of the "
+            "step took in again pairs an earlier pass had held (ACTIVE_SET_REPEATS; "
+            f"{pressed} pairs pressed at the last){why}: a body held only by contact pairs "
+            "that open, as at zero load, has no equilibrium (a support missing?)")
+
+
 def _why_not_halved(err: BaseException) -> str:
     """The error's tail when halving was skipped as :func:`_same_problem`: the truth, and
     what helps where Newton ran out of iterations."""
@@ -134,9 +153,18 @@ class RunInterrupted(KeyboardInterrupt):
     ``stop_reason``; the CLI's signal handlers)."""
 
 
+class ActiveSetError(RuntimeError):
+    """A quasi-static step's active set cycled (:data:`ACTIVE_SET_REPEATS`): the step is cut
+    back, like a failed Newton solve."""
+
+
 class AugmentationError(RuntimeError):
     """A step's contact multipliers did not pass report 5.4's test within
-    ``augmentation.max_iterations``: the step is cut back, like a failed Newton solve."""
+    ``augmentation.max_iterations``: the step is cut back, like a failed Newton solve, unless
+    ``halving_helps`` is False (one augmentation allowed, a tolerance below round-off: a
+    tester's step was halved 4 times for nothing)."""
+
+    halving_helps = True
 
 
 @dataclass(frozen=True)
@@ -172,6 +200,13 @@ SENSITIVITY_COLUMNS = 64
 #: Quasi-static steps are re-solved at most this many times when new pairs penetrate at a
 #: converged solve (passes stopped at an unconverged augmentation for new pairs not counted).
 ACTIVE_SET_PASSES = 5
+#: ... and at most this many passes a step stopped for "new" pairs (``SolvedStep.grown``)
+#: that all had been in an earlier pass of the step (a pass that takes in a node never tried
+#: is not counted: there are finitely many). A Lagrange interface releases its tensile pairs
+#: at each solve and they can penetrate again, so its active set can cycle: a tester's block
+#: unloaded to zero (held by contact only) cycled 9 -> 3 -> 9 pairs without end (11 min in
+#: one step, no message), where the augmented Lagrangian failed at once as singular
+ACTIVE_SET_REPEATS = 10
 #: fixed-theta solves of report 5.5's energy equation by bracketing, where its bordered Newton
 #: failed (``Simulation._theta_by_bracket``)
 THETA_BRACKET_ITERATIONS = 8
@@ -308,6 +343,7 @@ class Simulation:
         self._last_substep: float | None = None  # the last sub-step after cut-backs
         self._state_substep: float | None = None  # the sub-step that ended at advance's state
         self._resumed = False  # restored from a checkpoint: no initial record
+        self._stop_reason: Callable[[], str | None] | None = None  # run's, asked in steps too
         #: static runs: the contact forces at the end of the last step (the trapezoidal work)
         self._contact_force = np.zeros(model.ndof)
 
@@ -359,15 +395,23 @@ class Simulation:
         interfaces = self.model.interfaces
         contact = (detect_all(interfaces, state.contact, state.x, state.v, dt) if interfaces
                    else ())
-        iterations, start, converged_passes = 0, None, 0
+        iterations, start, converged_passes, repeats = 0, None, 0, 0
+        tried = tuple(c.pairs[:, 0] for c in contact)  # per interface: nodes of any pass
         # per interface: nodes whose pairs were released as unfollowed (taken in again if
         # they end inside), and those the solves released (not taken in again)
         retake = let_go = _no_nodes(interfaces)
         # a pass stopped early for new pairs (SolvedStep.grown) does not count: each adds pairs
         while converged_passes < ACTIVE_SET_PASSES:
+            self._check_stop()  # a long step still ends at a signal (tester B F2: 11 min)
             solved = self._solve_step(state, contact, dt, start, may_grow=True)
             iterations += solved.iterations
             converged_passes += solved.grown is None
+            if solved.grown is not None:
+                repeats += _tried_before(solved.grown, tried)
+                tried = tuple(np.union1d(t, g.pairs[:, 0]) for t, g in zip(tried, solved.grown,
+                                                                           strict=True))
+                if repeats > ACTIVE_SET_REPEATS:
+                    raise ActiveSetError(_cycling_active_set(interfaces, solved.used))
             if solved.released:
                 retake = tuple(np.union1d(r, n) for r, n in zip(retake, solved.released,
                                                                  strict=True))
@@ -524,8 +568,8 @@ class Simulation:
                 break
             previous, before = results, previous
         if not done:
-            self._require_accepted(augmentation,
-                                   unconverged_interfaces(interfaces, used, before, previous))
+            self._require_accepted(augmentation, unconverged_interfaces(
+                interfaces, used, before, previous, gap_roundoff(state.X + d), dt))
             self._augmentations_converged = False
         return SolvedStep(state, d, used, results, augmentation, iterations,
                           **self._step_figures(problem, result, motion, state.X + d))
@@ -618,20 +662,24 @@ class Simulation:
     def _require_accepted(augmentations: int, failed: list) -> None:
         """Unless every interface that failed the test asked for its last augmentation to be
         kept (``augmentation.on_limit = "accept"``), the step fails and is cut back, like a
-        failed Newton solve."""
-        if all(ci.accept_unconverged for ci, _ in failed):
+        failed Newton solve; not where no shorter step can pass the test
+        (``AugmentationError.halving_helps``)."""
+        if all(ci.accept_unconverged for ci, _, _ in failed):
             return
+        helps = all(h for _, _, h in failed)
         hint = ""
-        if any(ci.law.method == "augmented_lagrangian" and not _newton_updated(ci)
-               for ci, _ in failed):
+        if helps and any(ci.law.method == "augmented_lagrangian" and not _newton_updated(ci)
+                         for ci, _, _ in failed):
             # the fast-sliding blocks refined 8x: Uzawa contracts by 0.86 an augmentation on a
             # stiff local mode, Newton updates pass the same steps in <= 18 (docs/scenarios.md)
             hint = ("; Uzawa's multiplier update can converge slowly on fine meshes: try "
                     "augmentation.update = \"newton\"")
-        raise AugmentationError(
+        error = AugmentationError(
             f"contact augmentations did not converge in {augmentations} (report 5.4; "
             "augmentation.max_iterations): "
-            + "; ".join(f"interface {ci.name!r}: {why}" for ci, why in failed) + hint)
+            + "; ".join(f"interface {ci.name!r}: {why}" for ci, why, _ in failed) + hint)
+        error.halving_helps = helps
+        raise error
 
     def _test_augmentation(self, problem: StepProblem, result, split, contact, previous,
                            last_contact: dict, factors):
@@ -875,6 +923,12 @@ class Simulation:
             except (NewtonError, InvertedElementError, AleMotionError, np.linalg.LinAlgError,
                     RuntimeError) as err:
                 cuts += 1
+                if not getattr(err, "halving_helps", True):
+                    raise SimulationError(
+                        f"step {self.state.step + 1} (t = {self.state.time:.6g} -> "
+                        f"{self.state.time + dt:.6g}) failed: {named_failure(self.model, err)}"
+                        "; the step was not halved: a shorter one cannot pass this test"
+                    ) from err
                 if _same_problem(self.model, state, h):
                     raise SimulationError(
                         f"step {self.state.step + 1} (t = {self.state.time:.6g} -> "
@@ -904,8 +958,10 @@ class Simulation:
 
         ``stop_reason`` is asked before every step: a reason (not None) ends the run there with
         :class:`RunInterrupted`. A signal handler that only records the request this way
-        stops the run between steps, never inside a compiled kernel. NumPy's BLAS runs on one
-        thread meanwhile (:func:`ntncontact.threads.serial_blas`)."""
+        stops the run between steps, or between a step's active-set passes (:meth:`advance`),
+        never inside a compiled kernel. NumPy's BLAS runs on one thread meanwhile
+        (:func:`ntncontact.threads.serial_blas`)."""
+        self._stop_reason = stop_reason
         try:
             with serial_blas():
                 self._run_steps(progress, stop_reason)
@@ -928,9 +984,7 @@ class Simulation:
         if not self._resumed:
             self._notify(StepRecord(self.state, self.balance(self.state), 0, 0.0))
         for k in range(self.state.step, n_steps):  # a restored run: from its step on
-            reason = stop_reason() if stop_reason is not None else None
-            if reason is not None:
-                raise RunInterrupted(reason)
+            self._check_stop()
             # target times k dt (not accumulated sums) so output times are exact
             t_next = min((k + 1) * analysis.dt, analysis.t_end)
             dt = t_next - self.state.time
@@ -941,6 +995,13 @@ class Simulation:
             self._notify(StepRecord(self.state, self.balance(self.state), its, dt, extra))
             if progress is not None:
                 progress(self.state.time)
+
+    def _check_stop(self) -> None:
+        """Raise :class:`RunInterrupted` if the run was asked to stop (``run``'s
+        ``stop_reason``)."""
+        reason = self._stop_reason() if self._stop_reason is not None else None
+        if reason is not None:
+            raise RunInterrupted(reason)
 
     def _accumulate_work(self, s: StepState, d1: NDArray, results, dt: float,
                          used: tuple = ()) -> None:
