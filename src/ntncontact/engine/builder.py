@@ -38,6 +38,7 @@ from ..mesh.quadmesh import MeshError, QuadMesh
 from ..mesh.quality import check_elements
 from .diagnostics import PhysicsWarning
 from .initial import warn_overridden_velocities, warn_tied_velocities
+from .interfaces import warn_release_steps_unused
 from .model import AleSetup, AnalysisSettings, Body, ContactInterface, Model, stack_bodies
 from .ties import (
     Tie,
@@ -277,6 +278,7 @@ def build_model(config: ScenarioConfig, base_dir: str | Path = ".") -> Model:
     _warn_penalty_rate_law(config)
     _warn_ineffective_keys(config)
     _warn_support_jumps(config)
+    warn_release_steps_unused(config.contact)
     ale_bodies = tuple(_ale_setup(i, body, bc, config) for i, (body, bc)
                        in enumerate(zip(bodies, config.bodies, strict=True))
                        if bc.mesh_motion == "ale")
