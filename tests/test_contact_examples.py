@@ -213,18 +213,26 @@ def test_accepted_unconverged_steps_are_counted_in_the_results(tmp_path):
 
     from ntncontact.io.results import ResultWriter
     from ntncontact.io.writers import read_csv_table
+    from ntncontact.report.run_warnings import result_warnings
 
     accepting = _off_centre_load({"max_iterations": 2, "gap_tolerance": 1e-14,
                                   "on_limit": "accept"}, dt=0.5)
     Simulation(accepting, [ResultWriter(tmp_path, accepting)]).run()
     history = read_csv_table(tmp_path / "history.csv")
     np.testing.assert_array_equal(history["augmentations_converged"], [1, 0, 0])  # t = 0 first
-    assert json.loads((tmp_path / "summary.json").read_text())["unconverged_steps"] == 2
+    summary = json.loads((tmp_path / "summary.json").read_text())
+    assert summary["unconverged_steps"] == 2
+    # and the run says so (tester B F5: 4 of 4 steps kept so, and only the summary told)
+    said = [line for line in result_warnings(summary, static=True) if "unconverged" in line]
+    assert len(said) == 1 and said[0].startswith("2 of 2 steps kept an unconverged"), said
+    assert f"largest penetration {summary['max_penetration']:.3g}" in said[0]
     converging = _off_centre_load({"gap_tolerance": 1e-8}, dt=0.5)
     Simulation(converging, [ResultWriter(tmp_path / "ok", converging)]).run()
     history = read_csv_table(tmp_path / "ok" / "history.csv")
     np.testing.assert_array_equal(history["augmentations_converged"], [1, 1, 1])
-    assert json.loads((tmp_path / "ok" / "summary.json").read_text())["unconverged_steps"] == 0
+    summary = json.loads((tmp_path / "ok" / "summary.json").read_text())
+    assert summary["unconverged_steps"] == 0
+    assert not [line for line in result_warnings(summary, static=True) if "unconverged" in line]
 
 
 def test_three_bodies_and_two_interfaces_carry_the_same_pressure():

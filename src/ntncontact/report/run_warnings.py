@@ -90,7 +90,8 @@ def result_warnings(summary: dict, static: bool | None = None) -> list[str]:
              _penetration(summary, static), _unpaired(summary, static),
              _surface_2(summary, static), _self_crossing(summary), _opening(summary),
              _mismatch(summary),
-             _linear_rotation(summary, static), _linear_strain(summary), _cut_backs(summary))
+             _linear_rotation(summary, static), _linear_strain(summary), _cut_backs(summary),
+             _unconverged_augmentations(summary))
     return [line for line in found if line]
 
 
@@ -233,6 +234,23 @@ def _cut_backs(summary: dict) -> str | None:
     if cut > CUT_BACK_SHARE * steps:  # the delamination example halves 3 of 30, on purpose
         line += ": analysis.dt is too large for this case"
     return line
+
+
+def _unconverged_augmentations(summary: dict) -> str | None:
+    """Steps that kept their last augmentation unconverged (``augmentation.on_limit =
+    "accept"``, summary.json ``unconverged_steps``): a tester's block with max_iterations = 2
+    kept 4 of 4 steps so, its gap 2.2e-8 against the converged 6.6e-12, and only the summary
+    said so."""
+    unconverged, steps = summary.get("unconverged_steps") or 0, summary.get("steps") or 0
+    if not unconverged:
+        return None
+    deepest = summary.get("max_penetration")
+    depth = f" (the run's largest penetration {deepest:.3g})" if deepest else ""
+    return (f"{unconverged} of {steps} steps kept an unconverged contact augmentation "
+            "(augmentation.on_limit = \"accept\"; summary.json unconverged_steps, history.csv "
+            "augmentations_converged = 0): their gaps and tractions did not pass report 5.4's "
+            f"test and are off by up to the last augmentation's change{depth}; raise "
+            "augmentation.max_iterations to converge them")
 
 
 def _node(at: dict) -> str:
