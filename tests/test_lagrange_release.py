@@ -1,0 +1,60 @@
+"""How Lagrange multipliers release pairs (tester B, findings 3 and 7): at once, in the step
+that finds them in tension, so ``release_steps`` does nothing for them and is warned about;
+and a multiplier at round-off (t_N ~ 1e-30 at zero load) makes no contact time."""
+
+from __future__ import annotations
+
+import json
+import warnings
+
+import pytest
+from helpers import model_from_dict
+from test_active_set_cycle import _unloaded_block
+
+from ntncontact.engine.diagnostics import PhysicsWarning
+
+
+@pytest.mark.parametrize(("method", "warned"), [("lagrange", True),
+                                                ("augmented_lagrangian", False)])
+def test_release_steps_with_lagrange_is_warned_about(method, warned):
+    contact = {"name": "c", "body_1": "top", "surface_1": "bottom", "body_2": "base",
+               "surface_2": "top", "method": method, "law": "gap", "release_steps": 1}
+    if method != "lagrange":
+        contact["penalty_normal"] = 1e3
+    data = {"analysis": {"kind": "static", "dt": 1.0, "t_end": 1.0},
+            "bodies": [_body("top", 1.0), _body("base", 0.0, supported=True)],
+            "contact": [contact]}
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        model_from_dict(data)
+    said = [str(w.message) for w in caught if issubclass(w.category, PhysicsWarning)
+            and "release_steps" in str(w.message)]
+    assert len(said) == warned, said
+    if warned:
+        assert said[0].startswith("contact.0 ('c'): release_steps has no effect with method = "
+                                  '"lagrange"'), said
+
+
+def _body(name: str, y0: float, supported: bool = False) -> dict:
+    body = {"name": name, "mesh": {"type": "rectangle", "width": 1.0, "height": 1.0, "nx": 2,
+                                   "ny": 2, "origin": [0.0, y0]},
+            "material": {"model": "linear_elastic", "E": 100.0, "nu": 0.3, "density": 1.0}}
+    body["supports"] = ([{"set": "bottom", "x": 0.0, "y": 0.0}] if supported
+                        else [{"set": "corner_top_left", "x": 0.0}])
+    if not supported:
+        body["loads"] = [{"type": "pressure", "set": "top", "value": 1.0}]
+    return body
+
+
+def test_round_off_multipliers_make_no_contact_time(tmp_path):
+    """Tester B's block unloaded to zero at t = 2: its Lagrange pairs keep t_N ~ 1e-30 in the
+    last step (t = 1.75 -> 2), which made contact_end_time 2.0; the augmented Lagrangian and
+    penalty say 1.75."""
+    from ntncontact.engine.simulation import Simulation
+    from ntncontact.io.results import ResultWriter
+
+    model = _unloaded_block(t_end=2.0)
+    Simulation(model, [ResultWriter(tmp_path, model)]).run()
+    summary = json.loads((tmp_path / "summary.json").read_text())
+    assert summary["contact_start_time"] == 0.0
+    assert summary["contact_end_time"] == pytest.approx(1.75)
