@@ -130,7 +130,8 @@ def test_an_interrupted_run_writes_a_frame_of_its_last_step(tmp_path):
     _, err = child.communicate(timeout=TIMEOUT)
     assert child.returncode == 130, err
     data = summary(out)
-    assert data["status"] == "interrupted" and data["steps"] > 12
+    # step 12 was written (13 rows with step 0's); a signal between two steps stops there
+    assert data["status"] == "interrupted" and data["steps"] >= 12
     assert frame_steps(out) == [0, data["steps"]]
     times = [t for t, _ in read_pvd(out / "fields.pvd")]
     assert times[-1] == pytest.approx(data["time"], abs=1e-12)
