@@ -47,7 +47,7 @@ def test_a_trial_step_that_does_not_help_is_backtracked():
         return sp.csr_matrix(np.diag(1.0 / (1.0 + y**2)))
 
     result = newton(residual, jacobian, LinearSolver("superlu").solve, np.array([3.0]),
-                    NewtonSettings(rtol=1e-12))
+                    NewtonSettings(rtol=1e-12, watchdog=True))
     assert abs(result.y[0]) < 1e-10
     norms = result.residual_norms
     assert norms[1] > norms[0] > norms[2]  # the trial, then the backtracked step from y = 3

@@ -298,8 +298,12 @@ class Simulation:
         self.observers = list(observers)
         self.solve = linear_solve or default_linear_solve(
             model.analysis.factor_precision, check_pivots=model.analysis.kind == "static")
+        # the watchdog only without contact: with contact it changed the active sets' path
+        # (a Lagrange block touching on a step boundary then cycled, and 4 more tests moved
+        # beyond their tolerances), where the plain line search was tuned and tested
         self.settings = NewtonSettings(rtol=model.analysis.newton_rtol,
-                                       max_iterations=model.analysis.newton_max_iterations)
+                                       max_iterations=model.analysis.newton_max_iterations,
+                                       watchdog=not model.interfaces)
         self.dynamic = model.analysis.kind == "dynamic"
         self.lumped = model.analysis.mass == "lumped"
         self.state = initial_state(model)

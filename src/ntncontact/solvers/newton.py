@@ -55,6 +55,9 @@ class NewtonSettings:
     #: at most this many kept-factor steps in a row before a fresh factorization (bounds the
     #: linear convergence of modified Newton when the contraction setting is lax)
     max_reused_steps: int = 4
+    #: let a solve's first full step raise |R| on trial (:class:`_Watchdog`); the caller
+    #: turns it on where it was measured to help (``Simulation``: runs without contact)
+    watchdog: bool = False
 
 
 @dataclass
@@ -130,6 +133,7 @@ def _newton(residual: Residual, jacobian: Jacobian, solve: LinearSolve, y0: NDAr
     reused = 0
     limit = settings.divergence_factor * max(first, 1e-300)
     watch = _Watchdog(limit)
+    watch.used = not settings.watchdog
     for it in range(1, settings.max_iterations + 1):
         step = None
         if reused < settings.max_reused_steps:
