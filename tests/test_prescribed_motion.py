@@ -88,3 +88,16 @@ def test_the_ledger_closes_with_the_supports_work(mass):
         held_mass = 2.0 * 0.5 * 0.25 / 2.0  # two nodes, each a quarter of rho h dx
         assert jumps[kink] == pytest.approx(-0.5 * held_mass * SPEED**2, rel=1e-6)
     assert abs(jumps[kink]) < 0.05 * scale  # O(h): the held nodes carry the mass
+
+
+def test_a_step_end_within_round_off_of_a_kink_takes_the_segment_that_ends_there():
+    """Step 12 of dt = 0.025 ends at 0.30000000000000004: a kink at 0.3 gave the constant
+    extension's rate 0 there, and a time point one ulp later the incoming one (a tester's
+    reaction 1.3 % apart, session 41)."""
+    f = TimeFunction((0.0, 0.11, 0.3), (0.0, 1.0, -1.0))
+    incoming = -2.0 / 0.19
+    for t in (12 * 0.025, 0.3, np.nextafter(0.3, 0.0), np.nextafter(0.3, 1.0)):
+        assert f.rate_before(t) == pytest.approx(incoming)
+    g = TimeFunction((0.0, 0.11, 0.30000000000000004), (0.0, 1.0, -1.0))
+    assert g.rate_before(12 * 0.025) == pytest.approx(-2.0 / (0.30000000000000004 - 0.11))
+    assert f.rate_before(0.31) == 0.0 and f.rate_before(0.2) == pytest.approx(incoming)
