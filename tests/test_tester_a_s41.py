@@ -12,6 +12,7 @@ from helpers import model_from_dict
 import ntncontact as ntc
 from ntncontact.engine.diagnostics import linear_elastic_measures
 from ntncontact.engine.simulation import Simulation, SimulationError
+from ntncontact.io.scenario import ScenarioError
 from ntncontact.report.run_warnings import result_warnings
 
 #: the tester's mid-point spin (f5_spin.toml, dt = 0.4, t_end = 8): its summary's figures
@@ -157,3 +158,15 @@ def test_a_strain_below_the_limit_is_not_warned_about():
     rod = {"max_linear_elastic_strain": 0.067,
            "max_linear_elastic_strain_at": {"time": 0.2, "body": "rod_left"}}
     assert not [w for w in result_warnings(rod) if "strain" in w]
+
+
+def test_a_static_run_takes_an_explicit_zero_velocity():
+    """A zero initial velocity is what a static run does anyway: refusing it (as this session
+    first did) broke files that set it explicitly (tester R, session 41)."""
+    data = cantilever(function={"times": [0.0, 1.0], "values": [0.0, 0.01]})
+    data["analysis"]["newton"] = {"max_iterations": 25}
+    data["bodies"][0]["initial"] = {"velocity": [0.0, 0.0], "angular_velocity": 0.0}
+    Simulation(model_from_dict(data)).run()
+    data["bodies"][0]["initial"] = {"velocity": [0.0, 1.0]}
+    with pytest.raises(ScenarioError, match="initial.velocity"):
+        model_from_dict(data)
