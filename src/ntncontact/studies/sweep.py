@@ -269,6 +269,7 @@ def _results_row(results: Any, reductions: Mapping[str, str]) -> dict[str, Any]:
     row["warnings"] = " | ".join(lines) or None
     # no duration where the run ended in contact (its end time is the run's): a tester's cut
     # rod impact read 0.95 beside the full run's 2.05
+    row["contact_duration"] = None  # the column stays when no case's contact ended (tester R)
     if row.get("contact_end_time") is not None and row.get("contact_start_time") is not None \
             and not row.get("contact_at_end"):
         row["contact_duration"] = row["contact_end_time"] - row["contact_start_time"]
