@@ -165,3 +165,37 @@ def test_bodies_overlapping_at_t0_with_no_interface_are_refused_naming_node_and_
         "apart (bodies.*.mesh origin, center or transform)")
     # touching bodies are no overlap: tied parts (the T-junction)
     model_from_dict(_t_junction(close_loop=False))
+
+
+def tied_squares(x_b: float, function_b: dict | None = None) -> dict:
+    """Two static squares tied along a shared edge, each top corner on it held in x: a's at
+    0, b's at ``x_b`` (times ``function_b``, if given)."""
+    def square(name, origin, supports):
+        return {"name": name, "mesh": {"type": "rectangle", "width": 0.5, "height": 0.5,
+                                       "nx": 2, "ny": 2, "origin": origin},
+                "material": {"model": "linear_elastic", "E": 1000.0, "nu": 0.3,
+                             "density": 1.0},
+                "supports": supports,
+                "loads": [{"type": "pressure", "set": "top", "value": 10.0}]}
+    corner_b = {"set": "corner_top_left", "x": x_b} | (
+        {} if function_b is None else {"function": function_b})
+    return {"analysis": {"kind": "static", "dt": 1.0, "t_end": 1.0},
+            "bodies": [square("a", [-0.5, 0.0], [{"set": "bottom", "x": 0.0, "y": 0.0},
+                                                {"set": "corner_top_right", "x": 0.0}]),
+                       square("b", [0.0, 0.0], [{"set": "bottom", "y": 0.0}, corner_b])],
+            "tie": [{"name": "ab", "body_1": "a", "surface_1": "right", "body_2": "b",
+                     "surface_2": "left"}]}
+
+
+def test_tied_nodes_prescribed_different_motions_are_refused():
+    """A tester's tied corners held at x = 0 and x = 0.01 ran to "completed" 0.01 apart; the
+    tie leaves a component prescribed on both nodes to the supports (session 41)."""
+    with pytest.raises(ScenarioError, match=r"tie 'ab': node \d+ of body 'a' .* different x "
+                                            r"motions \('a_corner_top_right', "
+                                            r"'b_corner_top_left'\)"):
+        model_from_dict(tied_squares(0.01))
+    model_from_dict(tied_squares(0.0))  # the same motion: the supports' own business
+    # equal at the function's points only if equal everywhere: 0 * s(t) is 0 at all times
+    model_from_dict(tied_squares(0.0, {"times": [0.0, 1.0], "values": [0.0, 1.0]}))
+    with pytest.raises(ScenarioError, match="different x motions"):
+        model_from_dict(tied_squares(0.01, {"times": [0.0, 1.0], "values": [0.0, 1.0]}))

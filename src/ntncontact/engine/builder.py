@@ -294,6 +294,7 @@ def build_model(config: ScenarioConfig, base_dir: str | Path = ".") -> Model:
     _check_ale_ties(ties, ale_bodies, bodies)
     _check_tied_multipliers(ties, interfaces, config.contact, bodies)
     _check_redundant_ties(ties, bodies, fixed)
+    _check_tied_prescriptions(ties, tuple(prescribed), bodies)
     _check_tied_lagrange_pairs(ties, interfaces, config.contact, bodies)
     loads = LoadCase(tuple(patterns), tuple(functions), tuple(on_mesh), X0)
     model = Model(bodies, analysis, loads,
@@ -598,6 +599,39 @@ def _check_redundant_ties(ties: tuple[Tie, ...], bodies: tuple[Body, ...],
         "hold together: the constraint is given twice and the step's matrix is singular; "
         f"drop one of the ties there (tie '{found.tie}', or give it a node set without "
         "that node)")
+
+
+def _check_tied_prescriptions(ties: tuple[Tie, ...], prescribed: tuple[Prescribed, ...],
+                              bodies: tuple[Body, ...]) -> None:
+    """Refuse a tied pair whose two nodes are prescribed different motions in one component:
+    the tie leaves such a component to the supports, which pull the pair apart (a tester's
+    tied corners held at x = 0 and x = 0.01 ran to "completed" 0.01 apart, only
+    ``max_tie_violation`` telling). Equal motions are the supports' own business."""
+    motion: dict[int, tuple[float, Prescribed]] = {}
+    for p in prescribed:  # later entries win, as in dirichlet_values
+        for dof, value in zip(p.dofs.tolist(), p.values.tolist(), strict=True):
+            motion[dof] = (value, p)
+    for tie in ties:
+        for n1, n2 in zip(tie.nodes_1.tolist(), tie.nodes_2.tolist(), strict=True):
+            for c in (0, 1):
+                a, b = motion.get(2 * n1 + c), motion.get(2 * n2 + c)
+                if a is None or b is None or _same_motion(a, b):
+                    continue
+                raise ScenarioError(
+                    f"tie '{tie.name}': {_node_where(bodies, n1)} and "
+                    f"{_node_where(bodies, n2)} are tied, and their supports prescribe "
+                    f"different {'xy'[c]} motions ('{a[1].label}', '{b[1].label}'), which pull "
+                    "the tie apart: prescribe one of them, or the same motion on both")
+
+
+def _same_motion(a: tuple[float, Prescribed], b: tuple[float, Prescribed]) -> bool:
+    """Whether two prescribed components value * s(t) agree at all times: both are linear
+    between their functions' points and constant outside them, so at those points."""
+    times = np.union1d(a[1].function.times, b[1].function.times)
+    ua = a[0] * np.array([a[1].function(t) for t in times])
+    ub = b[0] * np.array([b[1].function(t) for t in times])
+    return bool(np.allclose(ua, ub, rtol=1e-12, atol=1e-12 * max(np.abs(ua).max(),
+                                                                 np.abs(ub).max(), 1e-300)))
 
 
 def _check_tied_lagrange_pairs(ties: tuple[Tie, ...],
