@@ -338,7 +338,8 @@ def _linear_strain(summary: dict) -> str | None:
     if not at or strain <= LINEAR_STRAIN_WARNING:
         return None
     return (f"an element of the linear elastic body '{at['body']}' reached a principal "
-            f"Green-Lagrange strain of {strain:.2g} (t = {at['time']:.6g}; summary.json "
+            f"Green-Lagrange strain of {strain:.2g} in magnitude, in tension or compression "
+            f"(t = {at['time']:.6g}; summary.json "
             f"max_linear_elastic_strain): above {LINEAR_STRAIN_WARNING:g} small-strain "
             "elasticity departs from a finite-strain law (a block compressed to a Green "
             "strain of 0.1 carries 9 % less than a Neo-Hookean one, to 0.32 (40 %) 38 % "
