@@ -38,7 +38,6 @@ from ..mesh.quadmesh import MeshError, QuadMesh
 from ..mesh.quality import check_elements
 from .diagnostics import PhysicsWarning
 from .initial import warn_overridden_velocities, warn_tied_velocities
-from .interfaces import warn_release_steps_unused
 from .model import AleSetup, AnalysisSettings, Body, ContactInterface, Model, stack_bodies
 from .ties import (
     Tie,
@@ -143,10 +142,36 @@ def _warn_ineffective_keys(config: ScenarioConfig) -> None:
     to runs without, silently. Warnings, not errors: one file serves every method through
     --set. Issued by the build, as the other build warnings, so that a run prints them once
     and keeps them in summary.json ``build_warnings``."""
+    static = config.analysis.kind == "static"
     for i, c in enumerate(config.contact):
-        for note in c.ineffective_keys():
+        for note in c.ineffective_keys() + _unread_in_this_run(c, static):
             warnings.warn(f"contact.{i} ('{c.name or f'interface{i}'}'): {note}",
                           PhysicsWarning, stacklevel=3)
+
+
+def _unread_in_this_run(c: ContactConfig, static: bool) -> list[str]:
+    """The keys of ``c`` that the method or the analysis kind leaves unread: release_steps
+    under Lagrange (its multipliers release a pair in tension at once: tester B's ring impact
+    identical with 1 and 2) and under the gap law (a pair is released when its gap opens:
+    tester R's ring identical with 1 and 4); gap_restoring and active_set_pass in a static
+    run (its steps always solve again with the nodes they end inside; tester R: contact.csv
+    byte for byte the plain run's)."""
+    given = c.model_fields_set
+    law = c.law or ("gap" if static else "persistency")
+    notes = []
+    if "release_steps" in given and c.method == "lagrange":
+        notes.append("release_steps has no effect with method = \"lagrange\": its "
+                     "multipliers release a pair in tension at once, in the step that finds it "
+                     "(docs/scenarios.md, release_steps)")
+    elif "release_steps" in given and law == "gap":
+        notes.append("release_steps has no effect under the gap law: a pair is released "
+                     "when its gap opens (the key counts steps of the persistency law)")
+    unread = [k for k in ("gap_restoring", "active_set_pass") if getattr(c, k) and static]
+    if unread:
+        notes.append(f"{' and '.join(unread)} {'have' if len(unread) > 1 else 'has'} no "
+                     "effect in a static run, which solves each step again with the nodes it "
+                     "ends inside")
+    return notes
 
 
 def _warn_support_jumps(config: ScenarioConfig) -> None:
@@ -278,7 +303,6 @@ def build_model(config: ScenarioConfig, base_dir: str | Path = ".") -> Model:
     _warn_penalty_rate_law(config)
     _warn_ineffective_keys(config)
     _warn_support_jumps(config)
-    warn_release_steps_unused(config.contact)
     ale_bodies = tuple(_ale_setup(i, body, bc, config) for i, (body, bc)
                        in enumerate(zip(bodies, config.bodies, strict=True))
                        if bc.mesh_motion == "ale")

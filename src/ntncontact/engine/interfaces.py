@@ -7,7 +7,6 @@ The time loop calls, per step: :func:`detect_all` at the step start, then repeat
 
 from __future__ import annotations
 
-import warnings
 from collections.abc import Sequence
 from dataclasses import dataclass, replace
 from typing import TYPE_CHECKING
@@ -37,11 +36,10 @@ from ..contact import (
     release_tensile_pairs,
 )
 from ..contact.evaluate import TOUCH_ROUNDOFF
-from .diagnostics import PhysicsWarning
 from .model import ContactInterface
 
 if TYPE_CHECKING:
-    from ..io.scenario import ContactConfig
+    pass
 
 
 def detect_all(
@@ -561,16 +559,3 @@ def contact_rows(
         cols["normal_y"].append(res.normal[:, 1])
     return {k: (np.concatenate(v) if v and not isinstance(v[0], str) else np.asarray(v))
             for k, v in cols.items()}
-
-
-def warn_release_steps_unused(contact: Sequence[ContactConfig]) -> None:
-    """Warn of ``release_steps`` set on a Lagrange interface: its exact multipliers release a
-    pair in tension at once, at the solve that finds it (``augment_all``), so the key changes
-    nothing (tester B: the ring impact identical to the last digit with 1 and 2, where the
-    augmented Lagrangian's rebound moved 0.488293 -> 0.487787)."""
-    for i, c in enumerate(contact):
-        if c.method == "lagrange" and "release_steps" in c.model_fields_set:
-            warnings.warn(f"contact.{i} ('{c.name or f'interface{i}'}'): release_steps has no "
-                          "effect with method = \"lagrange\": its multipliers release a pair "
-                          "in tension at once, in the step that finds it (docs/scenarios.md, "
-                          "release_steps)", PhysicsWarning, stacklevel=3)
