@@ -455,3 +455,27 @@ def test_a_run_that_ended_in_contact_has_no_contact_duration(at_end, duration):
     assert row["contact_at_end"] is at_end
     assert "contact_duration" in row  # a column even where no case's contact ended
     assert row["contact_duration"] == (None if duration is None else pytest.approx(duration))
+
+
+@pytest.mark.parametrize(("sets", "expected"), [
+    ({}, {"law": "persistency", "detection": "penetration", "moment_free": True}),
+    ({"contact.0.method": "lagrange", "contact.0.law": "gap", "contact.0.penalty_normal": 0.0},
+     {"law": "gap", "detection": "predicted", "moment_free": True}),
+    ({"contact.0.detection": "predicted", "contact.0.moment_free": False},
+     {"law": "persistency", "detection": "predicted", "moment_free": False})])
+def test_keys_the_build_resolves_get_the_value_the_case_ran_with(sets, expected):
+    """Tester R (session 41): contact.0.detection, law and moment_free stayed empty in
+    sweep.csv for cases that did not set them (their config holds None until the build), and
+    a figure by detection drew one "none" line through a predicted and a penetration case."""
+    from ntncontact.api import load_scenario
+    from ntncontact.engine.builder import build_model
+    from ntncontact.studies.sweep import _values
+
+    scenario = load_scenario(Path(__file__).parents[1] / "examples" / "rod_impact.toml", sets)
+    keys = [f"contact.0.{k}" for k in expected]
+    assert _values(scenario, keys) == {f"contact.0.{k}": v for k, v in expected.items()}
+    model = build_model(scenario.config, scenario.base_dir)  # what the run takes
+    ci = model.interfaces[0]
+    assert (ci.persistency, ci.predicted_detection, ci.law.moment_free) == (
+        expected["law"] == "persistency", expected["detection"] == "predicted",
+        expected["moment_free"])

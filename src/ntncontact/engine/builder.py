@@ -515,12 +515,13 @@ def _interface(cfg: ContactConfig, index: int, bodies: tuple[Body, ...],
     # moment-free pair forces conserve angular momentum under the mid-point rule: the default
     # of dynamic runs; static runs keep the report's forces (docs/theory.md, "Moment-free
     # pair forces")
-    moment_free = kind == "dynamic" if cfg.moment_free is None else cfg.moment_free
+    resolved = cfg.resolved(kind)
+    moment_free = resolved["moment_free"]
     # unpaired nodes between pairs share the pair forces where an ALE body ends the pairs node
     # to node; offset Lagrangian pairs would share them at the wrong places (docs/theory.md)
     lagrangian = b1.mesh_motion == "lagrangian" and b2.mesh_motion == "lagrangian"
     share = not lagrangian if cfg.unpaired_share is None else cfg.unpaired_share
-    persistency = (cfg.law or ("persistency" if kind == "dynamic" else "gap")) == "persistency"
+    persistency = resolved["law"] == "persistency"
     spacing = min(_median_spacing(b.mesh.nodes[c.nodes], c.closed)
                   for b, c in ((b1, chain1), (b2, chain2)))
     law = ContactLaw(cfg.method, *interface_penalties(cfg, (b1.material, b2.material), spacing,
@@ -532,8 +533,7 @@ def _interface(cfg: ContactConfig, index: int, bodies: tuple[Body, ...],
     max_aug = 1 if cfg.method == "penalty" else aug.max_iterations
     ordered = "ale" in (b1.mesh_motion, b2.mesh_motion)
     # exact gap constraints must not inherit a step's penetration: detect before touching
-    predicted = (cfg.detection or ("predicted" if cfg.method == "lagrange" and not persistency
-                                   else "penetration")) == "predicted"
+    predicted = resolved["detection"] == "predicted"
     return ContactInterface(cfg.name or f"interface{index}", Interface(surface1, surface2), law,
                             persistency, candidates, cfg.release_steps, tol, max_aug, ordered,
                             predicted, aug.update, aug.on_limit == "accept",

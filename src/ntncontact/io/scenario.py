@@ -332,6 +332,17 @@ class ContactConfig(Strict):
             raise ValueError("friction > 0 needs penalty_tangential > 0 (or penalty_factor)")
         return self
 
+    def resolved(self, kind: str) -> dict[str, Any]:
+        """The values the run takes for the keys whose default depends on others (None
+        here): ``law`` (persistency in a dynamic run, else gap), ``moment_free`` (on in a
+        dynamic run) and ``detection`` (predicted for Lagrange under the gap law, else
+        penetration). The build and a sweep's table read them from here."""
+        law = self.law or ("persistency" if kind == "dynamic" else "gap")
+        detection = self.detection or ("predicted" if self.method == "lagrange"
+                                       and law == "gap" else "penetration")
+        moment_free = kind == "dynamic" if self.moment_free is None else self.moment_free
+        return {"law": law, "detection": detection, "moment_free": moment_free}
+
     def ineffective_keys(self) -> list[str]:
         """The keys given here that this interface's method and friction never read, each
         group as a clause naming the keys and why: a tester's penalty run with an

@@ -403,6 +403,11 @@ def _values(scenario: Scenario, keys: Sequence[str]) -> dict[str, Any]:
     a case that does not set a sweep key left its sweep.csv cell empty, and a figure dropped
     the case without a word (a tester's 1 point of 3)."""
     data = scenario.config.model_dump(mode="json")
+    kind = scenario.config.analysis.kind
+    for contact, config in zip(data.get("contact", []), scenario.config.contact, strict=True):
+        # the keys whose default the build resolves (None in the config): a tester's figure
+        # by contact.0.detection drew one "none" line through a predicted and a penetration case
+        contact |= {k: v for k, v in config.resolved(kind).items() if contact.get(k) is None}
     values = {}
     for key in keys:
         value: Any = data
