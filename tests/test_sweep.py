@@ -354,6 +354,10 @@ def test_repeated_cases_are_refused_and_key_order_does_not_make_another_case(tmp
                    '[[cases]]\n"b" = "x"\n"a" = 1\n')
     with pytest.raises(ScenarioError, match=r"cases 0 and 1 are the same case"):
         load_sweep(bad)
+    # 10000 and 10000.0 are one value (tester R: two folders, two equal rows)
+    bad.write_text('scenario = "x.toml"\n[[cases]]\n"a" = 10000\n[[cases]]\n"a" = 10000.0\n')
+    with pytest.raises(ScenarioError, match=r"cases 0 and 1 are the same case"):
+        load_sweep(bad)
     # a grid's cases keep their keys' order, so their folders keep their names
     ok = tmp_path / "ok.toml"
     ok.write_text('scenario = "x.toml"\n[set]\n"z" = 2\n[grid]\n"b" = [1]\n"a" = [3]\n'

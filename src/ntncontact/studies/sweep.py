@@ -128,13 +128,15 @@ class SweepSpec(_Strict):
         """Two equal cases (as mappings: in any key order) would run in one folder, the second
         stopped by the first's lock (a tester's repeated [[cases]] table was recorded
         ``running``): refused, naming both."""
-        seen: dict[tuple[str, ...], int] = {}
+        seen: dict[tuple, int] = {}
         for k, case in enumerate(self.case_overrides()):
-            items = override_strings(case)
-            if items in seen:
-                raise ValueError(f"cases {seen[items]} and {k} are the same case "
+            # 10000 and 10000.0 are one value (a tester's two cases ran in two folders)
+            same = tuple((key, _as_number(value)) for key, value in case.items())
+            if same in seen:
+                items = override_strings(case)
+                raise ValueError(f"cases {seen[same]} and {k} are the same case "
                                  f"({', '.join(items) or 'no overrides'}): give each once")
-            seen[items] = k
+            seen[same] = k
 
     def key_order(self) -> list[str]:
         """Every override key in the order it first appears: [set], [grid], then [[cases]].
@@ -396,6 +398,15 @@ def _checked_case(spec: str | Path, k: int, case: Mapping[str, Any], scenario_pa
     except (ScenarioError, ValueError, OSError) as err:
         raise ScenarioError(f"{spec}: case {k} ({', '.join(override_strings(case))}): "
                             f"{err}") from None
+
+
+def _as_number(value: Any) -> Any:
+    """A value as a case compares it: numbers (not bools) as floats, lists item by item."""
+    if isinstance(value, (list, tuple)):
+        return tuple(_as_number(v) for v in value)
+    if isinstance(value, (int, float)) and not isinstance(value, bool):
+        return float(value)
+    return value
 
 
 def _values(scenario: Scenario, keys: Sequence[str]) -> dict[str, Any]:
