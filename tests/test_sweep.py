@@ -483,3 +483,14 @@ def test_keys_the_build_resolves_get_the_value_the_case_ran_with(sets, expected)
     assert (ci.persistency, ci.predicted_detection, ci.law.moment_free) == (
         expected["law"] == "persistency", expected["detection"] == "predicted",
         expected["moment_free"])
+
+
+def test_cases_with_table_values_are_compared_too(tmp_path):
+    """A case may set a table (a mesh): the repeat check must compare it, not fail on it (the
+    first version raised "unhashable type: 'dict'")."""
+    bad = tmp_path / "bad.toml"
+    mesh = '{ type = "rectangle", width = 1.0, height = 1.0, nx = 2, ny = 2 }'
+    bad.write_text(f'scenario = "x.toml"\n[[cases]]\n"bodies.0.mesh" = {mesh}\n'
+                   f'[[cases]]\n"bodies.0.mesh" = {mesh.replace("1.0", "1")}\n')
+    with pytest.raises(ScenarioError, match=r"cases 0 and 1 are the same case"):
+        load_sweep(bad)

@@ -9,6 +9,7 @@ nodal vector follows the body's moving reference mesh (``MeshBodyForce``).
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -160,23 +161,23 @@ class Prescribed:
 def dirichlet_values(prescribed: tuple[Prescribed, ...], t: float, ndof: int) -> tuple[NDArray,
                                                                                         NDArray]:
     """Sorted unique constrained dofs and their values at time t (later entries win)."""
-    if not prescribed:
-        return np.zeros(0, dtype=np.int64), np.zeros(0)
-    vals = np.full(ndof, np.nan)
-    for p in prescribed:
-        vals[p.dofs] = p.at(t)
-    dofs = np.flatnonzero(~np.isnan(vals))
-    return dofs, vals[dofs]
+    return _prescribed(prescribed, ndof, lambda p: p.at(t))
 
 
 def dirichlet_rates(prescribed: tuple[Prescribed, ...], t: float, ndof: int) -> tuple[NDArray,
                                                                                        NDArray]:
     """The dofs of :func:`dirichlet_values` and their velocities at the end t of a step (the
     rate of the segment that ends at t; later entries win, as for the values)."""
+    return _prescribed(prescribed, ndof, lambda p: p.rate_before(t))
+
+
+def _prescribed(prescribed: tuple[Prescribed, ...], ndof: int,
+                of: Callable[[Prescribed], NDArray]) -> tuple[NDArray, NDArray]:
+    """Sorted unique constrained dofs and ``of`` each entry at them (later entries win)."""
     if not prescribed:
         return np.zeros(0, dtype=np.int64), np.zeros(0)
-    rates = np.full(ndof, np.nan)
+    vals = np.full(ndof, np.nan)
     for p in prescribed:
-        rates[p.dofs] = p.rate_before(t)
-    dofs = np.flatnonzero(~np.isnan(rates))
-    return dofs, rates[dofs]
+        vals[p.dofs] = of(p)
+    dofs = np.flatnonzero(~np.isnan(vals))
+    return dofs, vals[dofs]

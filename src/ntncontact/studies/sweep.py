@@ -401,7 +401,10 @@ def _checked_case(spec: str | Path, k: int, case: Mapping[str, Any], scenario_pa
 
 
 def _as_number(value: Any) -> Any:
-    """A value as a case compares it: numbers (not bools) as floats, lists item by item."""
+    """A value as a case compares it (hashable): numbers (not bools) as floats, lists and
+    tables (a mesh given as a table) item by item."""
+    if isinstance(value, Mapping):
+        return tuple(sorted((k, _as_number(v)) for k, v in value.items()))
     if isinstance(value, (list, tuple)):
         return tuple(_as_number(v) for v in value)
     if isinstance(value, (int, float)) and not isinstance(value, bool):
