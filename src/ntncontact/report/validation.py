@@ -29,7 +29,7 @@ from .validation_checks import (
     hertz_versus_rows,
 )
 from .validation_figures import plot_hertz_versus
-from .validation_measure import MEASURES, overrides, run_mesh_motion
+from .validation_measure import MEASURES, overrides, quiet_build, run_mesh_motion
 from .validation_report import RunInfo, write_html, write_markdown
 
 
@@ -44,7 +44,8 @@ def _run_scenario(case: Case, directory: Path, quick: bool) -> None:
     scenario = EXAMPLES / case.example
     items = overrides(case, quick)
     config = load_scenario(scenario, items)
-    model = build_model(config, scenario.parent)
+    with quiet_build():
+        model = build_model(config, scenario.parent)
     writer = ResultWriter(directory, model, scenario=str(scenario), title=config.title,
                           overrides=items, overwrite=True)  # validate reruns every case
     Simulation(model, [writer]).run()  # raises if the run fails
