@@ -9,7 +9,6 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass, replace
-from typing import TYPE_CHECKING
 
 import numpy as np
 from numpy.typing import NDArray
@@ -37,9 +36,6 @@ from ..contact import (
 )
 from ..contact.evaluate import TOUCH_ROUNDOFF
 from .model import ContactInterface
-
-if TYPE_CHECKING:
-    pass
 
 
 def detect_all(

@@ -132,8 +132,7 @@ def _newton(residual: Residual, jacobian: Jacobian, solve: LinearSolve, y0: NDAr
         return NewtonResult(y, 0, norms)
     reused = 0
     limit = settings.divergence_factor * max(first, 1e-300)
-    watch = _Watchdog(limit)
-    watch.used = not settings.watchdog
+    watch = _Watchdog(limit, settings.watchdog)
     for it in range(1, settings.max_iterations + 1):
         step = None
         if reused < settings.max_reused_steps:
@@ -222,9 +221,9 @@ class _Watchdog:
     so the line search still protects against divergence and inverted elements (a trial that
     inverts one is never taken in full)."""
 
-    def __init__(self, limit: float) -> None:
+    def __init__(self, limit: float, enabled: bool = True) -> None:
         self.limit = limit  # a full step beyond the divergence limit is never let through
-        self.used = False
+        self.used = not enabled  # its one trial per solve spent, or never given
         self.pending = False
         self.saved: tuple[NDArray, NDArray, float] | None = None
         self.fresh = False
