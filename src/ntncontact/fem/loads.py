@@ -158,9 +158,32 @@ class Prescribed:
         return self.values * self.function.rate_before(t)
 
 
+def same_motions(values_a: NDArray, function_a: TimeFunction, values_b: NDArray,
+                 function_b: TimeFunction) -> NDArray:
+    """Whether each pair of prescribed components values_a * s_a(t) and values_b * s_b(t)
+    agree at all times (to 1e-12 relative), compared as functions of time, not as objects:
+    0.2 x ramp and 0.1 x (twice the ramp) are one motion. Both are linear between their
+    functions' points and constant outside them, so comparing at those points suffices."""
+    times = np.union1d(function_a.times, function_b.times)
+    ua = np.outer(values_a, [function_a(t) for t in times])
+    ub = np.outer(values_b, [function_b(t) for t in times])
+    scale = np.maximum(np.abs(ua).max(axis=1), np.abs(ub).max(axis=1))
+    return np.all(np.abs(ua - ub) <= 1e-12 * scale[:, None] + 1e-12 * np.abs(ub), axis=1)
+
+
+def conflicting_dofs(a: Prescribed, b: Prescribed) -> tuple[NDArray, NDArray, NDArray]:
+    """The dofs that both ``a`` and ``b`` prescribe with different motions, with their values
+    in ``a`` and in ``b``: the build refuses them, since only one of the two would hold."""
+    common, ia, ib = np.intersect1d(a.dofs, b.dofs, return_indices=True)
+    differ = ~same_motions(a.values[ia], a.function, b.values[ib], b.function)
+    return common[differ], a.values[ia][differ], b.values[ib][differ]
+
+
 def dirichlet_values(prescribed: tuple[Prescribed, ...], t: float, ndof: int) -> tuple[NDArray,
                                                                                         NDArray]:
-    """Sorted unique constrained dofs and their values at time t (later entries win)."""
+    """Sorted unique constrained dofs and their values at time t (later entries win; the
+    build refuses two entries that give a dof different motions, ``conflicting_dofs``, so
+    the order only decides which entry a dof's reaction is reported with)."""
     return _prescribed(prescribed, ndof, lambda p: p.at(t))
 
 
