@@ -3,7 +3,9 @@
 At a converged step the residual R = f_int (+ M a) - f_ext + f_contact vanishes on the free
 dofs; on a prescribed dof it is the force the support must add for equilibrium, the reaction.
 Each prescribed dof belongs to the last support that prescribes it (as the displacement does,
-``fem.loads.dirichlet_values``), so a node in two sets is counted once.
+``fem.loads.dirichlet_values``), so a node in two sets is counted once. The build refuses two
+supports that give a dof different motions, and two (body, set) pairs whose labels
+``<body>_<set>`` coincide (their columns would merge into one holding the sum).
 """
 
 from __future__ import annotations
