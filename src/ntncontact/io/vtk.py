@@ -275,6 +275,34 @@ def _frame_of(mesh: meshio.Mesh, time: float, path: Path) -> VtuFrame:
     )
 
 
+#: positions in VTK's symmetric 6-vector (XX, YY, ZZ, XY, YZ, XZ) of the 9 components of the
+#: full tensor, row-major (XX, XY, XZ, YX, YY, YZ, ZX, ZY, ZZ)
+SYMMETRIC6_TO_FULL9 = np.array([0, 3, 5, 3, 1, 4, 5, 4, 2])
+#: positions in the row-major 9 of VTK's 6 (the inverse of SYMMETRIC6_TO_FULL9)
+FULL9_TO_SYMMETRIC6 = np.array([0, 4, 8, 1, 5, 2])
+
+
+def full_tensor(value: NDArray) -> NDArray:
+    """An (n, 6) array (VTK's symmetric tensors) as (n, 9) row-major full tensors, which
+    meshio labels XDMF ``Tensor``; other arrays unchanged. Why: meshio labels an (n, 6) array
+    ``Tensor6``, whose XDMF order is XX, XY, XZ, YY, YZ, ZZ, not VTK's; ParaView's "XDMF
+    Reader" (vtkXdmfReader) reorders Tensor6 by XDMF's rule and showed sigma_yy as sigma_xy,
+    while its Xdmf3 readers pass the 6 values through in VTK's order, so no order of 6 is
+    right for both. A full tensor reads the same in every reader."""
+    return value[:, SYMMETRIC6_TO_FULL9] if value.ndim == 2 and value.shape[1] == 6 else value
+
+
+def symmetric_tensor(value: NDArray) -> NDArray:
+    """Undo :func:`full_tensor`: a symmetric (n, 9) array of an XDMF frame back in VTK's
+    6-component layout, as the VTU frame holds it; other arrays unchanged (a non-symmetric
+    (n, 9) one is not a tensor this package wrote as 6)."""
+    array = np.asarray(value)
+    if array.ndim == 2 and array.shape[1] == 9 and np.array_equal(
+            array, array.reshape(-1, 3, 3).transpose(0, 2, 1).reshape(-1, 9)):
+        return array[:, FULL9_TO_SYMMETRIC6]
+    return array
+
+
 def _drop_z(values: NDArray, count: int) -> NDArray:
     # Undo pad_to_3d: 3-vectors whose z is identically zero were 2D fields.
     array = np.asarray(values)
@@ -327,6 +355,9 @@ class XdmfSeriesWriter:
               point_data: Mapping[str, ArrayLike], cell_data: Mapping[str, ArrayLike]) -> Path:
         """Append output step ``step`` at ``time``; returns the XDMF path."""
         mesh = frame_mesh(points, cells, point_data, cell_data)
+        mesh.point_data = {name: full_tensor(v) for name, v in mesh.point_data.items()}
+        mesh.cell_data = {name: [full_tensor(v) for v in blocks]
+                          for name, blocks in mesh.cell_data.items()}
         self._check_room(mesh)
         if self._first is None:
             import h5py
@@ -536,7 +567,10 @@ class XdmfSeries:
         points = point_data.get("material_position")
         if points is None:  # a series without the field: the node's position less d
             points = stored + offset - point_data["displacement"]
-        return meshio.Mesh(np.array(points), cells, point_data=point_data, cell_data=cell_data)
+        return meshio.Mesh(np.array(points), cells,
+                           point_data={name: symmetric_tensor(v) for name, v in point_data.items()},
+                           cell_data={name: [symmetric_tensor(v) for v in blocks]
+                                      for name, blocks in cell_data.items()})
 
     def frame(self, k: int) -> VtuFrame:
         """Frame k as :func:`read_vtu` reads the VTU frame it replaces."""
@@ -576,11 +610,17 @@ def read_series(path: str | os.PathLike) -> list[tuple[float, FrameSource]]:
     """(time, frame source) of every frame of a PVD (the VTU files that exist) or of an XDMF
     series, in time order; read a frame with :func:`read_frame` or :func:`read_frame_mesh`."""
     if Path(path).suffix == ".xdmf":
-        try:
-            return list(XdmfSeries(path).steps())
-        except (meshio.ReadError, ET.ParseError, KeyError, AttributeError) as error:
-            raise ValueError(f"{path} is not a readable XDMF time series ({error!r})") from None
+        return list(_open_xdmf(path).steps())
     return list(read_pvd(path))
+
+
+def _open_xdmf(path: str | os.PathLike) -> XdmfSeries:
+    """:class:`XdmfSeries`, meshio's and the XML parser's errors as one ValueError naming the
+    file."""
+    try:
+        return XdmfSeries(path)
+    except (meshio.ReadError, ET.ParseError, KeyError, AttributeError) as error:
+        raise ValueError(f"{path} is not a readable XDMF time series ({error!r})") from None
 
 
 def read_frame(source: FrameSource, time: float = float("nan")) -> VtuFrame:
@@ -599,6 +639,18 @@ def read_frame_mesh(source: FrameSource) -> meshio.Mesh:
 
 def read_xdmf(path: str | os.PathLike) -> list[VtuFrame]:
     """Every frame of an XDMF series written by :class:`XdmfSeriesWriter`, in time order, as
-    :func:`read_vtu` reads the VTU frames of the same run."""
-    series = XdmfSeries(path)
+    :func:`read_vtu` reads the VTU frames of the same run. ``path``: the ``.xdmf`` file or,
+    as ``read_results`` takes it, the results folder (its ``fields.xdmf``; meshio raised
+    IsADirectoryError on a folder). Raises FileNotFoundError without the file, ValueError
+    naming it when it is not an XDMF series."""
+    xdmf = Path(path)
+    if xdmf.is_dir():
+        xdmf = xdmf / "fields.xdmf"
+        if not xdmf.is_file():
+            vtu = " (its frames are VTU files: fields.pvd)" if (
+                xdmf.parent / "fields.pvd").is_file() else ""
+            raise FileNotFoundError(f"no fields.xdmf in results folder {path}{vtu}")
+    elif not xdmf.is_file():
+        raise FileNotFoundError(f"no XDMF series {path}")
+    series = _open_xdmf(xdmf)
     return [series.frame(k) for k in range(len(series))]
