@@ -555,3 +555,49 @@ def contact_rows(
         cols["normal_y"].append(res.normal[:, 1])
     return {k: (np.concatenate(v) if v and not isinstance(v[0], str) else np.asarray(v))
             for k, v in cols.items()}
+
+
+def unpaired_shares(
+    interfaces: Sequence[ContactInterface], results: Sequence[ContactResult | None],
+    x: NDArray,
+) -> dict[str, NDArray]:
+    """The surface-1 nodes in no pair that carry a share of their neighbouring pairs' forces
+    (``unpaired_share``, contact/transfer.py), for the frames: without them a uniformly
+    pressed face read 0 ("open") at every third node, and its pressure integrated to 12.5 of
+    a load of 20 (tester V). Per node: its share of the pairs' normal and tangential forces
+    (the rows of the transfer S^T applied to the pair forces, in the pairs' own directions)
+    over its tributary length on surface 1 at ``x``: tractions per current length, as the
+    pairs' t_N. contact.csv keeps its pair rows; these are the frames' only."""
+    out: dict[str, list] = {"node": [], "normal_traction": [], "tangential_traction": []}
+    for ci, res in zip(interfaces, results, strict=True):
+        if res is None or res.transfer is None:
+            continue
+        nodes, normal, tangential = _shares_of(ci, res, x)
+        for key, val in (("node", nodes), ("normal_traction", normal),
+                         ("tangential_traction", tangential)):
+            out[key].append(val)
+    return {k: np.concatenate(v) if v else np.zeros(0, np.int64 if k == "node" else float)
+            for k, v in out.items()}
+
+
+def _shares_of(ci: ContactInterface, res: ContactResult, x: NDArray
+               ) -> tuple[NDArray[np.int64], NDArray, NDArray]:
+    """(nodes, t_N, t_T) of :func:`unpaired_shares` on one interface."""
+    transfer, surface = res.transfer, ci.interface.surface1
+    pair_of = {int(n): k for k, n in enumerate(res.pairs[:, 0])}
+    # rows of S that belong to a surface-1 pair (a finer surface 2 has rows of its own)
+    rows = [r for r, n in enumerate(transfer.distributed.tolist()) if n in pair_of]
+    paired = [pair_of[int(transfer.distributed[r])] for r in rows]
+    weights = transfer.weights[rows]
+    normal = weights.T @ res.normal_force[paired]
+    tangential = weights.T @ res.tangential_force[paired]
+    carried = np.zeros(len(x), bool)
+    carried[weights.indices] = True
+    carried[res.pairs[:, 0]] = False  # a paired node keeps its pair's own traction
+    on_surface = np.zeros(len(x), bool)
+    on_surface[surface.nodes] = True
+    nodes = np.flatnonzero(carried & on_surface)
+    k = surface.index_of(nodes)
+    length = 0.5 * (np.linalg.norm(x[nodes] - x[surface.prev[k]], axis=1)
+                    + np.linalg.norm(x[surface.next[k]] - x[nodes], axis=1))
+    return nodes, normal[nodes] / length, tangential[nodes] / length

@@ -18,8 +18,9 @@ from numpy.typing import NDArray
 from ..fem.kernels_numba import CELL_FIELD_COLUMNS, MODEL_CODES, cell_fields, raise_inverted
 from .model import Model
 
-#: status codes of the contact-node field ``contact_status``
-OPEN, STICK, SLIP = 0, 1, 2
+#: status codes of the contact-node field ``contact_status``; SHARED: a surface-1 node in no
+#: pair that carries a share of its neighbouring pairs' forces (``unpaired_share``)
+OPEN, STICK, SLIP, SHARED = 0, 1, 2, 3
 
 
 def _symmetric6(xx: NDArray, yy: NDArray, zz: NDArray, xy: NDArray) -> NDArray:
@@ -98,9 +99,14 @@ def _nodal_averages(cells: NDArray, area: NDArray, cell: dict, n_nodes: int) -> 
     return out
 
 
-def contact_node_fields(rows: dict | None, n_nodes: int) -> dict[str, NDArray]:
+def contact_node_fields(rows: dict | None, n_nodes: int, shares: dict | None = None
+                        ) -> dict[str, NDArray]:
     """Point data from a step's contact.csv rows, on the surface-1 node of each active pair
-    (zero elsewhere; ``contact_partner`` -1): tractions, gap, gap rate, status, partner."""
+    (zero elsewhere; ``contact_partner`` -1): tractions, gap, gap rate, status, partner.
+    ``shares`` (``engine.interfaces.unpaired_shares``): the unpaired surface-1 nodes that
+    carry part of the pairs' forces get their tractions and status SHARED (gap, gap rate and
+    partner are the pairs' and stay 0, 0, -1 there), so that the field integrates to the
+    contact force along the surface."""
     out = {name: np.zeros(n_nodes) for name in ("contact_pressure", "contact_tangential_traction",
                                                 "contact_gap", "contact_gap_rate")}
     out["contact_status"] = np.full(n_nodes, OPEN, dtype=np.int64)
@@ -114,6 +120,11 @@ def contact_node_fields(rows: dict | None, n_nodes: int) -> dict[str, NDArray]:
         out[name][nodes] = rows[column]
     out["contact_status"][nodes] = np.where(np.asarray(rows["status"]) == "slip", SLIP, STICK)
     out["contact_partner"][nodes] = rows["node_2"]
+    if shares is not None and len(shares["node"]):
+        shared = np.asarray(shares["node"], dtype=np.int64)
+        out["contact_pressure"][shared] = shares["normal_traction"]
+        out["contact_tangential_traction"][shared] = shares["tangential_traction"]
+        out["contact_status"][shared] = SHARED
     return out
 
 

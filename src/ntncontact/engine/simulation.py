@@ -47,6 +47,7 @@ from .interfaces import (
     lagrange_terms,
     persistent_velocities,
     unconverged_interfaces,
+    unpaired_shares,
     with_solved_multipliers,
 )
 from .mesh_motion import (
@@ -1066,6 +1067,7 @@ class Simulation:
             "energy_multiplier": self._energy_multiplier,
             "energy_equation_unmet": self._take_energy_unmet(),
             "contact_rows": contact_rows(self.model.interfaces, results, self.state.x),
+            "contact_shares": unpaired_shares(self.model.interfaces, results, self.state.x),
         }
 
     def _take_energy_unmet(self) -> bool:

@@ -437,7 +437,8 @@ class ResultWriter:
                  "mesh_velocity": mesh_velocity(s.v, s.X, before.state.X if moving else s.X,
                                                 record.dt, F),
                  "material_position": s.X, "file_node_id": self._file_node_id}
-        point |= nodal | contact_node_fields(record.extra.get("contact_rows"), len(s.X))
+        point |= nodal | contact_node_fields(record.extra.get("contact_rows"), len(s.X),
+                                             record.extra.get("contact_shares"))
         self.results.fields.write(s.step, s.time, s.X, model.cells, point_data=point,
                                   cell_data=cell | {"body_id": self._body_id})
         self._framed_step = s.step
