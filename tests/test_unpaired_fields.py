@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from ntncontact import api
-from ntncontact.engine.postprocess import SHARED, SLIP, STICK
+from ntncontact.engine.postprocess import SHARED, SLIP, STICK, contact_node_fields
 
 P = 10.0
 
@@ -111,3 +111,18 @@ def test_equal_counts_have_no_shared_nodes(tmp_path, nx_base):
     assert not np.any(p["contact_status"] == SHARED)
     np.testing.assert_array_equal(p["contact_pressure"][rows["node_1"].to_numpy()],
                                   rows["normal_traction"])
+
+
+def test_a_node_paired_on_another_interface_keeps_its_pair_values():
+    """Two interfaces on one surface: a node shared on one and paired on the other shows its
+    pair (contact.csv's row), not the share."""
+    rows = {"node_1": np.array([1]), "node_2": np.array([9]), "normal_traction": np.array([5.0]),
+            "tangential_traction": np.array([0.5]), "gap": np.array([1e-3]),
+            "gap_rate": np.array([np.nan]), "status": np.array(["stick"])}
+    shares = {"node": np.array([1, 2]), "normal_traction": np.array([7.0, 8.0]),
+              "tangential_traction": np.array([0.7, 0.8])}
+    out = contact_node_fields(rows, 4, shares)
+    np.testing.assert_array_equal(out["contact_pressure"], [0.0, 5.0, 8.0, 0.0])
+    np.testing.assert_array_equal(out["contact_tangential_traction"], [0.0, 0.5, 0.8, 0.0])
+    np.testing.assert_array_equal(out["contact_status"], [0, STICK, SHARED, 0])
+    np.testing.assert_array_equal(out["contact_partner"], [-1, 9, -1, -1])

@@ -121,9 +121,12 @@ def contact_node_fields(rows: dict | None, n_nodes: int, shares: dict | None = N
     out["contact_status"][nodes] = np.where(np.asarray(rows["status"]) == "slip", SLIP, STICK)
     out["contact_partner"][nodes] = rows["node_2"]
     if shares is not None and len(shares["node"]):
-        shared = np.asarray(shares["node"], dtype=np.int64)
-        out["contact_pressure"][shared] = shares["normal_traction"]
-        out["contact_tangential_traction"][shared] = shares["tangential_traction"]
+        # a node paired on another interface of the same surface keeps its pair's values
+        keep = ~np.isin(shares["node"], nodes)
+        shared = np.asarray(shares["node"], dtype=np.int64)[keep]
+        out["contact_pressure"][shared] = np.asarray(shares["normal_traction"])[keep]
+        out["contact_tangential_traction"][shared] = np.asarray(
+            shares["tangential_traction"])[keep]
         out["contact_status"][shared] = SHARED
     return out
 
