@@ -334,6 +334,8 @@ class Simulation:
         self._supports = support_sets(model)
         self._last_reactions: dict = {}
         self._cut_back = False  # the last step was solved in sub-steps
+        self._newton_run = 0  # Newton iterations run so far, failed solves' too (_newton)
+        self._failed_iterations = 0  # the last step's, in attempts a halving discarded
         self._energy_multiplier = 0.0
         self._energy_unmet = False  # the energy equation had no root (report 5.5)
         self._penetration = PenetrationCheck(model) if len(model.bodies) > 1 else None
@@ -648,7 +650,7 @@ class Simulation:
         penetrating pairs there: if any, (result, iterations, the grown active sets) ends the
         pass before the rest of the solve (Hertz k = 4: 189 -> 165 solves); else it goes on
         to the inexact ratio of its start, as without the probe."""
-        solve = partial(newton, problem.residual, problem.jacobian, self.solve,
+        solve = partial(self._newton, problem.residual, problem.jacobian, self.solve,
                         settings=self.settings, length_scale=self.length_scale, factors=factors)
         if not probe:
             result = solve(y0, early_ratio=self._early_ratio)
@@ -702,8 +704,8 @@ class Simulation:
             updated, done = augment_all(interfaces, used, previous, results)
             if not (done and result.early):
                 return result, d, used, results, updated, done, iterations
-            result = newton(problem.residual, problem.jacobian, self.solve, result.y,
-                            self.settings, self.length_scale, factors)
+            result = self._newton(problem.residual, problem.jacobian, self.solve, result.y,
+                                  self.settings, self.length_scale, factors)
             iterations += result.iterations
 
     def _extrapolated_multipliers(self, used: tuple, updated: tuple, results: tuple,
@@ -861,9 +863,21 @@ class Simulation:
     def _solve_bordered(self, problem: StepProblem, others: list, combined, y0: NDArray):
         bordered = StepProblem(self.model, problem.state, problem.dt, problem.mass,
                                problem.extra, others + [combined], union=self._union)
-        new = newton(bordered.residual, bordered.jacobian, self.solve, y0, self.settings,
-                     self.length_scale)
+        new = self._newton(bordered.residual, bordered.jacobian, self.solve, y0, self.settings,
+                           self.length_scale)
         return bordered, new
+
+    def _newton(self, *args, **kwargs):
+        """``newton``, counting its iterations in ``_newton_run`` also when it fails (its
+        ``NewtonError.iterations``): a halved step's discarded attempts are told apart from
+        the accepted sub-steps' by this count (history.csv failed_newton_iterations)."""
+        try:
+            result = newton(*args, **kwargs)
+        except NewtonError as err:
+            self._newton_run += err.iterations
+            raise
+        self._newton_run += result.iterations
+        return result
 
     @staticmethod
     def _lagrange_multipliers(problem: StepProblem, result, split) -> list:
@@ -912,15 +926,19 @@ class Simulation:
         return evaluate_all(interfaces, contact, x_eval, v_eval, rate, state.x, dt, last)
 
     def step_with_cutback(self, dt: float) -> tuple[StepState, int, float]:
-        """Advance by dt, halving (up to max_cutbacks times) sub-steps that fail."""
+        """Advance by dt, halving (up to max_cutbacks times) sub-steps that fail; (the state,
+        the accepted sub-steps' Newton iterations, the last sub-step). The iterations of the
+        attempts the halvings discarded are kept apart in ``_failed_iterations``."""
         state, remaining, iterations, cuts = self.state, dt, 0, 0
         h = dt
         self._step_work = dict.fromkeys(LEDGER, 0.0)  # summed over the accepted sub-steps
         self._augmentations_converged = True
         self._state_substep = self._last_substep
+        self._failed_iterations = 0
         substeps: list[tuple[float, dict, dict]] = []  # each one's length, reactions, tie forces
         while remaining > 1e-12 * dt:
             h = min(h, remaining)
+            run_before = self._newton_run
             try:
                 before = dict(self._step_work)
                 state, its = self.advance(state, h)
@@ -928,6 +946,7 @@ class Simulation:
             except (NewtonError, InvertedElementError, AleMotionError, np.linalg.LinAlgError,
                     RuntimeError) as err:
                 cuts += 1
+                self._failed_iterations += self._newton_run - run_before
                 if not getattr(err, "halving_helps", True):
                     raise SimulationError(
                         f"step {self.state.step + 1} (t = {self.state.time:.6g} -> "
@@ -996,7 +1015,8 @@ class Simulation:
             self.state, its, self._last_substep = self.step_with_cutback(dt)
             self.state = replace(self.state, time=t_next)
             extra = (self._ledger_extra() | self._contact_extra() | self._penetration_extra()
-                     | self._tie_extra() | self._last_reactions | {"cut_back": self._cut_back})
+                     | self._tie_extra() | self._last_reactions | {"cut_back": self._cut_back}
+                     | {"failed_newton_iterations": self._failed_iterations})
             self._notify(StepRecord(self.state, self.balance(self.state), its, dt, extra))
             if progress is not None:
                 progress(self.state.time)

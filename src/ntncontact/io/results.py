@@ -33,7 +33,8 @@ OFF_SURFACE_SUMMARY = {"max_penetration_off_surfaces": 0.0,
 #: the contact times (``ResultWriter._contact_summary``): the solve's relative accuracy is
 #: ~1e-15, and a tester's block at zero load kept t_N ~ 2e-30 against 1 under load
 LAGRANGE_ROUNDOFF = 1e-12
-HISTORY_DEFAULTS = {"augmentations_converged": 1}  # of the initial row and contact-free steps
+HISTORY_DEFAULTS = {"augmentations_converged": 1,  # of the initial row and contact-free steps
+                    "failed_newton_iterations": 0}  # the initial row (an integer column)
 
 
 def tie_history(model: Model) -> tuple[str, ...]:
@@ -154,12 +155,16 @@ class ResultWriter:
                          "max_self_penetration_at": None} | summary_extra
         summary_extra = dict.fromkeys(EnergyAudit.KEYS) | summary_extra  # energy balance
         summary_extra = {"cut_back_steps": 0} | summary_extra  # steps solved in sub-steps
+        # Newton iterations of the accepted sub-steps, and of the attempts halvings discarded
+        summary_extra = {"newton_iterations": 0, "failed_newton_iterations": 0} | summary_extra
         summary_extra = {"mass": model.analysis.mass} | summary_extra  # as `compare` needs it
         # the energy warning names the mid-point rule as the cause of a gain (report.run_warnings)
         summary_extra = {"integrator": None if model.analysis.kind == "static"
                          else model.analysis.integrator,
                          "outside_ledger": outside_ledger(model)} | summary_extra
         self._energy = EnergyAudit()
+        # last, so that the earlier columns keep their places
+        extra_history = extra_history + ("failed_newton_iterations",)
         self.results: ResultsDirectory | MemoryResults
         if directory is None:  # ntncontact.run(out=None): nothing written
             self.results = MemoryResults(history_columns=extra_history, **summary_extra)
@@ -230,6 +235,8 @@ class ResultWriter:
         fields |= self._rotation_summary(model, s, summary)
         if row.get("ale_unreturned_energy"):  # cumulative: the summary keeps the last
             fields["ale_unreturned_energy"] = row["ale_unreturned_energy"]
+        fields |= {key: summary.get(key, 0) + int(row[key])  # running totals
+                   for key in ("newton_iterations", "failed_newton_iterations")}
         if record.extra.get("cut_back"):
             fields["cut_back_steps"] = summary["cut_back_steps"] + 1
         if record.extra.get("energy_equation_unmet"):  # report 5.5: no theta conserves
