@@ -9,11 +9,13 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass, replace
+from typing import NamedTuple
 
 import numpy as np
 from numpy.typing import NDArray
 
 from ..contact import (
+    SLIP,
     ContactResult,
     Pairing,
     PairState,
@@ -454,11 +456,25 @@ def augment_all(
     return tuple(new_states), done
 
 
+class AugmentationFailure(NamedTuple):
+    """An interface that failed report 5.4's test at its last augmentation of a step."""
+
+    interface: ContactInterface
+    reason: str  # the test's values and tolerances, and which of its parts failed
+    halving_helps: bool  # False where no shorter step can pass the test
+    #: the failed parts: "gap" ("normal rate" under the persistency law), "slip",
+    #: "traction", "stick/slip", "constraint", "tension"
+    tests: tuple[str, ...] = ()
+    #: pressed pairs stick: their tangential multipliers take Uzawa's update whatever
+    #: augmentation.update says (docs/scenarios.md)
+    sticking: bool = False
+
+
 def unconverged_interfaces(
     interfaces: Sequence[ContactInterface], states: Sequence[PairState],
     previous: Sequence[ContactResult | None] | None, current: Sequence[ContactResult | None],
     gap_roundoff: float = 0.0, dt: float = 1.0,
-) -> list[tuple[ContactInterface, str, bool]]:
+) -> list[AugmentationFailure]:
     """The interfaces that fail report 5.4's test between their last two augmentations
     (Lagrange interfaces: that still release pairs in tension), each with what failed and
     whether a shorter step can help: not with one augmentation allowed, nor with a
@@ -472,12 +488,13 @@ def unconverged_interfaces(
             continue
         if ci.law.method == "lagrange":
             if release_tensile_pairs(state, state.lambda_N)[1].any():
-                failed.append((ci, "pairs still released in tension", True))
+                failed.append(AugmentationFailure(ci, "pairs still released in tension", True,
+                                                  ("tension",)))
         elif ci.law.method == "augmented_lagrangian":
             roundoff = gap_roundoff * (2.0 / dt if ci.persistency else 1.0)
-            reason, helps = _augmentation_failure(ci, prev, res, roundoff)
-            if reason:
-                failed.append((ci, reason, helps))
+            failure = _augmentation_failure(ci, prev, res, roundoff)
+            if failure is not None:
+                failed.append(failure)
     return failed
 
 
@@ -489,29 +506,90 @@ def gap_roundoff(x: NDArray) -> float:
 
 
 def _augmentation_failure(ci: ContactInterface, prev: ContactResult | None,
-                          res: ContactResult, roundoff: float) -> tuple[str, bool]:
-    """Why an interface failed report 5.4's test ("" if it passed), and whether a shorter
-    step can help (not where the test cannot be met at all)."""
+                          res: ContactResult, roundoff: float) -> AugmentationFailure | None:
+    """Why an interface failed report 5.4's test (None if it passed): its values against
+    their tolerances, the parts that failed (named in the reason), and whether a shorter step
+    can help (not where the test cannot be met at all)."""
     if prev is None:
-        return "one augmentation only, and the test compares two", False
+        return AugmentationFailure(ci, "one augmentation only, and the test compares two", False)
     check = check_augmentation(prev, res, ci.law, ci.tolerances)
     if check.converged:
-        return "", True
-    tol = ci.tolerances
+        return None
+    tol, frictional = ci.tolerances, ci.law.frictional
     measure = "normal rate" if ci.persistency else "gap"  # report 5.4's test of each law
     out = [f"change of the {measure} {check.normal_change:.3g} (gap_tolerance {tol.normal:.3g})"]
-    if ci.law.frictional:
+    if frictional:
         out += [f"change of the slip {check.tangential_change:.3g} "
                 f"(slip_tolerance {tol.tangential:.3g})",
                 f"{check.status_changes} stick/slip switches"]
+        if check.slip_excess > tol.slip:
+            out.append(f"|t_T| above mu t_N by {check.slip_excess:.3g} of it "
+                       f"(traction_tolerance {tol.slip:.3g})")
     if check.tensile_pairs:
         out.append(f"{check.tensile_pairs} pairs in tension")
+    tests = _failed_tests(check, tol, frictional, measure)
+    pressed = res.t_N > 0.0
+    sticking = frictional and bool(np.any(pressed & (res.status != SLIP)))
+    reason = ", ".join(out) + f"; failed: the {' and '.join(tests)} test" + (
+        "s" if len(tests) > 1 else "")
     if tol.normal < roundoff:
-        out.append(f"gap_tolerance {tol.normal:.3g} is below the round-off of the {measure}s "
+        reason += (f"; gap_tolerance {tol.normal:.3g} is below the round-off of the {measure}s "
                    f"({roundoff:.3g}, one ulp of the coordinates), which no augmentation, "
                    "update rule or shorter step can meet: raise it above that")
-        return ", ".join(out), False
-    return ", ".join(out), True
+        return AugmentationFailure(ci, reason, False, tests, sticking)
+    return AugmentationFailure(ci, reason, True, tests, sticking)
+
+
+def _failed_tests(check, tol, frictional: bool, measure: str) -> tuple[str, ...]:
+    """The parts of report 5.4's test that ``check`` failed, as ``check_augmentation``
+    judges them (the advice on a failed step depends on which)."""
+    parts = [(measure, check.normal_change > tol.normal),
+             ("slip", frictional and check.tangential_change > tol.tangential),
+             ("traction", frictional and check.slip_excess > tol.slip),
+             ("stick/slip", frictional and check.status_changes > 0),
+             ("constraint", tol.constraint is not None
+              and check.constraint_violation > tol.constraint),
+             ("tension", check.tensile_pairs > 0)]
+    return tuple(name for name, failed in parts if failed)
+
+
+def _friction_advice(ci: ContactInterface, f: AugmentationFailure) -> str:
+    """augmentation_advice's for a frictional interface that failed the slip test, or the gap
+    test with sticking pairs. Methods without a tangential augmentation have no such test:
+    "lagrange" (friction stays penalty-regularized) and "penalty"."""
+    options = []
+    if f.sticking:  # Uzawa's stick update contracts faster with a stiffer tangential penalty
+        options.append(f"a larger penalty_tangential (now {ci.law.eps_T:.4g})")
+    if "slip" in f.tests:
+        options.append(f"a looser augmentation.slip_tolerance (now {ci.tolerances.tangential:.3g})")
+    options.append('method = "lagrange" or "penalty"')
+    why = ("sticking pairs' tangential multipliers take Uzawa's update under either "
+           "augmentation.update; try " if f.sticking else "try ")
+    return why + ", ".join(options[:-1]) + (", or " if len(options) > 1 else "") + options[-1]
+
+
+def augmentation_advice(failed: Sequence[AugmentationFailure]) -> str:
+    """What can make a failed augmented Lagrangian interface pass, by the test it failed
+    ("" if nothing to say). ``augmentation.update = "newton"`` speeds up the normal
+    multipliers and slipping pairs' traction only: a tester's static block with friction
+    (static_tilt, 80 elements, sticking pairs) failed the gap test with it as without, and
+    the slip test with eps_T = 500 too. What passed there: a 10x penalty_tangential (the gap
+    case), a looser slip_tolerance (the slip case), method "lagrange" or "penalty" (both)."""
+    hints: list[str] = []
+    for f in failed:
+        ci = f.interface
+        if ci.law.method != "augmented_lagrangian" or not f.halving_helps:
+            continue
+        normal = "gap" in f.tests or "normal rate" in f.tests
+        if normal and not f.sticking and ci.multiplier_update != "newton":
+            # the fast-sliding blocks refined 8x: Uzawa contracts by 0.86 an augmentation on
+            # a stiff local mode, Newton updates pass the same steps in <= 18
+            hints.append(f"interface {ci.name!r}: Uzawa's update of the normal multipliers "
+                         "can converge slowly on a stiff local mode: try augmentation.update "
+                         "= \"newton\"")
+        if ci.law.frictional and ("slip" in f.tests or (normal and f.sticking)):
+            hints.append(f"interface {ci.name!r}: " + _friction_advice(ci, f))
+    return "".join(f"; {h}" for h in hints)
 
 
 def commit_all(

@@ -35,8 +35,10 @@ from .diagnostics import (
 )
 from .initial import initial_state
 from .interfaces import (
+    AugmentationFailure,
     LagrangeTerm,
     augment_all,
+    augmentation_advice,
     commit_all,
     contact_rows,
     contact_terms,
@@ -666,25 +668,20 @@ class Simulation:
         return result, iterations, grown
 
     @staticmethod
-    def _require_accepted(augmentations: int, failed: list) -> None:
+    def _require_accepted(augmentations: int, failed: list[AugmentationFailure]) -> None:
         """Unless every interface that failed the test asked for its last augmentation to be
         kept (``augmentation.on_limit = "accept"``), the step fails and is cut back, like a
         failed Newton solve; not where no shorter step can pass the test
-        (``AugmentationError.halving_helps``)."""
-        if all(ci.accept_unconverged for ci, _, _ in failed):
+        (``AugmentationError.halving_helps``). The message names the failed tests and what
+        can help with them (``augmentation_advice``)."""
+        if all(f.interface.accept_unconverged for f in failed):
             return
-        helps = all(h for _, _, h in failed)
-        hint = ""
-        if helps and any(ci.law.method == "augmented_lagrangian" and not _newton_updated(ci)
-                         for ci, _, _ in failed):
-            # the fast-sliding blocks refined 8x: Uzawa contracts by 0.86 an augmentation on a
-            # stiff local mode, Newton updates pass the same steps in <= 18 (docs/scenarios.md)
-            hint = ("; Uzawa's multiplier update can converge slowly on fine meshes: try "
-                    "augmentation.update = \"newton\"")
+        helps = all(f.halving_helps for f in failed)
         error = AugmentationError(
             f"contact augmentations did not converge in {augmentations} (report 5.4; "
             "augmentation.max_iterations): "
-            + "; ".join(f"interface {ci.name!r}: {why}" for ci, why, _ in failed) + hint)
+            + "; ".join(f"interface {f.interface.name!r}: {f.reason}" for f in failed)
+            + (augmentation_advice(failed) if helps else ""))
         error.halving_helps = helps
         raise error
 
