@@ -9,6 +9,7 @@ import pytest
 from ntncontact import api
 from ntncontact.engine import simulation
 from ntncontact.solvers.newton import NewtonError
+from ntncontact.studies.sweep import _results_row
 
 EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
 
@@ -65,3 +66,6 @@ def test_the_folder_holds_the_column_and_totals(tmp_path, column):
     header = (tmp_path / "out" / "history.csv").read_text().splitlines()[0].split(",")
     assert header[-1] == column  # last: the earlier columns keep their places
     assert results.summary[column] == int(results.history[column].sum()) > 0
+    row = _results_row(api.read_results(tmp_path / "out"), {})  # a sweep.csv row
+    assert row[column] == results.summary[column]
+    assert row["newton_iterations"] == int(results.history["newton_iterations"].sum()) > 0

@@ -63,7 +63,9 @@ REDUCTIONS: dict[str, Callable[[np.ndarray], float]] = {
 HEADLINE = ("status", "steps", "wall_time_s", "cpu_time_s", "energy_initial", "energy_final",
             "energy_max_relative_variation", "contact_start_time", "contact_end_time",
             "contact_at_end", "max_penetration", "max_active_pairs", "max_penetration_off_surfaces",
-            "max_penetration_surface_2", "max_self_penetration", "cut_back_steps")
+            "max_penetration_surface_2", "max_self_penetration", "cut_back_steps",
+            # a case's solver cost, the accepted sub-steps' and the discarded attempts'
+            "newton_iterations", "failed_newton_iterations")
 
 #: Dask settings of the LocalCluster a sweep starts (docs/api.md, "Where it runs"). Its
 #: periodic work otherwise costs ~7 % of a core-second per worker-second of a running case
