@@ -508,6 +508,7 @@ def _evaluate_compiled(
     pairs = state.pairs
     transfer = unpaired_share(x_eval, interface, pairs) if law.unpaired_share else None
     table1 = interface.surface1.kernel_table
+    x_nodes = x_eval  # the weights' derivative acts on the nodes' own positions
     if transfer is not None:  # the kernel sees each shared pair's weighted point
         x_eval, v_eval, x_start = (transfer.positions(a) for a in (x_eval, v_eval, x_start))
         table1 = transfer.surface1.kernel_table
@@ -531,8 +532,9 @@ def _evaluate_compiled(
     if code == ZERO_CHORD:
         raise ValueError("a contact normal is undefined (coincident chain neighbours)")
     if transfer is not None:
+        extra = transfer.weight_terms(rows, cols, vals, x_nodes, force)
         force = transfer.force(force)
-        rows, cols, vals = transfer.tangent(rows, cols, vals)
+        rows, cols, vals = transfer.tangent(rows, cols, vals, extra)
     return ContactResult(
         force=force, rows=rows, cols=cols, vals=vals, pairs=pairs, gap=scalars[GAP],
         gap_rate=scalars[GAP_RATE], slip_measure=scalars[SLIP_MEASURE],

@@ -50,6 +50,10 @@ class Transfer:
     surface1: ContactSurface
     distributed: NDArray[np.int64]
     weights: sp.csr_matrix
+    #: d W / d x as COO entries (row of ``weights``, node q, dof k, d W_rq / d x_k): the
+    #: weights move with the surfaces (arc-length parameters, span, tributary lengths)
+    derivative: tuple[NDArray[np.int64], NDArray[np.int64], NDArray[np.int64],
+                      NDArray[np.float64]] | None = None
 
     @property
     def dofs(self) -> sp.csr_matrix:
@@ -79,12 +83,62 @@ class Transfer:
         out += self.weights.T @ shared
         return out.reshape(np.shape(force))
 
-    def tangent(self, rows: NDArray, cols: NDArray, vals: NDArray
+    def tangent(self, rows: NDArray, cols: NDArray, vals: NDArray,
+                extra: tuple[NDArray, NDArray, NDArray] | None = None
                 ) -> tuple[NDArray[np.int64], NDArray[np.int64], NDArray[np.float64]]:
-        """S^T K S of a COO K (dofs), summed into unique sorted entries."""
+        """S^T K S of a COO K (dofs), plus ``extra`` entries already mapped (the weights'
+        own terms, :meth:`weight_terms`), summed into unique sorted entries."""
         rows, cols, vals = self._expand(rows, cols, vals)  # S^T K: K's rows spread
         cols, rows, vals = self._expand(cols, rows, vals)  # (S^T K) S: its columns spread
+        if extra is not None:
+            rows, cols, vals = (np.concatenate(pair) for pair in
+                                zip((rows, cols, vals), extra, strict=True))
         return _summed(rows, cols, vals, self.weights.shape[1] * 2)
+
+    def weight_terms(self, rows: NDArray, cols: NDArray, vals: NDArray,
+                     x: NDArray[np.float64], kernel_force: NDArray[np.float64]
+                     ) -> tuple[NDArray[np.int64], NDArray[np.int64], NDArray[np.float64]]:
+        """The tangent's terms from the weights' own dependence on x (dof entries, unsummed):
+        S^T K (dS/dx) x, kernel K and x the evaluated positions, and (dS/dx)^T f, f the
+        kernel's force (before ``force``). Without them Newton on a sheared surface went
+        linear (FD vs J 1e-3, 52 iterations for 19 in a static step)."""
+        if self.derivative is None:
+            return _EMPTY
+        k_rows, k_cols, k_vals = self._through(rows, cols, vals, x)
+        k_rows, k_cols, k_vals = self._expand(k_rows, k_cols, k_vals)  # S^T (K D_x)
+        r, q, k, d = self.derivative
+        f = np.asarray(kernel_force, dtype=float).reshape(-1, 2)[self.distributed[r]]
+        comp = np.arange(2)
+        f_rows = (2 * q[:, None] + comp).ravel()
+        f_vals = (f * d[:, None]).ravel()
+        return (np.concatenate([k_rows, f_rows]),
+                np.concatenate([k_cols, np.repeat(k, 2)]),
+                np.concatenate([k_vals, f_vals]))
+
+    def _through(self, rows: NDArray, cols: NDArray, vals: NDArray, a: NDArray
+                 ) -> tuple[NDArray[np.int64], NDArray[np.int64], NDArray[np.float64]]:
+        """A D_a for a COO A (dofs): D_a = (dS/dx) a, the change of the weighted points S a
+        as the weights move, which is nonzero on the distributed nodes' rows only."""
+        rows, cols = np.asarray(rows, np.int64), np.asarray(cols, np.int64)
+        vals = np.asarray(vals, dtype=float)
+        n_dist = self.distributed.size
+        at = np.minimum(np.searchsorted(self.distributed, cols // 2), n_dist - 1)
+        hit = self.distributed[at] == cols // 2
+        if not hit.any():
+            return _EMPTY
+        r, q, k, d = self.derivative
+        a = np.asarray(a, dtype=float).reshape(-1, 2)
+        n_dof = 2 * self.weights.shape[1]
+        comp = np.arange(2)
+        # D_a: row (distributed r, component i), column k: sum_q a_q,i dW_rq/dx_k
+        d_matrix = sp.csr_matrix(((a[q] * d[:, None]).ravel(),
+                                  ((2 * r[:, None] + comp).ravel(), np.repeat(k, 2))),
+                                 shape=(2 * n_dist, n_dof))
+        used, local_rows = np.unique(rows[hit], return_inverse=True)
+        a_matrix = sp.csr_matrix((vals[hit], (local_rows, 2 * at[hit] + cols[hit] % 2)),
+                                 shape=(used.size, 2 * n_dist))
+        product = (a_matrix @ d_matrix).tocoo()
+        return used[product.row], product.col.astype(np.int64), product.data
 
     def columns(self, rows: NDArray, cols: NDArray, vals: NDArray, n_rows: int
                 ) -> tuple[NDArray[np.int64], NDArray[np.int64], NDArray[np.float64]]:
@@ -115,6 +169,9 @@ class Transfer:
                 np.concatenate([vals[keep], vals[hit][repeat] * w.data[entries]]))
 
 
+_EMPTY = (np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros(0))
+
+
 def _summed(rows: NDArray, cols: NDArray, vals: NDArray, n_cols: int
             ) -> tuple[NDArray[np.int64], NDArray[np.int64], NDArray[np.float64]]:
     """COO entries with equal (row, col) summed, sorted by row then column."""
@@ -124,17 +181,18 @@ def _summed(rows: NDArray, cols: NDArray, vals: NDArray, n_cols: int
                                                           minlength=unique.size)
 
 
-def _dual_hat_integrals(xi: NDArray[np.float64]) -> NDArray[np.float64]:
-    """(2, m) int_0^1 psi N_q dxi for psi_a = 2 - 3 xi, psi_b = 3 xi - 1 and the hats N_q of
-    the nodes at xi (0 = xi_0 < ... < xi_{m-1} = 1); Simpson's rule is exact for the products."""
-    out = np.zeros((2, xi.size))
-    for lo in range(xi.size - 1):
-        a, b = xi[lo], xi[lo + 1]
+def _dual_hat_integrals(xi: NDArray) -> NDArray:
+    """(..., 2, m) int_0^1 psi N_q dxi for psi_a = 2 - 3 xi, psi_b = 3 xi - 1 and the hats N_q
+    of the nodes at xi (..., m) (0 = xi_0 < ... < xi_{m-1} = 1); Simpson's rule is exact for
+    the products. Leading axes and complex xi: the weights' derivative (``_share_derivative``)."""
+    out = np.zeros(xi.shape[:-1] + (2, xi.shape[-1]), dtype=xi.dtype)
+    for lo in range(xi.shape[-1] - 1):
+        a, b = xi[..., lo], xi[..., lo + 1]
         mid, h = 0.5 * (a + b), b - a
         for side, psi in enumerate((lambda t: 2.0 - 3.0 * t, lambda t: 3.0 * t - 1.0)):
             # the hat of the left node falls 1 -> 0 over [a, b], the right one rises 0 -> 1
-            out[side, lo] += h / 6.0 * (psi(a) + 4.0 * psi(mid) * 0.5)
-            out[side, lo + 1] += h / 6.0 * (4.0 * psi(mid) * 0.5 + psi(b))
+            out[..., side, lo] += h / 6.0 * (psi(a) + 4.0 * psi(mid) * 0.5)
+            out[..., side, lo + 1] += h / 6.0 * (4.0 * psi(mid) * 0.5 + psi(b))
     return out
 
 
@@ -187,6 +245,7 @@ def unpaired_share(x: NDArray[np.float64], interface: Interface,
                                     [(a, b) for s, a, b in found if s == 0])
     length = _tributary(x, surface1, pairs[:, 0])
     weights: dict[int, dict[int, float]] = {}  # distributed node -> {node: weight}
+    slopes: list[tuple[int, NDArray, NDArray, NDArray]] = []  # (row node, q, dofs, dW/dx)
     for s, a, b in found:
         chain = _inner_chain(surfaces[s], pos[s][a], pos[s][b])
         arc = np.concatenate(([0.0], np.cumsum(np.linalg.norm(np.diff(x[chain], axis=0),
@@ -199,9 +258,66 @@ def unpaired_share(x: NDArray[np.float64], interface: Interface,
             row[int(pairs[p, s])] -= 0.5 * scale  # this half of L_c no longer stays on the node
             for node, w in zip(chain.tolist(), (scale * share[side]).tolist(), strict=True):
                 row[node] = row.get(node, 0.0) + w
+        slopes.extend(_share_derivative(x, surface1, chain, pairs[[a, b]], s))
     if any(np.count_nonzero(pairs[:, s] == node) > 1 for s in range(2) for node in weights):
         return None  # a node paired twice has no single weighted point
-    return Transfer(surface1, *_weights(x.shape[0], weights))
+    distributed, matrix = _weights(x.shape[0], weights)
+    return Transfer(surface1, distributed, matrix, _derivative_entries(distributed, slopes))
+
+
+def _segment_weights(xl: NDArray, chain: NDArray, ends: NDArray, around: NDArray
+                     ) -> tuple[NDArray, NDArray]:
+    """The scale span / L_c of both pairs (..., 2) and the dual-hat integrals (..., 2, m) of one
+    shared segment from local positions xl (..., n, 2), as in :func:`unpaired_share`; complex
+    xl carries the complex step (lengths as sqrt(d.d), not |d|, to stay analytic).
+    chain: local chain nodes; ends: the pairs' surface-1 nodes; around: (2, 3) their
+    surface-1 (prev, node, next)."""
+    def length(d: NDArray) -> NDArray:
+        return np.sqrt(np.sum(d * d, axis=-1))
+
+    arc = np.cumsum(length(np.diff(xl[..., chain, :], axis=-2)), axis=-1)
+    arc = np.concatenate((np.zeros_like(arc[..., :1]), arc), axis=-1)
+    share = _dual_hat_integrals(arc / arc[..., -1:])
+    span = length(xl[..., ends[0], :] - xl[..., ends[1], :])
+    tributary = 0.5 * (length(xl[..., around[:, 1], :] - xl[..., around[:, 0], :])
+                       + length(xl[..., around[:, 2], :] - xl[..., around[:, 1], :]))
+    return span[..., None] / tributary, share
+
+
+def _share_derivative(x: NDArray, surface1: ContactSurface, chain: NDArray, pairs: NDArray,
+                      s: int) -> list[tuple[int, NDArray, NDArray, NDArray]]:
+    """d W / d x of one shared segment's two rows by the complex step (exact to round-off,
+    no difference of nearly equal numbers): [(row node, nodes q, dofs k, dW_rq/dx_k)]."""
+    k = surface1.index_of(pairs[:, 0])
+    around_global = np.column_stack((surface1.prev[k], pairs[:, 0], surface1.next[k]))
+    nodes, inverse = np.unique(np.concatenate((chain, around_global.ravel())),
+                               return_inverse=True)
+    local_chain, around = inverse[:chain.size], inverse[chain.size:].reshape(2, 3)
+    n_dof = 2 * nodes.size
+    step = 1e-30
+    xl = np.broadcast_to(x[nodes].astype(complex), (n_dof, nodes.size, 2)).copy()
+    xl.reshape(n_dof, n_dof)[np.arange(n_dof), np.arange(n_dof)] += 1j * step
+    scale, share = _segment_weights(xl, local_chain, around[:, 1], around)
+    d_scale, d_share = scale.imag / step, share.imag / step  # (dof, 2), (dof, 2, m)
+    dofs = (2 * nodes[:, None] + np.arange(2)).ravel()
+    out = []
+    for side in range(2):
+        row = int(pairs[side, s])
+        value = scale[:, side].real[:, None] * d_share[:, side] + d_scale[:, side, None] * (
+            share[:, side].real)  # (dof, m): d (scale share_q)
+        q = np.concatenate((chain, [row]))
+        value = np.hstack((value, -0.5 * d_scale[:, side, None]))
+        out.append((row, np.tile(q, n_dof), np.repeat(dofs, q.size), value.ravel()))
+    return out
+
+
+def _derivative_entries(distributed: NDArray, slopes: list) -> tuple | None:
+    """The per-segment d W / d x as one COO list on the rows of ``weights``."""
+    if not slopes:
+        return None
+    rows = np.concatenate([np.full(q.size, np.searchsorted(distributed, node))
+                           for node, q, _, _ in slopes])
+    return (rows, *(np.concatenate([item[i] for item in slopes]) for i in (1, 2, 3)))
 
 
 def _inner_chain(surface: ContactSurface, start: int, stop: int) -> NDArray[np.int64]:
