@@ -95,16 +95,18 @@ class Transfer:
                                 zip((rows, cols, vals), extra, strict=True))
         return _summed(rows, cols, vals, self.weights.shape[1] * 2)
 
-    def weight_terms(self, rows: NDArray, cols: NDArray, vals: NDArray,
-                     x: NDArray[np.float64], kernel_force: NDArray[np.float64]
+    def weight_terms(self, rows: NDArray, cols: NDArray,
+                     moving: list[tuple[NDArray, NDArray]], kernel_force: NDArray[np.float64]
                      ) -> tuple[NDArray[np.int64], NDArray[np.int64], NDArray[np.float64]]:
         """The tangent's terms from the weights' own dependence on x (dof entries, unsummed):
-        S^T K (dS/dx) x, kernel K and x the evaluated positions, and (dS/dx)^T f, f the
-        kernel's force (before ``force``). Without them Newton on a sheared surface went
-        linear (FD vs J 1e-3, 52 iterations for 19 in a static step)."""
+        S^T sum K_a (dS/dx) a over ``moving`` [(K_a's values on rows, cols; a)], the kernel's
+        partial derivatives with respect to its weighted inputs S a (positions: a = x; rates:
+        v), and (dS/dx)^T f, f the kernel's force (before ``force``). Without them Newton on
+        a sheared surface went linear (FD vs J 1e-3, 52 iterations for 19 in a static step)."""
         if self.derivative is None:
             return _EMPTY
-        k_rows, k_cols, k_vals = self._through(rows, cols, vals, x)
+        parts = [self._through(rows, cols, vals, a) for vals, a in moving]
+        k_rows, k_cols, k_vals = (np.concatenate(item) for item in zip(*parts, strict=True))
         k_rows, k_cols, k_vals = self._expand(k_rows, k_cols, k_vals)  # S^T (K D_x)
         r, q, k, d = self.derivative
         f = np.asarray(kernel_force, dtype=float).reshape(-1, 2)[self.distributed[r]]
@@ -140,10 +142,17 @@ class Transfer:
         product = (a_matrix @ d_matrix).tocoo()
         return used[product.row], product.col.astype(np.int64), product.data
 
-    def columns(self, rows: NDArray, cols: NDArray, vals: NDArray, n_rows: int
+    def columns(self, rows: NDArray, cols: NDArray, vals: NDArray, n_rows: int,
+                moving: list[tuple[NDArray, NDArray]] | None = None
                 ) -> tuple[NDArray[np.int64], NDArray[np.int64], NDArray[np.float64]]:
-        """A (n_rows, ndof) COO block G_c as G_c S."""
+        """A (n_rows, ndof) COO block G_c as G_c S, plus sum G_a (dS/dx) a over ``moving``
+        (as in :meth:`weight_terms`) for a block that is a derivative with respect to x."""
+        parts = [] if moving is None or self.derivative is None else [
+            self._through(rows, cols, g, a) for g, a in moving]
         cols, rows, vals = self._expand(cols, rows, vals)
+        if parts:
+            rows, cols, vals = (np.concatenate(item) for item in
+                                zip((rows, cols, vals), *parts, strict=True))
         return _summed(rows, cols, vals, self.weights.shape[1] * 2)
 
     def _expand(self, index: NDArray, other: NDArray, vals: NDArray
