@@ -16,11 +16,15 @@ of pair a's force (H the segment's length on surface 1, L_c,a the pair's tributa
 the pair's point on that surface is sum_q w_aq x_q. Where a segment has no unpaired node
 between its pairs (equal counts), w is the identity: the pairs stay node to node.
 
-The transfer is a fixed linear map S of the node positions: the contact kernel is evaluated at
-x_c = S x (and v_c = S v), and its force and tangent come back as S^T f and S^T K S. The weights
-are taken at the evaluated positions, their own derivative is left out of the tangent (it
-vanishes where the arc-length parameters of the finer surface do not change, as on a flat
-surface under uniform strain).
+The transfer is a map S(x) of the node positions: the contact kernel is evaluated at
+x_c = S x (and v_c = S v, x_start_c = S x_start), and its force comes back as S^T f. The weights
+are taken at the evaluated positions and move with them, so the tangent is S^T K S plus the
+weights' own terms S^T K_a (dS/dx) a (a = x, v, x_start, with the kernel's partial tangents)
+and (dS/dx)^T f (:meth:`Transfer.weight_terms`; docs/theory.md, "Unequal node counts").
+Without them (S^T K S only, exact only where the arc-length parameters of the finer surface do
+not change) a sheared flat surface gave FD vs J 1e-3 and linear Newton. dS/dx is taken per
+shared segment by the complex step on its few nodes. Not included: the weights' part of a
+gap-restoring pair's first-step offset g_n(S x_start)/dt (rate law), one step per pair.
 """
 
 from __future__ import annotations
