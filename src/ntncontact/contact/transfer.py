@@ -197,7 +197,7 @@ def _summed(rows: NDArray, cols: NDArray, vals: NDArray, n_cols: int
 def _dual_hat_integrals(xi: NDArray) -> NDArray:
     """(..., 2, m) int_0^1 psi N_q dxi for psi_a = 2 - 3 xi, psi_b = 3 xi - 1 and the hats N_q
     of the nodes at xi (..., m) (0 = xi_0 < ... < xi_{m-1} = 1); Simpson's rule is exact for
-    the products. Leading axes and complex xi: the weights' derivative (``_share_derivative``)."""
+    the products. Leading axes and complex xi: the weights' derivative (``_share_derivatives``)."""
     out = np.zeros(xi.shape[:-1] + (2, xi.shape[-1]), dtype=xi.dtype)
     for lo in range(xi.shape[-1] - 1):
         a, b = xi[..., lo], xi[..., lo + 1]
@@ -258,7 +258,7 @@ def unpaired_share(x: NDArray[np.float64], interface: Interface,
                                     [(a, b) for s, a, b in found if s == 0])
     length = _tributary(x, surface1, pairs[:, 0])
     weights: dict[int, dict[int, float]] = {}  # distributed node -> {node: weight}
-    slopes: list[tuple[int, NDArray, NDArray, NDArray]] = []  # (row node, q, dofs, dW/dx)
+    segments: list[tuple[NDArray, NDArray]] = []  # (chain, its two pairs' nodes (2, 2))
     for s, a, b in found:
         chain = _inner_chain(surfaces[s], pos[s][a], pos[s][b])
         arc = np.concatenate(([0.0], np.cumsum(np.linalg.norm(np.diff(x[chain], axis=0),
@@ -271,11 +271,12 @@ def unpaired_share(x: NDArray[np.float64], interface: Interface,
             row[int(pairs[p, s])] -= 0.5 * scale  # this half of L_c no longer stays on the node
             for node, w in zip(chain.tolist(), (scale * share[side]).tolist(), strict=True):
                 row[node] = row.get(node, 0.0) + w
-        slopes.extend(_share_derivative(x, surface1, chain, pairs[[a, b]], s))
+        segments.append((chain, pairs[[a, b]][:, [s, 0]]))
     if any(np.count_nonzero(pairs[:, s] == node) > 1 for s in range(2) for node in weights):
         return None  # a node paired twice has no single weighted point
     distributed, matrix = _weights(x.shape[0], weights)
-    return Transfer(surface1, distributed, matrix, _derivative_entries(distributed, slopes))
+    return Transfer(surface1, distributed, matrix,
+                    _share_derivatives(x, surface1, segments, distributed))
 
 
 def _segment_weights(xl: NDArray, chain: NDArray, ends: NDArray, around: NDArray
@@ -286,7 +287,9 @@ def _segment_weights(xl: NDArray, chain: NDArray, ends: NDArray, around: NDArray
     chain: local chain nodes; ends: the pairs' surface-1 nodes; around: (2, 3) their
     surface-1 (prev, node, next)."""
     def length(d: NDArray) -> NDArray:
-        return np.sqrt(np.sum(d * d, axis=-1))
+        out = np.sqrt(np.sum(d * d, axis=-1))
+        # an open chain's end is its own prev (or next): a zero side, not one of slope 1
+        return np.where(out.real == 0.0, 0.0, out)
 
     arc = np.cumsum(length(np.diff(xl[..., chain, :], axis=-2)), axis=-1)
     arc = np.concatenate((np.zeros_like(arc[..., :1]), arc), axis=-1)
@@ -297,40 +300,49 @@ def _segment_weights(xl: NDArray, chain: NDArray, ends: NDArray, around: NDArray
     return span[..., None] / tributary, share
 
 
-def _share_derivative(x: NDArray, surface1: ContactSurface, chain: NDArray, pairs: NDArray,
-                      s: int) -> list[tuple[int, NDArray, NDArray, NDArray]]:
-    """d W / d x of one shared segment's two rows by the complex step (exact to round-off,
-    no difference of nearly equal numbers): [(row node, nodes q, dofs k, dW_rq/dx_k)]."""
-    k = surface1.index_of(pairs[:, 0])
-    around_global = np.column_stack((surface1.prev[k], pairs[:, 0], surface1.next[k]))
-    nodes, inverse = np.unique(np.concatenate((chain, around_global.ravel())),
-                               return_inverse=True)
-    local_chain, around = inverse[:chain.size], inverse[chain.size:].reshape(2, 3)
-    n_dof = 2 * nodes.size
-    step = 1e-30
-    xl = np.broadcast_to(x[nodes].astype(complex), (n_dof, nodes.size, 2)).copy()
-    xl.reshape(n_dof, n_dof)[np.arange(n_dof), np.arange(n_dof)] += 1j * step
-    scale, share = _segment_weights(xl, local_chain, around[:, 1], around)
-    d_scale, d_share = scale.imag / step, share.imag / step  # (dof, 2), (dof, 2, m)
-    dofs = (2 * nodes[:, None] + np.arange(2)).ravel()
-    out = []
-    for side in range(2):
-        row = int(pairs[side, s])
-        value = scale[:, side].real[:, None] * d_share[:, side] + d_scale[:, side, None] * (
-            share[:, side].real)  # (dof, m): d (scale share_q)
-        q = np.concatenate((chain, [row]))
-        value = np.hstack((value, -0.5 * d_scale[:, side, None]))
-        out.append((row, np.tile(q, n_dof), np.repeat(dofs, q.size), value.ravel()))
-    return out
+def _share_derivatives(x: NDArray, surface1: ContactSurface,
+                       segments: list[tuple[NDArray, NDArray]], distributed: NDArray
+                       ) -> tuple[NDArray, NDArray, NDArray, NDArray]:
+    """d W / d x of the shared segments' rows as COO (row of W, node q, dof k, dW_rq/dx_k), by
+    the complex step (exact to round-off, no difference of nearly equal numbers), batched over
+    the segments of equal chain length. Each segment's local nodes are its chain and its
+    pairs' surface-1 (prev, node, next), repeats included: their partial derivatives add up
+    when the entries are summed."""
+    groups: dict[int, list[int]] = {}
+    for g, (chain, _) in enumerate(segments):
+        groups.setdefault(chain.size, []).append(g)
+    parts = [_group_derivative(x, surface1, [segments[g] for g in members], distributed)
+             for members in groups.values()]
+    return tuple(np.concatenate(item) for item in zip(*parts, strict=True))
 
 
-def _derivative_entries(distributed: NDArray, slopes: list) -> tuple | None:
-    """The per-segment d W / d x as one COO list on the rows of ``weights``."""
-    if not slopes:
-        return None
-    rows = np.concatenate([np.full(q.size, np.searchsorted(distributed, node))
-                           for node, q, _, _ in slopes])
-    return (rows, *(np.concatenate([item[i] for item in slopes]) for i in (1, 2, 3)))
+def _group_derivative(x: NDArray, surface1: ContactSurface,
+                      segments: list[tuple[NDArray, NDArray]], distributed: NDArray
+                      ) -> tuple[NDArray, NDArray, NDArray, NDArray]:
+    """:func:`_share_derivatives` of segments whose chains have the same length m."""
+    chains = np.array([chain for chain, _ in segments])  # (G, m)
+    ends = np.array([nodes for _, nodes in segments])  # (G, 2 pairs, (row node, surface 1))
+    k = surface1.index_of(ends[:, :, 1].ravel())
+    around = np.stack((surface1.prev[k], ends[:, :, 1].ravel(), surface1.next[k]),
+                      axis=1).reshape(-1, 6)
+    nodes = np.hstack((chains, around))  # (G, n) local nodes
+    m, n = chains.shape[1], nodes.shape[1]
+    n_dof, step = 2 * n, 1e-30
+    xl = np.broadcast_to(x[nodes].astype(complex)[:, None], (len(segments), n_dof, n, 2)).copy()
+    xl.reshape(len(segments), n_dof, n_dof)[:, np.arange(n_dof), np.arange(n_dof)] += 1j * step
+    local_around = m + np.arange(6).reshape(2, 3)
+    scale, share = _segment_weights(xl, np.arange(m), local_around[:, 1], local_around)
+    d_scale, d_share = scale.imag / step, share.imag / step  # (G, dof, 2), (G, dof, 2, m)
+    # d (scale share_q) on the chain's nodes, d (-scale / 2) on the row's own node
+    value = np.concatenate((scale.real[..., None] * d_share + d_scale[..., None] * share.real,
+                            -0.5 * d_scale[..., None]), axis=-1)  # (G, dof, 2, m + 1)
+    rows = np.searchsorted(distributed, ends[:, :, 0])  # (G, 2)
+    q = np.concatenate((np.repeat(chains[:, None], 2, axis=1), ends[:, :, :1]), axis=-1)
+    dofs = (2 * nodes[:, :, None] + np.arange(2)).reshape(len(segments), n_dof)
+    shape = value.shape
+    return (np.broadcast_to(rows[:, None, :, None], shape).ravel(),
+            np.broadcast_to(q[:, None], shape).ravel(),
+            np.broadcast_to(dofs[:, :, None, None], shape).ravel(), value.ravel())
 
 
 def _inner_chain(surface: ContactSurface, start: int, stop: int) -> NDArray[np.int64]:
