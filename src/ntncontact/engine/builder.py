@@ -368,6 +368,7 @@ def build_model(config: ScenarioConfig, base_dir: str | Path = ".") -> Model:
                                 a.max_cutbacks, a.newton.rtol, a.newton.max_iterations,
                                 a.newton.inexact_augmentations,
                                 factor_precision=a.newton.factor_precision,
+                                newton_max_reused_steps=a.newton.max_reused_steps,
                                 energy_conserving=a.energy_conserving,
                                 integrator=a.integrator, field_format=a.field_format,
                                 contact_output=a.contact_output)

@@ -69,6 +69,8 @@ class AnalysisSettings:
     newton_inexact_augmentations: float = 1e-4
     #: how PARDISO factors Newton's matrices (solvers.linear.LinearSolver's ``precision``)
     factor_precision: Precision = "auto"
+    #: modified Newton's kept-factor steps in a row (0: full Newton; NewtonSettings)
+    newton_max_reused_steps: int = 4
     energy_conserving: bool = False  # report 5.5: energy multiplier bordering the contact step
     #: dynamic runs: "energy_momentum" (Neo-Hookean internal force by a discrete gradient,
     #: docs/theory.md) or "midpoint" (the report's mid-point rule)

@@ -306,6 +306,7 @@ class Simulation:
         # beyond their tolerances), where the plain line search was tuned and tested
         self.settings = NewtonSettings(rtol=model.analysis.newton_rtol,
                                        max_iterations=model.analysis.newton_max_iterations,
+                                       max_reused_steps=model.analysis.newton_max_reused_steps,
                                        watchdog=not model.interfaces)
         self.dynamic = model.analysis.kind == "dynamic"
         self.lumped = model.analysis.mass == "lumped"

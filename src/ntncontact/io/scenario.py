@@ -242,6 +242,9 @@ class NewtonConfig(Strict):
     max_iterations: Annotated[int, Field(ge=1)] = 25
     inexact_augmentations: Annotated[float, Field(ge=0.0, lt=1.0)] = 1e-4
     factor_precision: Precision = "auto"
+    #: kept-factor (modified Newton) steps in a row before a fresh factorization; 0 is full
+    #: Newton, a fresh factorization every iteration (NewtonSettings.max_reused_steps)
+    max_reused_steps: Annotated[int, Field(ge=0)] = 4
 
 
 class AnalysisConfig(Strict):

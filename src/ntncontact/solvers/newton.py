@@ -52,8 +52,13 @@ class NewtonSettings:
     #: modified Newton (see :class:`FactorCache`): a step with a kept factor is accepted if it
     #: shrinks |R| at least by this factor, else the Jacobian is factored afresh
     reuse_contraction: float = 0.1
-    #: at most this many kept-factor steps in a row before a fresh factorization (bounds the
-    #: linear convergence of modified Newton when the contraction setting is lax)
+    #: at most this many kept-factor steps in a row within one solve before a fresh
+    #: factorization (bounds the linear convergence of modified Newton when the contraction
+    #: setting is lax). The count restarts at each solve while a FactorCache's factor serves
+    #: all the solves of a step, so a factor can serve longer runs over the augmentations
+    #: (tester Y: 11 in the ring impact, 13 in the disk drop); a count kept with the cache was
+    #: measured slower (benchmarks/README.md, session 42). 0 factors at every iteration: full
+    #: Newton (``analysis.newton.max_reused_steps``)
     max_reused_steps: int = 4
     #: let a solve's first full step raise |R| on trial (:class:`_Watchdog`); the caller
     #: turns it on where it was measured to help (``Simulation``: runs without contact)
