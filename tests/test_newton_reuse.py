@@ -119,5 +119,5 @@ def test_default_keeps_four_reused_steps(monkeypatch):
 
 
 def test_a_negative_bound_is_refused():
-    with pytest.raises(ScenarioError, match="max_reused_steps"):
+    with pytest.raises(ScenarioError, match=r"max_reused_steps = -1: .*greater than or equal to 0"):
         model_from_dict(_block({"max_reused_steps": -1}))
