@@ -24,6 +24,7 @@ from ..solvers.newton import FactorCache, NewtonError, NewtonSettings, newton
 from ..threads import serial_blas
 from .convection import convective_terms
 from .diagnostics import (
+    AleQualityCheck,
     Balance,
     PenetrationCheck,
     SelfCrossingCheck,
@@ -345,6 +346,7 @@ class Simulation:
         self._unpaired = UnpairedCheck(model) if model.interfaces else None
         self._surface_2 = SurfaceTwoCheck(model) if model.interfaces else None
         self._self_crossing = SelfCrossingCheck(model)
+        self._ale_quality = AleQualityCheck(model) if model.ale_bodies else None
         # the energy-conserving solve (report 5.5) starts from each augmentation's exact one
         self._early_ratio = (0.0 if model.analysis.energy_conserving
                              else model.analysis.newton_inexact_augmentations)
@@ -1098,8 +1100,9 @@ class Simulation:
         """The step's deepest boundary node inside another body off the contact surfaces
         (``diagnostics.PenetrationCheck``): its depth for history.csv, and where it is; and
         the deepest contact-surface node in no pair (``diagnostics.UnpairedCheck``), the
-        deepest surface-2 node inside body 1 (``diagnostics.SurfaceTwoCheck``) and the deepest
-        boundary node inside its own body (``diagnostics.SelfCrossingCheck``)."""
+        deepest surface-2 node inside body 1 (``diagnostics.SurfaceTwoCheck``), the deepest
+        boundary node inside its own body (``diagnostics.SelfCrossingCheck``) and the ALE
+        bodies' worst sliver (``diagnostics.AleQualityCheck``)."""
         extra = {}
         if self._penetration is not None:
             found = self._penetration.deepest(self.state.x)
@@ -1111,6 +1114,8 @@ class Simulation:
         if self._surface_2 is not None:  # surface-2 nodes inside body 1 (SurfaceTwoCheck)
             extra["penetration_surface_2_at"] = self._surface_2.deepest(self.state.x)
         extra["self_penetration_at"] = self._self_crossing.deepest(self.state.x)
+        if self._ale_quality is not None:  # an ALE body's cell flattened to a sliver
+            extra["ale_degraded_cell"] = self._ale_quality.worst(self.state.x)
         return extra
 
     def _tie_extra(self) -> dict:

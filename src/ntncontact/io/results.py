@@ -123,6 +123,8 @@ class ResultWriter:
         if any(body.material.kind == "linear_elastic" for body in model.bodies):
             summary_extra = {f"max_linear_elastic_{key}{at}": None if at else 0.0
                              for key in LINEAR_MEASURES for at in ("", "_at")} | summary_extra
+        if model.ale_bodies:  # the worst sliver of the mesh motion (AleQualityCheck)
+            summary_extra = {"ale_mesh_degraded_at": None} | summary_extra
         if model.ale_bodies and model.interfaces:
             summary_extra = {"max_ale_mismatch": 0.0, "max_ale_mismatch_at": None} | summary_extra
         if model.interfaces:
@@ -252,6 +254,7 @@ class ResultWriter:
             fields |= self._interface_depth_summary(key, s.time, record.extra.get(found),
                                                     summary)
         fields |= self._self_summary(s.time, record.extra.get("self_penetration_at"), summary)
+        fields |= self._degraded_summary(s.time, record.extra.get("ale_degraded_cell"), summary)
         framed = self._due(s.time, model)  # before the rows: "frames" keeps those steps'
         rows = record.extra.get("contact_rows")
         if model.interfaces:  # set again below by a step that carries contact
@@ -405,6 +408,20 @@ class ResultWriter:
                                             "file_node": self._file_node(found.node),
                                             "depth": found.depth, "element_size": found.size,
                                             "first_time": before.get("first_time", time)}}
+
+    @staticmethod
+    def _degraded_summary(time: float, found, summary: dict) -> dict:
+        """``ale_mesh_degraded_at``: the ALE bodies' worst cell so far below its quality limit
+        (``engine.diagnostics.AleQualityCheck``), where and when; ``first_time``: the end of
+        the first step that found one, kept as the cell worsens."""
+        before = summary.get("ale_mesh_degraded_at")
+        if found is None or (before and found.sine >= before["min_sine"]):
+            return {}
+        return {"ale_mesh_degraded_at": {
+            "time": time, "body": found.body, "cell": found.cell,
+            "centroid": list(found.centroid), "angle": found.angle,
+            "initial_angle": found.initial_angle, "min_sine": found.sine,
+            "first_time": (before or {}).get("first_time", time)}}
 
     @staticmethod
     def _off_surface_summary(time: float, found, summary: dict) -> dict:

@@ -6,7 +6,12 @@ from __future__ import annotations
 
 import math
 
-from ..engine.diagnostics import LINEAR_ROTATION_LIMIT, LINEAR_STRAIN_LIMIT, PhysicsWarning
+from ..engine.diagnostics import (
+    ALE_ANGLE_LIMIT,
+    LINEAR_ROTATION_LIMIT,
+    LINEAR_STRAIN_LIMIT,
+    PhysicsWarning,
+)
 
 __all__ = ["PhysicsWarning", "result_warnings"]
 
@@ -89,7 +94,7 @@ def result_warnings(summary: dict, static: bool | None = None) -> list[str]:
              _balance(summary, static),
              _penetration(summary, static), _unpaired(summary, static),
              _surface_2(summary, static), _self_crossing(summary), _opening(summary),
-             _mismatch(summary),
+             _mismatch(summary), _degraded_mesh(summary),
              _linear_rotation(summary, static), _linear_strain(summary), _cut_backs(summary),
              _unconverged_augmentations(summary))
     return [line for line in found if line]
@@ -380,6 +385,28 @@ def _mismatch(summary: dict) -> str | None:
         "sliding on along the surface) none does: the partner's nodes carry this body's "
         "along and bunch them up; make the ALE body Lagrangian there "
         "(mesh_motion = \"lagrangian\")")
+
+
+def _degraded_mesh(summary: dict) -> str | None:
+    """An ALE body's cell got a corner below ALE_ANGLE_LIMIT degrees (or above 180 minus it)
+    where its initial mesh had none so bad (summary.json ``ale_mesh_degraded_at``, recorded by
+    ``engine.diagnostics.AleQualityCheck``): a sliver the next steps may invert, whose
+    stiffness and remaps are poor. A tester's angle-smoothed base ended at 1.08 deg, a cell
+    0.01 thick and 0.9 long, and the run said "completed" and nothing else."""
+    at = summary.get("ale_mesh_degraded_at")
+    if not at:
+        return None
+    x, y = at["centroid"]
+    first = (f", first below {ALE_ANGLE_LIMIT:g} deg at t = {at['first_time']:.6g}"
+             if at["first_time"] != at["time"] else "")
+    return (f"cell {at['cell']} of the ALE body '{at['body']}' (centroid ({x:.4g}, {y:.4g})) "
+            f"was flattened to a corner of {at['angle']:.2f} deg (its sine "
+            f"{at['min_sine']:.2g}, t = {at['time']:.6g}{first}; "
+            f"{at['initial_angle']:.3g} deg at t = 0; summary.json ale_mesh_degraded_at): the "
+            "mesh motion made it a sliver, which a few more steps of the same may invert and "
+            "whose stiffness and remaps are poor; ale.smoothing = \"laplacian\" (the default), "
+            "more ale.smoothing_layers, or mesh_motion = \"lagrangian\" for that body keep its "
+            "cells shaped")
 
 
 def _mismatch_where(at: dict) -> str:
