@@ -116,3 +116,45 @@ def test_the_warning_reads_from_the_summary_alone():
     assert "smoothing_layers" in lines[0] and 'mesh_motion = "lagrangian"' in lines[0]
     assert not [line for line in result_warnings({"ale_mesh_degraded_at": None})
                 if "ale_mesh" in line]
+
+
+def _zhou_shimada(x: np.ndarray, cells: np.ndarray, p: int) -> np.ndarray:
+    """Report (4.10)-(4.14) node by node, written apart from ``ale.smoothing``: every node i
+    of the polygon around P rotates P about itself onto the bisector of the polygon's angle
+    (i-1, i, i+1), and P goes to the mean of the proposals."""
+    succ = {}
+    for cell in cells[(cells == p).any(axis=1)]:
+        k = int(np.flatnonzero(cell == p)[0])
+        succ[cell[(k + 1) % 4]], succ[cell[(k + 2) % 4]] = cell[(k + 2) % 4], cell[(k + 3) % 4]
+    order = [next(iter(succ))]
+    while succ[order[-1]] != order[0]:
+        order.append(succ[order[-1]])
+    proposals = []
+    for j, i in enumerate(order):
+        a, b, v = x[order[j - 1]] - x[i], x[order[(j + 1) % len(order)]] - x[i], x[p] - x[i]
+        ccw = [np.mod(np.arctan2(w[1], w[0]) - np.arctan2(a[1], a[0]), 2 * np.pi)
+               for w in (b, v)]  # from a to b and to P, counter-clockwise
+        half = 0.5 * ccw[0] if ccw[1] < ccw[0] else -0.5 * (2 * np.pi - ccw[0])  # P's side
+        turn = np.arctan2(a[1], a[0]) + half
+        proposals.append(x[i] + np.linalg.norm(v) * np.array([np.cos(turn), np.sin(turn)]))
+    return np.mean(proposals, axis=0)
+
+
+def test_the_angle_rules_sliver_is_the_rule_not_its_code():
+    """The angle rule's sweep is (4.10)-(4.14) to round-off on a mesh dragged as the tester's
+    slide drags its base (a long surface segment beside squeezed ones): its sliver there
+    (docs/scenarios.md, ale.smoothing) is the rule's fixed point, not a coding error."""
+    from ntncontact.ale.smoothing import Smoother
+    from ntncontact.mesh.generators import rectangle
+
+    mesh = rectangle(3.0, 0.5, 6, 3)
+    x = mesh.nodes.copy()
+    rng = np.random.default_rng(7)
+    top = np.flatnonzero(np.isclose(x[:, 1], 0.5))
+    x[top[1:-1], 0] = [0.9, 1.05, 1.2, 1.35, 2.5]  # the long segment 0..0.9, then squeezed
+    inner = np.flatnonzero((x[:, 1] > 0.0) & (x[:, 1] < 0.5) & (x[:, 0] > 0.0) & (x[:, 0] < 3.0))
+    x[inner] += rng.uniform(-0.03, 0.03, (inner.size, 2))
+    smoother = Smoother(mesh.cells, len(x), method="angle")
+    swept = smoother.candidates(x)
+    for p in inner:
+        assert swept[p] == pytest.approx(_zhou_shimada(x, mesh.cells, p), abs=1e-12)
