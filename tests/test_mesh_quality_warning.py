@@ -85,7 +85,9 @@ def _two_cells(skew_deg: float) -> SimpleNamespace:
                    [shift, 1.0], [1.0 + shift, 1.0], [2.0 + shift, 1.0]])
     body = SimpleNamespace(name="base", cells=np.arange(2))
     return SimpleNamespace(X0=X0, cells=np.array([[0, 1, 4, 3], [1, 2, 5, 4]]),
-                           bodies=[body], ale_bodies=[SimpleNamespace(body_index=0)])
+                           bodies=[body], ale_bodies=[SimpleNamespace(
+                               body_index=0, motion=SimpleNamespace(smoothing="laplacian",
+                                                                    smoothing_layers=3))])
 
 
 def test_a_users_own_skewed_mesh_is_not_flagged_for_what_it_was_given():
@@ -106,14 +108,20 @@ def test_a_users_own_skewed_mesh_is_not_flagged_for_what_it_was_given():
 
 def test_the_warning_reads_from_the_summary_alone():
     at = {"time": 0.476, "body": "base", "cell": 37, "centroid": [0.5256, -0.00567],
-          "angle": 179.9998, "initial_angle": 90.0, "min_sine": 4.3e-6, "first_time": 0.316}
+          "angle": 179.9998, "initial_angle": 90.0, "min_sine": 4.3e-6, "first_time": 0.316,
+          "smoothing": "angle", "smoothing_layers": 3}
     lines = [line for line in result_warnings({"ale_mesh_degraded_at": at})
              if "ale_mesh_degraded_at" in line]
     assert len(lines) == 1
     assert ("cell 37 of the ALE body 'base' (centroid (0.5256, -0.00567)) was flattened to a "
             "corner of 180.00 deg (its sine 4.3e-06, t = 0.476, first below 10 deg at t = "
             "0.316; 90 deg at t = 0") in lines[0]
-    assert "smoothing_layers" in lines[0] and 'mesh_motion = "lagrangian"' in lines[0]
+    assert 'ale.smoothing = "laplacian" (the default; "angle" can make' in lines[0]
+    assert "more ale.smoothing_layers (now 3)" in lines[0]
+    assert 'mesh_motion = "lagrangian"' in lines[0]
+    # a Laplacian body is not told to use the rule it has (tester X's long slide: 176.1 deg)
+    lines = result_warnings({"ale_mesh_degraded_at": at | {"smoothing": "laplacian"}})
+    assert 'ale.smoothing = "laplacian"' not in lines[0] and "smoothing_layers" in lines[0]
     assert not [line for line in result_warnings({"ale_mesh_degraded_at": None})
                 if "ale_mesh" in line]
 

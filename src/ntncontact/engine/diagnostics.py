@@ -541,7 +541,8 @@ ALE_DEGRADE_FRACTION = 0.9
 class DegradedCell:
     """The worst cell of the ALE bodies below their quality limit (``AleQualityCheck``):
     its smallest corner sine, body, body-local cell number, centroid, the corner angle
-    farthest from 90 degrees now and at t = 0."""
+    farthest from 90 degrees now and at t = 0, and the body's ``ale.smoothing`` and
+    ``ale.smoothing_layers`` (the warning advises what the body does not use already)."""
 
     sine: float
     body: str
@@ -549,6 +550,8 @@ class DegradedCell:
     centroid: tuple[float, float]
     angle: float
     initial_angle: float
+    smoothing: str
+    smoothing_layers: int
 
 
 def _worst_angle(x: NDArray, cell: NDArray) -> float:
@@ -572,12 +575,12 @@ class AleQualityCheck:
             cells = np.ascontiguousarray(model.cells[body.cells])
             limit = np.minimum(np.sin(np.radians(ALE_ANGLE_LIMIT)),
                                ALE_DEGRADE_FRACTION * cell_min_sines(model.X0, cells))
-            self._tests.append((body, cells, limit))
+            self._tests.append((body, setup.motion, cells, limit))
 
     def worst(self, x: NDArray) -> DegradedCell | None:
         """The worst cell below its limit at the positions ``x`` (None: none is)."""
         worst = None
-        for body, cells, limit in self._tests:
+        for body, motion, cells, limit in self._tests:
             sines = cell_min_sines(x, cells)
             low = np.flatnonzero(sines < limit)
             if not low.size:
@@ -588,5 +591,6 @@ class AleQualityCheck:
             centre = x[cells[k]].mean(axis=0)
             worst = DegradedCell(float(sines[k]), body.name, k,
                                  (float(centre[0]), float(centre[1])),
-                                 _worst_angle(x, cells[k]), _worst_angle(self._X0, cells[k]))
+                                 _worst_angle(x, cells[k]), _worst_angle(self._X0, cells[k]),
+                                 motion.smoothing, motion.smoothing_layers)
         return worst

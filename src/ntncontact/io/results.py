@@ -421,6 +421,7 @@ class ResultWriter:
             "time": time, "body": found.body, "cell": found.cell,
             "centroid": list(found.centroid), "angle": found.angle,
             "initial_angle": found.initial_angle, "min_sine": found.sine,
+            "smoothing": found.smoothing, "smoothing_layers": found.smoothing_layers,
             "first_time": (before or {}).get("first_time", time)}}
 
     @staticmethod

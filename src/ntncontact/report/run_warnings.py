@@ -404,9 +404,22 @@ def _degraded_mesh(summary: dict) -> str | None:
             f"{at['min_sine']:.2g}, t = {at['time']:.6g}{first}; "
             f"{at['initial_angle']:.3g} deg at t = 0; summary.json ale_mesh_degraded_at): the "
             "mesh motion made it a sliver, which a few more steps of the same may invert and "
-            "whose stiffness and remaps are poor; ale.smoothing = \"laplacian\" (the default), "
-            "more ale.smoothing_layers, or mesh_motion = \"lagrangian\" for that body keep its "
-            "cells shaped")
+            f"whose stiffness and remaps are poor; {_reshaping(at)}")
+
+
+def _reshaping(at: dict) -> str:
+    """What keeps a degraded ALE body's cells shaped, leaving out the smoothing rule it has
+    already: the angle-based rules' fixed point beside an unevenly dragged surface can be a
+    sliver (docs/scenarios.md, ale.smoothing), the Laplacian rule's is not."""
+    cures = []
+    if at.get("smoothing", "laplacian") != "laplacian":
+        cures.append(f"ale.smoothing = \"laplacian\" (the default; \"{at['smoothing']}\" "
+                     "can make slivers beside a dragged surface)")
+    layers = at.get("smoothing_layers")
+    cures.append("more ale.smoothing_layers" + (f" (now {layers})" if layers is not None else ""))
+    cures.append("mesh_motion = \"lagrangian\" for that body (where a partner slides on "
+                 "along its surface, its nodes drag this body's along)")
+    return ", ".join(cures[:-1]) + " or " + cures[-1] + " keep its cells shaped"
 
 
 def _mismatch_where(at: dict) -> str:
