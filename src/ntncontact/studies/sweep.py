@@ -66,6 +66,11 @@ HEADLINE = ("status", "steps", "wall_time_s", "cpu_time_s", "energy_initial", "e
             "max_penetration_surface_2", "max_self_penetration", "cut_back_steps",
             # a case's solver cost, the accepted sub-steps' and the discarded attempts'
             "newton_iterations", "failed_newton_iterations")
+#: the exception types of a case that failed for a reason its message states (a bad scenario,
+#: a diverged solve, a full disk), as ``ntncontact run`` takes them; any other is a bug
+EXPECTED_ERRORS = (ValueError, RuntimeError, OSError, ArithmeticError, MemoryError)
+#: where a case's internal error keeps its traceback, in the case's folder
+TRACEBACK_FILE = "traceback.txt"
 
 #: Dask settings of the LocalCluster a sweep starts (docs/api.md, "Where it runs"). Its
 #: periodic work otherwise costs ~7 % of a core-second per worker-second of a running case
@@ -228,6 +233,8 @@ def run_case(scenario_path: str, overrides: Mapping[str, Any], folder: str,
     items = override_strings(overrides)
     row: dict[str, Any] = {"case": Path(folder).name, **overrides}
     started = time.time()  # what the folder holds from before is not this case's
+    with contextlib.suppress(OSError):  # an earlier run's traceback is not this one's
+        (Path(folder) / TRACEBACK_FILE).unlink(missing_ok=True)
     try:
         scenario = load_scenario(scenario_path, list(items))
         done = _completed(Path(folder), scenario)
@@ -240,11 +247,24 @@ def run_case(scenario_path: str, overrides: Mapping[str, Any], folder: str,
         row |= {"skipped": done} | _results_row(results, reductions)
     except Exception as err:  # recorded, the other cases go on
         row |= _written_so_far(folder, reductions, started)
-        row |= {"status": "failed", "skipped": False,
-                "error": f"{type(err).__name__}: {err}".strip()}
-        if not isinstance(err, ScenarioError | ValueError):
-            row["traceback"] = traceback.format_exc(limit=3)
+        error = f"{type(err).__name__}: {err}".strip()
+        if not isinstance(err, EXPECTED_ERRORS):
+            error += f" (an internal error; its traceback is in {_save_traceback(folder)})"
+        row |= {"status": "failed", "skipped": False, "error": error}
     return row
+
+
+def _save_traceback(folder: str) -> str:
+    """Write the current exception's traceback to the case's folder and return its path: a
+    sweep.csv column of it held 2,486 characters of Python for a diverged solve (tester W),
+    where the one-line error says all a user needs."""
+    path = Path(folder) / TRACEBACK_FILE
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_text(traceback.format_exc(), encoding="utf-8")
+    except OSError as err:  # the error is recorded all the same
+        return f"nowhere ({path} could not be written: {err.strerror})"
+    return str(path)
 
 
 def _written_so_far(folder: str, reductions: Mapping[str, str],
