@@ -76,7 +76,7 @@ def build_mesh(cfg: MeshConfig, name: str, base_dir: Path) -> QuadMesh:
     if cfg.transform is not None:
         t = cfg.transform
         mesh = mesh.transformed(t.rotate_deg, t.translate, t.center)
-    check_elements(mesh.nodes, mesh.cells, name)
+    check_elements(mesh, body_name=name)  # a file's mesh named by the file's numbers
     return mesh
 
 

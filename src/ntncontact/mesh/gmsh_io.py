@@ -10,6 +10,7 @@ from __future__ import annotations
 import warnings
 from collections.abc import Mapping
 from pathlib import Path
+from typing import BinaryIO
 
 import meshio
 import numpy as np
@@ -44,6 +45,7 @@ def read_msh(path: str | Path, name: str | None = None) -> QuadMesh:
         raise MeshError(f"{label}: no quadrilateral cells (is the surface in a physical group?)")
     # format 2.2 repeats an element once per physical group it belongs to
     _, first = np.unique(np.sort(quads, axis=1), axis=0, return_index=True)
+    element_ids = _file_quad_ids(path, quads.shape[0])[np.sort(first)]
     quads = quads[np.sort(first)]
     xy = _planar_points(np.asarray(raw.points, dtype=float), label)
     _check_finite(xy, path)
@@ -51,11 +53,12 @@ def read_msh(path: str | Path, name: str | None = None) -> QuadMesh:
     renumber = np.full(xy.shape[0], -1, dtype=np.int64)
     renumber[used] = np.arange(used.size)
     _check_distinct(xy[used], label)
-    cells = _counter_clockwise(xy[used], renumber[quads], label)
-    mesh = QuadMesh(xy[used], cells, name=name or path.stem,
-                    file_node_ids=_file_node_ids(path, xy.shape[0])[used])
+    node_ids = _file_node_ids(path, xy.shape[0])[used]
+    cells = _counter_clockwise(xy[used], renumber[quads], label, element_ids, node_ids)
+    mesh = QuadMesh(xy[used], cells, name=name or path.stem, file_node_ids=node_ids,
+                    file_element_ids=element_ids)
     _check_conforming(mesh, label)
-    groups = _physical_groups(raw, blocks, label)
+    groups = _physical_groups(raw, blocks, label, _file_group_names(path))
     node_sets, edge_sets = _named_sets(mesh, groups, renumber, label)
     return mesh.with_sets(node_sets, edge_sets)
 
@@ -126,6 +129,88 @@ def _file_node_ids(path: Path, n_points: int) -> NDArray[np.int64]:
     except Exception:  # noqa: BLE001 - the ids are a help for finding nodes, not the mesh
         ids = np.zeros(0, np.int64)
     return ids if ids.size == n_points else np.full(n_points, -1, np.int64)
+
+
+def _file_quad_ids(path: Path, n_quads: int) -> NDArray[np.int64]:
+    """The file's element numbers of the quads in file order (meshio's order of them), which
+    meshio drops: messages name a file's element by them (a tester looked for "element 50",
+    a 0-based index, in a file where it was element 51). -1 for every quad if the file cannot
+    be read here, since they only help find an element."""
+    try:
+        with path.open("rb") as stream:
+            stream.readline()  # $MeshFormat, checked by _read_meshio
+            version, data_size, is_ascii = meshio.gmsh.main._read_header(stream)
+            while stream.readline().strip() != b"$Elements":
+                pass
+            ids = _quad_ids(stream, version, is_ascii, data_size)
+    except Exception:  # noqa: BLE001 - the ids are a help for finding elements, not the mesh
+        ids = np.zeros(0, np.int64)
+    return ids if ids.size == n_quads else np.full(n_quads, -1, np.int64)
+
+
+#: gmsh's element type number of a first-order quadrilateral
+_GMSH_QUAD = 3
+
+
+def _quad_ids(stream: BinaryIO, version: str, is_ascii: bool,
+              data_size: int) -> NDArray[np.int64]:
+    """The quads' element numbers of an $Elements section read from its first line on."""
+    if version not in ("2.2", "4.1"):
+        return np.zeros(0, np.int64)
+    ids: list[NDArray[np.int64]] = []
+    if version == "2.2" and is_ascii:
+        for _ in range(int(stream.readline())):
+            tag, kind = stream.readline().split()[:2]
+            if int(kind) == _GMSH_QUAD:
+                ids.append(np.array([int(tag)], np.int64))
+    elif version == "2.2":  # binary: blocks of (type, count, number of tags) headers
+        total = int(stream.readline())
+        while total > 0:
+            kind, count, n_tags = np.fromfile(stream, count=3, dtype=np.int32)
+            width = 1 + n_tags + _nodes_of(kind)
+            rows = np.fromfile(stream, count=count * width, dtype=np.int32).reshape(count, width)
+            if kind == _GMSH_QUAD:
+                ids.append(rows[:, 0].astype(np.int64))
+            total -= count
+    else:  # 4.1: entity blocks of (dim, entity, type, count), then tag and nodes per element
+        size = np.uint64 if data_size == 8 else np.uint32
+        read = (lambda d, n: np.fromfile(stream, dtype=d, count=n, sep=" ")) if is_ascii else (
+            lambda d, n: np.fromfile(stream, dtype=d, count=n))
+        blocks = int(read(size, 4)[0])
+        for _ in range(blocks):
+            kind = int(read(np.int32, 3)[2])
+            count = int(read(size, 1)[0])
+            rows = read(size, count * (1 + _nodes_of(kind))).reshape(count, -1)
+            if kind == _GMSH_QUAD:
+                ids.append(rows[:, 0].astype(np.int64))
+    return np.concatenate(ids) if ids else np.zeros(0, np.int64)
+
+
+def _nodes_of(kind: int) -> int:
+    """The number of nodes of gmsh element type ``kind``."""
+    from meshio._common import num_nodes_per_cell
+
+    return int(num_nodes_per_cell[meshio.gmsh.common._gmsh_to_meshio_type[int(kind)]])
+
+
+def _file_group_names(path: Path) -> dict[tuple[int, int], str]:
+    """(dimension, tag) -> name of the file's $PhysicalNames: meshio keys the groups by name
+    alone, and of a point and a line group that share a name (gmsh's names are per
+    dimension) keeps one; the other's name is needed to say so. Empty if it cannot be read."""
+    names: dict[tuple[int, int], str] = {}
+    try:
+        with path.open("rb") as stream:
+            for line in stream:
+                if line.strip() in (b"$Nodes", b"$Entities", b"$Elements"):
+                    break
+                if line.strip() == b"$PhysicalNames":
+                    for _ in range(int(stream.readline())):
+                        dim, tag, name = stream.readline().decode().split(maxsplit=2)
+                        names[(int(dim), int(tag))] = name.strip().strip('"')
+                    break
+    except (OSError, ValueError):  # the names only improve a warning
+        return {}
+    return names
 
 
 def _check_finite(xy: NDArray[np.float64], path: Path) -> None:
@@ -225,19 +310,30 @@ def _check_nothing_inside(mesh: QuadMesh, label: str) -> None:
         "the parts separate bodies joined by a [[tie]]")
 
 
-def _counter_clockwise(xy: NDArray, cells: NDArray[np.int64], label: str) -> NDArray[np.int64]:
-    """Flip clockwise cells (negative shoelace area) to counter-clockwise."""
+def _counter_clockwise(xy: NDArray, cells: NDArray[np.int64], label: str,
+                       element_ids: NDArray[np.int64], node_ids: NDArray[np.int64]
+                       ) -> NDArray[np.int64]:
+    """Flip clockwise cells (negative shoelace area) to counter-clockwise. A cell of (near)
+    zero area is refused, named by the file's element and node numbers (``element_ids``,
+    ``node_ids``; -1 where unknown, then by its index and the 0-based node indices)."""
     x, y = xy[cells, 0], xy[cells, 1]
     area = 0.5 * np.sum(x * np.roll(y, -1, axis=1) - np.roll(x, -1, axis=1) * y, axis=1)
     scale = float(np.ptp(xy, axis=0).max()) ** 2
     if np.any(np.abs(area) <= 1e3 * np.finfo(float).eps * scale):
-        raise MeshError(f"{label}: cell {int(np.argmin(np.abs(area)))} has (near) zero area")
+        cell = int(np.argmin(np.abs(area)))
+        tag, corners = int(element_ids[cell]), node_ids[cells[cell]]
+        which = (f"file element {tag} (nodes {' '.join(map(str, corners))})" if tag >= 0
+                 and np.all(corners >= 0) else f"cell {cell} (0-based, in file order)")
+        raise MeshError(f"{label}: {which} has (near) zero area (a twisted or collapsed "
+                        "quadrilateral)")
     return np.where((area < 0)[:, None], cells[:, [0, 3, 2, 1]], cells)
 
 
-def _physical_groups(raw: meshio.Mesh, blocks: list[tuple[str, NDArray]], label: str
+def _physical_groups(raw: meshio.Mesh, blocks: list[tuple[str, NDArray]], label: str,
+                     file_names: Mapping[tuple[int, int], str]
                      ) -> dict[str, tuple[int, list[NDArray]]]:
-    """name -> (dimension, list of cell connectivity arrays of that group)."""
+    """name -> (dimension, list of cell connectivity arrays of that group); ``file_names``:
+    the file's (dimension, tag) -> name, for the warning on a group whose name is taken."""
     groups: dict[str, tuple[int, list[NDArray]]] = {}
     tags = raw.cell_data.get("gmsh:physical")
     for group_name, (tag, dim) in ((k, tuple(int(t) for t in v[:2]))
@@ -255,17 +351,20 @@ def _physical_groups(raw: meshio.Mesh, blocks: list[tuple[str, NDArray]], label:
                 raise MeshError(f"{label}: physical group '{group_name}' has no cell data")
             members.append(data[index])
         groups[group_name] = (dim, members)
-    return groups | _unnamed_groups(raw, blocks, label, groups)
+    return groups | _unnamed_groups(raw, blocks, label, groups, file_names)
 
 
 def _unnamed_groups(raw: meshio.Mesh, blocks: list[tuple[str, NDArray]], label: str,
-                    named: Mapping[str, tuple[int, list[NDArray]]]
+                    named: Mapping[str, tuple[int, list[NDArray]]],
+                    file_names: Mapping[tuple[int, int], str]
                     ) -> dict[str, tuple[int, list[NDArray]]]:
     """Physical line and point groups without a name, each under its number (``set = "5"``),
     with a warning: gmsh writes a group without a name when its name was given to another
     group already (the second of two lines named "top"), and legacy .geo files number them
     only (``Physical Line(5) = {...}``). Ignoring them silently halved a tester's top
-    pressure."""
+    pressure. A group whose name another group of another dimension has too (gmsh's names are
+    per dimension, meshio keeps one of them) is one of these, and its warning says so (it
+    said "has no name" of a point group named "bottom" beside the line group "bottom")."""
     tags = raw.cell_data.get("gmsh:physical")
     if tags is None:
         return {}
@@ -279,9 +378,28 @@ def _unnamed_groups(raw: meshio.Mesh, blocks: list[tuple[str, NDArray]], label: 
             members = groups.setdefault(str(tag), (dim, []))[1]
             members.append(data[block_tags == tag])
     for name, (dim, _) in groups.items():
-        warnings.warn(f"{label}: physical group {name} ({('points', 'lines')[dim]}) has no "
-                      f"name; it is the set \"{name}\"", stacklevel=4)
+        warnings.warn(f"{label}: {_unnamed_text(raw, name, dim, file_names)}", stacklevel=4)
     return groups
+
+
+_DIMENSION_NAMES = ("point", "line", "surface")
+
+
+def _unnamed_text(raw: meshio.Mesh, tag: str, dim: int,
+                  file_names: Mapping[tuple[int, int], str]) -> str:
+    """The warning on the physical group ``tag`` of dimension ``dim`` that is a set by its
+    number: it has no name, or its name is another dimension's group's."""
+    own = file_names.get((dim, int(tag)))
+    if own is None or own not in raw.field_data:
+        return (f"physical group {tag} ({_DIMENSION_NAMES[dim]}s) has no name; it is the "
+                f"set \"{tag}\"")
+    other_tag, other_dim = (int(v) for v in raw.field_data[own][:2])
+    return (f"physical {_DIMENSION_NAMES[dim]} group {tag} and {_DIMENSION_NAMES[other_dim]} "
+            f"group {other_tag} are both named \"{own}\" (gmsh allows a name once per "
+            f"dimension; a set name means one group): the set \"{own}\" is the "
+            f"{_DIMENSION_NAMES[other_dim]} group {other_tag}, and the "
+            f"{_DIMENSION_NAMES[dim]} group is the set \"{tag}\" (rename one in gmsh to "
+            "use both by name)")
 
 
 def _named_sets(mesh: QuadMesh, groups: Mapping[str, tuple[int, list[NDArray]]],
@@ -321,6 +439,8 @@ def _orient_on_boundary(mesh: QuadMesh, edges: NDArray[np.int64], group_name: st
     found = boundary_keys[order[pos]] == keys
     if not np.all(found):
         a, b = edges[np.argmin(found)]
+        if mesh.file_node_ids is not None and min(mesh.file_node_ids[[a, b]]) >= 0:
+            a, b = mesh.file_node_ids[[a, b]]  # the numbers a user finds in the file
         warnings.warn(f"{label}: line group '{group_name}' has edge ({a}, {b}) inside the quad "
                       "mesh: it is a node set only (surfaces and edge loads need boundary "
                       "curves)", stacklevel=5)

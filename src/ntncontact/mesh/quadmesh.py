@@ -32,7 +32,8 @@ class QuadMesh:
     (counter-clockwise boundary orientation), i.e. the outward normal of edge (a, b) is
     ``rot(-90)(x_b - x_a)``. ``file_node_ids`` are the node numbers of the file a mesh was read
     from (a reader renumbers the nodes 0..n-1; messages and outputs use those), None for a
-    generated mesh.
+    generated mesh; ``file_element_ids`` likewise the file's element numbers of the cells
+    (messages name an element of a file mesh by them); -1 where a number is unknown.
     """
 
     nodes: NDArray[np.float64]
@@ -41,6 +42,7 @@ class QuadMesh:
     edge_sets: Mapping[str, NDArray[np.int64]] = field(default_factory=dict)
     name: str = "body"
     file_node_ids: NDArray[np.int64] | None = None
+    file_element_ids: NDArray[np.int64] | None = None
 
     def __post_init__(self) -> None:
         nodes = _frozen(self.nodes, np.float64)
@@ -62,6 +64,12 @@ class QuadMesh:
             if ids.size != len(nodes):
                 raise MeshError(f"{self.name}: {ids.size} file node ids for {len(nodes)} nodes")
             object.__setattr__(self, "file_node_ids", ids)
+        if self.file_element_ids is not None:
+            ids = _frozen(self.file_element_ids, np.int64).reshape(-1)
+            if ids.size != len(cells):
+                raise MeshError(f"{self.name}: {ids.size} file element ids for {len(cells)} "
+                                "cells")
+            object.__setattr__(self, "file_element_ids", ids)
         object.__setattr__(self, "nodes", nodes)
         object.__setattr__(self, "cells", cells)
         object.__setattr__(self, "node_sets", MappingProxyType(node_sets))
@@ -112,7 +120,7 @@ class QuadMesh:
     def with_nodes(self, nodes: NDArray[np.float64]) -> QuadMesh:
         """The same topology and sets at new node coordinates."""
         return QuadMesh(nodes, self.cells, dict(self.node_sets), dict(self.edge_sets), self.name,
-                        self.file_node_ids)
+                        self.file_node_ids, self.file_element_ids)
 
     def with_sets(
         self,
@@ -122,7 +130,8 @@ class QuadMesh:
         """A copy with extra (or replaced) named sets."""
         ns = dict(self.node_sets) | dict(node_sets or {})
         es = dict(self.edge_sets) | dict(edge_sets or {})
-        return QuadMesh(self.nodes, self.cells, ns, es, self.name, self.file_node_ids)
+        return QuadMesh(self.nodes, self.cells, ns, es, self.name, self.file_node_ids,
+                        self.file_element_ids)
 
     def transformed(
         self, angle_deg: float = 0.0, translation: tuple[float, float] = (0.0, 0.0),

@@ -191,7 +191,8 @@ def check_elements(
     A corner is inverted when its corner Jacobian is negative, and degenerate when it is at most
     ``rel_tol * |a| |b|`` (sine of the corner angle below ``rel_tol``, or a zero-length edge).
     The corner reported is the one with the smallest scaled Jacobian in that element.
-    ``which``: check only these cells (their numbers are the ones reported).
+    ``which``: check only these cells (their numbers are the ones reported). A mesh read from a
+    file is named by the file's element and node numbers (:func:`_element_text`).
     """
     if body_name is None:
         body_name = mesh_or_nodes.name if isinstance(mesh_or_nodes, QuadMesh) else "body"
@@ -209,10 +210,22 @@ def check_elements(
         scaled = np.where(scale[elem] > 0, jac[elem] / scale[elem], -np.inf)
     corner = int(np.argmin(np.nan_to_num(scaled, nan=-np.inf)))
     kind = "inverted" if jac[elem, corner] < 0 else "degenerate"
-    raise MeshError(
-        f"body '{body_name}': element {int(numbers[elem])} is {kind} "
-        f"(corner Jacobian {jac[elem, corner]:.3g} at node {int(cell_arr[elem, corner])})"
-    )
+    element, node = _element_text(mesh_or_nodes, int(numbers[elem]),
+                                  int(cell_arr[elem, corner]))
+    raise MeshError(f"body '{body_name}': {element} is {kind} "
+                    f"(corner Jacobian {jac[elem, corner]:.3g} at {node})")
+
+
+def _element_text(mesh: QuadMesh | ArrayLike, elem: int, node: int) -> tuple[str, str]:
+    """("element E", "node N") by the mesh's indices, or ("file element E", "file node N") by
+    the numbers of the file it was read from: a tester looked for element 50 and node 52 of a
+    gmsh file, 0-based indices, where the file says 51 and 53."""
+    if isinstance(mesh, QuadMesh) and mesh.file_element_ids is not None \
+            and mesh.file_node_ids is not None:
+        file_elem, file_node = int(mesh.file_element_ids[elem]), int(mesh.file_node_ids[node])
+        if file_elem >= 0 and file_node >= 0:
+            return f"file element {file_elem}", f"file node {file_node}"
+    return f"element {elem}", f"node {node}"
 
 
 def check_move(new: ArrayLike, old: ArrayLike, cells: ArrayLike, body_name: str,
