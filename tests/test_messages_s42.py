@@ -130,3 +130,38 @@ def test_the_file_element_numbers_are_read_in_every_format(tmp_path, version, bi
     mesh = read_msh(tmp_path / "plate.msh")
     assert tags.min() > 1 and mesh.file_element_ids is not None
     assert np.array_equal(mesh.file_element_ids, tags)
+
+
+def test_a_folder_given_as_the_scenario_is_named_a_folder(capsys, tmp_path):
+    assert main(["run", str(EXAMPLES), "--out", str(tmp_path / "o")]) == 1
+    err = capsys.readouterr().err
+    assert f"{EXAMPLES}: is a folder; expected a TOML file (it holds " in err, err
+    assert "not found" not in err
+
+
+def test_an_existing_file_as_out_is_refused_by_name(capsys, tmp_path):
+    (tmp_path / "taken").write_text("mine")
+    for command in (["run", str(EXAMPLES / "rod_impact.toml")],
+                    ["sweep", str(EXAMPLES / "studies" / "fast_sliding_friction.toml")]):
+        assert main([*command, "--out", str(tmp_path / "taken")]) == 1
+        err = capsys.readouterr().err
+        assert f"--out {tmp_path / 'taken'}: is a file; --out names the results folder" in err
+        assert "Errno" not in err
+    assert (tmp_path / "taken").read_text() == "mine"
+
+
+def test_an_empty_set_key_is_named(capsys, tmp_path):
+    assert main(["run", str(EXAMPLES / "rod_impact.toml"), "--out", str(tmp_path / "o"),
+                 "--set", "=1"]) == 1
+    err = capsys.readouterr().err
+    assert "override '=1' has an empty key; it must look like key.path=value" in err, err
+
+
+def test_a_sweep_s_missing_scenario_names_the_sweep_file_and_the_folder(capsys, tmp_path):
+    sweep_file = tmp_path / "study.toml"
+    sweep_file.write_text('scenario = "nosuch.toml"\n[grid]\n"analysis.t_end" = [0.1]\n')
+    assert main(["sweep", str(sweep_file), "--out", str(tmp_path / "o")]) == 1
+    err = capsys.readouterr().err
+    assert (f'{sweep_file}: scenario = "nosuch.toml": no such file (looked for '
+            f"{tmp_path.resolve() / 'nosuch.toml'}; the path is relative to the sweep file's "
+            f"folder {tmp_path.resolve()})") in err, err

@@ -118,7 +118,7 @@ def _run_until_stopped(args: argparse.Namespace, stop: StopOnSignal) -> int:
     started = time.monotonic()
     scenario = Path(args.scenario)
     config = load_scenario(scenario, args.set)
-    out = Path(args.out)
+    out = _out_folder(args.out)
     if args.restart and args.overwrite:
         raise ValueError("--restart continues the run in --out, --overwrite replaces it: "
                          "give one of them")
@@ -182,6 +182,16 @@ def _build(build_model: Callable, config: object, folder: Path, stop: StopOnSign
         return build_model(config, folder)
     finally:
         stop.building = False
+
+
+def _out_folder(out: str) -> Path:
+    """``--out`` as a folder; an existing file is refused by name (it gave a bare "[Errno
+    17] File exists")."""
+    path = Path(out)
+    if path.exists() and not path.is_dir():
+        raise ValueError(f"--out {out}: is a file; --out names the results folder (a new or "
+                         "an existing folder)")
+    return path
 
 
 def _lock_before_build(out: Path) -> RunLock:
@@ -408,6 +418,7 @@ def _sweep(args: argparse.Namespace) -> int:
     """Run a sweep file's cases on Dask; write OUT/sweep.csv and the figures it asks for."""
     from .studies.sweep import SWEEP_FILE, sweep
 
+    _out_folder(args.out)
     with _interrupting_signals():
         table = sweep(args.sweep, args.out, scheduler=args.scheduler, workers=args.workers,
                       progress=not args.quiet)

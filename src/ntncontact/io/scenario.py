@@ -493,6 +493,11 @@ def load_scenario(path: str | Path, overrides: list[str] | None = None) -> Scena
 
 def read_toml(path: Path) -> dict[str, Any]:
     """The mapping of a TOML file; a missing or unreadable file raises a ScenarioError."""
+    if path.is_dir():  # it exists: "not found" sent a tester looking for a typo
+        found = sorted(p.name for p in path.glob("*.toml"))
+        more = ", ..." if len(found) > 3 else ""
+        hint = f" (it holds {', '.join(found[:3])}{more})" if found else ""
+        raise ScenarioError(f"{path}: is a folder; expected a TOML file{hint}")
     if not path.is_file():
         raise ScenarioError(f"{path}: scenario file not found")
     try:
@@ -524,6 +529,10 @@ def apply_override(data: dict[str, Any], item: str, path: Path) -> None:
     if "=" not in item:
         raise ScenarioError(f"{path}: override '{item}' must look like key.path=value")
     key, raw = item.split("=", 1)
+    if not key.strip() or "" in key.strip().split("."):  # "=1" read as the key "" (tester W)
+        what = "an empty key" if not key.strip() else f"an empty part in the key '{key}'"
+        raise ScenarioError(f"{path}: override '{item}' has {what}; it must look like "
+                            "key.path=value")
     try:
         value = tomllib.loads(f"v = {raw}")["v"]
     except tomllib.TOMLDecodeError:

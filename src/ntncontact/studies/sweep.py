@@ -217,7 +217,13 @@ def load_sweep(path: str | Path) -> tuple[SweepSpec, Path]:
         problems = "; ".join(f"{'.'.join(map(str, e['loc'])) or '(top level)'}: {e['msg']}"
                              for e in err.errors())
         raise ScenarioError(f"{path}: invalid sweep file: {problems}") from None
-    return spec, (path.parent / spec.scenario)
+    scenario = path.parent / spec.scenario
+    if not scenario.is_file():  # "nosuch.toml: not found" named neither file nor folder
+        raise ScenarioError(f"{path}: scenario = \"{spec.scenario}\": "
+                            f"{'a folder' if scenario.is_dir() else 'no such file'} (looked "
+                            f"for {scenario.resolve()}; the path is relative to the sweep "
+                            f"file's folder {path.parent.resolve()})")
+    return spec, scenario
 
 
 def case_name(overrides: Sequence[str]) -> str:
