@@ -217,13 +217,17 @@ def load_sweep(path: str | Path) -> tuple[SweepSpec, Path]:
         problems = "; ".join(f"{'.'.join(map(str, e['loc'])) or '(top level)'}: {e['msg']}"
                              for e in err.errors())
         raise ScenarioError(f"{path}: invalid sweep file: {problems}") from None
-    scenario = path.parent / spec.scenario
-    if not scenario.is_file():  # "nosuch.toml: not found" named neither file nor folder
-        raise ScenarioError(f"{path}: scenario = \"{spec.scenario}\": "
+    return spec, (path.parent / spec.scenario)
+
+
+def _check_scenario_file(spec: str | Path, sweep_spec: SweepSpec, scenario: Path) -> None:
+    """Refuse a sweep whose scenario file is missing, naming the sweep file and the folder
+    the path is relative to ("nosuch.toml: scenario file not found" named neither)."""
+    if not scenario.is_file():
+        raise ScenarioError(f"{spec}: scenario = \"{sweep_spec.scenario}\": "
                             f"{'a folder' if scenario.is_dir() else 'no such file'} (looked "
                             f"for {scenario.resolve()}; the path is relative to the sweep "
-                            f"file's folder {path.parent.resolve()})")
-    return spec, scenario
+                            f"file's folder {Path(spec).parent.resolve()})")
 
 
 def case_name(overrides: Sequence[str]) -> str:
@@ -376,6 +380,7 @@ def sweep(spec: str | Path, out: str | Path, *, scheduler: str | None = None,
     if workers is not None and workers < 1:  # a LocalCluster of none waits for ever
         raise ValueError(f"workers must be >= 1, got {workers}")
     sweep_spec, scenario_path = load_sweep(spec)
+    _check_scenario_file(spec, sweep_spec, scenario_path)
     load_scenario(scenario_path)  # a broken scenario fails here, once, not in every case
     cases = sweep_spec.case_overrides()
     out = Path(out)
