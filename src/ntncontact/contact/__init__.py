@@ -20,7 +20,14 @@ from .friction import SLIP, STICK
 from .kinematics import facing, pair_gaps, rate_roundoff
 from .lagrange import LagrangeBlocks, blocks_of, lagrange_blocks, release_tensile_pairs
 from .laws import ContactLaw
-from .pairing import Pairing, beyond_ends, closest_pairs, neighbour_pairs, ordered_partners
+from .pairing import (
+    Pairing,
+    beyond_ends,
+    beyond_reach,
+    closest_pairs,
+    neighbour_pairs,
+    ordered_partners,
+)
 from .state import PairState
 from .surfaces import ContactSurface, Interface, chord_normals, corner_mask
 
@@ -41,6 +48,7 @@ __all__ = [
     "ordered_partners",
     "augment",
     "beyond_ends",
+    "beyond_reach",
     "blocks_of",
     "check_augmentation",
     "chord_normals",

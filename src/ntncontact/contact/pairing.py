@@ -20,7 +20,7 @@ from scipy.spatial import cKDTree
 from .kinematics import pair_gaps
 from .surfaces import Interface
 
-__all__ = ["Pairing", "beyond_ends", "closest_pairs", "neighbour_pairs"]
+__all__ = ["Pairing", "beyond_ends", "beyond_reach", "closest_pairs", "neighbour_pairs"]
 
 #: Up to this many (candidate, segment) combinations the closest points are found by comparing
 #: all of them (module doc); beyond it the k-d trees, whose cost grows like C log S, win.
@@ -230,7 +230,9 @@ def ordered_partners(
 
     Rule (docs/theory.md, "Partners at any spacing ratio"): among the pairs (i, j) whose nodes
     lie within reach, |x_i - x_j| <= r_ij = the longer of the two nodes' longest adjacent
-    segments, choose an order-preserving matching (candidates ordered by their closest
+    segments (surface 2's counted at no more than :data:`REACH_STRETCH` times their length in
+    ``reference_arc``, ``_surface2_reach``),
+    choose an order-preserving matching (candidates ordered by their closest
     projection on surface 2, surface-2 nodes by their chain index) with the most pairs and,
     of those, the largest summed closeness 1 - |x_i - x_j| / r_ij: every node that can be
     matched is, each to its nearest partner where the order allows. Consecutive matched
@@ -261,7 +263,8 @@ def ordered_partners(
     chain_index = np.full(len(x), -1, dtype=np.int64)
     chain_index[s2] = np.arange(s2.size)
     depth = np.maximum(proj.projection_gap[: node1.size], 0.0)
-    cand, j, weight = _admissible_pairs(x, interface, node1, taken, kept_pairs, s2, depth)
+    cand, j, weight = _admissible_pairs(x, interface, node1, taken, kept_pairs, s2, depth,
+                                        reference_arc)
     kept_j = chain_index[kept_pairs[:, 1]]
     spacing_arc = arc2 if reference_arc is None else np.asarray(reference_arc, dtype=float)
     picks = _best_matching(along[: node1.size], arc2, spacing_arc, cand, j, weight,
@@ -282,8 +285,56 @@ def _longest_adjacent_segment(x: NDArray, surface) -> NDArray[np.float64]:
     return out
 
 
+#: How far from an ALE surface's node, in its longer adjacent segment of the original mesh,
+#: a partner may be and still pair with it (``_surface2_reach``). The mesh motion stretches
+#: a segment to reach a new partner (the disk drop's block: a node 1.26 of its original
+#: spacing away, across a segment stretched to 2.1 of it), but one it stretched behind a
+#: partner it could not follow is no reach.
+REACH_STRETCH = 2.0
+
+
+def _surface2_reach(x: NDArray, interface: Interface, reference_arc: ArrayLike | None
+                    ) -> NDArray[np.float64]:
+    """Per surface-2 node (chain order) its reach: its longer adjacent segment, counted at no
+    more than :data:`REACH_STRETCH` times its length in ``reference_arc`` (the original mesh;
+    None: as it is at x). A segment the ALE mesh motion stretched behind a partner it could
+    not follow (clamped by ``ale.max_stretch``) does not extend the reach: with the stretched
+    length a tester's block, sliding 5 of its lengths over an ALE base, kept its trailing
+    corner pressed on a base node 4.5 (45 spacings) behind it, and a block on a base stretched
+    to 4x paired its corner with the base's fixed chain end 0.64 away (spacing 0.1 / 0.17)."""
+    reach = _longest_adjacent_segment(x, interface.surface2)
+    if reference_arc is None:
+        return reach
+    arc = np.asarray(reference_arc, dtype=float)
+    original = np.zeros(arc.size)
+    np.maximum.at(original, np.arange(arc.size - 1), np.diff(arc))
+    np.maximum.at(original, np.arange(1, arc.size), np.diff(arc))
+    return np.minimum(reach, REACH_STRETCH * original)
+
+
+def beyond_reach(x: NDArray[np.float64], interface: Interface, pairs: ArrayLike,
+                 reference_arc: ArrayLike | None = None) -> NDArray[np.bool_]:
+    """Which pairs (P, 2) of an ordered (ALE) interface ``ordered_partners`` would not admit:
+    their nodes farther apart, beyond the surface-1 node's depth behind surface 2, than the
+    longer of the two nodes' reaches. Open partner surfaces only. A kept pair whose ALE node
+    could not follow its partner is no node-to-node pair: detection releases it and pairs
+    its node afresh, as it pairs a new one (``engine.interfaces._kept_where_they_face``)."""
+    pairs = np.asarray(pairs, dtype=np.int64).reshape(-1, 2)
+    if pairs.size == 0:
+        return np.zeros(0, bool)
+    s1, s2 = interface.surface1, interface.surface2.nodes
+    reach1 = np.zeros(len(x))
+    reach1[s1.nodes] = _longest_adjacent_segment(x, s1)
+    reach2 = np.zeros(len(x))
+    reach2[s2] = _surface2_reach(x, interface, reference_arc)
+    depth = np.maximum(closest_pairs(x, interface, pairs[:, 0]).projection_gap, 0.0)
+    dist = np.linalg.norm(x[pairs[:, 0]] - x[pairs[:, 1]], axis=1) - depth
+    return dist > np.maximum(reach1[pairs[:, 0]], reach2[pairs[:, 1]])
+
+
 def _admissible_pairs(x: NDArray, interface: Interface, node1: NDArray, taken: ArrayLike,
-                      kept: NDArray, s2: NDArray, depth: NDArray | None = None
+                      kept: NDArray, s2: NDArray, depth: NDArray | None = None,
+                      reference_arc: ArrayLike | None = None
                       ) -> tuple[NDArray, NDArray, NDArray]:
     """(candidate index, surface-2 chain index, weight) of the pairs within reach whose
     surface-2 node is free: weight 1 + closeness / (C + 1) for C candidates, so that a
@@ -299,6 +350,7 @@ def _admissible_pairs(x: NDArray, interface: Interface, node1: NDArray, taken: A
     reach1 = np.zeros(len(x))
     reach1[s1.nodes] = _longest_adjacent_segment(x, s1)
     reach2 = _longest_adjacent_segment(x, interface.surface2)
+    capped2 = _surface2_reach(x, interface, reference_arc)
     behind = np.zeros(node1.size) if depth is None else np.asarray(depth, dtype=float)
     cand, j = _nearby_pairs(x[node1], x[s2], behind + np.maximum(reach1[node1], reach2.max()))
     dist = np.linalg.norm(x[node1][cand] - x[s2][j], axis=1)
@@ -306,7 +358,8 @@ def _admissible_pairs(x: NDArray, interface: Interface, node1: NDArray, taken: A
         dist = np.maximum(dist - behind[cand], 0.0)
     reach = np.maximum(reach1[node1][cand], reach2[j])
     busy = np.isin(s2, np.concatenate([np.asarray(taken, np.int64).reshape(-1), kept[:, 1]]))
-    within = (dist <= reach) & ~busy[j]
+    # the capped reach only bounds which pairs are admitted; closeness keeps the segments
+    within = (dist <= np.maximum(reach1[node1][cand], capped2[j])) & (dist <= reach) & ~busy[j]
     cand, j, dist, reach = cand[within], j[within], dist[within], reach[within]
     closeness = 1.0 - dist / reach
     return cand, j, 1.0 + closeness / (node1.size + 1.0)

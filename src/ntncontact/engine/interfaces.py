@@ -21,6 +21,7 @@ from ..contact import (
     PairState,
     augment,
     beyond_ends,
+    beyond_reach,
     blocks_of,
     check_augmentation,
     closest_pairs,
@@ -69,7 +70,14 @@ def _kept_where_they_face(x: NDArray, ci: ContactInterface, state: PairState) ->
     surface-2 node where the node no longer faces a segment of its partner. Nothing moves a
     Lagrangian partner with its node, and a pair kept where it entered held a sliding block
     by base nodes up to 2 away, and on past the base's end (an independent tester's case);
-    an ALE partner follows its node (the mesh motion), so ALE pairs keep their partners.
+    an ALE partner follows its node (the mesh motion), so ALE pairs keep their partners,
+    except where it could not (``contact.beyond_reach``: farther from its node than a new
+    pair may be, ``ordered_partners``): released, the node is paired afresh by this
+    detection, as a new one is (ALE partners are distinct and in surface order, so the
+    node it now faces is mostly another's partner: no re-pairing with history). Kept, a
+    block sliding 5 of its lengths over an ALE base pressed its trailing corner on a base
+    node 4.5 (45 spacings) behind it, the base node clamped by ale.max_stretch (a tester;
+    released, no pressed pair is more than 0.265 off).
     Released too where the pair's normal no longer faces its partner's (``contact.facing``):
     a tester's spinning disk rolled away from a block with a pair held 0.66 apart, its
     persistency-law gap frozen and its force pushing on. Not released by their opening: a
@@ -87,6 +95,10 @@ def _kept_where_they_face(x: NDArray, ci: ContactInterface, state: PairState) ->
         pairs = np.column_stack([state.pairs[:, 0], partners])
         keep &= ~(moved & _opened(x, ci, state.pairs, pairs, nearest_edge))
         state = replace(state, pairs=pairs)
+    elif not ci.interface.surface2.closed:
+        # a pair its ALE node could not follow (clamped by ale.max_stretch) is released once
+        # out of the reach a new pair must be within; its node is then a free candidate
+        keep &= ~beyond_reach(x, ci.interface, state.pairs, ci.reference_arc2)
     # a pair whose normal has turned away from its partner's is no contact either (a
     # spinning disk's node kept pressing a block it had rolled away from)
     return state.take(keep & facing(x, ci.interface, state.pairs))
