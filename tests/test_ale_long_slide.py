@@ -15,7 +15,10 @@ from __future__ import annotations
 
 import json
 
+import numpy as np
+
 from ntncontact.cli import main
+from ntncontact.contact import ContactSurface, Interface, beyond_reach, ordered_partners
 from ntncontact.contact.pairing import REACH_STRETCH
 
 LONG_SLIDE = """
@@ -63,3 +66,21 @@ def test_a_pressed_pair_does_not_stay_spacings_behind_a_long_slide(tmp_path):
     assert summary["status"] == "completed"
     assert summary["max_ale_mismatch"] < (REACH_STRETCH + 0.2) * spacing
     assert summary["energy_balance_max_relative_error"] < 1e-9
+
+
+def test_a_stretched_end_segment_does_not_let_a_far_fixed_end_pair():
+    """Tester X's finding 4: a base end segment stretched to 0.68 (4x its 0.17, max_stretch =
+    4) made its fixed chain end 'within reach' of a block corner 0.64 away, and the pair
+    carried force until the end (a mismatch of 0.64 that no motion can close). Its reach
+    now counts the segment at no more than REACH_STRETCH times its original length."""
+    block = np.column_stack([[0.84, 0.74, 0.64], np.ones(3)])  # walked right to left
+    base = np.column_stack([[0.0, 0.68, 0.85, 1.02], np.ones(4)])  # chain end at x = 0
+    x = np.vstack([block, base])
+    interface = Interface(ContactSurface(np.arange(3)), ContactSurface(np.arange(3, 7)))
+    kept = [[1, 4], [0, 5]]  # the base nodes under the block follow their partners
+    original = np.array([0.0, 0.17, 0.34, 0.51])
+    # with the stretched segment's reach (0.68) the old code paired it with node 3 (x = 0)
+    assert ordered_partners(x, interface, [2], kept=kept, reference_arc=original)[0] == -1
+    pair = np.array([[2, 3]])
+    assert beyond_reach(x, interface, pair, original)[0]
+    assert not beyond_reach(x, interface, np.array([[1, 4]]), original)[0]
