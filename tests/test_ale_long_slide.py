@@ -20,6 +20,7 @@ import numpy as np
 from ntncontact.cli import main
 from ntncontact.contact import ContactSurface, Interface, beyond_reach, ordered_partners
 from ntncontact.contact.pairing import REACH_STRETCH
+from ntncontact.report.run_warnings import result_warnings
 
 LONG_SLIDE = """
 [analysis]
@@ -84,3 +85,21 @@ def test_a_stretched_end_segment_does_not_let_a_far_fixed_end_pair():
     pair = np.array([[2, 3]])
     assert beyond_reach(x, interface, pair, original)[0]
     assert not beyond_reach(x, interface, np.array([[1, 4]]), original)[0]
+
+
+def test_the_mismatch_advice_says_a_long_slide_needs_a_lagrangian_body():
+    """Tester X: the first advice (max_stretch, respace) failed for a block sliding 5 of its
+    lengths; the advice now bounds it by the partner's length and names the Lagrangian body
+    for a longer slide. At a fixed end it no longer blames only the start or a slide past
+    the end, which a partner sliding away from the end also gives."""
+    at = {"time": 1.0, "element_size": 0.1, "interface": "c", "body": "base", "body_node": 5,
+          "partner_body": "block", "partner_body_node": 0}
+    summary = {"max_ale_mismatch": 0.265, "max_ale_mismatch_at": at}
+    [line] = [w for w in result_warnings(summary, static=False) if "ALE contact node" in w]
+    advice = line.split("no longer node to node. ", 1)[1]
+    assert advice.startswith("A larger ale.max_stretch")
+    assert "up to about the partner's own length" in advice
+    assert "slides on farther" in advice and 'mesh_motion = "lagrangian"' in advice
+    summary["max_ale_mismatch_at"] = {**at, "fixed_end": True}
+    [line] = [w for w in result_warnings(summary, static=False) if "ALE contact node" in w]
+    assert "sliding away from it" in line and "twice the end segment's original length" in line

@@ -359,7 +359,9 @@ def _mismatch(summary: dict) -> str | None:
     and with a Lagrangian obstacle no pressed pair is more than 0.125 apart. At a fixed end
     of the ALE surface (``fixed_end``) nothing slides: a partner node off the ALE grid there
     (a tester's head-on hit and static stack, offset from t = 0) is out of every node's
-    reach, and the slide advice does not apply."""
+    reach, and the slide advice does not apply. Nor does it to a long slide (tester X,
+    session 42: a block sliding 5 of its lengths over an ALE base, whatever max_stretch or
+    respace): the advice names the partner's length as the bound."""
     at = summary.get("max_ale_mismatch_at")
     if not at or summary["max_ale_mismatch"] <= MISMATCH_WARNING * at["element_size"]:
         return None
@@ -372,18 +374,22 @@ def _mismatch(summary: dict) -> str | None:
         return head + (
             "That node is a fixed end of its ALE surface (a corner or a chain end: it stays "
             "in place whatever the ALE settings), and its partner is off the ALE surface's "
-            "grid there (placed so from the start, or slid past that end), beyond the reach "
-            "of every ALE node; start the two surfaces with matching end nodes, or extend "
-            "the ALE surface past the partner's end (or past its slide)")
+            "grid there (placed so from the start, slid past that end, or sliding away from "
+            "it: such a pair is released once farther off than twice the end segment's "
+            "original length, however far the mesh motion stretched that segment), beyond "
+            "the reach of every ALE node; start the two surfaces with matching end nodes, or "
+            "extend the ALE surface past the partner's end (or past its slide)")
     return head + (
         "A larger ale.max_stretch (a node "
         "leaves a fixed end behind by at most that times their original distance, so a "
         "slide away from an end runs out of it even on a long surface), an ALE surface "
         "longer than the slide (its ends and corners stay fixed, its kinks too: no node "
-        "crosses them) or ale.respace = \"reference\" may let it follow. Where the "
-        "partner's surface runs on through the contact (a spinning or rolling body, or one "
-        "sliding on along the surface) none does: the partner's nodes carry this body's "
-        "along and bunch them up; make the ALE body Lagrangian there "
+        "crosses them) or ale.respace = \"reference\" may let it follow a slide of up to "
+        "about the partner's own length. Where the partner slides on farther (a tester's "
+        "block sliding 5 of its lengths over an ALE base: no setting helped, max_stretch = "
+        "100 left base cells of 4 degrees) or its surface runs on through the contact (a "
+        "spinning or rolling body that slips) none does: the partner's nodes carry this "
+        "body's along and bunch them up; make the ALE body Lagrangian there "
         "(mesh_motion = \"lagrangian\")")
 
 
