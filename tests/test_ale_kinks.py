@@ -87,8 +87,9 @@ def test_a_disk_sliding_across_a_kink_keeps_the_corner_and_the_energy(tmp_path, 
     assert summary["status"] == "completed" and summary["steps"] == 125
     assert summary["energy_balance_max_relative_error"] < 1e-9
     assert summary["ale_unreturned_energy"] == 0.0
-    # the disk crossed the kink: the foundation's nodes could not follow it there
-    assert summary["max_ale_mismatch"] > 5 * 0.1
+    # the disk crossed the kink: the foundation's nodes could not follow it there (pairs were
+    # held over 5 spacings off; since session 42 released beyond REACH_STRETCH = 2 spacings)
+    assert summary["max_ale_mismatch"] > 1.5 * 0.1
     last = results.fields(results.times[-1])
     corner = np.flatnonzero(np.all(np.isclose(last.points[:, :2], [0.8, 0.0], atol=1e-9),
                                    axis=1))
