@@ -391,26 +391,45 @@ def _print_comparison(directory: Path) -> int:
 
 
 def _validate(args: argparse.Namespace) -> int:
-    """Run every example of the report and write DIR/report.html and report.md."""
+    """Run every example of the report and write DIR/report.html and report.md. SIGINT and
+    SIGTERM stop the cases after their step and start no other; the report of the finished
+    ones is written, and the command ends as interrupted (130/143, as ``run``)."""
     from tqdm import tqdm
 
+    from .report import validation_cases
     from .report.validation import validate
-    from .report.validation_cases import CASES
 
+    cases = validation_cases.CASES  # looked up here: a test runs the command on a few cases
     out = Path(args.out)
     started: list[str] = []
-    with tqdm(total=len(CASES), unit="case", disable=None) as bar:
+    with StopOnSignal() as stop, tqdm(total=len(cases), unit="case", disable=None) as bar:
+        stop.writing = True  # the first signal: "stopping after this step", the cases' steps
 
         def progress(name: str) -> None:  # called as each case starts: count the finished one
             bar.update(1 if started else 0)
             started.append(name)
             bar.set_description(name)
 
-        results = validate(out, quick=args.quick, progress=progress)
+        try:
+            results = validate(out, quick=args.quick, cases=cases, progress=progress,
+                               stop=stop.reason)
+        except KeyboardInterrupt:
+            if stop.signum is None:
+                raise
+            # a second signal: the workers were terminated, no report
+            print(f"{stop.reason()}: stopped at once, no report written (the cases' files "
+                  "written so far are valid)", file=sys.stderr)
+            return stop.exit_code
         bar.update(bar.total - bar.n)
-    failed = [r.case.name for r in results if not r.passed()]
-    print(f"report: {out / 'report.html'} ({len(results) - len(failed)} passed, "
-          f"{len(failed)} failed{': ' + ', '.join(failed) if failed else ''})")
+    failed = [r.case.name for r in results if not r.passed() and not r.interrupted]
+    not_run = sum(r.interrupted for r in results)
+    report = (f"report: {out / 'report.html'} ({len(results) - len(failed) - not_run} passed, "
+              f"{len(failed)} failed{': ' + ', '.join(failed) if failed else ''}")
+    if stop.signum is not None:
+        print(f"{report}, {not_run} not run: interrupted)")
+        print(f"{stop.reason()}: files written so far are valid", file=sys.stderr)
+        return stop.exit_code
+    print(f"{report})")
     return 1 if failed else 0  # a failed or crashed case fails the command (CI, scripts)
 
 

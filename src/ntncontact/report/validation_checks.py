@@ -46,6 +46,8 @@ class CaseResult:
     images: list[Path] = field(default_factory=list)
     notes: list[str] = field(default_factory=list)
     data: dict = field(default_factory=dict)  # measurements other cases compare with
+    #: not run, or stopped before its end, by an interruption (``error`` says which)
+    interrupted: bool = False
 
     def checked(self) -> list[Comparison]:
         return [r for r in self.rows if r.checked]

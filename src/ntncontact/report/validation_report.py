@@ -25,8 +25,11 @@ class RunInfo:
 
     def text(self, results: list[CaseResult]) -> str:
         passed = sum(r.passed() for r in results)
+        not_run = sum(r.interrupted for r in results)
+        interrupted = f" {not_run} not run: interrupted." if not_run else ""
         return (f"Mode: {'quick (shortened runs)' if self.quick else 'full'}. "
-                f"{passed} of {len(results)} cases passed. Wall time {self.wall_seconds:.0f} s "
+                f"{passed} of {len(results)} cases passed.{interrupted} "
+                f"Wall time {self.wall_seconds:.0f} s "
                 f"with {self.jobs} worker process{'es' if self.jobs > 1 else ''} on "
                 f"{self.cpus} cores (sum of the case times "
                 f"{sum(r.seconds for r in results):.0f} s; 1-minute load average "
@@ -34,11 +37,15 @@ class RunInfo:
 
 
 def _status(result: CaseResult) -> str:
+    if result.interrupted:
+        return "NOT RUN"
     return "PASS" if result.passed() else "FAIL"
 
 
 def _summary_counts(result: CaseResult) -> str:
     checked = result.checked()
+    if result.interrupted:
+        return "not run"
     if result.error is not None:
         return "error"
     return f"{sum(bool(r.passed()) for r in checked)}/{len(checked)}"
