@@ -213,6 +213,7 @@ class ResultWriter:
         self._framed_step = self._last.state.step  # a stand-in, no frame of its own to write
 
     def on_step(self, model: Model, record: StepRecord) -> None:
+        self._previous_frame_written()
         s, b = record.state, record.balance
         row = {
             "step": s.step, "time": s.time,
@@ -270,6 +271,19 @@ class ResultWriter:
         before = self._before
         if framed:
             self._write_fields(model, record, before)
+
+    def _previous_frame_written(self) -> None:
+        """Wait for the frame in flight (a VTU written in the background) before this step's
+        rows: if its writing failed, the run stops with the summary at the frame's step, the
+        last one history.csv has a row of, and the final frame is tried again."""
+        wait = getattr(self.results.fields, "wait_for_frame", None)
+        if wait is None:
+            return
+        try:
+            wait()
+        except BaseException:
+            self._framed_step = None  # on_finish tries this step's frame again
+            raise
 
     def _keeps_contact_rows(self, framed: bool) -> bool:
         """Whether contact.csv gets this step's pairs (``analysis.contact_output``): ~168

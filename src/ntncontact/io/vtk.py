@@ -176,6 +176,13 @@ class VtuSeriesWriter:
         if pending is not None:
             pending.result()
 
+    def wait_for_frame(self) -> None:
+        """:meth:`flush`, for a caller about to write the next step's rows: a frame whose
+        writing failed stops the run at its own step (a tester's full disk failed the frame of
+        step 15, raised at the next frame's write, and the run computed and wrote 5 more steps
+        whose last had no frame). The frame still overlaps the next step's solve."""
+        self.flush()
+
     def close(self) -> None:
         """Write the frame in flight, then stop the writing thread (background mode)."""
         try:
@@ -202,13 +209,20 @@ class VtuSeriesWriter:
         mesh = frame_mesh(points, cells, point_data, cell_data, copy=self._pool is not None)
         vtu_path = self.vtu_directory / f"{self.name}_{int(step):05d}.vtu"
         if self._pool is None:
-            self._write_frame(float(time), vtu_path, mesh)
+            self._write_frame(int(step), float(time), vtu_path, mesh)
         else:
-            self._pending = self._pool.submit(self._write_frame, float(time), vtu_path, mesh)
+            self._pending = self._pool.submit(self._write_frame, int(step), float(time),
+                                              vtu_path, mesh)
         return vtu_path
 
-    def _write_frame(self, time: float, vtu_path: Path, mesh: meshio.Mesh) -> None:
-        replace_atomically(vtu_path, lambda tmp: meshio.write(tmp, mesh, file_format="vtu"))
+    def _write_frame(self, step: int, time: float, vtu_path: Path, mesh: meshio.Mesh) -> None:
+        try:
+            replace_atomically(vtu_path, lambda tmp: meshio.write(tmp, mesh, file_format="vtu"))
+        except OSError as err:  # named by its step: in background mode it surfaces a step later
+            last = (f"the last frame written is t = {self._entries[-1][0]:.6g} "
+                    f"({self._entries[-1][1]})" if self._entries else "no frame was written")
+            raise OSError(err.errno, f"{err.strerror or err} (the frame of step {step}, "
+                          f"t = {time:.6g}; {last})", str(err.filename or vtu_path)) from err
         self._entries.append((time, f"{self.name}/{vtu_path.name}"))
         replace_atomically(self.pvd_path, self._write_pvd)
 
