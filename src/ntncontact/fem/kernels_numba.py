@@ -24,7 +24,7 @@ from numpy.typing import NDArray
 from ..jit import njit
 from ..materials.models import MaterialKind
 from ..threads import run_threads
-from .q4 import DN_GP, GAUSS_WEIGHTS, InvertedElementError
+from .q4 import DN_GP, GAUSS_WEIGHTS, InvertedElementError, NonFiniteElementError
 
 #: Integer codes of the constitutive models compiled into the kernel.
 MODEL_CODES: dict[str, int] = {"linear_elastic": 0, "neo_hookean": 1}
@@ -642,16 +642,27 @@ def raise_inverted(e: int, X: NDArray, cells: NDArray) -> None:
     _raise_inverted(e, 1, X, [], cells)
 
 
+#: |Grad d| past which the kernel's det F = 1 + tr H + det H overflows (H00 H11 > 1.8e308) and
+#: its failed test says nothing about inversion.
+_OVERFLOWING_GRADIENT = 1e154
+
+
 def _raise_inverted(e: int, where: int, X: NDArray, configurations: list[NDArray],
                     cells: NDArray) -> None:
     """Raise :class:`InvertedElementError` for element e with its smallest determinant (over
     the current configurations, given by their displacements, when where == 2)."""
     X_e = X[cells[e]]
-    J = np.einsum("gaj,ai->gij", _DN, X_e)
-    det = J[:, 0, 0] * J[:, 1, 1] - J[:, 0, 1] * J[:, 1, 0]
-    if where == 2:
-        grad = np.einsum("gaj,gjI->gaI", _DN, np.linalg.inv(J))
-        F = np.eye(2) + np.stack([np.einsum("ai,gaJ->giJ", d[cells[e]], grad)
-                                  for d in configurations])
-        det = F[..., 0, 0] * F[..., 1, 1] - F[..., 0, 1] * F[..., 1, 0]
+    with np.errstate(all="ignore"):  # a non-finite element is told below, not warned about
+        J = np.einsum("gaj,ai->gij", _DN, X_e)
+        det = J[:, 0, 0] * J[:, 1, 1] - J[:, 0, 1] * J[:, 1, 0]
+        d_e = np.stack([X_e - X_e] + [d[cells[e]] for d in configurations])
+        size = float(np.abs(np.nan_to_num(d_e, nan=np.inf)).max())
+        overflow = False
+        if where == 2:
+            grad = np.einsum("gaj,gjI->gaI", _DN, np.linalg.inv(J))
+            F = np.eye(2) + np.einsum("cai,gaJ->cgiJ", d_e[1:], grad)
+            det = F[..., 0, 0] * F[..., 1, 1] - F[..., 0, 1] * F[..., 1, 0]
+            overflow = size * float(np.abs(grad).max()) > _OVERFLOWING_GRADIENT
+    if overflow or not (np.isfinite(X_e).all() and np.isfinite(det).all()):
+        raise NonFiniteElementError(e, size, _WHERE[where])
     raise InvertedElementError(e, float(det.min()), _WHERE[where])

@@ -53,6 +53,27 @@ class InvertedElementError(ValueError):
                 f"in the {self.where} (det J = {self.value:.3e})")
 
 
+class NonFiniteElementError(InvertedElementError):
+    """An element the kernel refused because its configuration, or its deformation gradient,
+    is not finite (NaN/inf, or products past the floating-point range): a tester's ring
+    thrown at 1e300 read "inverted in the current configuration (det J = 1.000e+00)", the
+    determinant recomputed here differently from the kernel's, which overflowed. An
+    :class:`InvertedElementError`, so the step is halved as before."""
+
+    def __init__(self, element: int, value: float, where: str) -> None:
+        super().__init__(element, value, where)
+        self.args = (self._text(f"element {element}"),)
+
+    def _text(self, element: str) -> str:
+        return (f"{element} has a {self.where} that is not finite (NaN/inf or out of the "
+                f"floating-point range: displacements up to {self.value:.3g}); check the "
+                "units and scale of the initial velocity, loads and material")
+
+    def named(self, body: str, local: int) -> str:
+        """The message with the element named by its body and its number there."""
+        return self._text(f"element {local} of body '{body}' (global element {self.element})")
+
+
 @dataclass(frozen=True)
 class Kinematics:
     """Per element and Gauss point: reference gradients, volume weights and F."""
