@@ -28,6 +28,7 @@ import scipy.sparse as sp
 from numpy.typing import NDArray
 
 from ..jit import njit
+from .kinematics import raise_undefined_normal
 from .laws import ContactLaw
 from .state import PairState
 from .surfaces import Interface
@@ -517,6 +518,7 @@ def _evaluate_compiled(
     transfer = unpaired_share(x_eval, interface, pairs) if law.unpaired_share else None
     table1 = interface.surface1.kernel_table
     x_nodes, v_nodes, start_nodes = x_eval, v_eval, x_start  # the weights' derivative
+    x_named = x_eval  # the nodes' own positions (an undefined normal names them)
     if transfer is not None:  # the kernel sees each shared pair's weighted point
         x_eval, v_eval, x_start = (transfer.positions(a) for a in (x_eval, v_eval, x_start))
         table1 = transfer.surface1.kernel_table
@@ -537,7 +539,7 @@ def _evaluate_compiled(
         interface.surface1.index_of(pairs[:, 0])  # raises, naming the nodes
         interface.surface2.index_of(pairs[:, 1])
     if code == ZERO_CHORD:
-        raise ValueError("a contact normal is undefined (coincident chain neighbours)")
+        raise_undefined_normal(np.asarray(x_named), interface, pairs)
     if transfer is not None:
         moving = [(vals, x_nodes)]  # K's factors of dS/dx applied to x (and v)
         gradients_x = None

@@ -39,12 +39,44 @@ def _slots(interface: Interface, pairs: NDArray[np.int64]) -> NDArray[np.int64]:
     return np.column_stack((i, j, a, b, s1.prev[k1], s1.next[k1]))
 
 
+class UndefinedNormalError(ValueError):
+    """A pair whose normal chord has zero length (its two chain neighbours coincide: a crushed
+    surface, or a mesh of zero size). It keeps the nodes and their position, which the engine
+    names by interface and body (``engine.diagnostics.named_failure``): the bare message gave
+    a tester no place to look."""
+
+    def __init__(self, node: int, partner: int, chord: tuple[int, int],
+                 position: NDArray | None) -> None:
+        self.node, self.partner = int(node), int(partner)
+        self.chord = (int(chord[0]), int(chord[1]))
+        self.position = None if position is None else np.asarray(position, dtype=float)
+        where = ("" if self.position is None else
+                 f" at ({self.position[0]:.6g}, {self.position[1]:.6g})")
+        super().__init__(f"a contact normal is undefined (coincident chain neighbours: nodes "
+                         f"{self.chord[0]} and {self.chord[1]}{where}, the normal chord of "
+                         f"the pair of nodes {self.node} and {self.partner})")
+
+
+def raise_undefined_normal(x: NDArray, interface: Interface, pairs: NDArray) -> None:
+    """Raise :class:`UndefinedNormalError` for the first pair whose normal chord has zero
+    length at the positions ``x`` (a generic one when none has: the kernel's positions)."""
+    slots = _slots(interface, pairs)
+    length = np.linalg.norm(x[slots[:, 3]] - x[slots[:, 2]], axis=1)
+    zero = np.flatnonzero(~(length > 0.0))
+    if zero.size == 0:
+        raise ValueError("a contact normal is undefined (coincident chain neighbours)")
+    i, j, a, b = slots[zero[0], :4]
+    raise UndefinedNormalError(i, j, (a, b), x[a])
+
+
 def _unit_chord(x: NDArray, slots: NDArray) -> tuple[NDArray, NDArray]:
     """e = (x_b - x_a)/l and l of every pair's normal chord (slots 2, 3)."""
     chord = x[slots[:, 3]] - x[slots[:, 2]]
     length = np.linalg.norm(chord, axis=1)
-    if np.any(length == 0.0):
-        raise ValueError("a contact normal is undefined (coincident chain neighbours)")
+    zero = np.flatnonzero(length == 0.0)
+    if zero.size:
+        i, j, a, b = slots[zero[0], :4]
+        raise UndefinedNormalError(i, j, (a, b), x[a])
     return chord / length[:, None], length
 
 

@@ -13,6 +13,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 from numpy.typing import NDArray
 
+from ..contact.kinematics import UndefinedNormalError
 from ..fem.loads import dirichlet_values
 from ..fem.q4 import DN_GP, InvertedElementError, shape_gradients
 from ..mesh.overlap import (
@@ -237,6 +238,8 @@ def named_failure(model: Model, err: BaseException) -> str:
     number there (the global message with the body appended read "element 4 is inverted
     ...: element 4 of body 'block'")."""
     inverted = err.__cause__ if isinstance(err, NewtonError) else err
+    if isinstance(inverted, UndefinedNormalError):
+        return str(err).replace(str(inverted), _named_normal(model, inverted))
     if isinstance(inverted, InvertedElementError) \
             and not isinstance(inverted, InvertedAtStepEnd) \
             and 0 <= inverted.element < len(model.cells):
@@ -247,6 +250,27 @@ def named_failure(model: Model, err: BaseException) -> str:
     if columns is not None:
         return f"{err}{_singular_where(model, np.asarray(columns))}"
     return f"{err}{_friction_hint(model, err)}"
+
+
+def _named_normal(model: Model, err: UndefinedNormalError) -> str:
+    """An undefined contact normal named by its interface and the bodies' own node numbers,
+    with the place where the chain neighbours coincide."""
+    body_of = model.body_of_node()
+
+    def node(n: int) -> str:
+        body = model.bodies[int(body_of[n])]
+        return f"node {n - body.node_offset} of body '{body.name}'"
+
+    names = [ci.name for ci in model.interfaces
+             if np.isin(err.node, ci.interface.surface1.nodes)
+             and np.isin(err.partner, ci.interface.surface2.nodes)]
+    where = f"interface '{names[0]}': " if names else ""
+    place = ("" if err.position is None
+             else f" at ({err.position[0]:.6g}, {err.position[1]:.6g})")
+    return (f"{where}a contact normal is undefined: the chain neighbours {node(err.chord[0])} "
+            f"and {node(err.chord[1])} coincide{place} (the normal of the pair "
+            f"{node(err.node)} - {node(err.partner)}; a crushed contact surface, or a body of "
+            "zero size)")
 
 
 def _friction_hint(model: Model, err: BaseException) -> str:

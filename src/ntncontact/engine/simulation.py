@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import warnings
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, replace
 from functools import partial
@@ -13,6 +14,7 @@ from numpy.typing import NDArray
 
 from ..ale.motion import AleMotionError
 from ..contact import SLIP, PairState, extrapolated_update, lagrange_blocks, newton_update
+from ..contact.kinematics import UndefinedNormalError
 from ..dynamics.energy import EndEnergy, EnergyConsistentContact
 from ..dynamics.mass import MovingMass
 from ..dynamics.midpoint import end_of_step, midpoint_velocity, velocity_factor
@@ -330,6 +332,7 @@ class Simulation:
         self.initial_contact = tuple(PairState.empty() for _ in model.interfaces)
         self.state = replace(self.state, contact=self.initial_contact)
         self._last_contact: tuple = ((), 0)
+        self._fp_errors = FloatingPointErrors()  # run() starts a new one
         self.ledger = dict.fromkeys(LEDGER, 0.0)  # cumulative energy ledger
         self._step_work = dict.fromkeys(LEDGER, 0.0)
         self._last_mismatch, self._last_mismatch_at = 0.0, None
@@ -939,14 +942,16 @@ class Simulation:
         while remaining > 1e-12 * dt:
             h = min(h, remaining)
             run_before = self._newton_run
+            fp_mark = self._fp_errors.mark()
             try:
                 before = dict(self._step_work)
                 state, its = self.advance(state, h)
                 substeps.append((h, self._last_reactions, self._last_tie_forces))
             except (NewtonError, InvertedElementError, AleMotionError, np.linalg.LinAlgError,
-                    RuntimeError) as err:
+                    RuntimeError, UndefinedNormalError) as err:
                 cuts += 1
                 self._failed_iterations += self._newton_run - run_before
+                self._fp_errors.drop_since(fp_mark)  # the failure, or the halving, tells them
                 if not getattr(err, "halving_helps", True):
                     raise SimulationError(
                         f"step {self.state.step + 1} (t = {self.state.time:.6g} -> "
@@ -986,8 +991,9 @@ class Simulation:
         never inside a compiled kernel. NumPy's BLAS runs on one thread meanwhile
         (:func:`ntncontact.threads.serial_blas`)."""
         self._stop_reason = stop_reason
+        self._fp_errors = FloatingPointErrors()
         try:
-            with serial_blas():
+            with serial_blas(), self._fp_errors.recording():
                 self._run_steps(progress, stop_reason)
         except KeyboardInterrupt as err:
             self._finish("interrupted", str(err) or "interrupted by the user")
@@ -1014,6 +1020,7 @@ class Simulation:
             dt = t_next - self.state.time
             self.state, its, self._last_substep = self.step_with_cutback(dt)
             self.state = replace(self.state, time=t_next)
+            self._fp_errors.tell(self.state.step, t_next - dt, t_next)
             extra = (self._ledger_extra() | self._contact_extra() | self._penetration_extra()
                      | self._tie_extra() | self._last_reactions | {"cut_back": self._cut_back}
                      | {"failed_newton_iterations": self._failed_iterations})
@@ -1137,6 +1144,45 @@ class Simulation:
     def _finish(self, status: str, error: str | None) -> None:
         for obs in self.observers:
             obs.on_finish(status, error)
+
+
+class FloatingPointErrors:
+    """NumPy's floating-point errors (divide by zero, overflow, invalid value) in a run's
+    steps, told once as one warning that names the step, instead of NumPy's own lines
+    ("warning: overflow encountered in multiply", a tester's ring thrown at 1e300) that say
+    neither where nor why. Those of a sub-step that failed are dropped: its error, or the
+    halving that passed, is the story. Not the package's own warnings: only NumPy's errors
+    reach :meth:`__call__` (``np.errstate(call=...)``)."""
+
+    def __init__(self) -> None:
+        self.kinds: list[str] = []
+        self.told = False
+
+    def __call__(self, kind: str, _flag: int) -> None:
+        self.kinds.append(kind)
+
+    def recording(self) -> np.errstate:
+        """The context in which NumPy calls this object instead of warning (underflow stays
+        ignored, as by default)."""
+        return np.errstate(divide="call", over="call", invalid="call", call=self)
+
+    def mark(self) -> int:
+        return len(self.kinds)
+
+    def drop_since(self, mark: int) -> None:
+        del self.kinds[mark:]
+
+    def tell(self, step: int, t_start: float, t_end: float) -> None:
+        """Warn, once a run, of the errors the step just completed met."""
+        if self.kinds and not self.told:
+            self.told = True
+            kinds = ", ".join(sorted(set(self.kinds)))
+            warnings.warn(
+                f"step {step} (t = {t_start:.6g} -> {t_end:.6g}): NumPy met floating-point "
+                f"errors ({kinds}; {len(self.kinds)} in the step): values out of the "
+                "floating-point range, the results may hold inf or NaN; check the units and "
+                "scale of the inputs", RuntimeWarning, stacklevel=2)
+        self.kinds.clear()
 
 
 def _mean_forces(substeps: list[tuple[float, dict, dict]], dt: float) -> tuple[dict, dict]:
