@@ -125,6 +125,24 @@ def _warn_penalty_rate_law(config: ScenarioConfig) -> None:
                           "ALE body\")", PhysicsWarning, stacklevel=3)
 
 
+#: Coulomb coefficients above this are warned of: measured dry-friction coefficients stay
+#: below ~1.5 (rubber on dry rock), and a tester's friction = 1e300 ran silently.
+LARGE_FRICTION = 10.0
+
+
+def _warn_large_friction(config: ScenarioConfig) -> None:
+    """Warn of a friction coefficient no pair of materials has: likely a unit or typing slip
+    (a percentage, an angle). A warning, not an error: a large mu is a valid way to make the
+    interface stick."""
+    for i, c in enumerate(config.contact):
+        if c.friction > LARGE_FRICTION:
+            warnings.warn(f"contact.{i} ('{c.name or f'interface{i}'}'): friction = "
+                          f"{c.friction:.3g} is a Coulomb coefficient far above any measured "
+                          f"one (dry friction stays below ~1.5; above {LARGE_FRICTION:g} is "
+                          "warned of): the pairs stick whatever the load; is it a percentage "
+                          "or an angle?", PhysicsWarning, stacklevel=3)
+
+
 def _joined(config: ScenarioConfig, bodies: set[str]) -> set[str]:
     """``bodies`` and every body joined to them through contact interfaces and ties: a load
     on a block stacked on top presses the interface below it too."""
@@ -360,6 +378,7 @@ def build_model(config: ScenarioConfig, base_dir: str | Path = ".") -> Model:
     _check_analysis_options(config)
     _warn_penalty_rate_law(config)
     _warn_ineffective_keys(config)
+    _warn_large_friction(config)
     _warn_support_jumps(config)
     ale_bodies = tuple(_ale_setup(i, body, bc, config) for i, (body, bc)
                        in enumerate(zip(bodies, config.bodies, strict=True))

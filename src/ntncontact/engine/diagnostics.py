@@ -316,7 +316,32 @@ def _singular_where(model: Model, columns: NDArray) -> str:
     for b in np.unique(of_node):
         axes = "".join(sorted({"xy"[d % 2] for d in dofs[of_node == b]}))
         parts.append(f"'{model.bodies[int(b)].name}' ({' and '.join(axes)})")
-    return f": the free motion moves the dofs of body {', '.join(parts)}"
+    light = [_lost_inertia(model, model.bodies[int(b)]) for b in np.unique(of_node)]
+    return (f": the free motion moves the dofs of body {', '.join(parts)}"
+            + "".join(f"; {note}" for note in light if note))
+
+
+#: A body's inertia rho h^2/dt^2 below this fraction of its stiffness (~E) is lost to the
+#: stiffness's round-off: the matrix is singular as if the body had no mass (a tester's
+#: density 1e-300 was reported with the supports as the only cause).
+LOST_INERTIA = 1e-14
+
+
+def _lost_inertia(model: Model, body) -> str:
+    """A note when a dynamic body's inertia is lost to round-off in the step's matrix (what
+    held its free motions), naming its density; "" otherwise."""
+    material = body.material
+    stiffness = material.mu * 2.0 + material.lam
+    if model.analysis.kind != "dynamic" or not stiffness > 0.0:
+        return ""
+    nodes = body.mesh.nodes
+    size = float(np.ptp(nodes, axis=0).max()) / max(np.sqrt(body.mesh.n_cells), 1.0)
+    inertia = material.density * size**2 / model.analysis.dt**2
+    if not inertia < LOST_INERTIA * stiffness:
+        return ""
+    return (f"body '{body.name}' has an inertia (density h^2/dt^2 = {inertia:.3g}) lost to "
+            f"the round-off of its stiffness ({stiffness:.3g}): check the units of its "
+            f"density ({material.density:.3g})")
 
 
 NO_NODES = np.zeros(0, np.int64)

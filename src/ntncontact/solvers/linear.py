@@ -84,6 +84,15 @@ SINGULAR_CAUSES = ("(a body whose supports leave a rigid motion free, in a stati
                    "placed apart from its partner, held by nothing until it touches (start it "
                    "touching, or support it); a mechanism, or coincident nodes that split a "
                    "mesh?)")
+#: Pivot or entry magnitudes past which a "singular" matrix is one out of the floating-point
+#: range rather than one with a free motion: a true free motion leaves a pivot of round-off
+#: size (~1e-16 of the largest) or zero, while density 1e-300, E 1e300 or a penalty 1e300
+#: (a tester's fuzzing) left pivots 1e-290 of the largest, or a largest of 1e300.
+OUT_OF_RANGE_RATIO = 1e-100
+OUT_OF_RANGE_LARGEST = 1e150
+#: the cause of a singular matrix whose scale is out of range
+RANGE_CAUSE = ("(values out of the floating-point range, {}: check the units and scale of E, "
+               "density and the contact penalties; no rigid motion need be free)")
 #: SuperLU keeps a diagonal pivot at least this fraction of the largest entry of its column
 #: (partial pivoting otherwise); the static LU accepts a pivot on the same test, so it takes
 #: the pivots SuperLU would and falls back to SuperLU where SuperLU would interchange rows.
@@ -687,13 +696,29 @@ def _check_pivots(lu: spla.SuperLU, perm: NDArray | None = None,
         if (~border).any():
             largest = d[~border].max()
         d = d * np.where(border, weights, 1.0)
-    small = np.flatnonzero(d <= PIVOT_RTOL * largest)
+    small = np.flatnonzero(~(d > PIVOT_RTOL * largest))  # NaN pivots too
+    if small.size and (scale := _out_of_range(d, largest)):
+        raise LinearSolverError(f"matrix is numerically singular: {small.size} pivot(s) "
+                                f"below {PIVOT_RTOL:g} x the largest {RANGE_CAUSE.format(scale)}")
     if small.size:
         raise LinearSolverError(
             f"matrix is numerically singular: {small.size} pivot(s) below "
             f"{PIVOT_RTOL:g} x the largest {SINGULAR_CAUSES}",
             columns=np.unique(np.concatenate([_null_columns(lu, k, perm)
                                               for k in small[:4]])))
+
+
+def _out_of_range(pivots: NDArray, largest: float) -> str:
+    """What puts a singular factor's pivots out of the floating-point range ("" if nothing
+    does: then a motion is free, :data:`SINGULAR_CAUSES`)."""
+    if not (np.isfinite(pivots).all() and np.isfinite(largest)):
+        return "the matrix holds inf or NaN"
+    if largest > OUT_OF_RANGE_LARGEST:
+        return f"pivots up to {largest:.3g}"
+    tiny = pivots[pivots > 0.0]
+    if tiny.size and tiny.min() < OUT_OF_RANGE_RATIO * largest:
+        return f"pivots from {tiny.min():.3g} to {largest:.3g}"
+    return ""
 
 
 def _null_columns(lu: spla.SuperLU, k: int, perm: NDArray | None) -> NDArray[np.int64]:
@@ -777,9 +802,11 @@ class _PardisoBackend:
             self._to_double()
             return
         if self._perturbed():
+            nonzero = np.abs(values[values != 0.0])
+            scale = _out_of_range(nonzero, float(nonzero.max(initial=0.0)))
             raise LinearSolverError(
                 f"matrix is numerically singular: PARDISO perturbed {self._perturbed()} "
-                f"pivot(s) {SINGULAR_CAUSES}")
+                f"pivot(s) {RANGE_CAUSE.format(scale) if scale else SINGULAR_CAUSES}")
 
     def _perturbed(self) -> int:
         return int(self.pardiso.get_iparm(14))  # perturbed pivots of the last factorization
