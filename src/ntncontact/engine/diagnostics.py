@@ -5,7 +5,7 @@ inside another body off the contact surfaces, and the ALE bodies' worst degraded
 from __future__ import annotations
 
 import warnings
-from collections.abc import Iterator
+from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
@@ -342,6 +342,53 @@ def _lost_inertia(model: Model, body) -> str:
     return (f"body '{body.name}' has an inertia (density h^2/dt^2 = {inertia:.3g}) lost to "
             f"the round-off of its stiffness ({stiffness:.3g}): check the units of its "
             f"density ({material.density:.3g})")
+
+
+@dataclass(frozen=True)
+class ContactMoment:
+    """The net moment of one interface's contact forces (the worst interface's, 0.0 and no
+    interface when none carries force): ``relative`` = |moment| / (``force`` ``length``)."""
+
+    relative: float = 0.0
+    interface: str = ""
+    moment: float = 0.0  # about the origin, signed as the reactions' (history.csv): see below
+    force: float = 0.0  # sum over the nodes of |f|
+    length: float = 0.0  # the largest extent of the nodes that carry force
+
+
+def contact_moment(interfaces: Sequence, results: Sequence, x: NDArray) -> ContactMoment:
+    """The worst interface's net moment of its contact forces (summary.json
+    ``max_contact_moment_imbalance``). The forces of an interface act between its two bodies
+    only, so they should exert no net moment; the report's pair force (``moment_free =
+    false``) of a pair whose nodes are offset along the surface is not along the line that
+    joins them, and its couple is taken up by the supports: a tester's static press on a
+    non-matching Lagrangian base read a reaction moment of 79.88 where the loads needed
+    78.06, with force reactions exact and no warning. The sum over the nodes of x_i x f_i of
+    ``ContactResult.force`` (the pair nodes and those the transfer spread the forces to,
+    ``x``: where the solve evaluated them) is taken about the loaded nodes' centroid (the net
+    force is zero, so the point does not matter, and coordinates far from the origin add no
+    round-off) and divided by the sum of |f_i| times the loaded nodes' largest extent.
+    ``moment`` is the same sum about the origin, in the residual's sign, which the support
+    reactions use: in a static step it is the reactions' moment plus the loads'."""
+    worst = ContactMoment()
+    for ci, res in zip(interfaces, results, strict=True):
+        if res is None:
+            continue
+        f = np.asarray(res.force).reshape(-1, 2)
+        loaded = np.flatnonzero(np.any(f != 0.0, axis=1))
+        if loaded.size < 2:
+            continue
+        f, p = f[loaded], x[loaded]
+        force, length = float(np.linalg.norm(f, axis=1).sum()), float(np.ptp(p, axis=0).max())
+        if force == 0.0 or length == 0.0:
+            continue
+        q = p - p.mean(axis=0)
+        about_centroid = float(np.sum(q[:, 0] * f[:, 1] - q[:, 1] * f[:, 0]))
+        relative = abs(about_centroid) / (force * length)
+        if relative > worst.relative:
+            moment = float(np.sum(p[:, 0] * f[:, 1] - p[:, 1] * f[:, 0]))
+            worst = ContactMoment(relative, ci.name, moment, force, length)
+    return worst
 
 
 NO_NODES = np.zeros(0, np.int64)

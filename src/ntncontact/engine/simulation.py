@@ -28,12 +28,14 @@ from .convection import convective_terms
 from .diagnostics import (
     AleQualityCheck,
     Balance,
+    ContactMoment,
     PenetrationCheck,
     SelfCrossingCheck,
     SurfaceTwoCheck,
     UnpairedCheck,
     balance,
     check_end_of_step,
+    contact_moment,
     named_failure,
 )
 from .initial import initial_state
@@ -336,6 +338,7 @@ class Simulation:
         self.ledger = dict.fromkeys(LEDGER, 0.0)  # cumulative energy ledger
         self._step_work = dict.fromkeys(LEDGER, 0.0)
         self._last_mismatch, self._last_mismatch_at = 0.0, None
+        self._last_moment = ContactMoment()  # the contact forces' net moment (diagnostics)
         self._augmentations_converged = True  # False: a sub-step accepted its last augmentation
         self._last_tie_forces: dict = {}
         self._supports = support_sets(model)
@@ -451,6 +454,9 @@ class Simulation:
         self._last_mismatch, self._last_mismatch_at = (
             end_of_step_mismatch(self.model, results, s.X + d1)
             if self.model.ale_bodies and interfaces else (solved.mismatch, None))
+        # where the solve evaluated the forces (the mid-point of a dynamic step)
+        self._last_moment = (contact_moment(interfaces, results, s.X + d) if interfaces
+                             else ContactMoment())
         self._last_tie_forces = solved.tie_forces
         self._last_reactions = solved.reactions
         out_of_balance = (self._remap_out_of_balance_work(s, state, d1)
@@ -1089,6 +1095,7 @@ class Simulation:
             "augmentations_converged": int(self._augmentations_converged),
             "ale_mismatch": self._last_mismatch,
             "ale_mismatch_at": self._last_mismatch_at,
+            "contact_moment": self._last_moment,
             "ale_remap_energy": self.ledger["ale_remap_energy"],
             "ale_unreturned_energy": self.ledger["ale_unreturned_energy"],
             "energy_multiplier": self._energy_multiplier,

@@ -133,6 +133,8 @@ class ResultWriter:
                              "contact_at_end": False,
                              "max_penetration": 0.0, "max_penetration_at": None,
                              "max_active_pairs": 0, "unconverged_steps": 0,
+                             "max_contact_moment_imbalance": 0.0,
+                             "max_contact_moment_imbalance_at": None,
                              "max_penetration_unpaired": 0.0,
                              "max_penetration_unpaired_at": None,
                              "max_penetration_surface_2": 0.0,
@@ -250,6 +252,7 @@ class ResultWriter:
             s.time, record.extra.get("penetration_off_surfaces_at"), summary)
         fields |= self._mismatch_summary(s.time, row.get("ale_mismatch", 0.0),
                                          record.extra.get("ale_mismatch_at"), summary)
+        fields |= self._moment_summary(s, record.extra.get("contact_moment"), summary)
         for key, found in (("max_penetration_unpaired", "penetration_unpaired_at"),
                            ("max_penetration_surface_2", "penetration_surface_2_at")):
             fields |= self._interface_depth_summary(key, s.time, record.extra.get(found),
@@ -395,6 +398,20 @@ class ResultWriter:
             at |= where | {"file_node": self._file_node(where["node"]),
                            "partner_file_node": self._file_node(where["partner"])}
         return {"max_ale_mismatch": float(mismatch), "max_ale_mismatch_at": at}
+
+    @staticmethod
+    def _moment_summary(s, found, summary: dict) -> dict:
+        """``max_contact_moment_imbalance`` and where: the largest net moment of an
+        interface's contact forces so far, relative to their sum |f| times the contact
+        zone's extent (``engine.diagnostics.contact_moment``), with the step, the time, the
+        interface and the moment itself (about the origin: in a static step the reactions'
+        moment plus the loads')."""
+        if found is None or found.relative <= summary.get("max_contact_moment_imbalance", 0.0):
+            return {}
+        return {"max_contact_moment_imbalance": found.relative,
+                "max_contact_moment_imbalance_at": {
+                    "step": s.step, "time": s.time, "interface": found.interface,
+                    "moment": found.moment, "force": found.force, "length": found.length}}
 
     def _interface_depth_summary(self, key: str, time: float, found, summary: dict) -> dict:
         """``key`` and ``key_at``: the deepest node so far that an interface's check found
