@@ -113,6 +113,10 @@ CASES = [
          sets=('bodies.1.mesh={type = "annulus", r_inner = 1.0, r_outer = 2.0, '
                'n_radial = 1000000, n_circ = 100000, center = [0.0, -3.0]}',),
          needs_bytes=10**11 * BYTES_PER_ELEMENT),
+    # names label output columns and messages: an empty one is refused (tester W, session 42)
+    Case("empty_body_name", ("bodies.0.name", "at least 1 character"), sets=('bodies.0.name=""',)),
+    Case("empty_contact_name", ("contact.0.name", "at least 1 character"),
+         sets=('contact.0.name=""',)),
     # NaN and inf in any number
     Case("penalty_inf", ("contact.0.penalty_normal", "inf"),
          edit=("penalty_normal = 100.0", "penalty_normal = inf")),

@@ -45,6 +45,8 @@ def _list_to_tuple(value: Any) -> Any:
 
 Positive = Annotated[float, Field(gt=0)]
 NonNegative = Annotated[float, Field(ge=0)]
+#: a body, interface or tie name: it labels output columns and messages, so never empty
+Name = Annotated[str, Field(min_length=1)]
 Vector = Annotated[tuple[float, float], BeforeValidator(_list_to_tuple)]
 
 
@@ -227,7 +229,7 @@ class AleConfig(Strict):
 
 
 class BodyConfig(Strict):
-    name: str
+    name: Name
     mesh: MeshConfig
     material: MaterialConfig
     mesh_motion: Literal["lagrangian", "ale"] = "lagrangian"
@@ -294,7 +296,7 @@ class AugmentationConfig(Strict):
 class ContactConfig(Strict):
     """A contact interface between a surface of body 1 (carries the normal) and of body 2."""
 
-    name: str | None = None
+    name: Name | None = None
     body_1: str
     surface_1: str
     body_2: str
@@ -402,7 +404,7 @@ def _keys(names: list[str], prefix: str) -> str:
 class TieConfig(Strict):
     """Nodes of surface 1 held at their coincident partners on surface 2 (x_a = x_b)."""
 
-    name: str
+    name: Name
     body_1: str
     surface_1: str
     body_2: str
