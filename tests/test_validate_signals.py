@@ -123,3 +123,34 @@ console_main()
                           timeout=60)
     assert proc.returncode == 143, proc.stderr
     assert proc.stderr.strip() == "interrupted while starting: nothing was run or written"
+
+
+@pytest.mark.slow  # as above, plus the workers' leaving
+def test_a_second_signal_ends_the_workers_at_once(tmp_path):
+    """A second SIGTERM asks the workers to leave now: they exit through the interpreter
+    (SystemExit from their handler, told by their watch thread), within seconds, mid-case."""
+    proc, out, children = _start(tmp_path)
+    proc.send_signal(signal.SIGTERM)
+    time.sleep(0.5)
+    sent = time.monotonic()
+    proc.send_signal(signal.SIGTERM)
+    _, stderr = proc.communicate(timeout=120)
+    _, alive = psutil.wait_procs(children, timeout=10.0)
+    assert not alive, [c.cmdline() for c in alive]
+    assert time.monotonic() - sent < 60.0, stderr
+    assert "Traceback" not in stderr
+
+
+@pytest.mark.slow  # ORPHAN_GRACE (30 s) and the case's start
+def test_workers_of_a_killed_command_leave_after_the_grace(tmp_path):
+    """SIGKILL on the command (no handler runs): its workers see their parent gone, stop their
+    cases after the step, and exit once ORPHAN_GRACE has passed, not idle for ever."""
+    from ntncontact.report.validation import ORPHAN_GRACE
+
+    proc, out, children = _start(tmp_path)
+    workers = [c for c in children if "spawn_main" in " ".join(c.cmdline())]
+    proc.kill()
+    proc.wait(timeout=30)  # not communicate: the workers hold its pipes until they leave
+    _, alive = psutil.wait_procs(workers, timeout=ORPHAN_GRACE + 30.0)
+    proc.communicate(timeout=10)
+    assert not alive, [c.cmdline() for c in alive]

@@ -146,10 +146,14 @@ def link_results(results: list[CaseResult]) -> None:
 
 
 # ---- the worker processes' side of a stop request ----------------------------------------
-#: the parent's stop request, shared with the workers: 1 once asked
+#: the parent's stop request, shared with the workers: STOP_AFTER_STEP once asked, STOP_NOW on
+#: a second signal
 _shared_stop: ctypes.c_int | None = None
+STOP_AFTER_STEP, STOP_NOW = 1, 2
 #: a signal this worker received itself (a Ctrl-C reaches every process of the terminal's job)
 _own_signum = 0
+#: set once the worker must leave: its next signal ends it by SystemExit (a plain exit)
+_leaving = False
 
 
 def _worker_stop() -> str | None:
@@ -162,9 +166,13 @@ def _worker_stop() -> str | None:
 
 def _worker_signal(signum: int, frame: object) -> None:
     """Record the signal: the case stops after its step (raising here could land inside a
-    compiled kernel, as the command's own handler explains)."""
+    compiled kernel, as the command's own handler explains), unless the worker is leaving:
+    then it exits through the interpreter (the handler runs between bytecodes, never inside a
+    kernel)."""
     global _own_signum
-    _own_signum = signum
+    _own_signum = _own_signum or signum
+    if _leaving:
+        raise SystemExit(128 + signum)
 
 
 def _init_worker(shared: ctypes.c_int) -> None:
@@ -176,18 +184,26 @@ def _init_worker(shared: ctypes.c_int) -> None:
     for signum in SIGNALS:
         signal.signal(signum, _worker_signal)
     signal.pthread_sigmask(signal.SIG_UNBLOCK, SIGNALS)
-    threading.Thread(target=_watch_parent, args=(os.getppid(),), daemon=True).start()
+    threading.Thread(target=_watch_parent, args=(os.getppid(), shared), daemon=True).start()
 
 
-def _watch_parent(parent: int) -> None:
-    """Stop and exit when the parent is gone (killed by SIGKILL: no one joins this worker any
-    more, and a tester's orphaned workers idled for ever). Its case stops after its step."""
-    global _own_signum
-    while os.getppid() == parent:
+def _watch_parent(parent: int, shared: ctypes.c_int) -> None:
+    """Make the worker leave when the parent is gone (killed by SIGKILL: no one joins this
+    worker any more, and a tester's orphaned workers idled for ever; its case stops after its
+    step, given ORPHAN_GRACE to close its files) or asks for a stop at once (a second signal).
+    The worker's main thread waits in the pool's queue or runs a case, so it is told by a
+    SIGTERM to itself, repeated until it has gone (a case that catches the first one returns
+    to the queue, where the next one ends it)."""
+    global _leaving, _own_signum
+    while os.getppid() == parent and shared.value != STOP_NOW:
         time.sleep(1.0)
-    _own_signum = _own_signum or signal.SIGTERM
-    time.sleep(ORPHAN_GRACE)  # the case's step and its files' closing, within reason
-    os._exit(1)
+    if shared.value != STOP_NOW:
+        _own_signum = _own_signum or signal.SIGTERM
+        time.sleep(ORPHAN_GRACE)  # the case's step and its files' closing, within reason
+    _leaving = True
+    while True:
+        os.kill(os.getpid(), signal.SIGTERM)
+        time.sleep(1.0)
 
 
 def default_jobs(n_cases: int) -> int:
@@ -247,9 +263,8 @@ def _run_in_workers(cases: tuple[Case, ...], out: Path, quick: bool, jobs: int,
         signal.pthread_sigmask(signal.SIG_UNBLOCK, SIGNALS)
     try:
         _collect(futures, cases, out, results, progress, stop, shared)
-    except BaseException:  # a second signal: stop at once (SIGTERM only asks them to stop)
-        for process in list(pool._processes.values()):  # no public way before Python 3.14
-            process.kill()
+    except BaseException:  # a second signal: the workers leave at once (_watch_parent)
+        shared.value = STOP_NOW
         pool.shutdown(wait=True, cancel_futures=True)
         raise
     pool.shutdown(wait=True, cancel_futures=True)
@@ -264,7 +279,7 @@ def _collect(futures: dict[Future, int], cases: tuple[Case, ...], out: Path,
     while pending:
         finished, pending = wait(pending, timeout=POLL, return_when=FIRST_COMPLETED)
         if stop() is not None and not shared.value:
-            shared.value = 1
+            shared.value = STOP_AFTER_STEP
             pending = {f for f in pending if not f.cancel()}  # those a worker has: they stop
         for future in finished:
             i = futures[future]
