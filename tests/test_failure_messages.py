@@ -6,8 +6,10 @@ configuration (det J = -1.795e-03): element 4 of body 'block'")."""
 import re
 
 import pytest
+from helpers import model_from_example
 
 import ntncontact as ntc
+from ntncontact.engine.diagnostics import element_label
 from ntncontact.engine.simulation import SimulationError
 
 
@@ -52,7 +54,25 @@ def test_a_failed_step_names_its_last_sub_step():
 
 def test_an_inverted_element_is_named_once_with_its_body():
     message = failure(0.1)
-    assert "element 4 of body 'block' (global element 4) is inverted in the current " \
-           "configuration" in message
+    assert "element 4 of body 'block' (global element 4; centred at (1.125, 1.375) in the " \
+           "reference mesh) is inverted in the current configuration" in message
     assert "element 4 is inverted" not in message and "): element 4 of body" not in message
     assert message.count("of body 'block'") == 1, message
+
+
+def test_a_file_element_is_named_by_its_file_number_and_place():
+    """Run errors named internal numbers only (session 42's noticed item): an element of a
+    gmsh mesh is named by its body, its number there, the file's element number and its
+    reference centre, and the undefined normal's nodes by their file numbers too."""
+    model = model_from_example("block_sliding.toml")
+    block = model.body("block")
+    local = block.mesh.n_cells - 1
+    label = element_label(model, block.cell_offset + local)
+    file_number = int(block.mesh.file_element_ids[local])
+    centre = block.mesh.nodes[block.mesh.cells[local]].mean(axis=0)
+    assert label == (f"element {local} of body 'block' (global element "
+                     f"{block.cell_offset + local}, file element {file_number}; centred at "
+                     f"({centre[0]:.6g}, {centre[1]:.6g}) in the reference mesh)")
+    assert file_number != local  # gmsh numbers its quads after the lines and points
+    generated = model.body("foundation")
+    assert "file element" not in element_label(model, generated.cell_offset)

@@ -205,13 +205,26 @@ class InvertedAtStepEnd(InvertedElementError):
     """An element inverted in the configuration a converged step ends in. It is an
     :class:`InvertedElementError`, so the step is cut back like a failed Newton solve."""
 
-    def __init__(self, body: str, local: int, element: int, value: float, time: float) -> None:
-        self.body, self.local, self.time = body, int(local), float(time)
-        self.element, self.value = int(element), float(value)
+    def __init__(self, label: str, element: int, value: float, time: float) -> None:
+        self.element, self.value, self.time = int(element), float(value), float(time)
         ValueError.__init__(
-            self, f"element {self.local} of body '{body}' (global element {self.element}) is "
-            f"inverted at the end of the step to t = {self.time:.6g} (det J = {self.value:.3e} "
-            "at a quadrature point)")
+            self, f"{label} is inverted at the end of the step to t = {self.time:.6g} "
+            f"(det J = {self.value:.3e} at a quadrature point)")
+
+
+def element_label(model: Model, element: int) -> str:
+    """A global element named as a user finds it: its body, its number there, the number of
+    the file it was read from, and its centre in the reference mesh (run errors named only
+    the package's 0-based numbers, which a gmsh file numbers otherwise and no viewer shows)."""
+    body = model.bodies[int(model.body_of_cell()[element])]
+    local = element - body.cell_offset
+    numbers = f"global element {element}"
+    ids = body.mesh.file_element_ids
+    if ids is not None and ids[local] >= 0:
+        numbers += f", file element {int(ids[local])}"
+    centre = body.mesh.nodes[body.mesh.cells[local]].mean(axis=0)
+    return (f"element {local} of body '{body.name}' ({numbers}; centred at "
+            f"({centre[0]:.6g}, {centre[1]:.6g}) in the reference mesh)")
 
 
 def check_end_of_step(model: Model, x: NDArray, time: float) -> None:
@@ -227,9 +240,7 @@ def check_end_of_step(model: Model, x: NDArray, time: float) -> None:
     if not bad.any():
         return
     element = int(np.flatnonzero(bad)[np.argmin(np.nan_to_num(det[bad], nan=-np.inf))])
-    body = model.bodies[int(model.body_of_cell()[element])]
-    raise InvertedAtStepEnd(body.name, element - body.cell_offset, element, float(det[element]),
-                            time)
+    raise InvertedAtStepEnd(element_label(model, element), element, float(det[element]), time)
 
 
 def named_failure(model: Model, err: BaseException) -> str:
@@ -243,8 +254,7 @@ def named_failure(model: Model, err: BaseException) -> str:
     if isinstance(inverted, InvertedElementError) \
             and not isinstance(inverted, InvertedAtStepEnd) \
             and 0 <= inverted.element < len(model.cells):
-        body = model.bodies[int(model.body_of_cell()[inverted.element])]
-        named = inverted.named(body.name, inverted.element - body.cell_offset)
+        named = inverted.named(element_label(model, inverted.element))
         return str(err).replace(str(inverted), named)
     columns = getattr(inverted, "columns", None)
     if columns is not None:
@@ -259,7 +269,10 @@ def _named_normal(model: Model, err: UndefinedNormalError) -> str:
 
     def node(n: int) -> str:
         body = model.bodies[int(body_of[n])]
-        return f"node {n - body.node_offset} of body '{body.name}'"
+        ids = body.mesh.file_node_ids
+        local = n - body.node_offset
+        file = f" (file node {int(ids[local])})" if ids is not None and ids[local] >= 0 else ""
+        return f"node {local} of body '{body.name}'{file}"
 
     names = [ci.name for ci in model.interfaces
              if np.isin(err.node, ci.interface.surface1.nodes)

@@ -45,12 +45,11 @@ class InvertedElementError(ValueError):
         self.where = where
         super().__init__(f"element {element} is inverted in the {where} (det J = {value:.3e})")
 
-    def named(self, body: str, local: int) -> str:
-        """The message with the element named once, by its body and its number there (the
-        global number appended after it read "element 4 is inverted ...: element 4 of body
-        'block'")."""
-        return (f"element {local} of body '{body}' (global element {self.element}) is inverted "
-                f"in the {self.where} (det J = {self.value:.3e})")
+    def named(self, label: str) -> str:
+        """The message with the element named once, by ``label`` (its body, its number there,
+        its file number and place: the global number appended after it read "element 4 is
+        inverted ...: element 4 of body 'block'")."""
+        return f"{label} is inverted in the {self.where} (det J = {self.value:.3e})"
 
 
 class NonFiniteElementError(InvertedElementError):
@@ -69,9 +68,9 @@ class NonFiniteElementError(InvertedElementError):
                 f"floating-point range: displacements up to {self.value:.3g}); check the "
                 "units and scale of the initial velocity, loads and material")
 
-    def named(self, body: str, local: int) -> str:
-        """The message with the element named by its body and its number there."""
-        return self._text(f"element {local} of body '{body}' (global element {self.element})")
+    def named(self, label: str) -> str:
+        """The message with the element named by ``label``."""
+        return self._text(label)
 
 
 @dataclass(frozen=True)
