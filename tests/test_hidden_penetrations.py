@@ -20,7 +20,8 @@ import pytest
 from helpers import run_example
 
 from ntncontact.cli import main
-from ntncontact.mesh.generators import annulus
+from ntncontact.mesh import overlap
+from ntncontact.mesh.generators import annulus, half_disk
 from ntncontact.mesh.overlap import boundary_edges, deepest_self_overlap, edge_size
 from ntncontact.report.run_warnings import PENETRATION_WARNING, result_warnings
 
@@ -172,3 +173,42 @@ def test_a_paired_surface_2_node_as_deep_as_its_pair_is_not_warned_twice():
     summary["max_penetration"] = 0.0
     (line,) = result_warnings(summary, static=False)
     assert line.startswith("node 155 of interface 'if', on surface_2, went 0.0316")
+
+
+def _all_pairs_clearance(boundary, nodes, cells):
+    """``self_clearance`` by definition: every boundary node against every cell it is not a
+    corner of, capped at two cell radii."""
+    corners = nodes[cells]
+    radius = np.linalg.norm(corners - corners.mean(axis=1)[:, None], axis=-1).max()
+    point, cell = np.divmod(np.arange(len(boundary) * len(cells)), len(cells))
+    foreign = ~np.any(cells[cell] == boundary[point, None], axis=1)
+    quad, at = corners[cell[foreign]], nodes[boundary[point[foreign]], None, :]
+    ab, rel = np.roll(quad, -1, axis=1) - quad, at - quad
+    t = np.clip(np.sum(rel * ab, axis=-1) / np.sum(ab * ab, axis=-1), 0.0, 1.0)
+    return min(2.0 * radius, float(np.linalg.norm(rel - t[..., None] * ab, axis=-1).min()))
+
+
+def test_self_clearance_measures_the_near_cells_only(monkeypatch):
+    """A graded body (Hertz's half cylinder, its contact zone's cells 7 times smaller than
+    the far ones) has the same clearance as every pair gives, bit for bit, deformed or not,
+    measuring ~4.5 pairs a boundary node a call: searching every cell within three times
+    the largest radius measured 73 a node here, and 200 000 a step on Hertz refined 8x
+    (0.12 s of its 2.1 s step)."""
+    mesh = half_disk(400.0, 80, 8, bottom_size=6.0, fine_half_width=60.0)
+    edges = boundary_edges(mesh.cells)
+    boundary = np.unique(edges)
+    measured = []
+
+    class Counted(overlap.cKDTree):
+        def sparse_distance_matrix(self, *args, **kwargs):
+            found = super().sparse_distance_matrix(*args, **kwargs)
+            measured.append(len(found))
+            return found
+
+    monkeypatch.setattr(overlap, "cKDTree", Counted)
+    rng = np.random.default_rng(3)
+    for scale in (0.0, 0.05, 0.3):
+        nodes = mesh.nodes + rng.normal(scale=scale, size=mesh.nodes.shape)
+        assert overlap.self_clearance(boundary, nodes, mesh.cells) == \
+            _all_pairs_clearance(boundary, nodes, mesh.cells)
+    assert sum(measured) < 3 * 20 * len(boundary)

@@ -279,20 +279,62 @@ def deepest_self_overlap(boundary: NDArray, nodes: NDArray, cells: NDArray, edge
 
 
 def self_clearance(boundary: NDArray, nodes: NDArray, cells: NDArray) -> float:
-    """The smallest distance from a boundary node to a cell it is not a corner of (inf with
-    none): a deformation that changes no distance between points of the body by this much
-    cannot put a boundary node inside such a cell (``deepest_self_overlap`` then finds none).
-    Cells farther than two cell radii from a node's centroid distance are left out: they are
-    at least that far."""
+    """The smallest distance from a boundary node to a cell it is not a corner of, capped at
+    two cell radii (the largest centroid-corner distance): a deformation that changes no
+    distance between points of the body by this much cannot put a boundary node inside such
+    a cell (``deepest_self_overlap`` then finds none).
+
+    Only the pairs that can be nearest are measured: a cell is at least its centroid's
+    distance minus its own radius away, so with ``bound`` the distance of some such pair
+    (each node's nearest centroids), a cell counts only within ``bound`` + its radius, in
+    classes of cells of like radius (``_by_radius``). Searching within three times the
+    largest radius, as before, measured 200 000 pairs a call on Hertz refined 8x (graded:
+    its far cells' radii 8 times the contact zone's), 0.12 s of its 2.1 s step; the pairs'
+    distances are computed as before, so the minimum is the same to the bit."""
     corners = nodes[cells]
     centroid = corners.mean(axis=1)
-    radius = float(np.linalg.norm(corners - centroid[:, None], axis=-1).max())
-    near = cKDTree(nodes[boundary]).sparse_distance_matrix(cKDTree(centroid), 3.0 * radius,
-                                                           output_type="ndarray")
-    point, cell = near["i"], near["j"]
+    radii = np.linalg.norm(corners - centroid[:, None], axis=-1).max(axis=1)
+    cap = 2.0 * float(radii.max())
+    if len(boundary) == 0:
+        return cap
+    points = cKDTree(nodes[boundary])
+    _, first = cKDTree(centroid).query(nodes[boundary], k=min(NEAREST_CELLS, len(cells)))
+    first = first.reshape(len(boundary), -1)
+    point = np.repeat(np.arange(len(boundary)), first.shape[1])
+    bound = min(cap, _foreign_distance(boundary, nodes, cells, corners, point,
+                                       first.reshape(-1)))
+    clearance = bound
+    for group in _by_radius(radii):
+        # round-off in either distance must not drop the nearest cell: a relative margin
+        reach = (bound + float(radii[group].max())) * (1.0 + 1e-9) + 1e-300
+        near = points.sparse_distance_matrix(cKDTree(centroid[group]), reach,
+                                             output_type="ndarray")
+        clearance = min(clearance, _foreign_distance(boundary, nodes, cells, corners,
+                                                     near["i"], group[near["j"]]))
+    return clearance
+
+
+#: Centroids nearest each boundary node whose cells give ``self_clearance`` its first bound
+NEAREST_CELLS = 8
+
+
+def _by_radius(radii: NDArray) -> list[NDArray]:
+    """The cells in classes whose radii are within a factor of two of each other (a graded
+    mesh's few sizes): each class is searched within its own largest radius."""
+    level = np.floor(np.log2(np.maximum(radii, 1e-300) / max(float(radii.max()), 1e-300)))
+    order = np.argsort(level, kind="stable")
+    cuts = np.flatnonzero(np.diff(level[order])) + 1
+    return np.split(order, cuts)
+
+
+def _foreign_distance(boundary: NDArray, nodes: NDArray, cells: NDArray, corners: NDArray,
+                      point: NDArray, cell: NDArray) -> float:
+    """The smallest distance from boundary node ``point`` (index into ``boundary``) to the
+    edges of ``cell``, over the pairs whose cell does not have the node as a corner (inf
+    with none)."""
     foreign = ~np.any(cells[cell] == boundary[point, None], axis=1)
     point, cell = point[foreign], cell[foreign]
-    clearance = 2.0 * radius
+    clearance = np.inf
     for start in range(0, len(point), CHUNK):  # the distance to the quad's four edges
         quad = corners[cell[start:start + CHUNK]]
         rel = nodes[boundary[point[start:start + CHUNK]], None, :] - quad
