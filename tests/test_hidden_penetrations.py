@@ -239,3 +239,29 @@ def test_a_body_deforming_fast_is_searched_without_remeasuring_its_clearance(mon
     for _ in range(10):  # at rest
         assert check.deepest(x) == SelfPenetration()
     assert len(measured) == 1 and len(searched) < 5 + 10
+
+
+def test_the_checks_cell_geometry_is_numpy_s_to_the_bit():
+    """The per-step checks' centroids and largest radius (``mesh.overlap._inside_pairs``,
+    run on every cell of a body every step: 47 -> 24 ms a step on Hertz refined 8x) are the
+    values ``mean`` and ``norm`` give, and the pairs found are every pair's test's."""
+    mesh = half_disk(400.0, 80, 8, bottom_size=6.0, fine_half_width=60.0)
+    rng = np.random.default_rng(5)
+    nodes = mesh.nodes + rng.normal(scale=0.5, size=mesh.nodes.shape)
+    corners = nodes[mesh.cells]
+    centroid = overlap._centroids(corners)
+    assert np.array_equal(centroid, corners.mean(axis=1))
+    assert overlap._largest_radius(corners, centroid) == \
+        float(np.linalg.norm(corners - centroid[:, None], axis=-1).max())
+    points = nodes[np.unique(boundary_edges(mesh.cells))]
+    slack = 0.05
+    point, cell = overlap._inside_pairs(points, nodes, mesh.cells, slack)
+    every = np.stack(np.divmod(np.arange(len(points) * len(mesh.cells)), len(mesh.cells)))
+    quad = corners[every[1]]
+    edges = np.roll(quad, -1, axis=1) - quad
+    rel = points[every[0], None, :] - quad
+    cross = edges[..., 0] * rel[..., 1] - edges[..., 1] * rel[..., 0]
+    inside = (cross >= -slack * np.linalg.norm(edges, axis=-1)).all(axis=-1)
+    assert sorted(zip(point.tolist(), cell.tolist(), strict=True)) == \
+        sorted(map(tuple, every[:, inside].T.tolist()))
+    assert len(point) > len(points)  # each node is in its own cells
