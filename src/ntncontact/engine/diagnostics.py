@@ -571,7 +571,7 @@ class SelfCrossingCheck:
     that deforms more than that each step (Hertz's cylinder: its contact zone's cells are
     small, its load steps large) is searched the next step whatever the reference, and
     measuring its clearance every step cost more than the search (Hertz refined 8x: 48 ms
-    and 47 ms a step, 2.1 s steps). The old reference stays valid: it was found clean and its
+    a step against the search's 24, 2.1 s steps). The old reference stays valid: it was found clean and its
     clearance measured, so skipping against it stays safe; which steps are searched changes,
     what a search finds does not."""
 
