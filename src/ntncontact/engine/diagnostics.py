@@ -570,10 +570,10 @@ class SelfCrossingCheck:
     than the old reference's half clearance a step on average since that reference: a body
     that deforms more than that each step (Hertz's cylinder: its contact zone's cells are
     small, its load steps large) is searched the next step whatever the reference, and
-    measuring its clearance every step cost more than the search (Hertz refined 8x: 48 ms
-    a step against the search's 24, 2.1 s steps). The old reference stays valid: it was found clean and its
-    clearance measured, so skipping against it stays safe; which steps are searched changes,
-    what a search finds does not."""
+    measuring its clearance every step cost more than the search (Hertz refined 8x: 48 ms a
+    step against the search's 24, 2.1 s steps). The old reference stays valid: it was found
+    clean and its clearance measured, so skipping against it stays safe; which steps are
+    searched changes, what a search finds does not."""
 
     def __init__(self, model: Model) -> None:
         # per body: it, its nodes, boundary nodes, cells, boundary edges, edge size (global
