@@ -3,7 +3,8 @@
 Compiled kernels are cached on disk in :func:`ntncontact.kernel_cache_dir` (set up when the
 package is imported). Importing this module also registers a listener on Numba's compile
 events: the first time a process has to compile one of this package's kernels (an empty or
-outdated cache), it says so once on stderr, since a first run then spends ~40 s on it.
+outdated cache, or a configuration whose kernels the warm-up did not compile), it says so
+once on stderr, since a first run then spends up to ~40 s on it.
 """
 
 from __future__ import annotations
@@ -11,15 +12,30 @@ from __future__ import annotations
 import sys
 
 import numba
+import numpy as np
 from numba.core import event
 
 from . import kernel_cache_dir
 
-__all__ = ["njit", "COMPILE_NOTE"]
+__all__ = ["njit", "COMPILE_NOTE", "read_only"]
 
-COMPILE_NOTE = "ntncontact: compiling kernels once, ~40 s (cached in {directory})"
+#: Not "once" (its wording until session 43): a configuration whose kernels (a branch, an
+#: argument type) the warm-up's runs do not reach compiles them at its first run, a few
+#: seconds; ~40 s is an empty cache's. What holds is that they are cached for later runs.
+COMPILE_NOTE = ("ntncontact: compiling kernels for this configuration (up to ~40 s with an empty "
+                "cache; cached in {directory} for later runs)")
 
 njit = numba.njit
+
+
+def read_only(array: np.ndarray) -> np.ndarray:
+    """A read-only view of ``array`` (no copy). Numba compiles a kernel once per argument
+    type, and a read-only array is another type than a writable one: a caller whose arrays
+    are sometimes frozen (a mesh's) and sometimes new passes them through this, so that one
+    compiled form (the one the warm-up caches) serves every run."""
+    view = array.view()
+    view.setflags(write=False)
+    return view
 
 
 class _CompileNote(event.Listener):

@@ -9,13 +9,25 @@ that exactly the type signatures a run uses are cached:
   output's fields;
 - the same impact with an ALE obstacle: the ALE kernels (the larger half); the element and
   contact kernels have no other form (one implementation each), so they are compiled by
-  whichever process reaches them first and loaded from the cache by the other;
+  whichever process reaches them first and loaded from the cache by the other; then, in the
+  same process, the impact with both bodies ALE (the ring a closed surface chain) and the
+  obstacle's interior diffused, which reaches the remaining ALE paths (~0.5 s, its kernels
+  compiled by then);
 - where the run may assemble on several threads, two steps of a free block of
   2 x MIN_ELEMENTS_PER_THREAD elements: the threaded assembly, which every mesh of that many
   elements a material group takes (an independent tester's first 10^4-element run compiled it,
   18-23 s inside its wall_time_s).
 
-Kernels of branches that these short runs do not reach are still compiled on first use.
+Numba compiles a kernel once per argument type, and a read-only array, a writable one and a
+broadcast view are three types: the callers pass each kernel one form (``jit.read_only``), so
+that the types these runs cache are the ones every run uses. Session 43 measured the nine
+examples, three validation variants and 29 common configurations (materials, mass, static,
+friction, each method, the energy-conserving variant, every ALE smoothing, interior, remap,
+repair and convection option, an ALE annulus, ties, XDMF, threaded assembly of either
+material) after this warm-up: none compiled a kernel (before: the ALE annulus 10-11 s, the
+interior-smoothing ALE runs and three examples 0.8-1.2 s each).
+``tests/test_warmup_coverage.py`` checks it. A branch these runs do not reach would still
+be compiled on first use, and the compile note says so.
 
 It also writes the package's Python bytecode (``__pycache__``), which the interpreter does not
 write where ``PYTHONDONTWRITEBYTECODE`` is set: without it every start compiled the package's
@@ -41,6 +53,8 @@ from .threads import run_threads
 #: off-centre by a third of an obstacle element so that its nodes land between the obstacle's
 #: and the ALE mesh slides (and remaps) from the first contact step.
 STEPS = 12
+#: Steps of :func:`_closed_chain_scenario`: 6 were too few to reach the cell search
+CLOSED_CHAIN_STEPS = 12
 
 
 def _scenario(ale: bool) -> dict:
@@ -67,6 +81,20 @@ def _scenario(ale: bool) -> dict:
                      "law": "persistency", "penalty_normal": 1000.0,
                      "augmentation": {"gap_tolerance": 1e-6}}],
     }
+
+
+def _closed_chain_scenario() -> dict:
+    """The ALE impact with the ring ALE too (a closed surface chain, opened at each update)
+    and the obstacle's interior moved by diffusion (``ale.interior = "displacement"``): paths
+    the first ALE run does not take, which call kernels from Python that it calls only from
+    other kernels or not at all (``slide_chain`` on an opened closed chain, the remap's cell
+    search). Its kernels are compiled by then; it checks that their argument types are the
+    ones cached (a tester's first ALE disk run compiled slide_chain again, ~10 s)."""
+    data = _scenario(ale=True)
+    data["analysis"]["t_end"] = CLOSED_CHAIN_STEPS * 0.005
+    data["bodies"][0] |= {"mesh_motion": "ale", "ale": {"smoothing_layers": 1}}
+    data["bodies"][1]["ale"] |= {"interior": "displacement"}
+    return data
 
 
 def _block_scenario() -> dict:
@@ -99,7 +127,9 @@ def exercise(ale: bool) -> Simulation:
     kernel, which the run itself does not call without a result writer)."""
     simulation = Simulation(build_model(parse_scenario(_scenario(ale), Path("<warmup>"))))
     simulation.run()
-    if not ale:
+    if ale:
+        Simulation(build_model(parse_scenario(_closed_chain_scenario(), Path("<warmup>")))).run()
+    else:
         state = simulation.state
         frame_fields(simulation.model, state.X, state.d, [1])
     return simulation
@@ -127,8 +157,8 @@ def main() -> int:
 
     start = time.perf_counter()
     compile_bytecode()
-    print(f"Compiling the Numba kernels into {kernel_cache_dir()} (once; cached for later "
-          "runs)...", flush=True)
+    print(f"Compiling the Numba kernels into {kernel_cache_dir()} (cached for later runs)...",
+          flush=True)
     jit.NOTE.said = True  # said here, not again by each process
     if "fork" in mp.get_all_start_methods():
         with ProcessPoolExecutor(max_workers=2, mp_context=mp.get_context("fork")) as pool:

@@ -145,7 +145,7 @@ from ntncontact.mesh.quality import (
 )
 
 from ..fem.kernels_numba import gauss_jacobian
-from ..jit import njit
+from ..jit import njit, read_only
 
 __all__ = ["AleBody", "AleMotionError", "AleUpdate", "lumped_masses", "move_ale_body"]
 
@@ -388,7 +388,10 @@ class AleBody:
 
     @cached_property
     def cell_density(self) -> NDArray[np.float64]:
-        return np.broadcast_to(np.asarray(self.density, dtype=float), (len(self.cells),))
+        # a contiguous copy, not a broadcast view: _element_masses is compiled for one layout
+        # (lumped_masses passes a contiguous array), and a stride-0 view was a second one
+        return np.array(np.broadcast_to(np.asarray(self.density, dtype=float),
+                                        (len(self.cells),)))
 
     @cached_property
     def _last_state(self) -> dict:
@@ -545,8 +548,7 @@ def lumped_masses(X: ArrayLike, cells: ArrayLike, density: ArrayLike = 1.0) -> N
     """
     X = np.ascontiguousarray(X, dtype=float)
     cell_arr = np.ascontiguousarray(cells, dtype=np.int64).reshape(-1, 4)
-    rho = np.ascontiguousarray(np.broadcast_to(np.asarray(density, dtype=float),
-                                               (len(cell_arr),)))
+    rho = np.array(np.broadcast_to(np.asarray(density, dtype=float), (len(cell_arr),)))
     masses = _element_masses(X, cell_arr, np.arange(len(cell_arr)), rho, _DN, _SHAPE)
     return np.bincount(cell_arr.ravel(), masses.ravel(), len(X))
 
@@ -559,6 +561,15 @@ class _Chain:
     breaks: NDArray[np.bool_]
     spacing: NDArray[np.float64]  # reference segment lengths
     position: NDArray[np.int64]  # chain index of each active node
+
+    def __post_init__(self) -> None:
+        # read-only views whichever way the chain was opened: the kernels (slide_chain,
+        # _hint_cells) are compiled for one array type, and an open chain's arrays are the
+        # body's frozen ones while a closed chain's are new, writable arrays. Numba types the
+        # two apart, so the first closed (annulus, disk) ALE surface compiled slide_chain again
+        # inside the user's run (~10 s) although the warm-up had cached the open form.
+        for name in ("nodes", "breaks", "spacing", "position"):
+            object.__setattr__(self, name, read_only(getattr(self, name)))
 
 
 def _open_chain(body: AleBody, active: NDArray) -> _Chain:

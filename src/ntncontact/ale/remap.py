@@ -80,8 +80,13 @@ def inverse_bilinear(
     """
     cell_xy, points = np.asarray(cell_xy, dtype=float), np.asarray(points, dtype=float)
     lead = np.broadcast_shapes(cell_xy.shape[:-2], points.shape[:-1])
-    cells = np.ascontiguousarray(np.broadcast_to(cell_xy, (*lead, 4, 2))).reshape(-1, 4, 2)
-    pts = np.ascontiguousarray(np.broadcast_to(points, (*lead, 2))).reshape(-1, 2)
+    # C-contiguous and writable whatever the inputs: np.broadcast_to returns a read-only view
+    # (copied only where it broadcasts), which Numba types apart from a writable array, so
+    # unbroadcast inputs compiled the kernel a second time inside a run (~1.2 s: the ALE
+    # examples with interior smoothing)
+    cells = np.require(np.broadcast_to(cell_xy, (*lead, 4, 2)).reshape(-1, 4, 2),
+                       requirements=["C", "W"])
+    pts = np.require(np.broadcast_to(points, (*lead, 2)).reshape(-1, 2), requirements=["C", "W"])
     xi, res = _inverse_bilinear(cells, pts, iterations)  # until every point has converged
     return xi.reshape(*lead, 2), res.reshape(lead)
 

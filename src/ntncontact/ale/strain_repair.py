@@ -39,7 +39,7 @@ from ..fem.kernels_numba import (
     gauss_jacobian,
 )
 from ..fem.q4 import DN_GP, GAUSS_WEIGHTS
-from ..jit import njit
+from ..jit import njit, read_only
 
 __all__ = ["RepairResult", "StrainRepair", "restore_strain_energy"]
 
@@ -105,6 +105,12 @@ class StrainRepair:
     models: NDArray[np.int64]  # kernel model code per cell
     lam: NDArray[np.float64]
     mu: NDArray[np.float64]
+
+    def __post_init__(self) -> None:
+        # read-only views: the body's repair holds its mesh's frozen cells, the local one of a
+        # neighbourhood new arrays, and Numba compiled _energy_and_force once for each
+        for name in ("cells", "models", "lam", "mu"):
+            object.__setattr__(self, name, read_only(getattr(self, name)))
 
     def energy(self, X: NDArray, d: NDArray, which: NDArray) -> float:
         """Strain energy of the cells ``which``; raises ValueError if one is inverted."""
