@@ -88,8 +88,9 @@ def _closed_chain_scenario() -> dict:
     and the obstacle's interior moved by diffusion (``ale.interior = "displacement"``): paths
     the first ALE run does not take, which call kernels from Python that it calls only from
     other kernels or not at all (``slide_chain`` on an opened closed chain, the remap's cell
-    search). Its kernels are compiled by then; it checks that their argument types are the
-    ones cached (a tester's first ALE disk run compiled slide_chain again, ~10 s)."""
+    search). Its kernels are compiled by then, with the same argument types (the callers keep
+    each to one form), so it costs its run time only; it makes these calls part of what the
+    warm-up runs, against which ``tests/test_warmup_coverage.py`` compares other runs."""
     data = _scenario(ale=True)
     data["analysis"]["t_end"] = CLOSED_CHAIN_STEPS * 0.005
     data["bodies"][0] |= {"mesh_motion": "ale", "ale": {"smoothing_layers": 1}}

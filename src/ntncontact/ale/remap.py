@@ -83,7 +83,7 @@ def inverse_bilinear(
     # C-contiguous and writable whatever the inputs: np.broadcast_to returns a read-only view
     # (copied only where it broadcasts), which Numba types apart from a writable array, so
     # unbroadcast inputs compiled the kernel a second time inside a run (~1.2 s: the ALE
-    # examples with interior smoothing)
+    # examples whose interior nodes move)
     cells = np.require(np.broadcast_to(cell_xy, (*lead, 4, 2)).reshape(-1, 4, 2),
                        requirements=["C", "W"])
     pts = np.require(np.broadcast_to(points, (*lead, 2)).reshape(-1, 2), requirements=["C", "W"])
