@@ -24,8 +24,10 @@ that the types these runs cache are the ones every run uses. Session 43 measured
 examples, three validation variants and 29 common configurations (materials, mass, static,
 friction, each method, the energy-conserving variant, every ALE smoothing, interior, remap,
 repair and convection option, an ALE annulus, ties, XDMF, threaded assembly of either
-material) after this warm-up: none compiled a kernel (before: the ALE annulus 10-11 s, the
-interior-smoothing ALE runs and three examples 0.8-1.2 s each).
+material), a sweep and ``ntncontact validate --quick`` after this warm-up: none compiled a
+kernel (before: the ALE annulus 10-16 s, the interior-smoothing ALE runs, three examples and a
+validation variant 0.8-2.2 s each, validate's mesh-motion example the curve kernels that
+``SurfaceCurve.point_at`` calls).
 ``tests/test_warmup_coverage.py`` checks it. A branch these runs do not reach would still
 be compiled on first use, and the compile note says so.
 

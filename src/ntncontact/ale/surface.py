@@ -41,14 +41,17 @@ from functools import cached_property
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from ..jit import njit
+from ..jit import njit, read_only
 
 __all__ = ["SurfaceCurve", "local_slides", "point_at", "respace_surface", "slide_chain"]
 
 # 8-point Gauss-Legendre on [0, 1]: |x'(u)| is the root of a quadratic in u, smooth on a segment
 _GX, _GW = np.polynomial.legendre.leggauss(8)
-GAUSS_U = 0.5 * (_GX + 1.0)
-GAUSS_W = 0.5 * _GW
+GAUSS_U = read_only(0.5 * (_GX + 1.0))
+GAUSS_W = read_only(0.5 * _GW)
+# read-only, as a kernel sees a global array: slide_chain passes them on to _point_at as such,
+# while SurfaceCurve.point_at passed the writable module arrays, a second type that the
+# validation's mesh-motion example (respace_surface) compiled inside `ntncontact validate`
 CONVERGED = 1e-14  # Newton updates of a local parameter u in [0, 1] below this: round-off
 
 
