@@ -179,18 +179,17 @@ def test_equal_counts_stay_node_to_node():
 
 @pytest.mark.parametrize(("n1", "n2"), [(4, 10), (10, 4)])
 def test_weighted_tangent_is_the_derivative_of_the_weighted_force(n1, n2):
-    """S^T K(S x) S is the derivative of S^T f(S x) with the transfer held fixed (the kernel
-    on the pairs' chain of surface 1)."""
+    """The weighted tangent is the derivative of S(x)^T f(S(x) x): S^T K S plus the terms of
+    the weights' own motion (contact/transfer.py; tests/test_transfer_tangent.py checks them
+    on sheared, curved, frictional and rate-law cases)."""
     x, interface, pairs = flat_pair_interface(n1, n2)
     x[interface.surface1.nodes, 1] += 1e-3  # pressed: body 1 below, pushed into body 2
     x = x + 1e-3 * np.random.default_rng(3).standard_normal(x.shape)
     state = PairState.from_pairs(pairs)
-    transfer = unpaired_share(x, interface, pairs)
-    reduced = Interface(transfer.surface1, interface.surface2)
 
     def force(y):
-        plain = evaluate_contact(transfer.positions(y), None, None, reduced, state, PENALTY)
-        return transfer.force(plain.force)
+        return evaluate_contact(y, None, None, interface, state,
+                                replace(PENALTY, unpaired_share=True)).force
 
     res = evaluate_contact(x, None, None, interface, state,
                            replace(PENALTY, unpaired_share=True))

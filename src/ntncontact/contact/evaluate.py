@@ -294,14 +294,18 @@ def evaluate_pairs(x, v, x_start, table1, table2, pairs, lambda_N, dlambda_T, t_
     restoring: per pair, non-zero where the persistency law gets the gap-restoring rate
     g_n/dt (:func:`_restoring_rate`), g_n the gap at ``x_start``.
 
-    params: (eps_N, eps_T, mu, rate_factor, dissipation time factor).
+    params: (eps_N, eps_T, mu, rate_factor, dissipation time factor, dv/dx in the tangent:
+    rate_factor, or 0 for the tangent at fixed v, d(x_i - x_j)/dx in the gap law's slip
+    increment: 1, or 0 for the tangent at fixed increment); the unpaired share's chain rule
+    needs these partial tangents (Transfer.weight_terms).
     flags: (method code, rate law, v given, x_start given, frictional, moment free).
     Returns (error code, force (ndof,), rows, cols, vals (48 P, or 96 P moment free),
     scalars (N_SCALARS, P) indexed by GAP...FRICTION_SLOPE, normal (P, 2), tangent (P, 2),
     status (P,), dissipation, the slots' global nodes (P, 6), and the slot gradients of the
     normal measure (g or gdot) and of L_c, (P, 2, 6, 2), which the Lagrange blocks use).
     """
-    eps_N, eps_T, mu, rate_factor, step = params[0], params[1], params[2], params[3], params[4]
+    eps_N, eps_T, mu, rate_value, step = params[0], params[1], params[2], params[3], params[4]
+    rate_factor = params[5]  # the tangent's dv/dx; rate_value scales the restoring rate
     method, rate_law, has_v, has_start, frictional = (flags[0], flags[1], flags[2], flags[3],
                                                       flags[4])
     moment_free = flags[5]
@@ -346,7 +350,7 @@ def evaluate_pairs(x, v, x_start, table1, table2, pairs, lambda_N, dlambda_T, t_
             slip = _project(vw0, vw1, rate_factor, e0, e1, de, d_slip)
         elif has_start:
             s0, s1 = w0 - (x_start[i, 0] - x_start[j, 0]), w1 - (x_start[i, 1] - x_start[j, 1])
-            slip = _project(s0, s1, 1.0, e0, e1, de, d_slip)
+            slip = _project(s0, s1, params[6], e0, e1, de, d_slip)
         else:
             slip = _project(0.0, 0.0, 0.0, e0, e1, de, d_slip)
         offset = 0.0
@@ -363,7 +367,7 @@ def evaluate_pairs(x, v, x_start, table1, table2, pairs, lambda_N, dlambda_T, t_
         measure, d_measure = (gap_rate, d_rate) if rate_law else (gap, d_gap)
         rate_offset = 0.0
         if rate_law and has_start and restoring[p] != 0.0:
-            rate_offset = _restoring_rate(x_start, slots, i, j, rate_factor)
+            rate_offset = _restoring_rate(x_start, slots, i, j, rate_value)
             measure += rate_offset
         touch = not rate_law and abs(gap) <= TOUCH_ROUNDOFF * max(
             abs(x[i, 0]), abs(x[i, 1]), abs(x[j, 0]), abs(x[j, 1]))
@@ -440,6 +444,9 @@ class ContactResult:
     #: the unpaired nodes' share (transfer.py): slots and gradients are those of the kernel's
     #: positions S x; force and tangent are already mapped back. None: pairs node to node
     transfer: Transfer | None = None
+    #: with a transfer: (x, v, rate_factor, slot gradients at fixed v or None), what the
+    #: Lagrange blocks' G needs for the weights' own derivative (Transfer.columns)
+    share_inputs: tuple | None = None
 
     @property
     def normal_force(self) -> NDArray[np.float64]:
@@ -503,12 +510,14 @@ def _evaluate_compiled(
     """:func:`evaluate_contact` by :func:`evaluate_pairs`; bad input raises a ValueError."""
     rate_law = rate_factor is not None
     step = 1.0 if rate_factor is None else (dt if dt is not None else 2.0 / rate_factor)
-    params = np.array([law.eps_N, law.eps_T, law.mu, rate_factor or 0.0, step])
+    params = np.array([law.eps_N, law.eps_T, law.mu, rate_factor or 0.0, step,
+                       rate_factor or 0.0, 1.0])
     flags = np.array([METHOD_CODES[law.method], rate_law, v_eval is not None,
                       x_start is not None, law.frictional, law.moment_free], dtype=np.int64)
     pairs = state.pairs
     transfer = unpaired_share(x_eval, interface, pairs) if law.unpaired_share else None
     table1 = interface.surface1.kernel_table
+    x_nodes, v_nodes, start_nodes = x_eval, v_eval, x_start  # the weights' derivative
     x_named = x_eval  # the nodes' own positions (an undefined normal names them)
     if transfer is not None:  # the kernel sees each shared pair's weighted point
         x_eval, v_eval, x_start = (transfer.positions(a) for a in (x_eval, v_eval, x_start))
@@ -520,21 +529,38 @@ def _evaluate_compiled(
     def c_float(a: NDArray | None) -> NDArray:  # one compiled signature: C-contiguous float64
         return _NO_ARRAY if a is None else np.ascontiguousarray(a, dtype=np.float64)
 
+    inputs = (c_float(x_eval), c_float(v_eval), c_float(x_start), table1,
+              interface.surface2.kernel_table, np.ascontiguousarray(pairs, dtype=np.int64),
+              c_float(state.lambda_N), c_float(state.dlambda_T), c_float(state.t_T), restoring,
+              params, flags)
     (code, force, rows, cols, vals, scalars, normal, tangent, status, dissipation, slots,
-     gradients) = evaluate_pairs(
-            c_float(x_eval), c_float(v_eval), c_float(x_start), table1,
-            interface.surface2.kernel_table, np.ascontiguousarray(pairs, dtype=np.int64),
-            c_float(state.lambda_N), c_float(state.dlambda_T), c_float(state.t_T), restoring,
-            params,
-            flags)
+     gradients) = evaluate_pairs(*inputs)
     if code == NOT_ON_SURFACE:
         interface.surface1.index_of(pairs[:, 0])  # raises, naming the nodes
         interface.surface2.index_of(pairs[:, 1])
     if code == ZERO_CHORD:
         raise_undefined_normal(np.asarray(x_named), interface, pairs)
     if transfer is not None:
+        moving = [(vals, x_nodes)]  # K's factors of dS/dx applied to x (and v)
+        gradients_x = None
+        if rate_law and transfer.derivative is not None:
+            # v_c = S v moves with the weights too: K (dS x) + K_v (dS (v - rate_factor x)),
+            # K_v from the tangent at fixed v (dv/dx = 0), K = K_x + rate_factor K_v
+            fixed_v = params.copy()
+            fixed_v[5] = 0.0
+            again = evaluate_pairs(*inputs[:-2], fixed_v, flags)
+            vals_x, gradients_x = again[4], again[11]
+            moving = [(vals_x, x_nodes), ((vals - vals_x) / rate_factor, v_nodes)]
+        elif x_start is not None and law.frictional and transfer.derivative is not None:
+            # the slip increment w - w_start, w_start = S x_start: K_start = -K_w, K_w the
+            # part of K through w in the increment (K minus K at a fixed increment)
+            fixed_w = params.copy()
+            fixed_w[6] = 0.0
+            vals_w = vals - evaluate_pairs(*inputs[:-2], fixed_w, flags)[4]
+            moving = [(vals, x_nodes), (-vals_w, start_nodes)]
+        extra = transfer.weight_terms(rows, cols, moving, force)
         force = transfer.force(force)
-        rows, cols, vals = transfer.tangent(rows, cols, vals)
+        rows, cols, vals = transfer.tangent(rows, cols, vals, extra)
     return ContactResult(
         force=force, rows=rows, cols=cols, vals=vals, pairs=pairs, gap=scalars[GAP],
         gap_rate=scalars[GAP_RATE], slip_measure=scalars[SLIP_MEASURE],
@@ -543,6 +569,7 @@ def _evaluate_compiled(
         dissipation=float(dissipation), rate_law=rate_law, slots=slots, gradients=gradients,
         offset=scalars[OFFSET], chord=scalars[CHORD], friction_slope=scalars[FRICTION_SLOPE],
         rate_offset=scalars[RATE_OFFSET], transfer=transfer,
+        share_inputs=None if transfer is None else (x_nodes, v_nodes, rate_factor, gradients_x),
     )
 
 

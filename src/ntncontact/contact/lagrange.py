@@ -101,9 +101,23 @@ def blocks_of(result: ContactResult, law: ContactLaw) -> LagrangeBlocks:
     b_vals = (sign * column.reshape(p, n_nodes // 2, 2).repeat(2, axis=1)).ravel()
     g_vals = d_h.ravel()
     if result.transfer is not None:  # back from the kernel's positions S x: G S and S^T B
-        g_rows, g_cols, g_vals = result.transfer.columns(g_rows, g_cols, g_vals, p)
+        moving = _share_moving(result, g_vals)
+        g_rows, g_cols, g_vals = result.transfer.columns(g_rows, g_cols, g_vals, p, moving)
         b_cols, b_rows, b_vals = result.transfer.columns(b_cols, b_rows, b_vals, p)
     return LagrangeBlocks(values, g_rows, g_cols, g_vals, b_rows, b_cols, b_vals)
+
+
+def _share_moving(result: ContactResult, g_vals: NDArray[np.float64]
+                  ) -> list[tuple[NDArray, NDArray]]:
+    """G's parts that multiply dS/dx applied to x and to v (Transfer.weight_terms): under the
+    rate law G = G_x + rate_factor G_v, G_x from the slot gradients at fixed v."""
+    x, v, rate_factor, gradients_x = result.share_inputs
+    if gradients_x is None:
+        return [(g_vals, x)]
+    measure, length = result.normal_measure, result.length
+    g_x = (measure[:, None, None] * result.gradients[:, 1]
+           + length[:, None, None] * gradients_x[:, 0]).ravel()
+    return [(g_x, x), ((g_vals - g_x) / rate_factor, v)]
 
 
 def release_tensile_pairs(

@@ -16,12 +16,15 @@ of pair a's force (H the segment's length on surface 1, L_c,a the pair's tributa
 the pair's point on that surface is sum_q w_aq x_q. Where a segment has no unpaired node
 between its pairs (equal counts), w is the identity: the pairs stay node to node.
 
-The transfer is a fixed linear map S of the node positions: the contact kernel is evaluated at
-x_c = S x (and v_c = S v), and its force and tangent come back as S^T f and S^T K S. The weights
-are taken at the evaluated positions, their own derivative is left out of the tangent (it
-vanishes where the arc-length parameters of the finer surface do not change, as on a flat
-surface under uniform strain; a sheared one gave FD vs J 1e-3 and linear Newton: docs/theory.md,
-"Unequal node counts", and the branch wip/share-tangent for the full tangent).
+The transfer is a map S(x) of the node positions: the contact kernel is evaluated at
+x_c = S x (and v_c = S v, x_start_c = S x_start), and its force comes back as S^T f. The weights
+are taken at the evaluated positions and move with them, so the tangent is S^T K S plus the
+weights' own terms S^T K_a (dS/dx) a (a = x, v, x_start, with the kernel's partial tangents)
+and (dS/dx)^T f (:meth:`Transfer.weight_terms`; docs/theory.md, "Unequal node counts").
+Without them (S^T K S only, exact only where the arc-length parameters of the finer surface do
+not change) a sheared flat surface gave FD vs J 1e-3 and linear Newton. dS/dx is taken per
+shared segment by the complex step on its few nodes. Not included: the weights' part of a
+gap-restoring pair's first-step offset g_n(S x_start)/dt (rate law), one step per pair.
 """
 
 from __future__ import annotations
@@ -51,6 +54,10 @@ class Transfer:
     surface1: ContactSurface
     distributed: NDArray[np.int64]
     weights: sp.csr_matrix
+    #: d W / d x as COO entries (row of ``weights``, node q, dof k, d W_rq / d x_k): the
+    #: weights move with the surfaces (arc-length parameters, span, tributary lengths)
+    derivative: tuple[NDArray[np.int64], NDArray[np.int64], NDArray[np.int64],
+                      NDArray[np.float64]] | None = None
 
     @property
     def dofs(self) -> sp.csr_matrix:
@@ -80,17 +87,76 @@ class Transfer:
         out += self.weights.T @ shared
         return out.reshape(np.shape(force))
 
-    def tangent(self, rows: NDArray, cols: NDArray, vals: NDArray
+    def tangent(self, rows: NDArray, cols: NDArray, vals: NDArray,
+                extra: tuple[NDArray, NDArray, NDArray] | None = None
                 ) -> tuple[NDArray[np.int64], NDArray[np.int64], NDArray[np.float64]]:
-        """S^T K S of a COO K (dofs), summed into unique sorted entries."""
+        """S^T K S of a COO K (dofs), plus ``extra`` entries already mapped (the weights'
+        own terms, :meth:`weight_terms`), summed into unique sorted entries."""
         rows, cols, vals = self._expand(rows, cols, vals)  # S^T K: K's rows spread
         cols, rows, vals = self._expand(cols, rows, vals)  # (S^T K) S: its columns spread
+        if extra is not None:
+            rows, cols, vals = (np.concatenate(pair) for pair in
+                                zip((rows, cols, vals), extra, strict=True))
         return _summed(rows, cols, vals, self.weights.shape[1] * 2)
 
-    def columns(self, rows: NDArray, cols: NDArray, vals: NDArray, n_rows: int
+    def weight_terms(self, rows: NDArray, cols: NDArray,
+                     moving: list[tuple[NDArray, NDArray]], kernel_force: NDArray[np.float64]
+                     ) -> tuple[NDArray[np.int64], NDArray[np.int64], NDArray[np.float64]]:
+        """The tangent's terms from the weights' own dependence on x (dof entries, unsummed):
+        S^T sum K_a (dS/dx) a over ``moving`` [(K_a's values on rows, cols; a)], the kernel's
+        partial derivatives with respect to its weighted inputs S a (positions: a = x; rates:
+        v), and (dS/dx)^T f, f the kernel's force (before ``force``). Without them Newton on
+        a sheared surface went linear (FD vs J 1e-3, 52 iterations for 19 in a static step)."""
+        if self.derivative is None:
+            return _EMPTY
+        parts = [self._through(rows, cols, vals, a) for vals, a in moving]
+        k_rows, k_cols, k_vals = (np.concatenate(item) for item in zip(*parts, strict=True))
+        k_rows, k_cols, k_vals = self._expand(k_rows, k_cols, k_vals)  # S^T (K D_x)
+        r, q, k, d = self.derivative
+        f = np.asarray(kernel_force, dtype=float).reshape(-1, 2)[self.distributed[r]]
+        comp = np.arange(2)
+        f_rows = (2 * q[:, None] + comp).ravel()
+        f_vals = (f * d[:, None]).ravel()
+        return (np.concatenate([k_rows, f_rows]),
+                np.concatenate([k_cols, np.repeat(k, 2)]),
+                np.concatenate([k_vals, f_vals]))
+
+    def _through(self, rows: NDArray, cols: NDArray, vals: NDArray, a: NDArray
+                 ) -> tuple[NDArray[np.int64], NDArray[np.int64], NDArray[np.float64]]:
+        """A D_a for a COO A (dofs): D_a = (dS/dx) a, the change of the weighted points S a
+        as the weights move, which is nonzero on the distributed nodes' rows only."""
+        rows, cols = np.asarray(rows, np.int64), np.asarray(cols, np.int64)
+        vals = np.asarray(vals, dtype=float)
+        n_dist = self.distributed.size
+        at = np.minimum(np.searchsorted(self.distributed, cols // 2), n_dist - 1)
+        hit = self.distributed[at] == cols // 2
+        if not hit.any():
+            return _EMPTY
+        r, q, k, d = self.derivative
+        a = np.asarray(a, dtype=float).reshape(-1, 2)
+        n_dof = 2 * self.weights.shape[1]
+        comp = np.arange(2)
+        # D_a: row (distributed r, component i), column k: sum_q a_q,i dW_rq/dx_k
+        d_matrix = sp.csr_matrix(((a[q] * d[:, None]).ravel(),
+                                  ((2 * r[:, None] + comp).ravel(), np.repeat(k, 2))),
+                                 shape=(2 * n_dist, n_dof))
+        used, local_rows = np.unique(rows[hit], return_inverse=True)
+        a_matrix = sp.csr_matrix((vals[hit], (local_rows, 2 * at[hit] + cols[hit] % 2)),
+                                 shape=(used.size, 2 * n_dist))
+        product = (a_matrix @ d_matrix).tocoo()
+        return used[product.row], product.col.astype(np.int64), product.data
+
+    def columns(self, rows: NDArray, cols: NDArray, vals: NDArray, n_rows: int,
+                moving: list[tuple[NDArray, NDArray]] | None = None
                 ) -> tuple[NDArray[np.int64], NDArray[np.int64], NDArray[np.float64]]:
-        """A (n_rows, ndof) COO block G_c as G_c S."""
+        """A (n_rows, ndof) COO block G_c as G_c S, plus sum G_a (dS/dx) a over ``moving``
+        (as in :meth:`weight_terms`) for a block that is a derivative with respect to x."""
+        parts = [] if moving is None or self.derivative is None else [
+            self._through(rows, cols, g, a) for g, a in moving]
         cols, rows, vals = self._expand(cols, rows, vals)
+        if parts:
+            rows, cols, vals = (np.concatenate(item) for item in
+                                zip((rows, cols, vals), *parts, strict=True))
         return _summed(rows, cols, vals, self.weights.shape[1] * 2)
 
     def _expand(self, index: NDArray, other: NDArray, vals: NDArray
@@ -116,6 +182,9 @@ class Transfer:
                 np.concatenate([vals[keep], vals[hit][repeat] * w.data[entries]]))
 
 
+_EMPTY = (np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros(0))
+
+
 def _summed(rows: NDArray, cols: NDArray, vals: NDArray, n_cols: int
             ) -> tuple[NDArray[np.int64], NDArray[np.int64], NDArray[np.float64]]:
     """COO entries with equal (row, col) summed, sorted by row then column."""
@@ -125,17 +194,18 @@ def _summed(rows: NDArray, cols: NDArray, vals: NDArray, n_cols: int
                                                           minlength=unique.size)
 
 
-def _dual_hat_integrals(xi: NDArray[np.float64]) -> NDArray[np.float64]:
-    """(2, m) int_0^1 psi N_q dxi for psi_a = 2 - 3 xi, psi_b = 3 xi - 1 and the hats N_q of
-    the nodes at xi (0 = xi_0 < ... < xi_{m-1} = 1); Simpson's rule is exact for the products."""
-    out = np.zeros((2, xi.size))
-    for lo in range(xi.size - 1):
-        a, b = xi[lo], xi[lo + 1]
+def _dual_hat_integrals(xi: NDArray) -> NDArray:
+    """(..., 2, m) int_0^1 psi N_q dxi for psi_a = 2 - 3 xi, psi_b = 3 xi - 1 and the hats N_q
+    of the nodes at xi (..., m) (0 = xi_0 < ... < xi_{m-1} = 1); Simpson's rule is exact for
+    the products. Leading axes and complex xi: the weights' derivative (``_share_derivatives``)."""
+    out = np.zeros(xi.shape[:-1] + (2, xi.shape[-1]), dtype=xi.dtype)
+    for lo in range(xi.shape[-1] - 1):
+        a, b = xi[..., lo], xi[..., lo + 1]
         mid, h = 0.5 * (a + b), b - a
         for side, psi in enumerate((lambda t: 2.0 - 3.0 * t, lambda t: 3.0 * t - 1.0)):
             # the hat of the left node falls 1 -> 0 over [a, b], the right one rises 0 -> 1
-            out[side, lo] += h / 6.0 * (psi(a) + 4.0 * psi(mid) * 0.5)
-            out[side, lo + 1] += h / 6.0 * (4.0 * psi(mid) * 0.5 + psi(b))
+            out[..., side, lo] += h / 6.0 * (psi(a) + 4.0 * psi(mid) * 0.5)
+            out[..., side, lo + 1] += h / 6.0 * (4.0 * psi(mid) * 0.5 + psi(b))
     return out
 
 
@@ -188,6 +258,7 @@ def unpaired_share(x: NDArray[np.float64], interface: Interface,
                                     [(a, b) for s, a, b in found if s == 0])
     length = _tributary(x, surface1, pairs[:, 0])
     weights: dict[int, dict[int, float]] = {}  # distributed node -> {node: weight}
+    segments: list[tuple[NDArray, NDArray]] = []  # (chain, its two pairs' nodes (2, 2))
     for s, a, b in found:
         chain = _inner_chain(surfaces[s], pos[s][a], pos[s][b])
         arc = np.concatenate(([0.0], np.cumsum(np.linalg.norm(np.diff(x[chain], axis=0),
@@ -200,9 +271,78 @@ def unpaired_share(x: NDArray[np.float64], interface: Interface,
             row[int(pairs[p, s])] -= 0.5 * scale  # this half of L_c no longer stays on the node
             for node, w in zip(chain.tolist(), (scale * share[side]).tolist(), strict=True):
                 row[node] = row.get(node, 0.0) + w
+        segments.append((chain, pairs[[a, b]][:, [s, 0]]))
     if any(np.count_nonzero(pairs[:, s] == node) > 1 for s in range(2) for node in weights):
         return None  # a node paired twice has no single weighted point
-    return Transfer(surface1, *_weights(x.shape[0], weights))
+    distributed, matrix = _weights(x.shape[0], weights)
+    return Transfer(surface1, distributed, matrix,
+                    _share_derivatives(x, surface1, segments, distributed))
+
+
+def _segment_weights(xl: NDArray, chain: NDArray, ends: NDArray, around: NDArray
+                     ) -> tuple[NDArray, NDArray]:
+    """The scale span / L_c of both pairs (..., 2) and the dual-hat integrals (..., 2, m) of one
+    shared segment from local positions xl (..., n, 2), as in :func:`unpaired_share`; complex
+    xl carries the complex step (lengths as sqrt(d.d), not |d|, to stay analytic).
+    chain: local chain nodes; ends: the pairs' surface-1 nodes; around: (2, 3) their
+    surface-1 (prev, node, next)."""
+    def length(d: NDArray) -> NDArray:
+        out = np.sqrt(np.sum(d * d, axis=-1))
+        # an open chain's end is its own prev (or next): a zero side, not one of slope 1
+        return np.where(out.real == 0.0, 0.0, out)
+
+    arc = np.cumsum(length(np.diff(xl[..., chain, :], axis=-2)), axis=-1)
+    arc = np.concatenate((np.zeros_like(arc[..., :1]), arc), axis=-1)
+    share = _dual_hat_integrals(arc / arc[..., -1:])
+    span = length(xl[..., ends[0], :] - xl[..., ends[1], :])
+    tributary = 0.5 * (length(xl[..., around[:, 1], :] - xl[..., around[:, 0], :])
+                       + length(xl[..., around[:, 2], :] - xl[..., around[:, 1], :]))
+    return span[..., None] / tributary, share
+
+
+def _share_derivatives(x: NDArray, surface1: ContactSurface,
+                       segments: list[tuple[NDArray, NDArray]], distributed: NDArray
+                       ) -> tuple[NDArray, NDArray, NDArray, NDArray]:
+    """d W / d x of the shared segments' rows as COO (row of W, node q, dof k, dW_rq/dx_k), by
+    the complex step (exact to round-off, no difference of nearly equal numbers), batched over
+    the segments of equal chain length. Each segment's local nodes are its chain and its
+    pairs' surface-1 (prev, node, next), repeats included: their partial derivatives add up
+    when the entries are summed."""
+    groups: dict[int, list[int]] = {}
+    for g, (chain, _) in enumerate(segments):
+        groups.setdefault(chain.size, []).append(g)
+    parts = [_group_derivative(x, surface1, [segments[g] for g in members], distributed)
+             for members in groups.values()]
+    return tuple(np.concatenate(item) for item in zip(*parts, strict=True))
+
+
+def _group_derivative(x: NDArray, surface1: ContactSurface,
+                      segments: list[tuple[NDArray, NDArray]], distributed: NDArray
+                      ) -> tuple[NDArray, NDArray, NDArray, NDArray]:
+    """:func:`_share_derivatives` of segments whose chains have the same length m."""
+    chains = np.array([chain for chain, _ in segments])  # (G, m)
+    ends = np.array([nodes for _, nodes in segments])  # (G, 2 pairs, (row node, surface 1))
+    k = surface1.index_of(ends[:, :, 1].ravel())
+    around = np.stack((surface1.prev[k], ends[:, :, 1].ravel(), surface1.next[k]),
+                      axis=1).reshape(-1, 6)
+    nodes = np.hstack((chains, around))  # (G, n) local nodes
+    m, n = chains.shape[1], nodes.shape[1]
+    n_dof, step = 2 * n, 1e-30
+    xl = np.broadcast_to(x[nodes].astype(complex)[:, None], (len(segments), n_dof, n, 2)).copy()
+    xl.reshape(len(segments), n_dof, n_dof)[:, np.arange(n_dof), np.arange(n_dof)] += 1j * step
+    local_around = m + np.arange(6).reshape(2, 3)
+    scale, share = _segment_weights(xl, np.arange(m), local_around[:, 1], local_around)
+    d_scale, d_share = scale.imag / step, share.imag / step  # (G, dof, 2), (G, dof, 2, m)
+    # d (scale share_q) on the chain's nodes, d (-scale / 2) on the row's own node
+    value = np.concatenate((scale.real[..., None] * d_share + d_scale[..., None] * share.real,
+                            -0.5 * d_scale[..., None]), axis=-1)  # (G, dof, 2, m + 1)
+    rows = np.searchsorted(distributed, ends[:, :, 0])  # (G, 2)
+    q = np.concatenate((np.repeat(chains[:, None], 2, axis=1), ends[:, :, :1]), axis=-1)
+    dofs = (2 * nodes[:, :, None] + np.arange(2)).reshape(len(segments), n_dof)
+    shape = value.shape
+    return (np.broadcast_to(rows[:, None, :, None], shape).ravel(),
+            np.broadcast_to(q[:, None], shape).ravel(),
+            np.broadcast_to(dofs[:, :, None, None], shape).ravel(), value.ravel())
 
 
 def _inner_chain(surface: ContactSurface, start: int, stop: int) -> NDArray[np.int64]:

@@ -1,0 +1,112 @@
+"""The unpaired share's tangent against central differences (contact/transfer.py).
+
+The share's weights S(x) move with the nodes (arc-length parameters of the finer surface, the
+span and the tributary lengths), and the kernel sees S x, S v and S x_start: the tangent must
+carry S^T K (dS/dx) x, the rate law's K_v (dS/dx) v, the gap law's slip increment through
+(dS/dx) x_start and (dS/dx)^T f. Without them (the old S^T K S) the error was 1e-4 to 3e-2 of
+max|K| on these cases. Tolerance 1e-7: with h = 1e-6 on coordinates of order 1, central
+differences carry a truncation error ~h^2 |f'''| ~ 1e-12 and a round-off ~eps |f| / h ~ 1e-10
+relative (measured here: 1e-11 to 1e-10), three orders below it and three above.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import scipy.sparse as sp
+
+from ntncontact.contact import ContactLaw, ContactSurface, Interface, PairState, evaluate_contact
+from ntncontact.contact.lagrange import lagrange_blocks
+
+H = 1e-6
+TOL = 1e-7
+
+
+def shared_interface(curved: bool) -> tuple[np.ndarray, Interface, np.ndarray]:
+    """Surface 1 (11 nodes, walked right to left, body 1 below) under surface 2 (5 nodes):
+    every node of the coarse one paired with a node of the fine one, 1 or 2 unpaired fine
+    nodes between pairs. Flat: the fine nodes unevenly spaced (a sheared surface); curved:
+    both on a tilted arc. Surface 1 is pressed 1e-2 into surface 2, and all nodes jittered."""
+    s1, s2 = np.linspace(2.0, 0.0, 11), np.linspace(0.0, 2.0, 5)
+    s1[1:-1] += 0.05 * np.sin(3.0 * s1[1:-1])  # uneven spacing: the share's weights vary
+    paired = np.array([10, 8, 5, 3, 0])  # fine nodes under s2's nodes 0..4
+    s1[paired] = s2
+    if curved:
+        def place(s, lift):
+            angle = 0.3 + 0.4 * s  # an arc of radius 2.5, turned
+            return np.column_stack([2.5 * np.sin(angle), lift - 2.5 * np.cos(angle)])
+    else:
+        def place(s, lift):
+            return np.column_stack([s, np.full(s.size, lift)])
+    x = np.vstack([place(s1, 1e-2), place(s2, 0.0)])
+    x += 1e-3 * np.random.default_rng(7).standard_normal(x.shape)
+    interface = Interface(ContactSurface(np.arange(11)), ContactSurface(11 + np.arange(5)))
+    return x, interface, np.column_stack([paired, 11 + np.arange(5)])
+
+
+def fd_check(x0, v0, rate_factor, interface, state, law, x_start=None) -> float:
+    """max |K - FD| / max |FD| of d force / d x, v following x with rate_factor."""
+    def force(x):
+        v = None if v0 is None else v0 + rate_factor * (x - x0)
+        return evaluate_contact(x, v, rate_factor, interface, state, law,
+                                x_start=x_start).force
+
+    res = evaluate_contact(x0, v0, rate_factor, interface, state, law, x_start=x_start)
+    assert res.transfer is not None and res.transfer.derivative is not None  # shares present
+    k = res.tangent_matrix().toarray()
+    fd = np.zeros_like(k)
+    for dof in range(x0.size):
+        e = np.zeros(x0.size)
+        e[dof] = H
+        fd[:, dof] = (force(x0 + e.reshape(-1, 2)) - force(x0 - e.reshape(-1, 2))) / (2 * H)
+    return float(np.abs(k - fd).max() / np.abs(fd).max())
+
+
+@pytest.mark.parametrize("curved", [False, True])
+@pytest.mark.parametrize("method", ["penalty", "augmented_lagrangian", "lagrange"])
+def test_gap_law_tangent_with_shares(curved, method):
+    """Static: the tangent includes the weights' derivative (frictionless and with friction,
+    whose slip increment is measured from S x_start)."""
+    x, interface, pairs = shared_interface(curved)
+    state = PairState.from_pairs(pairs).with_multipliers(np.full(len(pairs), 3.0))
+    frictionless = ContactLaw(method, eps_N=50.0, unpaired_share=True)
+    assert fd_check(x, None, None, interface, state, frictionless) < TOL
+    frictional = ContactLaw(method, eps_N=50.0, eps_T=40.0, mu=0.3, unpaired_share=True)
+    x_start = x + 2e-3 * np.random.default_rng(8).standard_normal(x.shape)
+    assert fd_check(x, None, None, interface, state, frictional, x_start=x_start) < TOL
+
+
+@pytest.mark.parametrize("curved", [False, True])
+def test_rate_law_tangent_with_shares(curved):
+    """Dynamic (persistency law, friction): v_c = S v moves with the weights too."""
+    x, interface, pairs = shared_interface(curved)
+    state = PairState.from_pairs(pairs).with_multipliers(np.full(len(pairs), 3.0))
+    law = ContactLaw("augmented_lagrangian", eps_N=50.0, eps_T=40.0, mu=0.3,
+                     unpaired_share=True)
+    v = np.random.default_rng(9).standard_normal(x.shape)
+    v[11:] *= 0.1
+    v[:11, 1] -= 1.0  # surface 1 approaching surface 2
+    assert fd_check(x, v, 40.0, interface, state, law) < TOL
+
+
+@pytest.mark.parametrize("rate_factor", [None, 40.0])
+def test_lagrange_constraint_gradient_with_shares(rate_factor):
+    """G = dh/dx of the Lagrange blocks includes the weights' derivative."""
+    x0, interface, pairs = shared_interface(curved=True)
+    state = PairState.from_pairs(pairs).with_multipliers(np.full(len(pairs), 3.0))
+    law = ContactLaw("lagrange", unpaired_share=True)
+    v0 = None if rate_factor is None else np.random.default_rng(9).standard_normal(x0.shape)
+
+    def blocks(x):
+        v = None if v0 is None else v0 + rate_factor * (x - x0)
+        return lagrange_blocks(x, v, rate_factor, interface, state, law)
+
+    g = sp.csr_matrix((lambda b: (b.g_vals, (b.g_rows, b.g_cols)))(blocks(x0)),
+                      shape=(len(pairs), x0.size)).toarray()
+    fd = np.zeros_like(g)
+    for dof in range(x0.size):
+        e = np.zeros(x0.size)
+        e[dof] = H
+        fd[:, dof] = (blocks(x0 + e.reshape(-1, 2)).values
+                      - blocks(x0 - e.reshape(-1, 2)).values) / (2 * H)
+    assert np.abs(g - fd).max() / np.abs(fd).max() < TOL
