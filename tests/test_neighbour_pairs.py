@@ -44,6 +44,23 @@ def test_no_active_pairs_reserve_nothing():
     assert neighbour_pairs(x, interface, active=np.zeros(0, np.int64), reach=4) == ()
 
 
+def test_a_shared_segments_entries_are_widened_along_both_chains():
+    """An unpaired share couples the nodes of a shared segment and its pairs' surface-1
+    neighbours, a few chain steps apart (the ring refined 2x: ring nodes 768-770, ALE nodes
+    1549-1555), which no grown set with every node paired holds: the reserved entries of
+    such an interface are widened by SHARE_RESERVED_STEPS along both chains."""
+    x, interface = _flat_interface()
+    rows, cols = interfaces.along_chains(np.array([2 * 4]), np.array([2 * 14 + 1]), interface,
+                                         len(x), 2)
+    entries = set(zip((rows // 2).tolist(), (cols // 2).tolist(), strict=True))
+    # node 4 (surface 1) and node 14 (surface 2): each moved 0..2 steps along its chain
+    assert entries == {(a, b) for a in range(2, 7) for b in range(12, 17)}
+    assert len(rows) == 4 * len(entries)  # both dofs of each node
+    x, interface = _flat_interface(closed=True)
+    rows, _ = interfaces.along_chains(np.array([0]), np.array([0]), interface, len(x), 1)
+    assert set((rows // 2).tolist()) == {8, 0, 1}  # around the closing segment
+
+
 RING_2X = ["bodies.0.mesh.n_radial=8", "bodies.0.mesh.n_circ=96", "bodies.1.mesh.nx=80",
            "bodies.1.mesh.ny=8", "analysis.t_end=0.15"]  # a mesh of our own, to the rebound
 
