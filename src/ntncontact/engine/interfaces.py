@@ -325,7 +325,9 @@ class ContactNewtonTerm:
         :data:`RESERVED_FROM_DOFS` on. Analyses, Hertz refined 8x: 15 -> 3, 41.5 -> 35 s a
         run (the run's final pattern given from the start: 1 analysis, 34.4 s); the ring
         refined 8x, t <= 0.15: 10 -> 3, 20.3 -> 18.9 s; 4x 8 -> 2. Histories the same to
-        round-off (1e-13 of their scales), Newton iterations equal."""
+        round-off (1e-13 of their scales), Newton iterations equal. With ``unpaired_share``
+        the entries are widened along both chains (:func:`along_chains`): the share's
+        weights couple the nodes of segments with unpaired nodes, which the grown sets lack."""
         if np.size(x_eval) < RESERVED_FROM_DOFS:
             return _NO_NODES, _NO_NODES
         rows, cols = [_NO_NODES], [_NO_NODES]
