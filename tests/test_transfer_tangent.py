@@ -4,9 +4,9 @@ The share's weights S(x) move with the nodes (arc-length parameters of the finer
 span and the tributary lengths), and the kernel sees S x, S v and S x_start: the tangent must
 carry S^T K (dS/dx) x, the rate law's K_v (dS/dx) v, the gap law's slip increment through
 (dS/dx) x_start and (dS/dx)^T f. Without them (the old S^T K S) the error was 1e-4 to 3e-2 of
-max|K| on these cases. Tolerance 1e-7: with h = 1e-6 on coordinates of order 1, central
+max|K| on these cases. Tolerance 1e-9: with h = 1e-6 on coordinates of order 1, central
 differences carry a truncation error ~h^2 |f'''| ~ 1e-12 and a round-off ~eps |f| / h ~ 1e-10
-relative (measured here: 1e-11 to 1e-10), three orders below it and three above.
+relative (measured here: 2e-11 to 5.7e-10), five orders below the terms' size.
 """
 
 from __future__ import annotations
@@ -19,7 +19,7 @@ from ntncontact.contact import ContactLaw, ContactSurface, Interface, PairState,
 from ntncontact.contact.lagrange import lagrange_blocks
 
 H = 1e-6
-TOL = 1e-7
+TOL = 1e-9
 
 
 def shared_interface(curved: bool) -> tuple[np.ndarray, Interface, np.ndarray]:
@@ -76,13 +76,15 @@ def test_gap_law_tangent_with_shares(curved, method):
     assert fd_check(x, None, None, interface, state, frictional, x_start=x_start) < TOL
 
 
+@pytest.mark.parametrize("moment_free", [False, True])
 @pytest.mark.parametrize("curved", [False, True])
-def test_rate_law_tangent_with_shares(curved):
-    """Dynamic (persistency law, friction): v_c = S v moves with the weights too."""
+def test_rate_law_tangent_with_shares(curved, moment_free):
+    """Dynamic (persistency law, friction): v_c = S v moves with the weights too (the kernel's
+    K_v, returned with the force, includes the moment-free chord rotation's v terms)."""
     x, interface, pairs = shared_interface(curved)
     state = PairState.from_pairs(pairs).with_multipliers(np.full(len(pairs), 3.0))
     law = ContactLaw("augmented_lagrangian", eps_N=50.0, eps_T=40.0, mu=0.3,
-                     unpaired_share=True)
+                     unpaired_share=True, moment_free=moment_free)
     v = np.random.default_rng(9).standard_normal(x.shape)
     v[11:] *= 0.1
     v[:11, 1] -= 1.0  # surface 1 approaching surface 2
@@ -110,3 +112,63 @@ def test_lagrange_constraint_gradient_with_shares(rate_factor):
         fd[:, dof] = (blocks(x0 + e.reshape(-1, 2)).values
                       - blocks(x0 - e.reshape(-1, 2)).values) / (2 * H)
     assert np.abs(g - fd).max() / np.abs(fd).max() < TOL
+
+
+def _complex_step_value(x: np.ndarray, block) -> np.ndarray:
+    """The oracle of ShareBlock.value: the weights of each segment from its local nodes (taken
+    from the block's dofs) by the complex step, step 1e-30 (no difference of nearly equal
+    numbers: exact to round-off). Lengths as sqrt(d.d), analytic, 0 where d = 0."""
+    def length(d):
+        out = np.sqrt(np.sum(d * d, axis=-1))
+        return np.where(out.real == 0.0, 0.0, out)
+
+    nodes = block.dofs[:, ::2] // 2  # (G, n): the chain (m), then each pair's prev, node, next
+    n_seg, n_dof = block.dofs.shape
+    m, step = nodes.shape[1] - 6, 1e-30
+    xl = np.broadcast_to(x[nodes].astype(complex)[:, None], (n_seg, n_dof, n_dof // 2, 2)).copy()
+    xl.reshape(n_seg, n_dof, n_dof)[:, np.arange(n_dof), np.arange(n_dof)] += 1j * step
+    arc = np.cumsum(length(np.diff(xl[..., :m, :], axis=-2)), axis=-1)
+    arc = np.concatenate((np.zeros_like(arc[..., :1]), arc), axis=-1)
+    xi = arc / arc[..., -1:]
+    share = np.zeros(xi.shape[:-1] + (2, m), dtype=complex)
+    for lo in range(m - 1):
+        a, b = xi[..., lo], xi[..., lo + 1]
+        mid, h = 0.5 * (a + b), b - a
+        for side, psi in enumerate((lambda t: 2.0 - 3.0 * t, lambda t: 3.0 * t - 1.0)):
+            share[..., side, lo] += h / 6.0 * (psi(a) + 2.0 * psi(mid))
+            share[..., side, lo + 1] += h / 6.0 * (2.0 * psi(mid) + psi(b))
+    around = m + np.arange(6).reshape(2, 3)
+    span = length(xl[..., m + 1, :] - xl[..., m + 4, :])
+    tributary = 0.5 * (length(xl[..., around[:, 1], :] - xl[..., around[:, 0], :])
+                       + length(xl[..., around[:, 2], :] - xl[..., around[:, 1], :]))
+    scale = span[..., None] / tributary
+    d_scale, d_share = scale.imag / step, share.imag / step
+    return np.concatenate((scale.real[..., None] * d_share + d_scale[..., None] * share.real,
+                           -0.5 * d_scale[..., None]), axis=-1)
+
+
+@pytest.mark.parametrize("curved", [False, True])
+def test_closed_form_weight_derivative_matches_complex_step(curved):
+    """The weights' derivative in closed form (transfer._group_derivative) equals the complex
+    step's to round-off, and both are dW/dx: central differences of the weights agree to
+    their truncation error. A wrong sign or a missing term (the span's or a tributary
+    length's derivative) breaks the first by O(1) of the values."""
+    from ntncontact.contact.transfer import unpaired_share
+
+    x, interface, pairs = shared_interface(curved)
+    transfer = unpaired_share(x, interface, pairs)
+    assert transfer is not None and len(transfer.derivative) == 2  # chains of 3 and 4 nodes
+    dense = np.zeros((transfer.distributed.size, x.shape[0], x.size))
+    for block in transfer.derivative:
+        oracle = _complex_step_value(x, block)
+        assert np.abs(block.value - oracle).max() <= 1e-13 * np.abs(oracle).max()
+        r = np.broadcast_to(block.rows[:, None, :, None], block.value.shape)
+        q = np.broadcast_to(block.nodes[:, None], block.value.shape)
+        k = np.broadcast_to(block.dofs[:, :, None, None], block.value.shape)
+        np.add.at(dense, (r.ravel(), q.ravel(), k.ravel()), block.value.ravel())
+    for dof in range(x.size):
+        e = np.zeros(x.size)
+        e[dof] = H
+        plus = unpaired_share(x + e.reshape(-1, 2), interface, pairs).weights.toarray()
+        minus = unpaired_share(x - e.reshape(-1, 2), interface, pairs).weights.toarray()
+        assert np.abs(dense[:, :, dof] - (plus - minus) / (2 * H)).max() < 1e-8

@@ -22,6 +22,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass
+from functools import partial
 
 import numpy as np
 import scipy.sparse as sp
@@ -286,6 +287,55 @@ def _restoring_rate(x_start, slots, i, j, rate_factor):
     return (w0 * c1 - w1 * c0) / chord * (0.5 * rate_factor)
 
 
+@njit(cache=True, inline="always")
+def _input_gradients(rate_law, moment_free, gap, offset, chord, n0, n1, e0, e1, d_meas, d_slip):
+    """Slot gradients of the normal measure and of the slip with respect to the kernel's
+    moving input alone (v under the rate law, w = x_i - x_j in the gap law's increment
+    w - w_start): the parts that the rate factor (or 1) scales in the full gradients."""
+    for k in range(6):
+        for c in range(2):
+            d_meas[k, c], d_slip[k, c] = 0.0, 0.0
+    d_slip[0, 0], d_slip[0, 1], d_slip[1, 0], d_slip[1, 1] = e0, e1, -e0, -e1
+    if not rate_law:
+        return
+    d_meas[0, 0], d_meas[0, 1], d_meas[1, 0], d_meas[1, 1] = n0, n1, -n0, -n1
+    if moment_free:  # the chord's rotation n.(v_a - v_b) (_add_chord_rate), a = 2, b = 3
+        q_rate, q_slip = offset / chord, -gap / chord
+        d_meas[2, 0], d_meas[2, 1] = q_rate * n0, q_rate * n1
+        d_meas[3, 0], d_meas[3, 1] = -q_rate * n0, -q_rate * n1
+        d_slip[2, 0], d_slip[2, 1] = q_slip * n0, q_slip * n1
+        d_slip[3, 0], d_slip[3, 1] = -q_slip * n0, -q_slip * n1
+
+
+@njit(cache=True, inline="always")
+def _input_jacobian(q, t_n_coef, t_t_coef, dn_coef, gap, offset, e0, e1, length, chord,
+                    moment_free, d_meas, d_slip, vals_in):
+    """The pair's force Jacobian with respect to the moving input (:func:`_input_gradients`),
+    written to vals_in from position q in :func:`_scatter`'s order (and the couple's)."""
+    n0, n1 = e1, -e0
+    for node in range(2):
+        sgn = 1.0 if node == 0 else -1.0
+        for k in range(6):
+            for r in range(2):
+                nr, er = (n0, e0) if r == 0 else (n1, e1)
+                for c in range(2):
+                    d_tn = t_n_coef * d_meas[k, c]
+                    d_tt = t_t_coef * d_slip[k, c] + dn_coef * d_tn
+                    vals_in[q] = sgn * length * (nr * d_tn + er * d_tt)
+                    q += 1
+    if moment_free:
+        for node in range(2):  # +C on chord node b (slot 3), -C on a
+            sgn = 1.0 if node == 0 else -1.0
+            for k in range(6):
+                for r in range(2):
+                    nr = n0 if r == 0 else n1
+                    for c in range(2):
+                        d_tn = t_n_coef * d_meas[k, c]
+                        d_tt = t_t_coef * d_slip[k, c] + dn_coef * d_tn
+                        vals_in[q] = sgn * nr * length * (gap * d_tt - offset * d_tn) / chord
+                        q += 1
+
+
 @njit(cache=True)
 def evaluate_pairs(x, v, x_start, table1, table2, pairs, lambda_N, dlambda_T, t_prev, restoring,
                    params, flags):
@@ -294,21 +344,23 @@ def evaluate_pairs(x, v, x_start, table1, table2, pairs, lambda_N, dlambda_T, t_
     restoring: per pair, non-zero where the persistency law gets the gap-restoring rate
     g_n/dt (:func:`_restoring_rate`), g_n the gap at ``x_start``.
 
-    params: (eps_N, eps_T, mu, rate_factor, dissipation time factor, dv/dx in the tangent:
-    rate_factor, or 0 for the tangent at fixed v, d(x_i - x_j)/dx in the gap law's slip
-    increment: 1, or 0 for the tangent at fixed increment); the unpaired share's chain rule
-    needs these partial tangents (Transfer.weight_terms).
-    flags: (method code, rate law, v given, x_start given, frictional, moment free).
+    params: (eps_N, eps_T, mu, rate_factor, dissipation time factor).
+    flags: (method code, rate law, v given, x_start given, frictional, moment free, partial
+    tangents wanted).
     Returns (error code, force (ndof,), rows, cols, vals (48 P, or 96 P moment free),
     scalars (N_SCALARS, P) indexed by GAP...FRICTION_SLOPE, normal (P, 2), tangent (P, 2),
-    status (P,), dissipation, the slots' global nodes (P, 6), and the slot gradients of the
-    normal measure (g or gdot) and of L_c, (P, 2, 6, 2), which the Lagrange blocks use).
+    status (P,), dissipation, the slots' global nodes (P, 6), the slot gradients of the
+    normal measure (g or gdot) and of L_c, (P, 2, 6, 2), which the Lagrange blocks use, and,
+    with the last flag, the partial tangents that the unpaired share's chain rule needs
+    (Transfer.weight_terms): vals_in, K's part through the moving input alone (K_v with
+    K = K_x + rate_factor K_v under the rate law; the part through w in the gap law's slip
+    increment w - w_start), on rows and cols, and the normal measure's slot gradient through
+    it (P, 6, 2); empty without the flag).
     """
-    eps_N, eps_T, mu, rate_value, step = params[0], params[1], params[2], params[3], params[4]
-    rate_factor = params[5]  # the tangent's dv/dx; rate_value scales the restoring rate
+    eps_N, eps_T, mu, rate_factor, step = params[0], params[1], params[2], params[3], params[4]
     method, rate_law, has_v, has_start, frictional = (flags[0], flags[1], flags[2], flags[3],
                                                       flags[4])
-    moment_free = flags[5]
+    moment_free, partials = flags[5], flags[6]
     npairs = pairs.shape[0]
     force = np.zeros(2 * x.shape[0])
     entries = ENTRIES_PER_PAIR * (2 if moment_free else 1) * npairs
@@ -326,17 +378,20 @@ def evaluate_pairs(x, v, x_start, table1, table2, pairs, lambda_N, dlambda_T, t_
     d_gap, d_rate, d_slip = np.empty((6, 2)), np.empty((6, 2)), np.empty((6, 2))
     d_tn, d_tt, jac = np.empty((6, 2)), np.empty((6, 2)), np.empty((6, 2, 2))
     d_offset = np.empty((6, 2))
+    vals_in = np.zeros(entries if partials else 0)
+    grads_in = np.zeros((npairs if partials else 0, 6, 2))
+    d_slip_in = np.empty((6, 2))
     dissipation = 0.0
     q = 0
     for p in range(npairs):
         i, j = pairs[p, 0], pairs[p, 1]
         if not _fill_slots(table1, table2, i, j, slots):
             return (NOT_ON_SURFACE, force, rows, cols, vals, scalars, normal, tangent, status, 0.0,
-                    all_slots, grads)
+                    all_slots, grads, vals_in, grads_in)
         chord, e0, e1 = _normal_frame(x, slots, dn, de)
         if chord == 0.0:
             return (ZERO_CHORD, force, rows, cols, vals, scalars, normal, tangent, status, 0.0,
-                    all_slots, grads)
+                    all_slots, grads, vals_in, grads_in)
         n0, n1 = e1, -e0
         length = _tributary_length(x, slots, d_length)
         # gap (2.4), gap rate (2.9), tangential measure (2.10 or the increment since x_start)
@@ -350,7 +405,7 @@ def evaluate_pairs(x, v, x_start, table1, table2, pairs, lambda_N, dlambda_T, t_
             slip = _project(vw0, vw1, rate_factor, e0, e1, de, d_slip)
         elif has_start:
             s0, s1 = w0 - (x_start[i, 0] - x_start[j, 0]), w1 - (x_start[i, 1] - x_start[j, 1])
-            slip = _project(s0, s1, params[6], e0, e1, de, d_slip)
+            slip = _project(s0, s1, 1.0, e0, e1, de, d_slip)
         else:
             slip = _project(0.0, 0.0, 0.0, e0, e1, de, d_slip)
         offset = 0.0
@@ -367,7 +422,7 @@ def evaluate_pairs(x, v, x_start, table1, table2, pairs, lambda_N, dlambda_T, t_
         measure, d_measure = (gap_rate, d_rate) if rate_law else (gap, d_gap)
         rate_offset = 0.0
         if rate_law and has_start and restoring[p] != 0.0:
-            rate_offset = _restoring_rate(x_start, slots, i, j, rate_value)
+            rate_offset = _restoring_rate(x_start, slots, i, j, rate_factor)
             measure += rate_offset
         touch = not rate_law and abs(gap) <= TOUCH_ROUNDOFF * max(
             abs(x[i, 0]), abs(x[i, 1]), abs(x[j, 0]), abs(x[j, 1]))
@@ -382,6 +437,11 @@ def evaluate_pairs(x, v, x_start, table1, table2, pairs, lambda_N, dlambda_T, t_
                 d_tn[k, c] = dt_dm * d_measure[k, c]
                 d_tt[k, c] = ds_coef * d_slip[k, c] + dn_coef * d_tn[k, c]
         f0, f1 = _force_jacobian(t_n, t_t, e0, e1, length, d_tn, d_tt, dn, de, d_length, jac)
+        if partials:
+            _input_gradients(rate_law, moment_free, gap, offset, chord, n0, n1, e0, e1,
+                             grads_in[p], d_slip_in)
+            _input_jacobian(q, dt_dm, ds_coef, dn_coef, gap, offset, e0, e1, length, chord,
+                            moment_free, grads_in[p], d_slip_in, vals_in)
         q = _scatter(q, i, j, slots, f0, f1, jac, force, rows, cols, vals)
         if moment_free:
             c0, c1 = _moment_free_couple(t_n, t_t, gap, offset, e0, e1, chord, length, d_tn,
@@ -398,7 +458,7 @@ def evaluate_pairs(x, v, x_start, table1, table2, pairs, lambda_N, dlambda_T, t_
         if stat == _SLIP:
             dissipation += t_t * (slip * step) * length
     return (OK, force, rows, cols, vals, scalars, normal, tangent, status, dissipation, all_slots,
-            grads)
+            grads, vals_in, grads_in)
 
 
 @dataclass(frozen=True)
@@ -406,7 +466,9 @@ class ContactResult:
     """Contact contribution to the residual and its tangent, plus per-pair diagnostics.
 
     force: (ndof,) vector to ADD to R = f_int - f_ext + f_contact.
-    rows, cols, vals: COO triplets of d force / d x_eval in global dofs (duplicates add up).
+    rows, cols, vals: COO triplets of d force / d x_eval in global dofs (duplicates add up);
+    None for a result evaluated with ``deferred_tangent`` whose transfer maps them back on
+    first use (:meth:`triplets`).
     Per pair (aligned with ``pairs``): gap g (2.4), gap_rate gdot (2.9; NaN without
     velocities), slip_measure (gdot_T, or delta g_T under the gap law), t_N, t_T (tractions),
     trial_T, normal_force = t_N L_c, tangential_force = t_T L_c, status (friction.STICK/SLIP),
@@ -444,9 +506,16 @@ class ContactResult:
     #: the unpaired nodes' share (transfer.py): slots and gradients are those of the kernel's
     #: positions S x; force and tangent are already mapped back. None: pairs node to node
     transfer: Transfer | None = None
-    #: with a transfer: (x, v, rate_factor, slot gradients at fixed v or None), what the
-    #: Lagrange blocks' G needs for the weights' own derivative (Transfer.columns)
+    #: with a transfer: (x, v, rate_factor, the normal measure's slot gradient through v
+    #: alone (P, 6, 2) under the rate law, else None), what the Lagrange blocks' G needs for
+    #: the weights' own derivative (Transfer.columns)
     share_inputs: tuple | None = None
+    #: with ``deferred_tangent`` and a transfer: () -> (rows, cols, vals), computed once
+    deferred: Callable[[], tuple[NDArray, NDArray, NDArray]] | None = None
+
+    def triplets(self) -> tuple[NDArray, NDArray, NDArray]:
+        """(rows, cols, vals), the deferred ones computed on the first call."""
+        return (self.rows, self.cols, self.vals) if self.deferred is None else self.deferred()
 
     @property
     def normal_force(self) -> NDArray[np.float64]:
@@ -467,7 +536,8 @@ class ContactResult:
     def tangent_matrix(self) -> sp.csr_matrix:
         """The COO triplets as a square CSR matrix (duplicates summed)."""
         n = self.force.size
-        return sp.csr_matrix((self.vals, (self.rows, self.cols)), shape=(n, n))
+        rows, cols, vals = self.triplets()
+        return sp.csr_matrix((vals, (rows, cols)), shape=(n, n))
 
 
 def evaluate_contact(
@@ -480,6 +550,7 @@ def evaluate_contact(
     *,
     x_start: NDArray[np.float64] | None = None,
     dt: float | None = None,
+    deferred_tangent: bool = False,
 ) -> ContactResult:
     """Contact force, consistent tangent and per-pair results for the active set ``state``.
 
@@ -491,13 +562,17 @@ def evaluate_contact(
     dt: only scales the reported dissipation under the rate law (default 2/rate_factor).
     Multipliers (lambda_N, dlambda_T) and the friction history come from ``state`` and are
     held fixed: this is what Newton calls at every iteration.
+    deferred_tangent: an unpaired share's tangent (S^T K S and the weights' terms, 5x the
+    kernel's time) is mapped back only when :meth:`ContactResult.triplets` asks for it: in
+    the ring example 261 of 2297 evaluations (the others are residuals: line search,
+    modified Newton, augmentation checks).
     """
     if law.frictional and rate_factor is None and x_start is None:
         raise ValueError("friction under the gap law needs x_start (tangential increment)")
     if rate_factor is not None and v_eval is None:
         raise ValueError("the rate law needs velocities v")
     return _evaluate_compiled(x_eval, v_eval, rate_factor, interface, state, law, x_start,
-                              dt)
+                              dt, deferred_tangent)
 
 
 _NO_ARRAY = np.zeros((0, 2))
@@ -506,16 +581,21 @@ _NO_ARRAY = np.zeros((0, 2))
 def _evaluate_compiled(
     x_eval: NDArray, v_eval: NDArray | None, rate_factor: float | None, interface: Interface,
     state: PairState, law: ContactLaw, x_start: NDArray | None, dt: float | None,
+    deferred_tangent: bool = False,
 ) -> ContactResult:
     """:func:`evaluate_contact` by :func:`evaluate_pairs`; bad input raises a ValueError."""
     rate_law = rate_factor is not None
     step = 1.0 if rate_factor is None else (dt if dt is not None else 2.0 / rate_factor)
-    params = np.array([law.eps_N, law.eps_T, law.mu, rate_factor or 0.0, step,
-                       rate_factor or 0.0, 1.0])
-    flags = np.array([METHOD_CODES[law.method], rate_law, v_eval is not None,
-                      x_start is not None, law.frictional, law.moment_free], dtype=np.int64)
+    params = np.array([law.eps_N, law.eps_T, law.mu, rate_factor or 0.0, step])
     pairs = state.pairs
     transfer = unpaired_share(x_eval, interface, pairs) if law.unpaired_share else None
+    # the weights' chain rule needs K's part through the moving input: v under the rate law,
+    # the slip increment's w - w_start under a frictional gap law
+    moving_input = transfer is not None and transfer.segments is not None and (
+        rate_law or (x_start is not None and law.frictional))
+    flags = np.array([METHOD_CODES[law.method], rate_law, v_eval is not None,
+                      x_start is not None, law.frictional, law.moment_free, moving_input],
+                     dtype=np.int64)
     table1 = interface.surface1.kernel_table
     x_nodes, v_nodes, start_nodes = x_eval, v_eval, x_start  # the weights' derivative
     x_named = x_eval  # the nodes' own positions (an undefined normal names them)
@@ -529,38 +609,29 @@ def _evaluate_compiled(
     def c_float(a: NDArray | None) -> NDArray:  # one compiled signature: C-contiguous float64
         return _NO_ARRAY if a is None else np.ascontiguousarray(a, dtype=np.float64)
 
-    inputs = (c_float(x_eval), c_float(v_eval), c_float(x_start), table1,
-              interface.surface2.kernel_table, np.ascontiguousarray(pairs, dtype=np.int64),
-              c_float(state.lambda_N), c_float(state.dlambda_T), c_float(state.t_T), restoring,
-              params, flags)
     (code, force, rows, cols, vals, scalars, normal, tangent, status, dissipation, slots,
-     gradients) = evaluate_pairs(*inputs)
+     gradients, vals_in, gradients_in) = evaluate_pairs(
+            c_float(x_eval), c_float(v_eval), c_float(x_start), table1,
+            interface.surface2.kernel_table, np.ascontiguousarray(pairs, dtype=np.int64),
+            c_float(state.lambda_N), c_float(state.dlambda_T), c_float(state.t_T), restoring,
+            params, flags)
     if code == NOT_ON_SURFACE:
         interface.surface1.index_of(pairs[:, 0])  # raises, naming the nodes
         interface.surface2.index_of(pairs[:, 1])
     if code == ZERO_CHORD:
         raise_undefined_normal(np.asarray(x_named), interface, pairs)
     if transfer is not None:
-        moving = [(vals, x_nodes)]  # K's factors of dS/dx applied to x (and v)
-        gradients_x = None
-        if rate_law and transfer.derivative is not None:
-            # v_c = S v moves with the weights too: K (dS x) + K_v (dS (v - rate_factor x)),
-            # K_v from the tangent at fixed v (dv/dx = 0), K = K_x + rate_factor K_v
-            fixed_v = params.copy()
-            fixed_v[5] = 0.0
-            again = evaluate_pairs(*inputs[:-2], fixed_v, flags)
-            vals_x, gradients_x = again[4], again[11]
-            moving = [(vals_x, x_nodes), ((vals - vals_x) / rate_factor, v_nodes)]
-        elif x_start is not None and law.frictional and transfer.derivative is not None:
-            # the slip increment w - w_start, w_start = S x_start: K_start = -K_w, K_w the
-            # part of K through w in the increment (K minus K at a fixed increment)
-            fixed_w = params.copy()
-            fixed_w[6] = 0.0
-            vals_w = vals - evaluate_pairs(*inputs[:-2], fixed_w, flags)[4]
-            moving = [(vals, x_nodes), (-vals_w, start_nodes)]
-        extra = transfer.weight_terms(rows, cols, moving, force)
+        moving = [(vals, x_nodes)]  # K's factors of dS/dx applied to x (and v, x_start)
+        if moving_input and rate_law:
+            # v_c = S v moves with the weights too: K = K_x + rate_factor K_v, so
+            # K_x (dS x) + K_v (dS v) = K (dS x) + K_v (dS (v - rate_factor x))
+            moving = [(vals - rate_factor * vals_in, x_nodes), (vals_in, v_nodes)]
+        elif moving_input:
+            # the slip increment w - w_start, w_start = S x_start: K_start = -K_w
+            moving = [(vals, x_nodes), (-vals_in, start_nodes)]
+        mapped = _Once(partial(_share_tangent, transfer, rows, cols, vals, moving, force))
         force = transfer.force(force)
-        rows, cols, vals = transfer.tangent(rows, cols, vals, extra)
+        rows, cols, vals = (None, None, None) if deferred_tangent else mapped()
     return ContactResult(
         force=force, rows=rows, cols=cols, vals=vals, pairs=pairs, gap=scalars[GAP],
         gap_rate=scalars[GAP_RATE], slip_measure=scalars[SLIP_MEASURE],
@@ -569,8 +640,30 @@ def _evaluate_compiled(
         dissipation=float(dissipation), rate_law=rate_law, slots=slots, gradients=gradients,
         offset=scalars[OFFSET], chord=scalars[CHORD], friction_slope=scalars[FRICTION_SLOPE],
         rate_offset=scalars[RATE_OFFSET], transfer=transfer,
-        share_inputs=None if transfer is None else (x_nodes, v_nodes, rate_factor, gradients_x),
+        share_inputs=None if transfer is None else (
+            x_nodes, v_nodes, rate_factor, gradients_in if moving_input and rate_law else None),
+        deferred=mapped if transfer is not None and deferred_tangent else None,
     )
+
+
+def _share_tangent(transfer: Transfer, rows: NDArray, cols: NDArray, vals: NDArray,
+                   moving: list[tuple[NDArray, NDArray]], kernel_force: NDArray
+                   ) -> tuple[NDArray, NDArray, NDArray]:
+    """The kernel's tangent mapped back through the share: S^T K S and the weights' terms."""
+    extra = transfer.weight_terms(rows, cols, moving, kernel_force)
+    return transfer.tangent(rows, cols, vals, extra)
+
+
+class _Once:
+    """A function of no arguments, called on first use only (a deferred tangent)."""
+
+    def __init__(self, function: Callable[[], tuple]) -> None:
+        self._function, self._value = function, None
+
+    def __call__(self) -> tuple:
+        if self._value is None:
+            self._value = self._function()
+        return self._value
 
 
 ContactTerm = Callable[

@@ -110,14 +110,13 @@ def blocks_of(result: ContactResult, law: ContactLaw) -> LagrangeBlocks:
 def _share_moving(result: ContactResult, g_vals: NDArray[np.float64]
                   ) -> list[tuple[NDArray, NDArray]]:
     """G's parts that multiply dS/dx applied to x and to v (Transfer.weight_terms): under the
-    rate law G = G_x + rate_factor G_v, G_x from the slot gradients at fixed v."""
-    x, v, rate_factor, gradients_x = result.share_inputs
-    if gradients_x is None:
+    rate law G = G_x + rate_factor G_v, G_v = L_c d gdot/dv from the kernel's gradient
+    through v alone."""
+    x, v, rate_factor, gradients_v = result.share_inputs
+    if gradients_v is None:
         return [(g_vals, x)]
-    measure, length = result.normal_measure, result.length
-    g_x = (measure[:, None, None] * result.gradients[:, 1]
-           + length[:, None, None] * gradients_x[:, 0]).ravel()
-    return [(g_x, x), ((g_vals - g_x) / rate_factor, v)]
+    g_v = (result.length[:, None, None] * gradients_v).ravel()
+    return [(g_vals - rate_factor * g_v, x), (g_v, v)]
 
 
 def release_tensile_pairs(

@@ -23,13 +23,17 @@ weights' own terms S^T K_a (dS/dx) a (a = x, v, x_start, with the kernel's parti
 and (dS/dx)^T f (:meth:`Transfer.weight_terms`; docs/theory.md, "Unequal node counts").
 Without them (S^T K S only, exact only where the arc-length parameters of the finer surface do
 not change) a sheared flat surface gave FD vs J 1e-3 and linear Newton. dS/dx is taken per
-shared segment by the complex step on its few nodes. Not included: the weights' part of a
-gap-restoring pair's first-step offset g_n(S x_start)/dt (rate law), one step per pair.
+shared segment in closed form on its few nodes (lengths, arc-length parameters, the dual-hat
+integrals' derivative); the kernel returns its partial tangents in the same call as the force.
+Not included: the weights' part of a gap-restoring pair's first-step offset g_n(S x_start)/dt
+(rate law), one step per pair.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
+from typing import NamedTuple
 
 import numpy as np
 import scipy.sparse as sp
@@ -38,6 +42,19 @@ from numpy.typing import NDArray
 from .surfaces import ContactSurface, Interface
 
 __all__ = ["Transfer", "unpaired_share"]
+
+
+class ShareBlock(NamedTuple):
+    """d W / d x of G shared segments with chains of m nodes, dense on each segment's few
+    local nodes (its chain and its two pairs' surface-1 (prev, node, next)): ``value``
+    (G, local dofs, 2 pairs, m + 1) is d W_rq / d x_k for the pair's row r = ``rows`` (G, 2)
+    (index into ``distributed``), q = ``nodes`` (G, 2, m + 1) (the chain, then the row's own
+    node) and k = ``dofs`` (G, local dofs). Repeated local nodes add up when summed."""
+
+    rows: NDArray[np.int64]
+    nodes: NDArray[np.int64]
+    dofs: NDArray[np.int64]
+    value: NDArray[np.float64]
 
 
 @dataclass(frozen=True)
@@ -54,10 +71,19 @@ class Transfer:
     surface1: ContactSurface
     distributed: NDArray[np.int64]
     weights: sp.csr_matrix
-    #: d W / d x as COO entries (row of ``weights``, node q, dof k, d W_rq / d x_k): the
-    #: weights move with the surfaces (arc-length parameters, span, tributary lengths)
-    derivative: tuple[NDArray[np.int64], NDArray[np.int64], NDArray[np.int64],
-                      NDArray[np.float64]] | None = None
+    #: the positions and the shared segments [(chain, its two pairs' (row node, surface-1
+    #: node))] the weights were taken from, for :attr:`derivative`; None: weights held fixed
+    x: NDArray[np.float64] | None = None
+    segments: list[tuple[NDArray, NDArray]] | None = None
+
+    @cached_property
+    def derivative(self) -> tuple[ShareBlock, ...] | None:
+        """d W / d x by groups of shared segments (:class:`ShareBlock`): the weights move with
+        the surfaces (arc-length parameters, span, tributary lengths). Computed on first use:
+        most evaluations are residuals that never map a tangent back."""
+        if self.segments is None:
+            return None
+        return _share_derivatives(self.x, self.surface1, self.segments, self.distributed)
 
     @property
     def dofs(self) -> sp.csr_matrix:
@@ -112,14 +138,17 @@ class Transfer:
         parts = [self._through(rows, cols, vals, a) for vals, a in moving]
         k_rows, k_cols, k_vals = (np.concatenate(item) for item in zip(*parts, strict=True))
         k_rows, k_cols, k_vals = self._expand(k_rows, k_cols, k_vals)  # S^T (K D_x)
-        r, q, k, d = self.derivative
-        f = np.asarray(kernel_force, dtype=float).reshape(-1, 2)[self.distributed[r]]
-        comp = np.arange(2)
-        f_rows = (2 * q[:, None] + comp).ravel()
-        f_vals = (f * d[:, None]).ravel()
-        return (np.concatenate([k_rows, f_rows]),
-                np.concatenate([k_cols, np.repeat(k, 2)]),
-                np.concatenate([k_vals, f_vals]))
+        f = np.asarray(kernel_force, dtype=float).reshape(-1, 2)
+        out_rows, out_cols, out_vals = [k_rows], [k_cols], [k_vals]
+        for block in self.derivative:  # (dW_rq/dx_k) f_r on q's dofs: (G, dof, pair, q, i)
+            f_r = f[self.distributed[block.rows]]  # (G, 2, 2)
+            vals = block.value[..., None] * f_r[:, None, :, None, :]
+            out_rows.append(np.broadcast_to((2 * block.nodes[..., None] + _COMP)[:, None],
+                                            vals.shape).ravel())
+            out_cols.append(np.broadcast_to(block.dofs[:, :, None, None, None],
+                                            vals.shape).ravel())
+            out_vals.append(vals.ravel())
+        return np.concatenate(out_rows), np.concatenate(out_cols), np.concatenate(out_vals)
 
     def _through(self, rows: NDArray, cols: NDArray, vals: NDArray, a: NDArray
                  ) -> tuple[NDArray[np.int64], NDArray[np.int64], NDArray[np.float64]]:
@@ -132,19 +161,26 @@ class Transfer:
         hit = self.distributed[at] == cols // 2
         if not hit.any():
             return _EMPTY
-        r, q, k, d = self.derivative
         a = np.asarray(a, dtype=float).reshape(-1, 2)
-        n_dof = 2 * self.weights.shape[1]
-        comp = np.arange(2)
-        # D_a: row (distributed r, component i), column k: sum_q a_q,i dW_rq/dx_k
-        d_matrix = sp.csr_matrix(((a[q] * d[:, None]).ravel(),
-                                  ((2 * r[:, None] + comp).ravel(), np.repeat(k, 2))),
-                                 shape=(2 * n_dist, n_dof))
-        used, local_rows = np.unique(rows[hit], return_inverse=True)
-        a_matrix = sp.csr_matrix((vals[hit], (local_rows, 2 * at[hit] + cols[hit] % 2)),
-                                 shape=(used.size, 2 * n_dist))
-        product = (a_matrix @ d_matrix).tocoo()
-        return used[product.row], product.col.astype(np.int64), product.data
+        # D_a: row (distributed r, component i), column k: sum_q a_q,i dW_rq/dx_k, dense per
+        # segment, its rows gathered (NumPy: scipy's sparse product cost more than the rest)
+        d_rows, d_cols, d_vals = [], [], []
+        for block in self.derivative:
+            d_a = np.einsum("gdpq,gpqi->gpid", block.value, a[block.nodes])  # (G, 2, 2, dof)
+            d_rows.append(np.broadcast_to((2 * block.rows[..., None] + _COMP)[..., None],
+                                          d_a.shape).ravel())
+            d_cols.append(np.broadcast_to(block.dofs[:, None, None], d_a.shape).ravel())
+            d_vals.append(d_a.ravel())
+        d_rows = np.concatenate(d_rows)
+        order = np.argsort(d_rows, kind="stable")
+        d_cols, d_vals = np.concatenate(d_cols)[order], np.concatenate(d_vals)[order]
+        start = np.searchsorted(d_rows[order], 2 * at[hit] + cols[hit] % 2, side="left")
+        count = np.searchsorted(d_rows[order], 2 * at[hit] + cols[hit] % 2, side="right") - start
+        # each hit entry of A times the entries start .. start + count - 1 of its D row
+        repeat = np.repeat(np.arange(count.size), count)
+        entries = start[repeat] + np.arange(repeat.size) - np.repeat(np.cumsum(count) - count,
+                                                                      count)
+        return rows[hit][repeat], d_cols[entries], vals[hit][repeat] * d_vals[entries]
 
     def columns(self, rows: NDArray, cols: NDArray, vals: NDArray, n_rows: int,
                 moving: list[tuple[NDArray, NDArray]] | None = None
@@ -183,6 +219,7 @@ class Transfer:
 
 
 _EMPTY = (np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros(0))
+_COMP = np.arange(2)
 
 
 def _summed(rows: NDArray, cols: NDArray, vals: NDArray, n_cols: int
@@ -197,7 +234,7 @@ def _summed(rows: NDArray, cols: NDArray, vals: NDArray, n_cols: int
 def _dual_hat_integrals(xi: NDArray) -> NDArray:
     """(..., 2, m) int_0^1 psi N_q dxi for psi_a = 2 - 3 xi, psi_b = 3 xi - 1 and the hats N_q
     of the nodes at xi (..., m) (0 = xi_0 < ... < xi_{m-1} = 1); Simpson's rule is exact for
-    the products. Leading axes and complex xi: the weights' derivative (``_share_derivatives``)."""
+    the products. Leading axes: segments batched (``_group_derivative``)."""
     out = np.zeros(xi.shape[:-1] + (2, xi.shape[-1]), dtype=xi.dtype)
     for lo in range(xi.shape[-1] - 1):
         a, b = xi[..., lo], xi[..., lo + 1]
@@ -275,74 +312,97 @@ def unpaired_share(x: NDArray[np.float64], interface: Interface,
     if any(np.count_nonzero(pairs[:, s] == node) > 1 for s in range(2) for node in weights):
         return None  # a node paired twice has no single weighted point
     distributed, matrix = _weights(x.shape[0], weights)
-    return Transfer(surface1, distributed, matrix,
-                    _share_derivatives(x, surface1, segments, distributed))
+    return Transfer(surface1, distributed, matrix, np.array(x, dtype=float), segments)
 
 
-def _segment_weights(xl: NDArray, chain: NDArray, ends: NDArray, around: NDArray
-                     ) -> tuple[NDArray, NDArray]:
-    """The scale span / L_c of both pairs (..., 2) and the dual-hat integrals (..., 2, m) of one
-    shared segment from local positions xl (..., n, 2), as in :func:`unpaired_share`; complex
-    xl carries the complex step (lengths as sqrt(d.d), not |d|, to stay analytic).
-    chain: local chain nodes; ends: the pairs' surface-1 nodes; around: (2, 3) their
-    surface-1 (prev, node, next)."""
-    def length(d: NDArray) -> NDArray:
-        out = np.sqrt(np.sum(d * d, axis=-1))
-        # an open chain's end is its own prev (or next): a zero side, not one of slope 1
-        return np.where(out.real == 0.0, 0.0, out)
+def _dual_hat_jacobian(xi: NDArray) -> NDArray:
+    """(..., 2, m, m) d/d xi_t of :func:`_dual_hat_integrals` (xi (..., m)): on [a, b], h = b - a,
+    psi = alpha + beta t, the left node gets h/6 (3 alpha + beta (2a + b)), the right one
+    h/6 (3 alpha + beta (a + 2b))."""
+    m = xi.shape[-1]
+    out = np.zeros(xi.shape[:-1] + (2, m, m))
+    for lo in range(m - 1):
+        a, b = xi[..., lo], xi[..., lo + 1]
+        h = b - a
+        for side, (alpha, beta) in enumerate(((2.0, -3.0), (-1.0, 3.0))):
+            left, right = 3.0 * alpha + beta * (2.0 * a + b), 3.0 * alpha + beta * (a + 2.0 * b)
+            out[..., side, lo, lo] += -left / 6.0 + h * beta / 3.0
+            out[..., side, lo, lo + 1] += left / 6.0 + h * beta / 6.0
+            out[..., side, lo + 1, lo] += -right / 6.0 + h * beta / 6.0
+            out[..., side, lo + 1, lo + 1] += right / 6.0 + h * beta / 3.0
+    return out
 
-    arc = np.cumsum(length(np.diff(xl[..., chain, :], axis=-2)), axis=-1)
-    arc = np.concatenate((np.zeros_like(arc[..., :1]), arc), axis=-1)
-    share = _dual_hat_integrals(arc / arc[..., -1:])
-    span = length(xl[..., ends[0], :] - xl[..., ends[1], :])
-    tributary = 0.5 * (length(xl[..., around[:, 1], :] - xl[..., around[:, 0], :])
-                       + length(xl[..., around[:, 2], :] - xl[..., around[:, 1], :]))
-    return span[..., None] / tributary, share
+
+def _length_and_unit(d: NDArray) -> tuple[NDArray, NDArray]:
+    """|d| over the last axis and d/|d|, whose derivative |d| has: 0 where |d| = 0 (an open
+    chain's end is its own prev or next: a side of zero length, not one of slope 1)."""
+    length = np.sqrt(np.sum(d * d, axis=-1))
+    unit = np.divide(d, length[..., None], out=np.zeros_like(d), where=length[..., None] > 0.0)
+    return length, unit
 
 
 def _share_derivatives(x: NDArray, surface1: ContactSurface,
                        segments: list[tuple[NDArray, NDArray]], distributed: NDArray
-                       ) -> tuple[NDArray, NDArray, NDArray, NDArray]:
-    """d W / d x of the shared segments' rows as COO (row of W, node q, dof k, dW_rq/dx_k), by
-    the complex step (exact to round-off, no difference of nearly equal numbers), batched over
-    the segments of equal chain length. Each segment's local nodes are its chain and its
-    pairs' surface-1 (prev, node, next), repeats included: their partial derivatives add up
-    when the entries are summed."""
+                       ) -> tuple[ShareBlock, ...]:
+    """d W / d x of the shared segments, batched over the segments of equal chain length
+    (:class:`ShareBlock`); closed form (tests/test_transfer_tangent.py checks it against the
+    complex step to round-off)."""
     groups: dict[int, list[int]] = {}
     for g, (chain, _) in enumerate(segments):
         groups.setdefault(chain.size, []).append(g)
-    parts = [_group_derivative(x, surface1, [segments[g] for g in members], distributed)
-             for members in groups.values()]
-    return tuple(np.concatenate(item) for item in zip(*parts, strict=True))
+    return tuple(_group_derivative(x, surface1, [segments[g] for g in members], distributed)
+                 for members in groups.values())
 
 
 def _group_derivative(x: NDArray, surface1: ContactSurface,
                       segments: list[tuple[NDArray, NDArray]], distributed: NDArray
-                      ) -> tuple[NDArray, NDArray, NDArray, NDArray]:
-    """:func:`_share_derivatives` of segments whose chains have the same length m."""
+                      ) -> ShareBlock:
+    """:func:`_share_derivatives` of G segments whose chains have the same length m. The row
+    of pair p holds scale_p share_pq on the chain's nodes q and -scale_p / 2 on its own node
+    (:func:`unpaired_share`), scale_p = span / L_c,p: both factors move."""
     chains = np.array([chain for chain, _ in segments])  # (G, m)
     ends = np.array([nodes for _, nodes in segments])  # (G, 2 pairs, (row node, surface 1))
     k = surface1.index_of(ends[:, :, 1].ravel())
     around = np.stack((surface1.prev[k], ends[:, :, 1].ravel(), surface1.next[k]),
-                      axis=1).reshape(-1, 6)
-    nodes = np.hstack((chains, around))  # (G, n) local nodes
-    m, n = chains.shape[1], nodes.shape[1]
-    n_dof, step = 2 * n, 1e-30
-    xl = np.broadcast_to(x[nodes].astype(complex)[:, None], (len(segments), n_dof, n, 2)).copy()
-    xl.reshape(len(segments), n_dof, n_dof)[:, np.arange(n_dof), np.arange(n_dof)] += 1j * step
-    local_around = m + np.arange(6).reshape(2, 3)
-    scale, share = _segment_weights(xl, np.arange(m), local_around[:, 1], local_around)
-    d_scale, d_share = scale.imag / step, share.imag / step  # (G, dof, 2), (G, dof, 2, m)
+                      axis=1).reshape(-1, 2, 3)  # each pair's surface-1 (prev, node, next)
+    n_seg, m = chains.shape
+    n = m + 6  # local nodes: the chain, then around
+    # share (G, 2, m) from the arc-length parameters xi and its gradient (G, 2, m, m, 2)
+    seg, unit = _length_and_unit(np.diff(x[chains], axis=1))  # (G, m - 1)
+    arc = np.concatenate((np.zeros((n_seg, 1)), np.cumsum(seg, axis=1)), axis=1)
+    xi = arc / arc[:, -1:]
+    j = np.arange(m - 1)
+    d_seg = np.zeros((n_seg, m - 1, m, 2))  # d seg_j / d x_t of the chain's nodes
+    d_seg[:, j, j], d_seg[:, j, j + 1] = -unit, unit
+    d_xi_d_seg = ((j[None, :] < np.arange(m)[:, None]) - xi[:, :, None]) / arc[:, -1:, None]
+    d_xi = np.einsum("gkj,gjtc->gktc", d_xi_d_seg, d_seg)
+    share = _dual_hat_integrals(xi)
+    d_share = np.einsum("gsnk,gktc->gsntc", _dual_hat_jacobian(xi), d_xi)
+    # scale (G, 2) and its gradient (G, 2, n, 2) on the local nodes
+    span, span_unit = _length_and_unit(x[around[:, 0, 1]] - x[around[:, 1, 1]])
+    back, back_unit = _length_and_unit(x[around[..., 1]] - x[around[..., 0]])  # (G, 2)
+    ahead, ahead_unit = _length_and_unit(x[around[..., 2]] - x[around[..., 1]])
+    tributary = 0.5 * (back + ahead)
+    scale = span[:, None] / tributary
+    d_span = np.zeros((n_seg, n, 2))
+    d_span[:, m + 1], d_span[:, m + 4] = span_unit, -span_unit
+    d_tributary = np.zeros((n_seg, 2, n, 2))
+    for p in range(2):
+        d_tributary[:, p, m + 3 * p] = -0.5 * back_unit[:, p]
+        d_tributary[:, p, m + 3 * p + 1] = 0.5 * (back_unit[:, p] - ahead_unit[:, p])
+        d_tributary[:, p, m + 3 * p + 2] = 0.5 * ahead_unit[:, p]
+    d_scale = (d_span[:, None] - scale[..., None, None] * d_tributary) / tributary[..., None, None]
     # d (scale share_q) on the chain's nodes, d (-scale / 2) on the row's own node
-    value = np.concatenate((scale.real[..., None] * d_share + d_scale[..., None] * share.real,
-                            -0.5 * d_scale[..., None]), axis=-1)  # (G, dof, 2, m + 1)
-    rows = np.searchsorted(distributed, ends[:, :, 0])  # (G, 2)
-    q = np.concatenate((np.repeat(chains[:, None], 2, axis=1), ends[:, :, :1]), axis=-1)
-    dofs = (2 * nodes[:, :, None] + np.arange(2)).reshape(len(segments), n_dof)
-    shape = value.shape
-    return (np.broadcast_to(rows[:, None, :, None], shape).ravel(),
-            np.broadcast_to(q[:, None], shape).ravel(),
-            np.broadcast_to(dofs[:, :, None, None], shape).ravel(), value.ravel())
+    value = np.zeros((n_seg, 2, m + 1, n, 2))
+    value[:, :, :m, :m] = scale[..., None, None, None] * d_share
+    value[:, :, :m] += share[..., None, None] * d_scale[:, :, None]
+    value[:, :, m] = -0.5 * d_scale
+    nodes = np.hstack((chains, around.reshape(n_seg, 6)))  # (G, n)
+    return ShareBlock(
+        rows=np.searchsorted(distributed, ends[:, :, 0]),
+        nodes=np.concatenate((np.repeat(chains[:, None], 2, axis=1), ends[:, :, :1]), axis=-1),
+        dofs=(2 * nodes[:, :, None] + _COMP).reshape(n_seg, 2 * n),
+        value=value.transpose(0, 3, 4, 1, 2).reshape(n_seg, 2 * n, 2, m + 1))
 
 
 def _inner_chain(surface: ContactSurface, start: int, stop: int) -> NDArray[np.int64]:

@@ -313,7 +313,7 @@ class ContactNewtonTerm:
         r = self._evaluate(x_eval, v_eval, rate, x_start, self.state)
         if self.last is not None:
             self.last[self.index] = (x_eval, v_eval, rate, x_start, r)
-        return r.force, (r.rows, r.cols, r.vals)
+        return r.force, _DeferredTriplets(r)
 
     def reserve(self, x_eval, v_eval, rate, x_start) -> tuple[NDArray, NDArray]:
         """(rows, cols) of the tangent entries of the active pairs grown by those that the
@@ -340,8 +340,9 @@ class ContactNewtonTerm:
                 r = self._evaluate(x_eval, v_eval, rate, x_start, grown)
             except (ValueError, FloatingPointError):  # e.g. an undefined normal of a pair
                 continue  # that may never form: no entries reserved for it
-            rows.append(r.rows)
-            cols.append(r.cols)
+            r_rows, r_cols, _ = r.triplets()
+            rows.append(r_rows)
+            cols.append(r_cols)
         rows, cols = np.concatenate(rows), np.concatenate(cols)
         if self.ci.law.unpaired_share:
             rows, cols = along_chains(rows, cols, self.ci.interface, x_eval.shape[0],
@@ -352,7 +353,22 @@ class ContactNewtonTerm:
         ci = self.ci
         rate_eval = rate if ci.persistency else None
         return evaluate_contact(x_eval, v_eval if ci.persistency else None, rate_eval,
-                                ci.interface, state, ci.law, x_start=x_start, dt=self.dt)
+                                ci.interface, state, ci.law, x_start=x_start, dt=self.dt,
+                                deferred_tangent=True)
+
+
+class _DeferredTriplets(Sequence):
+    """(rows, cols, vals) of a contact result, computed when first read: the step problem
+    reads them only when it builds a tangent (an unpaired share's mapping is deferred)."""
+
+    def __init__(self, result: ContactResult) -> None:
+        self._result = result
+
+    def __len__(self) -> int:
+        return 3
+
+    def __getitem__(self, index):
+        return self._result.triplets()[index]
 
 
 _NO_NODES = np.zeros(0, dtype=np.int64)
