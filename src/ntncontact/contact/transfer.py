@@ -25,6 +25,8 @@ Without them (S^T K S only, exact only where the arc-length parameters of the fi
 not change) a sheared flat surface gave FD vs J 1e-3 and linear Newton. dS/dx is taken per
 shared segment in closed form on its few nodes (lengths, arc-length parameters, the dual-hat
 integrals' derivative); the kernel returns its partial tangents in the same call as the force.
+Both, and the mapping of the tangent, wait until a tangent is built (``Transfer.derivative``,
+``ContactResult.triplets``): most evaluations are residuals.
 Not included: the weights' part of a gap-restoring pair's first-step offset g_n(S x_start)/dt
 (rate law), one step per pair.
 """
