@@ -172,3 +172,21 @@ def test_closed_form_weight_derivative_matches_complex_step(curved):
         plus = unpaired_share(x + e.reshape(-1, 2), interface, pairs).weights.toarray()
         minus = unpaired_share(x - e.reshape(-1, 2), interface, pairs).weights.toarray()
         assert np.abs(dense[:, :, dof] - (plus - minus) / (2 * H)).max() < 1e-8
+
+
+def test_deferred_tangent_is_the_eager_one():
+    """The step problem's contact terms defer the share's tangent to the evaluations that build
+    one (ContactResult.triplets): the same entries, bit for bit, the force computed at once."""
+    x, interface, pairs = shared_interface(curved=True)
+    state = PairState.from_pairs(pairs).with_multipliers(np.full(len(pairs), 3.0))
+    law = ContactLaw("augmented_lagrangian", eps_N=50.0, eps_T=40.0, mu=0.3,
+                     unpaired_share=True)
+    v = np.random.default_rng(9).standard_normal(x.shape)
+    eager = evaluate_contact(x, v, 40.0, interface, state, law, x_start=x)
+    deferred = evaluate_contact(x, v, 40.0, interface, state, law, x_start=x,
+                                deferred_tangent=True)
+    assert deferred.rows is None and deferred.deferred is not None
+    assert np.array_equal(deferred.force, eager.force)
+    for a, b in zip(deferred.triplets(), eager.triplets(), strict=True):
+        assert np.array_equal(a, b)
+    assert deferred.triplets() is deferred.triplets()  # computed once
