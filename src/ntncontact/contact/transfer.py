@@ -173,11 +173,12 @@ class Transfer:
                                           d_a.shape).ravel())
             d_cols.append(np.broadcast_to(block.dofs[:, None, None], d_a.shape).ravel())
             d_vals.append(d_a.ravel())
-        d_rows = np.concatenate(d_rows)
-        order = np.argsort(d_rows, kind="stable")
+        order = np.argsort(np.concatenate(d_rows), kind="stable")
+        by_row = np.concatenate(d_rows)[order]
         d_cols, d_vals = np.concatenate(d_cols)[order], np.concatenate(d_vals)[order]
-        start = np.searchsorted(d_rows[order], 2 * at[hit] + cols[hit] % 2, side="left")
-        count = np.searchsorted(d_rows[order], 2 * at[hit] + cols[hit] % 2, side="right") - start
+        wanted = 2 * at[hit] + cols[hit] % 2  # A's hit column as a row of D
+        start = np.searchsorted(by_row, wanted, side="left")
+        count = np.searchsorted(by_row, wanted, side="right") - start
         # each hit entry of A times the entries start .. start + count - 1 of its D row
         repeat = np.repeat(np.arange(count.size), count)
         entries = start[repeat] + np.arange(repeat.size) - np.repeat(np.cumsum(count) - count,
