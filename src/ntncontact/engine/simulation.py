@@ -70,23 +70,39 @@ from .reactions import support_reactions, support_sets
 from .ties import tie_forces, tie_terms, tie_violation
 
 
-def _static_dissipation(result, used: PairState, x_start: NDArray) -> float:
-    """Frictional dissipation of a quasi-static step over its SLIP pairs by the trapezoidal
-    rule, as ``contact_work``: the mean of the tangential forces t_T L_c at the step's start
-    (``used.t_T``, L_c at ``x_start``) and end, times the slip increment delta g_T. The end
-    force alone (the kernel's ``dissipation``) over-counted a load ramp's friction work, to
-    first order in the step: twice the true value in one step, more than the contact
-    forces' total work (report 6.1's ramp: 22.2, 12.5, 11.4 in 1, 8, 32 steps against
-    -contact_work 11.1). A pair whose force reverses within the step counts 0, not a
-    negative mean: its work there is the regularized stick's elastic unloading."""
+def _static_friction_work(result, used: PairState, x_start: NDArray,
+                          law) -> tuple[float, float]:
+    """(frictional dissipation, correction to the trapezoidal ``contact_work``) of a
+    quasi-static step over its SLIP pairs.
+
+    Only the slip part of the tangential increment dissipates: the regularized law's
+    s_p = (t^trial - t_T) / eps_T (friction.py), the increment beyond the cone; the rest is
+    the stick's elastic part (under the augmented Lagrangian, whose converged multiplier makes
+    the stick exact, s_p is all of delta g_T). A pair slips on the Coulomb cone, so s_p is
+    priced by the trapezoidal rule of the cone's mu t_N L_c at the step's start (``used.t_N``,
+    L_c at ``x_start``) and end. Where the pair slipped at the start too, that is the
+    trapezoid of its start and end tangential forces, which a load ramp needs (the end force
+    alone over-counted report 6.1's ramp to first order in the step: 22.2, 12.5, 11.4 in 1,
+    8, 32 steps against -contact_work 11.1). Where it stuck at the start, or its force
+    reverses within the step (tester Z, session 43), it slipped only after its force had
+    reached the cone, its stick part being elastic: the start force's trapezoid counted a
+    pair that starts to slide half its slip, and one that reverses (+mu t_N, -mu t_N) ~0, and
+    so did ``contact_work``'s trapezoid, which the second value corrects to the same path (by
+    the difference of the two prices of s_p). A block dragged back and forth lost mu N times
+    the slip of each step where it started or reversed: D 2.341 / 2.369 at dt 0.05 / 0.025,
+    ~2.39 in the limit."""
     slip = result.status == SLIP
     x0 = result.transfer.positions(x_start) if result.transfer is not None else x_start
     nodes = result.slots[slip]  # slots 0, 4, 5: the node and its surface neighbours
     back = np.linalg.norm(x0[nodes[:, 0]] - x0[nodes[:, 4]], axis=1)
     ahead = np.linalg.norm(x0[nodes[:, 5]] - x0[nodes[:, 0]], axis=1)
-    start = used.t_T[slip] * 0.5 * (back + ahead)
-    mean = 0.5 * (start + result.t_T[slip] * result.length[slip]) * result.slip_measure[slip]
-    return float(np.sum(np.maximum(mean, 0.0)))
+    start_length = 0.5 * (back + ahead)
+    end = result.t_T[slip] * result.length[slip]
+    cone = np.sign(end) * law.mu * used.t_N[slip] * start_length  # along the end force
+    slipped = (result.trial_T[slip] - result.t_T[slip]) / law.eps_T
+    dissipated = 0.5 * (cone + end) * slipped  # >= 0: end * slipped >= 0 (friction.py)
+    trapezoid = 0.5 * (used.t_T[slip] * start_length + end) * slipped
+    return float(np.sum(dissipated)), float(np.sum(trapezoid - dissipated))
 
 
 def _last_attempt(step_start: float, start: float, h: float, halvings: int) -> str:
@@ -1060,12 +1076,17 @@ class Simulation:
                           + self.model.loads(s.time + dt, dx.size, s.X))
             force, self._contact_force = 0.5 * (self._contact_force + force), force
         self._step_work["external_work"] += float(load @ dx)
-        if active:
-            self._step_work["contact_work"] -= float(force @ dx)
-            self._step_work["frictional_dissipation"] += (
-                sum(r.dissipation for r in active) if self.dynamic
-                else sum(_static_dissipation(r, u, s.x) for r, u in zip(results, used, strict=True)
-                         if r is not None))
+        if not active:
+            return
+        self._step_work["contact_work"] -= float(force @ dx)
+        if self.dynamic:
+            self._step_work["frictional_dissipation"] += sum(r.dissipation for r in active)
+            return
+        for ci, r, u in zip(self.model.interfaces, results, used, strict=True):
+            if r is not None and ci.law.frictional:
+                dissipated, correction = _static_friction_work(r, u, s.x, ci.law)
+                self._step_work["frictional_dissipation"] += dissipated
+                self._step_work["contact_work"] += correction
 
     def _static_start_load(self, s: StepState, ndof: int) -> NDArray:
         """The external load that the state ``s`` at a static step's start balances: the
