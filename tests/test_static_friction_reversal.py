@@ -3,7 +3,9 @@ back dissipates mu N per unit of slip, whatever the load step. The trapezoid of 
 end tangential forces averaged +mu t_N and -mu t_N to ~0 at the step where a pair's force
 reverses, although the pair slips there after the reversal, under the end force: every
 reversal lost mu N times that step's slip, first order in the step (tester Z's cycle: D 2.341,
-2.369, 2.382 at dt 0.05, 0.025, 0.0125; contact_work likewise)."""
+2.369, 2.382 at dt 0.05, 0.025, 0.0125). contact_work keeps its trapezoid, the static
+ledger's (tests/test_static.py): -0.0966 / -0.1079 / -0.1141 at dt 0.05 / 0.025 / 0.005 here,
+the loads' and supports' trapezoids missing as much of the path's work at those steps."""
 
 import pytest
 from helpers import Recorder, model_from_dict
@@ -70,11 +72,7 @@ def test_the_fine_step_dissipates_mu_n_per_unit_of_slip(runs):
 
 @pytest.mark.parametrize("dt", [0.05, 0.025])
 def test_a_reversal_dissipates_what_the_fine_step_does(runs, dt):
-    dissipation, contact_work = runs[dt]
-    assert dissipation == pytest.approx(runs[0.005][0], abs=COARSE)
-    # the contact forces' work tells the same (the normal forces do ~0 here): 1.1e-4 and
-    # 1.3e-4 apart; the old trapezoids 3.3e-3 and 1.3e-3
-    assert -contact_work == pytest.approx(dissipation, abs=5e-4)
+    assert runs[dt][0] == pytest.approx(runs[0.005][0], abs=COARSE)
 
 
 def test_a_reversal_s_dissipation_hardly_depends_on_the_load_step(runs):

@@ -70,10 +70,8 @@ from .reactions import support_reactions, support_sets
 from .ties import tie_forces, tie_terms, tie_violation
 
 
-def _static_friction_work(result, used: PairState, x_start: NDArray,
-                          law) -> tuple[float, float]:
-    """(frictional dissipation, correction to the trapezoidal ``contact_work``) of a
-    quasi-static step over its SLIP pairs.
+def _static_dissipation(result, used: PairState, x_start: NDArray, law) -> float:
+    """Frictional dissipation of a quasi-static step over its SLIP pairs.
 
     Only the slip part of the tangential increment dissipates: the regularized law's
     s_p = (t^trial - t_T) / eps_T (friction.py), the increment beyond the cone; the rest is
@@ -84,25 +82,24 @@ def _static_friction_work(result, used: PairState, x_start: NDArray,
     trapezoid of its start and end tangential forces, which a load ramp needs (the end force
     alone over-counted report 6.1's ramp to first order in the step: 22.2, 12.5, 11.4 in 1,
     8, 32 steps against -contact_work 11.1). Where it stuck at the start, or its force
-    reverses within the step (tester Z, session 43), it slipped only after its force had
-    reached the cone, its stick part being elastic: the start force's trapezoid counted a
-    pair that starts to slide half its slip, and one that reverses (+mu t_N, -mu t_N) ~0, and
-    so did ``contact_work``'s trapezoid, which the second value corrects to the same path (by
-    the difference of the two prices of s_p). A block dragged back and forth lost mu N times
-    the slip of each step where it started or reversed: D 2.341 / 2.369 at dt 0.05 / 0.025,
-    ~2.39 in the limit."""
+    reverses within the step, it slips only after its force has reached the cone, its stick
+    part being elastic: the trapezoid of its start and end forces counted half of a first
+    slip and ~0 of a reversal's (+mu t_N, -mu t_N), so that a block dragged back and forth
+    lost mu N times the slip of each step where it started or reversed (tester Z, session 43:
+    D 2.341 / 2.369 at dt 0.05 / 0.025, ~2.39 in the limit).
+
+    ``contact_work`` keeps the trapezoid of the contact forces: with the loads' it is the
+    static ledger's (E_{n+1} - E_n = W_ext + W_contact at both ends' equilibria), and the
+    loads' and supports' work along the stick-then-slip path is not known either."""
     slip = result.status == SLIP
     x0 = result.transfer.positions(x_start) if result.transfer is not None else x_start
     nodes = result.slots[slip]  # slots 0, 4, 5: the node and its surface neighbours
     back = np.linalg.norm(x0[nodes[:, 0]] - x0[nodes[:, 4]], axis=1)
     ahead = np.linalg.norm(x0[nodes[:, 5]] - x0[nodes[:, 0]], axis=1)
-    start_length = 0.5 * (back + ahead)
     end = result.t_T[slip] * result.length[slip]
-    cone = np.sign(end) * law.mu * used.t_N[slip] * start_length  # along the end force
+    cone = np.sign(end) * law.mu * used.t_N[slip] * 0.5 * (back + ahead)  # along the end force
     slipped = (result.trial_T[slip] - result.t_T[slip]) / law.eps_T
-    dissipated = 0.5 * (cone + end) * slipped  # >= 0: end * slipped >= 0 (friction.py)
-    trapezoid = 0.5 * (used.t_T[slip] * start_length + end) * slipped
-    return float(np.sum(dissipated)), float(np.sum(trapezoid - dissipated))
+    return float(np.sum(0.5 * (cone + end) * slipped))  # >= 0: end * slipped >= 0
 
 
 def _last_attempt(step_start: float, start: float, h: float, halvings: int) -> str:
@@ -1082,11 +1079,10 @@ class Simulation:
         if self.dynamic:
             self._step_work["frictional_dissipation"] += sum(r.dissipation for r in active)
             return
-        for ci, r, u in zip(self.model.interfaces, results, used, strict=True):
-            if r is not None and ci.law.frictional:
-                dissipated, correction = _static_friction_work(r, u, s.x, ci.law)
-                self._step_work["frictional_dissipation"] += dissipated
-                self._step_work["contact_work"] += correction
+        self._step_work["frictional_dissipation"] += sum(
+            _static_dissipation(r, u, s.x, ci.law)
+            for ci, r, u in zip(self.model.interfaces, results, used, strict=True)
+            if r is not None and ci.law.frictional)
 
     def _static_start_load(self, s: StepState, ndof: int) -> NDArray:
         """The external load that the state ``s`` at a static step's start balances: the
