@@ -21,7 +21,11 @@ trial already points along the new motion) slips in the new direction and dissip
 The frictional dissipation of a step is the sum over SLIP pairs of t_T delta g_T L_c
 (3.17)-(3.18), delta g_T = gdot_T dt under the rate law; STICK pairs are not counted, since the
 report treats them as not sliding (gdot_T = 0, 3.3.2): the regularized elastic part eps_T of
-their motion is stored, not dissipated.
+their motion is stored, not dissipated. That is the kernel's ``dissipation``, which dynamic
+runs take (the mid-point rule's traction and rate). A quasi-static step prices only the slip
+part of a SLIP pair's increment, (t^trial - t_T) / eps_T, on the cone mu t_N L_c averaged over
+the step's ends (``engine.simulation._static_dissipation``): a pair that sticks at the step
+start or reverses within it slips only once its traction has reached the cone.
 """
 
 from __future__ import annotations
