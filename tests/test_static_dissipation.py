@@ -1,7 +1,10 @@
 """Quasi-static frictional dissipation (tester Q, finding 3): it is summed by the trapezoidal
 rule over each load step, as ``contact_work``, so it does not depend on the step size and never
 exceeds the work the contact forces did. With the end-of-step tractions alone, report 6.1's
-proportional ramp gave 22.2, 12.5 and 11.4 in 1, 8 and 32 steps against -contact_work 11.1."""
+proportional ramp gave 22.2, 12.5 and 11.4 in 1, 8 and 32 steps against -contact_work 11.1.
+Since session 43 the rule prices the slip part of the increment on the Coulomb cone, the mean of
+mu t_N L_c at the step's ends (tests/test_static_friction_reversal.py): here, where the pairs
+slip from the ramp's start, that is the same mean of the tangential forces."""
 
 import numpy as np
 import pytest
