@@ -30,16 +30,30 @@ nothing is moved that need not be.
    run's mean stretch at t_n (``ale.surface._stretch_clamp``: an ALE body whose partners
    slide away from its corner would stretch the corner cell without bound). Clamped nodes
    are reported; a pair between two ALE bodies whose node is clamped is then followed by the
-   partner instead (``engine.mesh_motion._hold_clamped``).
+   partner instead (``engine.mesh_motion._hold_clamped``). The first clamp bounds the MEAN
+   spacing between a node and the break, not each segment: the respacing of item 3 may grade
+   those segments down to half that mean (a tester's block dragged its own length over a base
+   of spacing 0.1 left 15 segments in 0.505 ahead of it, 13 of them 0.0198 and two untouched).
 3. The other surface nodes follow (``respace``):
    ``"local"`` (default): each moved anchor's slide is absorbed by the fewest neighbouring
    surface segments whose slack suffices, each shrinking or growing in proportion to its slack,
-   the room it has before leaving a band [1 - t, 1/(1 - t)] (t = ``spacing_tolerance``) around
-   its ORIGINAL proportion; nothing beyond moves, and a segment at the edge of the band is
-   carried rigidly, so repeated slides one way compress a widening neighbourhood instead of
-   crushing one segment. A run whose whole slack does not suffice is respaced in the original
-   proportions, restoring the grading (``ale.surface.local_slides``; counted in
-   ``AleUpdate.resets``; never happened in the ring impact of report 6.4).
+   the room it has before leaving a band [1 - t, 1/(1 - t)] (t = ``spacing_tolerance``, this
+   field, not a scenario key) around its ORIGINAL proportion, i.e. its reference length scaled
+   by the CURRENT mean stretch of its run between two anchors; nothing beyond moves, and a
+   segment at the edge of the band is carried rigidly, so repeated slides one way compress a
+   widening neighbourhood instead of crushing one segment. The band is not a bound on the
+   segments' lengths against their original ones: a run its anchors keep squeezing has a
+   smaller mean at every move, the segments next to the slide are squeezed again against it
+   while those beyond keep their length, and a run between a partner and a fixed end can be
+   squeezed or stretched as a whole up to the clamps of item 2. The tester's block dragged
+   +-1 over the base left segments of 0.19x and 3.2x their original length (cells of 17 deg;
+   +-1.4: 0.17x, 13 deg); no respacing could keep 0.5x there (15 segments in 0.505: 0.34x
+   on average), only holding the contact nodes back, which would lose node-to-node contact.
+   ``engine.diagnostics.AleSpacingCheck`` reports a segment outside [1 - t, 1/(1 - t)] of
+   its original length (summary.json ``ale_surface_spacing_at``, a run warning). A run whose
+   whole slack does not suffice is respaced in the original proportions, restoring the
+   grading (``ale.surface.local_slides``; counted in ``AleUpdate.resets``; never happened in
+   the ring impact of report 6.4).
    ``"reference"``: every free surface node is respaced between the anchors in the original
    proportions at every update (nodes move whenever the deformed spacing differs from them).
 4. The interior follows (``interior``) as far as the mesh quality needs. A cell is acceptable

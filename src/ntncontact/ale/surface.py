@@ -538,7 +538,9 @@ def local_slides(
       "buffer") whose slack suffices, each shrinking or growing in proportion to its slack (a
       segment already at the edge of the band is carried along rigidly); nodes beyond the
       buffers do not move. Repeated slides the same way thus compress a neighbourhood that
-      widens as it saturates, and never push a segment out of the band;
+      widens as it saturates, and never push a segment out of the band of this move's
+      target (the run's mean changes with the move, and so does the band of the next one:
+      the band does not bound the lengths against the ORIGINAL ones, see ``ale.motion``);
     * if the two buffers would overlap, the run's length change is shared by all its segments
       the same way (equal slides: a rigid shift of the run);
     * if the run's slack does not suffice (only when it was already outside the band, or the

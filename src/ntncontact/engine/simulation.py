@@ -27,6 +27,7 @@ from ..threads import serial_blas
 from .convection import convective_terms
 from .diagnostics import (
     AleQualityCheck,
+    AleSpacingCheck,
     Balance,
     ContactMoment,
     PenetrationCheck,
@@ -366,6 +367,7 @@ class Simulation:
         self._surface_2 = SurfaceTwoCheck(model) if model.interfaces else None
         self._self_crossing = SelfCrossingCheck(model)
         self._ale_quality = AleQualityCheck(model) if model.ale_bodies else None
+        self._ale_spacing = AleSpacingCheck(model) if model.ale_bodies else None
         # the energy-conserving solve (report 5.5) starts from each augmentation's exact one
         self._early_ratio = (0.0 if model.analysis.energy_conserving
                              else model.analysis.newton_inexact_augmentations)
@@ -1133,7 +1135,8 @@ class Simulation:
         the deepest contact-surface node in no pair (``diagnostics.UnpairedCheck``), the
         deepest surface-2 node inside body 1 (``diagnostics.SurfaceTwoCheck``), the deepest
         boundary node inside its own body (``diagnostics.SelfCrossingCheck``) and the ALE
-        bodies' worst sliver (``diagnostics.AleQualityCheck``)."""
+        bodies' worst sliver (``diagnostics.AleQualityCheck``) and their surface segments
+        farthest outside the respacing's band (``diagnostics.AleSpacingCheck``)."""
         extra = {}
         if self._penetration is not None:
             found = self._penetration.deepest(self.state.x)
@@ -1147,6 +1150,8 @@ class Simulation:
         extra["self_penetration_at"] = self._self_crossing.deepest(self.state.x)
         if self._ale_quality is not None:  # an ALE body's cell flattened to a sliver
             extra["ale_degraded_cell"] = self._ale_quality.worst(self.state.x)
+        if self._ale_spacing is not None:  # ALE surface segments bunched or spread
+            extra["ale_spaced_segments"] = self._ale_spacing.extremes(self.state.x)
         return extra
 
     def _tie_extra(self) -> dict:

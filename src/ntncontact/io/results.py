@@ -124,7 +124,8 @@ class ResultWriter:
             summary_extra = {f"max_linear_elastic_{key}{at}": None if at else 0.0
                              for key in LINEAR_MEASURES for at in ("", "_at")} | summary_extra
         if model.ale_bodies:  # the worst sliver of the mesh motion (AleQualityCheck)
-            summary_extra = {"ale_mesh_degraded_at": None} | summary_extra
+            summary_extra = {"ale_mesh_degraded_at": None,
+                             "ale_surface_spacing_at": None} | summary_extra
         if model.ale_bodies and model.interfaces:
             summary_extra = {"max_ale_mismatch": 0.0, "max_ale_mismatch_at": None} | summary_extra
         if model.interfaces:
@@ -259,6 +260,8 @@ class ResultWriter:
                                                     summary)
         fields |= self._self_summary(s.time, record.extra.get("self_penetration_at"), summary)
         fields |= self._degraded_summary(s.time, record.extra.get("ale_degraded_cell"), summary)
+        fields |= self._spacing_summary(s.time, record.extra.get("ale_spaced_segments"),
+                                        summary)
         framed = self._due(s.time, model)  # before the rows: "frames" keeps those steps'
         rows = record.extra.get("contact_rows")
         if model.interfaces:  # set again below by a step that carries contact
@@ -454,6 +457,28 @@ class ResultWriter:
             "initial_angle": found.initial_angle, "min_sine": found.sine,
             "smoothing": found.smoothing, "smoothing_layers": found.smoothing_layers,
             "first_time": (before or {}).get("first_time", time)}}
+
+    @staticmethod
+    def _spacing_summary(time: float, found, summary: dict) -> dict:
+        """``ale_surface_spacing_at``: the ALE contact-surface segments squeezed the most
+        below (``shortest``), and stretched the most above (``longest``), the respacing's band
+        of their original length so far (``engine.diagnostics.AleSpacingCheck``), each with
+        ``first_time``, the end of the first step that found one on that side."""
+        if found is None or found == (None, None):
+            return {}
+        before = {"shortest": None, "longest": None} | (summary.get("ale_surface_spacing_at")
+                                                        or {})
+        out = dict(before)
+        for key, seg, sign in (("shortest", found[0], 1.0), ("longest", found[1], -1.0)):
+            old = before[key]
+            if seg is None or (old and sign * seg.ratio >= sign * old["ratio"]):
+                continue
+            out[key] = {"time": time, "body": seg.body, "nodes": list(seg.nodes),
+                        "midpoint": list(seg.midpoint), "length": seg.length,
+                        "reference_length": seg.reference_length, "ratio": seg.ratio,
+                        "band": list(seg.band),
+                        "first_time": (old or {}).get("first_time", time)}
+        return {"ale_surface_spacing_at": out} if out != before else {}
 
     @staticmethod
     def _off_surface_summary(time: float, found, summary: dict) -> dict:

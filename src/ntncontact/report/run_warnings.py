@@ -102,7 +102,7 @@ def result_warnings(summary: dict, static: bool | None = None) -> list[str]:
              _balance(summary, static),
              _penetration(summary, static), _unpaired(summary, static),
              _surface_2(summary, static), _self_crossing(summary), _opening(summary),
-             _mismatch(summary), _degraded_mesh(summary),
+             _mismatch(summary), _degraded_mesh(summary), _surface_spacing(summary),
              _contact_moment(summary, static),
              _linear_rotation(summary, static), _linear_strain(summary), _cut_backs(summary),
              _unconverged_augmentations(summary))
@@ -420,6 +420,38 @@ def _degraded_mesh(summary: dict) -> str | None:
             f"{at['initial_angle']:.3g} deg at t = 0; summary.json ale_mesh_degraded_at): the "
             "mesh motion made it a sliver, which a few more steps of the same may invert and "
             f"whose stiffness and remaps are poor; {_reshaping(at)}")
+
+
+def _surface_spacing(summary: dict) -> str | None:
+    """An ALE contact surface's segment went beyond the SQUARE of the respacing's band of its
+    ORIGINAL length, [(1 - t)^2, 1 / (1 - t)^2] = [0.25, 4] (summary.json
+    ``ale_surface_spacing_at`` records what left the band itself, ``engine.diagnostics.
+    AleSpacingCheck``). The respacing keeps its band only around each run's current mean
+    stretch within one move; a partner dragged along the surface bunches the nodes ahead of
+    it and spreads those behind (a tester: 0.19x and 3.2x after a block dragged its own
+    length over an ALE base, cells of 17 deg, in silence). The examples leave the band a
+    little where their bodies deform (the disk drop's block: 0.46x, 2.43x; the ring
+    impact's obstacle 0.46x), which is not news: hence the square."""
+    at = summary.get("ale_surface_spacing_at") or {}
+    sides = [(word, at[key]) for word, key in (("squeezed", "shortest"),
+                                                ("stretched", "longest")) if at.get(key)]
+    if not any(seg["ratio"] < seg["band"][0] ** 2 or seg["ratio"] > seg["band"][1] ** 2
+               for _, seg in sides):
+        return None
+    parts = [f"{word} to {seg['ratio']:.2f} of its original length "
+             f"({seg['length']:.3g} of {seg['reference_length']:.3g}, nodes "
+             f"{seg['nodes'][0]}-{seg['nodes'][1]} of '{seg['body']}' at "
+             f"({seg['midpoint'][0]:.4g}, {seg['midpoint'][1]:.4g}), t = {seg['time']:.6g})"
+             for word, seg in sides]
+    band = sides[0][1]["band"]
+    return ("an ALE contact surface segment was " + " and one ".join(parts)
+            + f" (summary.json ale_surface_spacing_at; the respacing's band is "
+            f"[{band[0]:g}, {band[1]:g}] of a segment's share of its stretch, not of its "
+            "original length): the partner dragged the surface nodes along, bunching them "
+            "ahead of it and spreading them behind, which coarsens the contact and flattens "
+            "the cells there; a longer ALE body (more free segments each side of the "
+            "contact), contact nodes spaced like this body's, or mesh_motion = "
+            "\"lagrangian\" for it keep its spacing")
 
 
 def _reshaping(at: dict) -> str:
