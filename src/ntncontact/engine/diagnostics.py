@@ -743,7 +743,9 @@ class AleSpacingCheck:
     around each run's current mean stretch and only within one move, so a partner dragged
     along the surface bunches the nodes ahead of it and spreads those behind: a tester's
     block dragged its own length over an ALE base left segments of 0.20x and 3.2x, in
-    silence (docs/theory.md, "How far the ALE surface respacing holds its spacing")."""
+    silence (docs/theory.md, "How far the ALE respacing keeps the surface spacing"). The run
+    warning waits for the band's square (``report.run_warnings._surface_spacing``): the
+    examples leave the band itself a little where their bodies deform."""
 
     def __init__(self, model: Model) -> None:
         self._tests = []  # per surface: body name, chain (global), segment ends, reference, band
