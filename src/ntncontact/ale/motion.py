@@ -23,17 +23,19 @@ nothing is moved that need not be.
    below ``slide_tolerance`` times the node's smaller adjacent surface spacing is not made: the
    node keeps its position and fields bit for bit (its miss shows in ``mismatch``).
 2. Corners and chain ends stay fixed, and a node never slides past one: its slide is clamped so
-   that the free nodes between it and the break keep at least ``min_spacing_ratio`` times the
-   smallest reference surface spacing of that stretch (not the one at t_n, which ratchets
-   down step after step while a node is held at the clamp). Nor does a node leave a break
+   that the free segments between it and the break keep on average at least
+   ``min_spacing_ratio`` times the smallest reference surface spacing of that stretch (not
+   the one at t_n, which ratchets down step after step while a node is held at the
+   clamp). Nor does a node leave a break
    behind beyond ``max_stretch`` times the reference length between them, scaled by the
    run's mean stretch at t_n (``ale.surface._stretch_clamp``: an ALE body whose partners
    slide away from its corner would stretch the corner cell without bound). Clamped nodes
    are reported; a pair between two ALE bodies whose node is clamped is then followed by the
    partner instead (``engine.mesh_motion._hold_clamped``). The first clamp bounds the MEAN
    spacing between a node and the break, not each segment: the respacing of item 3 may grade
-   those segments down to half that mean (a tester's block dragged its own length over a base
-   of spacing 0.1 left 15 segments in 0.505 ahead of it, 13 of them 0.0198 and two untouched).
+   those segments down to about half that mean (a tester's block dragged its own length over
+   a base of spacing 0.1 left 15 segments in 0.505 ahead of it, 13 of them 0.0198 and the
+   last two untouched).
 3. The other surface nodes follow (``respace``):
    ``"local"`` (default): each moved anchor's slide is absorbed by the fewest neighbouring
    surface segments whose slack suffices, each shrinking or growing in proportion to its slack,

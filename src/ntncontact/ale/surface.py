@@ -672,8 +672,9 @@ def _wanted_arc(points, bulge, node_s, t_start, t_end, breaks, pts, pos, snap, g
 def _anchor_targets(node_s, breaks, pos, wanted, slide_tolerance, ratio, snap, spacing,
                     stretch=np.inf):
     """Targets of the active nodes (the wanted arc lengths, slides below the tolerance dropped,
-    clamped so that the free nodes between a node and the breaks around it keep ``ratio`` times
-    the smallest REFERENCE segment of that stretch, ``spacing``) and the anchors; (targets,
+    clamped so that the free segments between a node and the breaks around it keep on average
+    ``ratio`` times the smallest REFERENCE segment of that stretch, ``spacing``: the mean, not
+    each segment, which the respacing may grade below it) and the anchors; (targets,
     clamped, mismatch, anchor indices, anchor slides, first pair of anchors out of order or
     -1). The smallest segment at t_n would ratchet: a node held at the clamp shortens its
     stretch's smallest segment, and the next step's clamp lets it nearer. An ALE block's

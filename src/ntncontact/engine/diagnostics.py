@@ -738,7 +738,7 @@ class SpacedSegment:
 
 class AleSpacingCheck:
     """Finds the ALE contact-surface segments squeezed below ``1 - t`` or stretched above
-    ``1 / (1 - t)`` of their ORIGINAL length (t = the body's ``ale.spacing_tolerance``,
+    ``1 / (1 - t)`` of their ORIGINAL length (t = ``AleBody.spacing_tolerance``, 0.5,
     summary.json ``ale_surface_spacing_at``). The local respacing keeps that band only
     around each run's current mean stretch and only within one move, so a partner dragged
     along the surface bunches the nodes ahead of it and spreads those behind: a tester's
