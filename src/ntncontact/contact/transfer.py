@@ -165,7 +165,8 @@ class Transfer:
             return _EMPTY
         a = np.asarray(a, dtype=float).reshape(-1, 2)
         # D_a: row (distributed r, component i), column k: sum_q a_q,i dW_rq/dx_k, dense per
-        # segment, its rows gathered (NumPy: scipy's sparse product cost more than the rest)
+        # segment in NumPy (scipy's sparse products per block cost more than the rest), then
+        # one product with A's hit entries (:func:`_product`)
         d_rows, d_cols, d_vals = [], [], []
         for block in self.derivative:
             d_a = np.einsum("gdpq,gpqi->gpid", block.value, a[block.nodes])  # (G, 2, 2, dof)
@@ -173,17 +174,11 @@ class Transfer:
                                           d_a.shape).ravel())
             d_cols.append(np.broadcast_to(block.dofs[:, None, None], d_a.shape).ravel())
             d_vals.append(d_a.ravel())
-        order = np.argsort(np.concatenate(d_rows), kind="stable")
-        by_row = np.concatenate(d_rows)[order]
-        d_cols, d_vals = np.concatenate(d_cols)[order], np.concatenate(d_vals)[order]
+        shape = (2 * n_dist, 2 * a.shape[0])
+        d_rows, d_cols = np.concatenate(d_rows), np.concatenate(d_cols)
         wanted = 2 * at[hit] + cols[hit] % 2  # A's hit column as a row of D
-        start = np.searchsorted(by_row, wanted, side="left")
-        count = np.searchsorted(by_row, wanted, side="right") - start
-        # each hit entry of A times the entries start .. start + count - 1 of its D row
-        repeat = np.repeat(np.arange(count.size), count)
-        entries = start[repeat] + np.arange(repeat.size) - np.repeat(np.cumsum(count) - count,
-                                                                      count)
-        return rows[hit][repeat], d_cols[entries], vals[hit][repeat] * d_vals[entries]
+        return _product(rows[hit], wanted, vals[hit], d_rows, d_cols, np.concatenate(d_vals),
+                        shape)
 
     def columns(self, rows: NDArray, cols: NDArray, vals: NDArray, n_rows: int,
                 moving: list[tuple[NDArray, NDArray]] | None = None
@@ -225,6 +220,34 @@ _EMPTY = (np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros(0))
 _COMP = np.arange(2)
 
 
+def _product(a_rows: NDArray, a_cols: NDArray, a_vals: NDArray, b_rows: NDArray,
+             b_cols: NDArray, b_vals: NDArray, b_shape: tuple[int, int]
+             ) -> tuple[NDArray[np.int64], NDArray[np.int64], NDArray[np.float64]]:
+    """A B of two COO matrices as unique entries sorted by row then column, those whose
+    products sum to exactly zero kept (a pattern that moved with the values would be a new
+    analysis of the Newton matrix). Each A entry times each entry of its B row, summed
+    afterwards, was 26k entries for 2k sums at a refined slide (k = 4) and cost 8 ms a
+    tangent in the sort; SciPy's product sums as it goes, but drops the zeros, so the
+    pattern is that of a second product of the structures (positive: no cancellation)."""
+    n_rows = int(a_rows.max(initial=-1)) + 1
+    a = sp.csr_matrix((a_vals, (a_rows, a_cols)), shape=(n_rows, b_shape[0]))
+    b = sp.csr_matrix((b_vals, (b_rows, b_cols)), shape=b_shape)
+    values = (a @ b).tocoo()
+    pattern = (_ones(a) @ _ones(b)).tocoo()
+    keys = pattern.row.astype(np.int64) * b_shape[1] + pattern.col
+    order = np.argsort(keys)
+    keys = keys[order]
+    out = np.zeros(keys.size, dtype=values.data.dtype)
+    out[np.searchsorted(keys, values.row.astype(np.int64) * b_shape[1] + values.col)] = \
+        values.data
+    return keys // b_shape[1], keys % b_shape[1], out
+
+
+def _ones(m: sp.csr_matrix) -> sp.csr_matrix:
+    """m's structure with ones (duplicates summed: positive)."""
+    return sp.csr_matrix((np.ones(m.data.size), m.indices, m.indptr), shape=m.shape)
+
+
 def _summed(rows: NDArray, cols: NDArray, vals: NDArray, n_cols: int
             ) -> tuple[NDArray[np.int64], NDArray[np.int64], NDArray[np.float64]]:
     """COO entries with equal (row, col) summed, sorted by row then column."""
@@ -238,14 +261,37 @@ def _dual_hat_integrals(xi: NDArray) -> NDArray:
     """(..., 2, m) int_0^1 psi N_q dxi for psi_a = 2 - 3 xi, psi_b = 3 xi - 1 and the hats N_q
     of the nodes at xi (..., m) (0 = xi_0 < ... < xi_{m-1} = 1); Simpson's rule is exact for
     the products. Leading axes: segments batched (``_group_derivative``)."""
+    if xi.ndim == 1 and xi.dtype == np.float64:
+        return np.array(_dual_hat_chain(xi.tolist()))
     out = np.zeros(xi.shape[:-1] + (2, xi.shape[-1]), dtype=xi.dtype)
-    for lo in range(xi.shape[-1] - 1):
-        a, b = xi[..., lo], xi[..., lo + 1]
+    # all the chains' segments [a, b] at once (a loop over them indexed 0-d arrays with
+    # xi[..., lo]); each node's two terms add in the other order, to the same bits
+    a, b = xi[..., :-1], xi[..., 1:]
+    mid, h = 0.5 * (a + b), b - a
+    for side, psi in enumerate(_DUAL_HATS):
+        # the hat of the left node falls 1 -> 0 over [a, b], the right one rises 0 -> 1
+        out[..., side, :-1] += h / 6.0 * (psi(a) + 4.0 * psi(mid) * 0.5)
+        out[..., side, 1:] += h / 6.0 * (4.0 * psi(mid) * 0.5 + psi(b))
+    return out
+
+
+_DUAL_HATS = (lambda t: 2.0 - 3.0 * t, lambda t: 3.0 * t - 1.0)
+
+
+def _dual_hat_chain(xi: list[float]) -> list[list[float]]:
+    """:func:`_dual_hat_integrals` of one chain in Python floats, the same operations (the
+    same bits): unpaired_share takes it per shared segment at every contact evaluation, where
+    indexing 0-d arrays (xi[..., lo], the batched form's loop) made it 3.6x slower (12 -> 44
+    us a chain, +1.1 s of 17 s of CPU at a refined slide, k = 4); NumPy's batched form
+    costs 21 us on a chain of 5 nodes, the scalar loop 5."""
+    m = len(xi)
+    out = [[0.0] * m, [0.0] * m]
+    for lo in range(m - 1):
+        a, b = xi[lo], xi[lo + 1]
         mid, h = 0.5 * (a + b), b - a
-        for side, psi in enumerate((lambda t: 2.0 - 3.0 * t, lambda t: 3.0 * t - 1.0)):
-            # the hat of the left node falls 1 -> 0 over [a, b], the right one rises 0 -> 1
-            out[..., side, lo] += h / 6.0 * (psi(a) + 4.0 * psi(mid) * 0.5)
-            out[..., side, lo + 1] += h / 6.0 * (4.0 * psi(mid) * 0.5 + psi(b))
+        for side, psi in enumerate(_DUAL_HATS):
+            out[side][lo] += h / 6.0 * (psi(a) + 4.0 * psi(mid) * 0.5)
+            out[side][lo + 1] += h / 6.0 * (4.0 * psi(mid) * 0.5 + psi(b))
     return out
 
 
