@@ -207,7 +207,7 @@ def test_weights_term_comes_summed_with_its_zero_entries():
     rows, cols = rng.integers(0, n_dof, 400), rng.integers(0, n_dof, 400)  # duplicates too
     vals = rng.standard_normal(400)
     vals[rows == rows[np.isin(cols // 2, dist)][0]] = 0.0  # one row of exact zeros
-    got_rows, got_cols, got_vals = transfer._through(rows, cols, vals, x)
+    got_rows, got_cols, got_vals = transfer._through(rows, cols, [(vals, x)])
     keys = got_rows * n_dof + got_cols
     assert np.all(np.diff(keys) > 0)  # unique, sorted
     # the reference, dense: A (dofs x D's rows) and D_a = (dS/dx) x

@@ -137,9 +137,7 @@ class Transfer:
         a sheared surface went linear (FD vs J 1e-3, 52 iterations for 19 in a static step)."""
         if self.derivative is None:
             return _EMPTY
-        parts = [self._through(rows, cols, vals, a) for vals, a in moving]
-        k_rows, k_cols, k_vals = (np.concatenate(item) for item in zip(*parts, strict=True))
-        k_rows, k_cols, k_vals = self._expand(k_rows, k_cols, k_vals)  # S^T (K D_x)
+        k_rows, k_cols, k_vals = self._expand(*self._through(rows, cols, moving))  # S^T K D
         f = np.asarray(kernel_force, dtype=float).reshape(-1, 2)
         out_rows, out_cols, out_vals = [k_rows], [k_cols], [k_vals]
         for block in self.derivative:  # (dW_rq/dx_k) f_r on q's dofs: (G, dof, pair, q, i)
@@ -152,41 +150,44 @@ class Transfer:
             out_vals.append(vals.ravel())
         return np.concatenate(out_rows), np.concatenate(out_cols), np.concatenate(out_vals)
 
-    def _through(self, rows: NDArray, cols: NDArray, vals: NDArray, a: NDArray
+    def _through(self, rows: NDArray, cols: NDArray, moving: list[tuple[NDArray, NDArray]]
                  ) -> tuple[NDArray[np.int64], NDArray[np.int64], NDArray[np.float64]]:
-        """A D_a for a COO A (dofs): D_a = (dS/dx) a, the change of the weighted points S a
-        as the weights move, which is nonzero on the distributed nodes' rows only."""
+        """sum A_a D_a over ``moving`` [(A_a's values on the COO places rows, cols (dofs);
+        a)]: D_a = (dS/dx) a, the change of the weighted points S a as the weights move,
+        nonzero on the distributed nodes' rows only. One product [A_1 A_2 ..] [D_1; D_2; ..]:
+        the parts share their places, and each product's fixed cost is SciPy's."""
         rows, cols = np.asarray(rows, np.int64), np.asarray(cols, np.int64)
-        vals = np.asarray(vals, dtype=float)
         n_dist = self.distributed.size
         at = np.minimum(np.searchsorted(self.distributed, cols // 2), n_dist - 1)
         hit = self.distributed[at] == cols // 2
         if not hit.any():
             return _EMPTY
-        a = np.asarray(a, dtype=float).reshape(-1, 2)
-        # D_a: row (distributed r, component i), column k: sum_q a_q,i dW_rq/dx_k, dense per
-        # segment in NumPy (scipy's sparse products per block cost more than the rest), then
-        # one product with A's hit entries (:func:`_product`)
-        d_rows, d_cols, d_vals = [], [], []
-        for block in self.derivative:
-            d_a = np.einsum("gdpq,gpqi->gpid", block.value, a[block.nodes])  # (G, 2, 2, dof)
-            d_rows.append(np.broadcast_to((2 * block.rows[..., None] + _COMP)[..., None],
-                                          d_a.shape).ravel())
-            d_cols.append(np.broadcast_to(block.dofs[:, None, None], d_a.shape).ravel())
-            d_vals.append(d_a.ravel())
-        shape = (2 * n_dist, 2 * a.shape[0])
-        d_rows, d_cols = np.concatenate(d_rows), np.concatenate(d_cols)
         wanted = 2 * at[hit] + cols[hit] % 2  # A's hit column as a row of D
-        return _product(rows[hit], wanted, vals[hit], d_rows, d_cols, np.concatenate(d_vals),
-                        shape)
+        a_cols, a_vals, d_rows, d_cols, d_vals = [], [], [], [], []
+        for part, (vals, a) in enumerate(moving):
+            offset = 2 * n_dist * part  # part's rows of the stacked D
+            a_cols.append(wanted + offset)
+            a_vals.append(np.asarray(vals, dtype=float)[hit])
+            a = np.asarray(a, dtype=float).reshape(-1, 2)
+            # D_a: row (distributed r, component i), column k: sum_q a_q,i dW_rq/dx_k, dense
+            # per segment in NumPy (scipy's sparse products per block cost more than the rest)
+            for block in self.derivative:
+                d_a = np.einsum("gdpq,gpqi->gpid", block.value, a[block.nodes])  # (G,2,2,dof)
+                d_rows.append(np.broadcast_to((2 * block.rows[..., None] + _COMP + offset)
+                                              [..., None], d_a.shape).ravel())
+                d_cols.append(np.broadcast_to(block.dofs[:, None, None], d_a.shape).ravel())
+                d_vals.append(d_a.ravel())
+        return _product(np.tile(rows[hit], len(moving)), np.concatenate(a_cols),
+                        np.concatenate(a_vals), np.concatenate(d_rows), np.concatenate(d_cols),
+                        np.concatenate(d_vals), (2 * n_dist * len(moving), 2 * a.shape[0]))
 
     def columns(self, rows: NDArray, cols: NDArray, vals: NDArray, n_rows: int,
                 moving: list[tuple[NDArray, NDArray]] | None = None
                 ) -> tuple[NDArray[np.int64], NDArray[np.int64], NDArray[np.float64]]:
         """A (n_rows, ndof) COO block G_c as G_c S, plus sum G_a (dS/dx) a over ``moving``
         (as in :meth:`weight_terms`) for a block that is a derivative with respect to x."""
-        parts = [] if moving is None or self.derivative is None else [
-            self._through(rows, cols, g, a) for g, a in moving]
+        parts = [] if not moving or self.derivative is None else [
+            self._through(rows, cols, moving)]
         cols, rows, vals = self._expand(cols, rows, vals)
         if parts:
             rows, cols, vals = (np.concatenate(item) for item in
