@@ -205,8 +205,11 @@ class InvertedAtStepEnd(InvertedElementError):
     """An element inverted in the configuration a converged step ends in. It is an
     :class:`InvertedElementError`, so the step is cut back like a failed Newton solve."""
 
-    def __init__(self, label: str, element: int, value: float, time: float) -> None:
+    def __init__(self, model: Model, element: int, value: float, time: float) -> None:
+        body = model.bodies[int(model.body_of_cell()[element])]
+        self.body, self.local = body.name, int(element) - body.cell_offset
         self.element, self.value, self.time = int(element), float(value), float(time)
+        label = element_label(model, self.element)
         ValueError.__init__(
             self, f"{label} is inverted at the end of the step to t = {self.time:.6g} "
             f"(det J = {self.value:.3e} at a quadrature point)")
@@ -240,7 +243,7 @@ def check_end_of_step(model: Model, x: NDArray, time: float) -> None:
     if not bad.any():
         return
     element = int(np.flatnonzero(bad)[np.argmin(np.nan_to_num(det[bad], nan=-np.inf))])
-    raise InvertedAtStepEnd(element_label(model, element), element, float(det[element]), time)
+    raise InvertedAtStepEnd(model, element, float(det[element]), time)
 
 
 def named_failure(model: Model, err: BaseException) -> str:
