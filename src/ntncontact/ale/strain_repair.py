@@ -155,8 +155,8 @@ class RepairResult:
 
 
 def restore_strain_energy(repair: StrainRepair, X: NDArray, x: NDArray, free: NDArray,
-                          weights: NDArray, cells: NDArray, target: float, tolerance: float
-                          ) -> RepairResult:
+                          weights: NDArray, cells: NDArray, target: float, tolerance: float,
+                          round_off: float = 0.0) -> RepairResult:
     """Reference positions X (n, 2) changed at fixed positions x on the nodes ``free`` (n,)
     so that the strain energy of the cells ``cells`` takes the value ``target``.
 
@@ -174,7 +174,14 @@ def restore_strain_energy(repair: StrainRepair, X: NDArray, x: NDArray, free: ND
     each overshot full step was halved and the residual fell ~0.8 an iteration. Returns X
     unchanged (restored False) if W cannot reach the target this way (the energy gradient
     vanishes on the free nodes, or the residual stops decreasing: W has a minimum on the
-    way).
+    way), unless the residual where it stopped is at most ``round_off``: W's round-off floor.
+    At fixed x a one-ulp change of X changes d = x - X, hence W, by the nodal force times
+    that ulp, which can exceed ``tolerance``: a Newton that converged quadratically to that
+    floor then ground on by ~1e-20 an iteration, and whether it crossed the tolerance before
+    giving up was the round-off's draw (a disk sliding on an ALE block, W = 2.08e-7, tolerance
+    2.08e-19: stalls at 2.1e-19 to 3.5e-19 in the frame rotated by 30 deg, met in the
+    axis-aligned one; a failed repair widened the relabelled nodes by a layer and the two
+    frames parted by 8e-7 of the momentum a step).
     """
     X = np.asarray(X, dtype=float)
     local, nodes, which = repair.around(cells)
@@ -184,7 +191,7 @@ def restore_strain_energy(repair: StrainRepair, X: NDArray, x: NDArray, free: ND
     origin = np.round(X[nodes].mean(axis=0))
     result = _restore(local, X[nodes] - origin, np.asarray(x, dtype=float)[nodes] - origin,
                       np.asarray(free, bool)[nodes], np.asarray(weights, float)[nodes], which,
-                      target, tolerance)
+                      target, (tolerance, round_off))
     if not result.restored:
         return replace(result, X=X)
     repaired = X.copy()
@@ -193,9 +200,10 @@ def restore_strain_energy(repair: StrainRepair, X: NDArray, x: NDArray, free: ND
 
 
 def _restore(repair: StrainRepair, X: NDArray, x: NDArray, free: NDArray, weights: NDArray,
-             cells: NDArray, target: float, tolerance: float) -> RepairResult:
+             cells: NDArray, target: float, tolerances: tuple[float, float]) -> RepairResult:
     """:func:`restore_strain_energy` on arrays of the nodes of ``cells`` only (``repair``
-    numbered on them)."""
+    numbered on them); ``tolerances``: (tolerance, round_off)."""
+    tolerance, round_off = tolerances
     metric = free[:, None] / weights[:, None]
     Xk = X
     energy, g, ok = repair.energy_and_force(Xk, x - Xk, cells)
@@ -216,6 +224,8 @@ def _restore(repair: StrainRepair, X: NDArray, x: NDArray, free: NDArray, weight
         # after Newton's full step the next direction is the plain one again
         last = None if found.full else (direction, z, g)
         Xk, g, value = found.X, found.force, found.energy - target
+    if abs(value) <= round_off:  # stopped at W's round-off floor: as restored as it gets
+        return RepairResult(Xk, True, float(np.max(np.linalg.norm(Xk - X, axis=1))), iteration)
     return RepairResult(X, False, 0.0, iteration)
 
 

@@ -49,6 +49,11 @@ __all__ = ["conserve_remap", "hand_over_energy"]
 
 #: the repaired strain energy matches its target to this fraction of the body's
 REPAIR_RTOL = 1e-12
+#: a repair whose Newton stops (no step decreases the residual) within this fraction of the
+#: body's strain energy has reached W's round-off floor and counts as restored
+#: (``ale.strain_repair.restore_strain_energy``); the rest goes to the velocities as any
+#: strain change does, so E stays exact
+REPAIR_ROUND_OFF = 1e-9
 #: the repair relabels interior nodes up to this many cell layers from the moved nodes
 REPAIR_LAYERS = 3
 
@@ -255,7 +260,8 @@ class _BodyData:
             target = self.repair.energy(X_old, d_old, around)
             scale = max(abs(target), abs(old.strain_energy), 1e-300)
             result = restore_strain_energy(self.repair, update.X, update.x_mesh, allowed,
-                                           weights, around, target, REPAIR_RTOL * scale)
+                                           weights, around, target, REPAIR_RTOL * scale,
+                                           REPAIR_ROUND_OFF * scale)
             if result.restored:
                 break
         self.last_repair = result
