@@ -85,7 +85,10 @@ def test_validate_stops_its_cases_and_writes_the_report(tmp_path, signum):
         summary = json.loads((out / case / "summary.json").read_text())
         assert summary["status"] == "interrupted", case
         assert summary["error"] in ("interrupted", f"interrupted by {name}"), case
-        assert summary["time"] < 0.5, (case, took)  # of t_end = 1: stopped, not finished
+        # stopped, not finished (t_end = 1). Not "< 0.5": ring_a runs from the start while
+        # ring_b waits for mesh_motion, so how far ring_a got depends on the load (a loaded
+        # make test: past 0.5 when ring_b started)
+        assert summary["time"] < 1.0, (case, summary["time"], took)
 
 
 def test_serial_validate_starts_no_case_after_a_stop_request(tmp_path):
