@@ -229,17 +229,3 @@ def test_weights_term_comes_summed_with_its_zero_entries():
     assert np.any(got_vals == 0.0)  # the zero row's places are kept
     ref = (A @ D).ravel()[places]
     assert np.abs(got_vals - ref).max() <= 1e-13 * np.abs(ref).max()
-
-
-def test_one_chains_dual_hat_integrals_are_the_batched_ones():
-    """unpaired_share's per-chain dual-hat integrals (Python floats, 5 us a chain against
-    44 us for 0-d array indexing) give the bits of the batched form the tangent uses."""
-    from ntncontact.contact.transfer import _dual_hat_integrals
-
-    rng = np.random.default_rng(4)
-    for m in range(2, 9):
-        xi = np.sort(rng.random((6, m)), axis=1)
-        xi[:, 0], xi[:, -1] = 0.0, 1.0
-        batched = _dual_hat_integrals(xi)
-        for g in range(xi.shape[0]):
-            assert np.array_equal(_dual_hat_integrals(xi[g]), batched[g])

@@ -22,7 +22,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass
-from functools import partial
+from functools import cache, partial
 
 import numpy as np
 import scipy.sparse as sp
@@ -629,7 +629,7 @@ def _evaluate_compiled(
         elif moving_input:
             # the slip increment w - w_start, w_start = S x_start: K_start = -K_w
             moving = [(vals, x_nodes), (-vals_in, start_nodes)]
-        mapped = _Once(partial(_share_tangent, transfer, rows, cols, vals, moving, force))
+        mapped = cache(partial(_share_tangent, transfer, rows, cols, vals, moving, force))
         force = transfer.force(force)
         rows, cols, vals = (None, None, None) if deferred_tangent else mapped()
     return ContactResult(
@@ -652,18 +652,6 @@ def _share_tangent(transfer: Transfer, rows: NDArray, cols: NDArray, vals: NDArr
     """The kernel's tangent mapped back through the share: S^T K S and the weights' terms."""
     extra = transfer.weight_terms(rows, cols, moving, kernel_force)
     return transfer.tangent(rows, cols, vals, extra)
-
-
-class _Once:
-    """A function of no arguments, called on first use only (a deferred tangent)."""
-
-    def __init__(self, function: Callable[[], tuple]) -> None:
-        self._function, self._value = function, None
-
-    def __call__(self) -> tuple:
-        if self._value is None:
-            self._value = self._function()
-        return self._value
 
 
 ContactTerm = Callable[

@@ -261,30 +261,21 @@ def _summed(rows: NDArray, cols: NDArray, vals: NDArray, n_cols: int
 def _dual_hat_integrals(xi: NDArray) -> NDArray:
     """(..., 2, m) int_0^1 psi N_q dxi for psi_a = 2 - 3 xi, psi_b = 3 xi - 1 and the hats N_q
     of the nodes at xi (..., m) (0 = xi_0 < ... < xi_{m-1} = 1); Simpson's rule is exact for
-    the products. Leading axes: segments batched (``_group_derivative``)."""
-    if xi.ndim == 1 and xi.dtype == np.float64:
-        return np.array(_dual_hat_chain(xi.tolist()))
-    out = np.zeros(xi.shape[:-1] + (2, xi.shape[-1]), dtype=xi.dtype)
-    # all the chains' segments [a, b] at once (a loop over them indexed 0-d arrays with
-    # xi[..., lo]); each node's two terms add in the other order, to the same bits
-    a, b = xi[..., :-1], xi[..., 1:]
-    mid, h = 0.5 * (a + b), b - a
-    for side, psi in enumerate(_DUAL_HATS):
-        # the hat of the left node falls 1 -> 0 over [a, b], the right one rises 0 -> 1
-        out[..., side, :-1] += h / 6.0 * (psi(a) + 4.0 * psi(mid) * 0.5)
-        out[..., side, 1:] += h / 6.0 * (4.0 * psi(mid) * 0.5 + psi(b))
-    return out
+    the products. Leading axes: segments batched (``_group_derivative``), one chain at a
+    time by :func:`_dual_hat_chain`, so the tangent's shares are the residual's bits."""
+    chains = np.asarray(xi, dtype=float).reshape(-1, xi.shape[-1]).tolist()
+    return np.array([_dual_hat_chain(chain) for chain in chains]).reshape(
+        xi.shape[:-1] + (2, xi.shape[-1]))
 
 
 _DUAL_HATS = (lambda t: 2.0 - 3.0 * t, lambda t: 3.0 * t - 1.0)
 
 
 def _dual_hat_chain(xi: list[float]) -> list[list[float]]:
-    """:func:`_dual_hat_integrals` of one chain in Python floats, the same operations (the
-    same bits): unpaired_share takes it per shared segment at every contact evaluation, where
-    indexing 0-d arrays (xi[..., lo], the batched form's loop) made it 3.6x slower (12 -> 44
-    us a chain, +1.1 s of 17 s of CPU at a refined slide, k = 4); NumPy's batched form
-    costs 21 us on a chain of 5 nodes, the scalar loop 5."""
+    """:func:`_dual_hat_integrals` of one chain in Python floats: unpaired_share takes it per
+    shared segment at every contact evaluation, where indexing 0-d arrays (xi[..., lo]) made
+    it 3.6x slower (12 -> 44 us a chain, +1.1 s of 17 s of CPU at a refined slide, k = 4); a
+    NumPy form batched over segments cost 21 us on a chain of 5 nodes, this loop 5."""
     m = len(xi)
     out = [[0.0] * m, [0.0] * m]
     for lo in range(m - 1):
