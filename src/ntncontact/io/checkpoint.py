@@ -1,4 +1,4 @@
-"""Restart checkpoints of a run (issue 19 §2; the format is in docs/outputs.md).
+"""Restart checkpoints of a run (the format is in docs/outputs.md).
 
 Every ``analysis.checkpoint_interval`` of simulated time, after the step's rows are written,
 :class:`Checkpointer` saves the whole state of the run to ``DIR/checkpoints/checkpoint_<step:08d>
@@ -13,7 +13,6 @@ from __future__ import annotations
 
 import hashlib
 import json
-import sys
 import zipfile
 from collections.abc import Iterable, Sequence
 from dataclasses import fields
@@ -22,11 +21,6 @@ from typing import Any
 
 import numpy as np
 
-if sys.version_info >= (3, 11):
-    import tomllib
-else:  # pragma: no cover - Python 3.10
-    import tomli as tomllib
-
 from .. import __version__
 from ..contact import PairState
 from ..engine.model import Model
@@ -34,12 +28,11 @@ from ..engine.problem import StepState
 from ..engine.simulation import Simulation, StepRecord
 from .results import ResultWriter
 from .run_folder import make_subfolder, replace_atomically
-from .scenario import ScenarioConfig
+from .scenario import ScenarioConfig, tomllib
 
 FORMAT = "ntncontact-checkpoint/1"
 CHECKPOINT_DIR = "checkpoints"
 KEEP = 2  # checkpoints kept: the newest may be cut short by a kill while being written
-STATE_ARRAYS = ("X", "x", "d", "v", "a")
 PAIR_FIELDS = tuple(f.name for f in fields(PairState))
 
 

@@ -20,6 +20,7 @@ from ..engine.reactions import reaction_columns
 from ..engine.simulation import StepRecord
 from ..mesh.boundary import chain_edge_lengths
 from .run_folder import RunLock
+from .vtk import VtuSeriesWriter
 from .writers import MemoryResults, ResultsDirectory
 
 CONTACT_HISTORY = ("active_pairs", "frictional_dissipation", "contact_work", "augmentations",
@@ -31,7 +32,7 @@ OFF_SURFACE_SUMMARY = {"max_penetration_off_surfaces": 0.0,
                        "max_penetration_off_surfaces_at": None}
 #: a Lagrange multiplier below this fraction of the run's largest so far is round-off for
 #: the contact times (``ResultWriter._contact_summary``): the solve's relative accuracy is
-#: ~1e-15, and a tester's block at zero load kept t_N ~ 2e-30 against 1 under load
+#: ~1e-15, and a block at zero load kept t_N ~ 2e-30 against 1 under load
 LAGRANGE_ROUNDOFF = 1e-12
 HISTORY_DEFAULTS = {"augmentations_converged": 1,  # of the initial row and contact-free steps
                     "failed_newton_iterations": 0}  # the initial row (an integer column)
@@ -72,8 +73,7 @@ def contact_setup(model: Model) -> dict[str, dict]:
 def used_penalties(law: ContactLaw) -> dict[str, float | None]:
     """The ``normal`` and ``tangential`` penalties an interface's run used (from
     ``penalty_factor`` too), None for one it does not use: the normal one under Lagrange
-    (exact multipliers) and the tangential one without friction. A tester's Lagrange runs at
-    penalty_normal = 1000 and 10 were bit-identical, yet summary.json gave 1000 and 10."""
+    (exact multipliers) and the tangential one without friction."""
     return {"normal": None if law.method == "lagrange" else law.eps_N,
             "tangential": law.eps_T if law.frictional else None}
 
@@ -82,11 +82,9 @@ def outside_ledger(model: Model) -> list[str]:
     """The energies the balance (``energy_balance_*``) leaves out by design, which its warning
     names (report.run_warnings): the work of supports with prescribed motion, the ALE
     remaps' energy where a body does not conserve the total (history's ale_remap_energy), and
-    the ALE convective term's work, which conserves no momentum either. A
-    tester's driven bar and disk drop with conserve_energy = "kinetic" were told the time
-    integration made the 0.4 % the ledger left out."""
+    the ALE convective term's work, which conserves no momentum either."""
     terms = []
-    # a nonzero value held from t = 0 moves too: the run starts at d = 0 (a tester's x = 0.01)
+    # a nonzero value held from t = 0 moves too: the run starts at d = 0
     if any(np.any(p.values != 0.0) and any(p.function.values) for p in model.prescribed):
         terms.append("the work of supports with prescribed motion")
     if any(setup.conserve_energy != "total" for setup in model.ale_bodies):
@@ -94,7 +92,7 @@ def outside_ledger(model: Model) -> list[str]:
                      "history.csv's ale_remap_energy)")
     convective = [f"'{model.bodies[setup.body_index].name}'" for setup in model.ale_bodies
                   if setup.motion.convection == "convective_term"]
-    if convective:  # a tester's block: P off by 1.2 %, E by 0.054, blamed on the integrator
+    if convective:
         terms.append("the work of the ALE convective term (ale.convection = "
                      f"\"convective_term\" on {', '.join(convective)}: it keeps neither the "
                      "energy nor the linear and angular momentum, docs/theory.md; "
@@ -280,22 +278,22 @@ class ResultWriter:
 
     def _previous_frame_written(self) -> None:
         """Wait for the frame in flight (a VTU written in the background) before this step's
-        rows: if its writing failed, the run stops with the summary at the frame's step, the
-        last one history.csv has a row of, and the final frame is tried again."""
-        wait = getattr(self.results.fields, "wait_for_frame", None)
-        if wait is None:
+        rows: if its writing failed, the run stops at the frame's own step, the last one
+        history.csv has a row of, and the final frame is tried again. The frame still
+        overlaps this step's solve."""
+        if not isinstance(self.results.fields, VtuSeriesWriter):
             return
         try:
-            wait()
+            self.results.fields.flush()
         except BaseException:
             self._framed_step = None  # on_finish tries this step's frame again
             raise
 
     def _keeps_contact_rows(self, framed: bool) -> bool:
-        """Whether contact.csv gets this step's pairs (``analysis.contact_output``): ~168
-        bytes a pair a step made 3.4 GB for a 2,000-pair interface over 10^4 steps (tester
-        T), so a long run can keep the frames' steps only, or none. Only the writing is
-        skipped: the summary's contact figures still come from every step's pairs."""
+        """Whether contact.csv gets this step's pairs (``analysis.contact_output``): ~168 bytes a
+        pair a step made 3.4 GB for a 2,000-pair interface over 10^4 steps, so a long run can keep
+        the frames' steps only, or none. Only the writing is skipped: the summary's contact figures
+        still come from every step's pairs."""
         wanted = self.model.analysis.contact_output
         return wanted == "steps" or (wanted == "frames" and framed)
 
@@ -305,11 +303,8 @@ class ResultWriter:
         such step. Round-off: the traction eps_N g_r that a gap g_r within the kernel's touch
         tolerance (TOUCH_ROUNDOFF times the pair's largest coordinate) gives, and under the
         persistency law the rate 2 g_r / dt of such a gap; the multipliers gather such
-        increments. Counting any t_N > 0 kept contact_end_time at 4.0 instead of 3.75 for
-        tractions <= 3.3e-11 at exactly zero load (tester Q) and set contact_start_time from a
-        pair 0.17 apart with t_N 1.9e-11 (tester U). Lagrange multipliers (no eps_N): above
-        LAGRANGE_ROUNDOFF times the largest of the run so far (tester B: t_N 3.6e-30 at zero
-        load gave contact_end_time 2.25 against the other methods' 1.75)."""
+        increments (at exactly zero load t_N <= 3.3e-11 remained). Lagrange multipliers (no
+        eps_N): above LAGRANGE_ROUNDOFF times the largest of the run so far."""
         fields = {"max_active_pairs": max(len(rows["node_1"]), summary["max_active_pairs"])}
         laws = {ci.name: ci for ci in self.model.interfaces}
         lagrange = np.array([laws[name].law.method == "lagrange" for name in rows["interface"]])
@@ -370,8 +365,7 @@ class ResultWriter:
         of a pair that carries a positive normal traction. The persistency law holds a pair's
         gap where it is, so a pair that opened in a step without traction and pressed again
         (the release test waits ``release_steps``) pushes across that opening; up to v dt,
-        the mirror of the detection lag's penetration (an independent tester's soft block
-        between walls: 0.028, 0.22 of the spacing, 3.6 % of the contact impulse)."""
+        the mirror of the detection lag's penetration."""
         # the gap law holds its mid-step gap at zero, its step-end gap swings (rod: 0.058)
         pressed = (rows["normal_traction"] > 0.0) & np.isin(rows["interface"], self._persistency)
         opening = np.where(pressed, -np.asarray(rows["end_gap"]), 0.0)
@@ -391,9 +385,7 @@ class ResultWriter:
         (``ntncontact run`` compares the two) and where (``where``: the interface, the ALE
         node and its partner, ``engine.mesh_motion.end_of_step_mismatch``; the file numbers
         added): an ALE node that ends far from its partner's place is a pair the mesh motion
-        did not follow (a tester's slide on a locally respaced ALE base: 0.265, 2.1 spacings,
-        where it is ~1e-9 when the motion follows). Without the place a run with several
-        interfaces and ALE bodies could not tell which pair it was."""
+        did not follow (~1e-9 of the spacing where it follows)."""
         if "max_ale_mismatch" not in summary or mismatch <= summary["max_ale_mismatch"]:
             return {}
         at = {"time": time, "element_size": min(self._spacing.values())}
@@ -496,9 +488,7 @@ class ResultWriter:
         last = time >= model.analysis.t_end - 1e-9 * model.analysis.dt
         if self.interval is None or last or time >= self._next_output - 1e-9 * model.analysis.dt:
             if self.interval is not None:  # the next multiple of the interval: a schedule
-                # from the last frame's time drifted to the dt grid (a tester's interval 0.3
-                # at dt 0.25 gave frames at 0, 0.5, 1.0 instead of the first steps past 0.3,
-                # 0.6, 0.9)
+                # from the last frame's time drifted to the dt grid
                 self._next_output = (math.floor(time / self.interval + 1e-6) + 1) * self.interval
             return True
         return False
@@ -540,13 +530,11 @@ class ResultWriter:
 
     def _write_last_frame(self) -> None:
         """A frame of the last completed step when the output interval left it without one:
-        an interrupted or failed run keeps the fields where it stopped (a tester's 48k-element
-        run stopped at step 16 had frames up to step 10 only, ~10 s of compute lost). One
-        frame, and best effort: a second signal (KeyboardInterrupt) or an error of its own
-        (the full disk that failed the run) gives it up, and the files are closed anyway.
-        Off the output schedule, so it adds no contact.csv rows under contact_output =
-        "frames", and a restart drops it: the restarted run's files are the uninterrupted
-        run's (a tester's restart kept the extra step's rows and its VTU file)."""
+        an interrupted or failed run keeps the fields where it stopped. One frame, and best
+        effort: a second signal (KeyboardInterrupt) or an error of its own (the full disk
+        that failed the run) gives it up, and the files are closed anyway. Off the output
+        schedule, so it adds no contact.csv rows under contact_output = "frames", and a
+        restart drops it: the restarted run's files are the uninterrupted run's."""
         last = self._last
         if last is None or last.state.step == self._framed_step:
             return

@@ -112,10 +112,10 @@ class RunLock:
 
     @classmethod
     def acquire(cls, directory: Path, phase: str | None = None) -> RunLock:
-        """Lock ``directory`` for this process, or raise :class:`RunFolderError` naming the
-        run that holds it. ``phase`` ("building": the command locks the folder before its
-        model's build, which took 10-35 s on a tester's long interfaces) is written in the
-        lock file for :func:`run_status` until :meth:`set_phase` clears it."""
+        """Lock ``directory`` for this process, or raise :class:`RunFolderError` naming the run
+        that holds it. ``phase`` ("building": the command locks the folder before its model's
+        build, up to 35 s for long interfaces) is written in the lock file for :func:`run_status`
+        until :meth:`set_phase` clears it."""
         path = directory / LOCK_FILE
         while True:
             try:
@@ -128,9 +128,11 @@ class RunLock:
                 fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
             except BlockingIOError:
                 os.close(fd)
-                raise RunFolderError(f"{directory} is in use by another run: "
-                                     f"{_describe(read_lock(directory))} (lock file {path})"
-                                     ) from None
+                info = read_lock(directory)
+                holder = ("its PID is not written yet" if info is None else f"PID "
+                          f"{info.get('pid')} on {info.get('host')}, started {info.get('started')}")
+                raise RunFolderError(f"{directory} is in use by another run: {holder} (lock "
+                                     f"file {path})") from None
             # The holder before us may have removed the file between our open and our lock:
             # then we hold a lock on a file nobody else will see, so try again.
             if _same_file(path, fd):
@@ -191,12 +193,6 @@ def read_lock(directory: Path) -> dict[str, Any] | None:
         except ValueError:  # being written
             return None
     return info if isinstance(info, dict) else None
-
-
-def _describe(info: dict[str, Any] | None) -> str:
-    if info is None:
-        return "its PID is not written yet"
-    return f"PID {info.get('pid')} on {info.get('host')}, started {info.get('started')}"
 
 
 def lock_holder_alive(directory: Path, info: dict[str, Any]) -> bool:
@@ -324,8 +320,7 @@ def _read_json(path: Path) -> dict[str, Any]:
 
 
 def run_status(directory: Path) -> RunStatus:
-    """The status of the run in ``directory`` (see :class:`RunStatus`). A tester's status of
-    a run building its model (10-35 s) said "holds no run" and exited 1."""
+    """The status of the run in ``directory`` (see :class:`RunStatus`)."""
     lock = read_lock(directory)
     alive = lock is not None and lock_holder_alive(directory, lock)
     phase = lock.get("phase") if alive and lock is not None else None

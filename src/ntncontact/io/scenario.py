@@ -38,16 +38,13 @@ class Strict(BaseModel):
                               allow_inf_nan=False)
 
 
-def _list_to_tuple(value: Any) -> Any:
-    """TOML arrays are lists; strict validation takes a tuple only from a tuple."""
-    return tuple(value) if isinstance(value, list) else value
-
-
 Positive = Annotated[float, Field(gt=0)]
 NonNegative = Annotated[float, Field(ge=0)]
 #: a body, interface or tie name: it labels output columns and messages, so never empty
 Name = Annotated[str, Field(min_length=1)]
-Vector = Annotated[tuple[float, float], BeforeValidator(_list_to_tuple)]
+#: TOML arrays are lists; strict validation takes a tuple only from a tuple
+Vector = Annotated[tuple[float, float],
+                   BeforeValidator(lambda v: tuple(v) if isinstance(v, list) else v)]
 
 
 class TimeFunctionConfig(Strict):
@@ -186,7 +183,7 @@ class LoadConfig(Strict):
     def _fields(self) -> LoadConfig:
         if self.type == "pressure" and self.value is None:
             raise ValueError("a pressure load needs 'value'")
-        if self.type == "pressure" and self.vector is not None:  # it was ignored
+        if self.type == "pressure" and self.vector is not None:
             raise ValueError("a pressure load takes 'value' (normal to its edges), not 'vector'")
         if self.type != "pressure" and self.vector is None:
             raise ValueError(f"a {self.type} load needs 'vector'")
@@ -350,10 +347,9 @@ class ContactConfig(Strict):
 
     def ineffective_keys(self) -> list[str]:
         """The keys given here that this interface's method and friction never read, each
-        group as a clause naming the keys and why: a tester's penalty run with an
-        augmentation table and Lagrange runs with penalty_normal = 1000, 10 or 0 were
-        bit-identical to runs without, and nothing said so. Warned of, not refused: one
-        scenario file serves every method through ``--set contact.N.method=...``.
+        group as a clause naming the keys and why (the run is the same without them). Warned
+        of, not refused: one scenario file serves every method through ``--set
+        contact.N.method=...``.
         ``penalty_tangential`` without friction is not among them: friction > 0 requires it,
         so files that ``--set contact.N.friction`` switches on carry it (three examples)."""
         given = [k for k in AugmentationConfig.model_fields
@@ -424,15 +420,12 @@ class ScenarioConfig(Strict):
         names = [b.name for b in self.bodies]
         if len(set(names)) != len(names):
             raise ValueError(f"body names must be unique, got {names}")
-        for i, c in enumerate(self.contact):
-            for key in ("body_1", "body_2"):
-                if getattr(c, key) not in names:
-                    raise ValueError(f"contact.{i}.{key}: no body named '{getattr(c, key)}'")
-        for i, t in enumerate(self.tie):
-            for key in ("body_1", "body_2"):
-                if getattr(t, key) not in names:
-                    raise ValueError(f"tie.{i} ('{t.name}').{key}: no body named "
-                                     f"'{getattr(t, key)}'")
+        for table, items in (("contact", self.contact), ("tie", self.tie)):
+            for i, item in enumerate(items):
+                where = f"{table}.{i}" + (f" ('{item.name}')" if table == "tie" else "")
+                for key in ("body_1", "body_2"):
+                    if getattr(item, key) not in names:
+                        raise ValueError(f"{where}.{key}: no body named '{getattr(item, key)}'")
         ties = [t.name for t in self.tie]
         if len(set(ties)) != len(ties):
             raise ValueError(f"tie names must be unique, got {ties}")
@@ -441,11 +434,6 @@ class ScenarioConfig(Strict):
         if len(set(interfaces)) != len(interfaces):
             raise ValueError(f"contact names must be unique, got {interfaces}")
         return self
-
-
-def _format_error(path: Path, err: ValidationError) -> str:
-    """One line: the file, then each offending key with its value and what is wrong."""
-    return f"{path}: " + "; ".join(_format_item(e) for e in err.errors())
 
 
 def _format_item(e: Any) -> str:
@@ -477,11 +465,13 @@ def _toml_value(value: Any, limit: int = 60) -> str:
 
 
 def parse_scenario(data: dict[str, Any], path: Path) -> ScenarioConfig:
-    """Validate a scenario mapping; errors name the file and each offending key."""
+    """Validate a scenario mapping; the error is one line: the file, then each offending key
+    with its value and what is wrong."""
     try:
         return ScenarioConfig.model_validate(data)
     except ValidationError as err:
-        raise ScenarioError(_format_error(path, err)) from None
+        raise ScenarioError(f"{path}: " + "; ".join(_format_item(e) for e in err.errors())
+                            ) from None
 
 
 def load_scenario(path: str | Path, overrides: list[str] | None = None) -> ScenarioConfig:
@@ -495,7 +485,7 @@ def load_scenario(path: str | Path, overrides: list[str] | None = None) -> Scena
 
 def read_toml(path: Path) -> dict[str, Any]:
     """The mapping of a TOML file; a missing or unreadable file raises a ScenarioError."""
-    if path.is_dir():  # it exists: "not found" sent a tester looking for a typo
+    if path.is_dir():  # it exists: "not found" would send the user looking for a typo
         found = sorted(p.name for p in path.glob("*.toml"))
         more = ", ..." if len(found) > 3 else ""
         hint = f" (it holds {', '.join(found[:3])}{more})" if found else ""
@@ -531,7 +521,7 @@ def apply_override(data: dict[str, Any], item: str, path: Path) -> None:
     if "=" not in item:
         raise ScenarioError(f"{path}: override '{item}' must look like key.path=value")
     key, raw = item.split("=", 1)
-    if not key.strip() or "" in key.strip().split("."):  # "=1" read as the key "" (tester W)
+    if not key.strip() or "" in key.strip().split("."):  # "=1" would set the key ""
         what = "an empty key" if not key.strip() else f"an empty part in the key '{key}'"
         raise ScenarioError(f"{path}: override '{item}' has {what}; it must look like "
                             "key.path=value")

@@ -130,11 +130,9 @@ class VtuSeriesWriter:
     caller goes on with the next step; a frame is on disk and listed once the next
     :meth:`write`, :meth:`flush`, :attr:`entries` or :meth:`close` returns, and an error of
     its writing (a full disk) is raised there. At most one frame is in flight. Why: meshio's
-    zlib compression, which releases the GIL, is most of a frame's time at scale. Hertz
-    refined 8x (61 086 elements, a frame a step), interleaved runs, load 1.2-1.6: 5.47 /
-    5.47 -> 4.25 / 4.38 s a step, the output part 1.12-1.14 -> 0.33-0.37 s; the cost is the
-    frame's copy held meanwhile, +52-57 MB of peak memory there (0.9 KB an element;
-    ``benchmarks/README.md``, session 16).
+    zlib compression, which releases the GIL, is most of a frame's time at scale: Hertz
+    refined 8x (61 086 elements) 5.47 -> 4.25 s a step, for the frame's copy held meanwhile
+    (0.9 KB an element; ``benchmarks/README.md``).
     """
 
     def __init__(self, directory: str | os.PathLike, name: str = "fields",
@@ -176,13 +174,6 @@ class VtuSeriesWriter:
         if pending is not None:
             pending.result()
 
-    def wait_for_frame(self) -> None:
-        """:meth:`flush`, for a caller about to write the next step's rows: a frame whose
-        writing failed stops the run at its own step (a tester's full disk failed the frame of
-        step 15, raised at the next frame's write, and the run computed and wrote 5 more steps
-        whose last had no frame). The frame still overlaps the next step's solve."""
-        self.flush()
-
     def close(self) -> None:
         """Write the frame in flight, then stop the writing thread (background mode)."""
         try:
@@ -204,7 +195,7 @@ class VtuSeriesWriter:
         """Write output step ``step`` as a VTU, list it in the PVD and return the VTU path
         (in background mode: once the frame before it is written, see the class)."""
         # the frame in flight is written first, then this one copied: one frame's copy held at
-        # a time, not two (a frame at Hertz refined 8x: ~35 MB; issue 18, memory)
+        # a time, not two
         self.flush()
         mesh = frame_mesh(points, cells, point_data, cell_data, copy=self._pool is not None)
         vtu_path = self.vtu_directory / f"{self.name}_{int(step):05d}.vtu"
@@ -392,9 +383,9 @@ class XdmfSeriesWriter:
 
     def _check_room(self, mesh: meshio.Mesh) -> None:
         """Refuse a frame that may not fit on the disk or under the file-size limit, before
-        HDF5 starts it: HDF5 does not recover from a write that fails (a tester's full disk
-        crashed the run with a segmentation fault, its index left at the first frame). The
-        room asked is twice the frame's arrays and 64 kB besides (HDF5's metadata)."""
+        HDF5 starts it: HDF5 does not recover from a write that fails (a full disk ended the
+        run in a segmentation fault). The room asked is twice the frame's arrays and 64 kB
+        besides (HDF5's metadata)."""
         frame = sum(np.asarray(a).nbytes for a in mesh.point_data.values())
         frame += sum(np.asarray(a).nbytes for blocks in mesh.cell_data.values() for a in blocks)
         if self._first is None:
@@ -417,8 +408,8 @@ class XdmfSeriesWriter:
     def flush(self) -> None:
         """The HDF5 file flushed, so that the frames' arrays so far are on disk (a checkpoint
         calls it). The index is not rewritten here: a restart lists the frames it lacks
-        (:meth:`_copy_frames`). Rewriting it at every checkpoint cost O(frames) each: a
-        tester's run checkpointing every step took 146 s for 1200 frames against 14 s."""
+        (:meth:`_copy_frames`). Rewriting it at every checkpoint cost O(frames) each: a run
+        checkpointing every step took 146 s for 1200 frames against 14 s."""
         if self._series.h5_file:
             self._series.h5_file.flush()
 
@@ -430,9 +421,8 @@ class XdmfSeriesWriter:
         write of the frames kept. The new file is written beside the old one, then the new
         index and the new file replace the old ones in that order: a kill at any point leaves
         a readable series (the old index over the old file; the new index over the old file,
-        which holds its frames; or the new pair), and a later restart starts again from it. A
-        tester's restart killed while copying in place left every frame unreadable. ``step``
-        is unused (the frames are counted, not numbered)."""
+        which holds its frames; or the new pair), and a later restart starts again from it.
+        ``step`` is unused (the frames are counted, not numbered)."""
         import h5py
 
         kept = [(float(time), str(name)) for time, name in entries]
@@ -654,9 +644,8 @@ def read_frame_mesh(source: FrameSource) -> meshio.Mesh:
 def read_xdmf(path: str | os.PathLike) -> list[VtuFrame]:
     """Every frame of an XDMF series written by :class:`XdmfSeriesWriter`, in time order, as
     :func:`read_vtu` reads the VTU frames of the same run. ``path``: the ``.xdmf`` file or,
-    as ``read_results`` takes it, the results folder (its ``fields.xdmf``; meshio raised
-    IsADirectoryError on a folder). Raises FileNotFoundError without the file, ValueError
-    naming it when it is not an XDMF series."""
+    as ``read_results`` takes it, the results folder (its ``fields.xdmf``). Raises
+    FileNotFoundError without the file, ValueError naming it when it is not an XDMF series."""
     xdmf = Path(path)
     if xdmf.is_dir():
         xdmf = xdmf / "fields.xdmf"

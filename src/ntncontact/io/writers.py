@@ -74,9 +74,7 @@ _STOP_SIGNALS = {signal.SIGINT, signal.SIGTERM}
 
 def format_value(value: Any) -> str:
     """One CSV cell: integers and bools as integers, floats by ``repr`` (round-trips exactly)."""
-    if isinstance(value, (bool, np.bool_)):
-        return str(int(value))
-    if isinstance(value, (int, np.integer)):
+    if isinstance(value, (bool, np.bool_, int, np.integer)):
         return str(int(value))
     if isinstance(value, (float, np.floating)):
         return repr(float(value))
@@ -87,10 +85,8 @@ def format_value(value: Any) -> str:
 
 def _format_column(values: NDArray) -> list[str]:
     # Vectorised per dtype: tolist() yields Python scalars whose repr round-trips.
-    if values.dtype.kind == "b":
+    if values.dtype.kind in "biu":
         return [str(int(v)) for v in values.tolist()]
-    if values.dtype.kind in "iu":
-        return [str(v) for v in values.tolist()]
     if values.dtype.kind == "f":
         return [repr(v) for v in values.tolist()]
     return [format_value(v) if not isinstance(v, str) else v for v in values.tolist()]
@@ -150,8 +146,8 @@ class _CsvWriter:
 def _append_whole(fd: int, data: bytes, path: Path) -> None:
     """Append ``data`` to the file of ``fd``, all or nothing: a write that fails part-way (a
     full disk, a file-size limit) is cut back to the size before it, so that CSV rows stay
-    whole (a tester's full disk left contact.csv's last row cut inside a number, which pandas
-    read as that row's value), and the error names the file."""
+    whole (a row cut inside a number reads as a row with another value), and the error names
+    the file."""
     start = os.lseek(fd, 0, os.SEEK_END)
     view = memoryview(data)
     try:
@@ -224,21 +220,26 @@ class ContactWriter(_CsvWriter):
         ``pairs`` maps every column except ``step`` and ``time`` to an array with one entry per
         active pair; scalars (e.g. a single ``interface`` name) are repeated for every pair.
         """
-        _check_keys(list(pairs), self.columns[2:], str(self.path))
-        arrays = {name: np.asarray(values) for name, values in pairs.items()}
-        lengths = {name: a.shape[0] for name, a in arrays.items() if a.ndim > 0}
-        if not lengths:
-            raise ValueError("contact rows need at least one per-pair array (e.g. node_1)")
-        count = max(lengths.values())
-        wrong = {name: n for name, n in lengths.items() if n != count}
-        if wrong or any(a.ndim > 1 for a in arrays.values()):
-            raise ValueError(f"contact columns must be 1D of length {count}; got lengths {wrong}")
+        count, columns = _pair_columns(pairs, self.columns[2:], str(self.path))
         cells = [[format_value(step)] * count, [format_value(time)] * count]
-        for name in self.columns[2:]:
-            column = np.broadcast_to(arrays[name], (count,))
-            cells.append(_format_column(column))
+        cells += [_format_column(column) for column in columns.values()]
         self._write_rows(list(zip(*cells, strict=True)))
         return count
+
+
+def _pair_columns(pairs: Mapping[str, ArrayLike], columns: Sequence[str],
+                  where: str) -> tuple[int, dict[str, NDArray]]:
+    """The pair count and each of ``columns`` as a 1D array of it (scalars repeated)."""
+    _check_keys(list(pairs), columns, where)
+    arrays = {name: np.asarray(values) for name, values in pairs.items()}
+    lengths = {name: a.shape[0] for name, a in arrays.items() if a.ndim > 0}
+    if not lengths:
+        raise ValueError("contact rows need at least one per-pair array (e.g. node_1)")
+    count = max(lengths.values())
+    wrong = {name: n for name, n in lengths.items() if n != count}
+    if wrong or any(a.ndim > 1 for a in arrays.values()):
+        raise ValueError(f"contact columns must be 1D of length {count}; got lengths {wrong}")
+    return count, {name: np.broadcast_to(arrays[name], (count,)) for name in columns}
 
 
 def to_jsonable(value: Any) -> Any:
@@ -261,10 +262,6 @@ def to_jsonable(value: Any) -> Any:
     if value is None or isinstance(value, (bool, int, float, str)):
         return value
     raise TypeError(f"cannot write {value!r} of type {type(value).__name__} to JSON")
-
-
-def _json_text(data: Mapping[str, Any]) -> str:
-    return json.dumps(to_jsonable(data), indent=2, allow_nan=False)
 
 
 class SummaryWriter:
@@ -354,20 +351,18 @@ class SummaryWriter:
             fields["cpu_time_s"] = _time.process_time() - self._cpu_start
         merged = self._data | fields
         # formatted first: a value JSON cannot hold leaves the file and the state unchanged
-        text = _json_text(merged) + "\n"
-        if self.path is None:
-            pass
-        elif status == "running":
+        text = json.dumps(to_jsonable(merged), indent=2, allow_nan=False) + "\n"
+        if self.path is not None and status == "running":
             self._write_in_place(text.encode())
-        else:
+        elif self.path is not None:
             self._write_final(text)
         self._data = merged
 
     def _write_final(self, text: str) -> None:
         """The final summary as a new file renamed over the old one, or, where no new file
         can be made (a full disk, a folder that takes no new file), written in place as while
-        running: a tester's run stopped by a full disk left summary.json at "running", which
-        ``ntncontact status`` called a killed run."""
+        running: else the file would say "running", which ``ntncontact status`` calls a killed
+        run."""
         try:
             replace_atomically(self.path, lambda tmp: tmp.write_text(text, encoding="utf-8"),
                                sync=True)
@@ -409,7 +404,21 @@ def closing() -> bool:
     return _CLOSING[0] > 0
 
 
-class ResultsDirectory:
+class _Results:
+    """What :class:`ResultsDirectory` and :class:`MemoryResults` share."""
+
+    history: HistoryWriter | _MemoryTable
+    summary: SummaryWriter
+
+    def write_history(self, row: Mapping[str, Any], **summary_fields: Any) -> None:
+        """Append a history row, then rewrite the summary with its step count, time and
+        energy statistics, and ``summary_fields``."""
+        self.history.write(row)
+        self.summary.record_energy(row["step"], row["total_energy"], row.get("time"))
+        self.summary.update(**summary_fields)
+
+
+class ResultsDirectory(_Results):
     """All writers of one run folder; use as a context manager around the time loop, or call
     :meth:`close` with the run's status.
 
@@ -442,11 +451,11 @@ class ResultsDirectory:
                                       else lock or RunLock.acquire(self.directory))
         step = None if resume is None else int(resume["step"])
         try:
-            # the fields first: without h5py the xdmf writer stops before any file exists
-            series = XdmfSeriesWriter if field_format == "xdmf" else VtuSeriesWriter
+            # the fields first: without h5py the xdmf writer stops before any file exists;
             # VTU frames are compressed and written beside the next step (VtuSeriesWriter)
-            self.fields = ((series(self.directory, background=True) if series is VtuSeriesWriter
-                            else series(self.directory)) if write_fields else None)
+            self.fields = None if not write_fields else (
+                XdmfSeriesWriter(self.directory) if field_format == "xdmf"
+                else VtuSeriesWriter(self.directory, background=True))
             if resume is not None:
                 for leftover in self.directory.glob(".*.tmp"):  # a kill mid-write
                     if leftover.name.startswith((".summary.json.", ".fields.pvd.",
@@ -454,8 +463,7 @@ class ResultsDirectory:
                                                  ".contact.csv.")):
                         leftover.unlink()
                 if self.fields is not None:  # may fail (an unreadable fields.h5): before
-                    # any other file is cut back or rewritten (a tester's refused restart
-                    # had cut history.csv back, and summary.json said running)
+                    # any other file is cut back or rewritten
                     self.fields.resume(step, resume["pvd_entries"])
             self.history = HistoryWriter(self.directory, history_columns, step)
             if step is not None and self.history.last_step() != step:
@@ -466,7 +474,9 @@ class ResultsDirectory:
             if resume is not None:
                 self.summary.restore(resume["summary"])
         except BaseException:
-            self._close_csv()
+            for writer in (getattr(self, "history", None), getattr(self, "contact", None)):
+                if writer is not None:
+                    writer.close()
             self._lock.release()
             raise
 
@@ -479,22 +489,9 @@ class ResultsDirectory:
         return {"step": int(step), "pvd_entries": [list(e) for e in entries],
                 "summary": self.summary.checkpoint_state()}
 
-    def _close_csv(self) -> None:
-        for name in ("history", "contact"):
-            writer = getattr(self, name, None)
-            if writer is not None:
-                writer.close()
-
     @property
     def closed(self) -> bool:
         return self._lock is None
-
-    def write_history(self, row: Mapping[str, Any], **summary_fields: Any) -> None:
-        """Append a history row, then rewrite the summary with its step count, time and
-        energy statistics, and ``summary_fields``."""
-        self.history.write(row)
-        self.summary.record_energy(row["step"], row["total_energy"], row.get("time"))
-        self.summary.update(**summary_fields)
 
     def close(self, status: str = "completed", error: str | None = None,
               **summary_fields: Any) -> None:
@@ -505,7 +502,7 @@ class ResultsDirectory:
         # A signal (a second Ctrl-C) waits until this is done: it must not leave the summary
         # saying "running" with the files closed. The mask holds it off this thread; one
         # that another thread (the VTU writer's) takes still runs its Python handler here,
-        # and the command's handler asks closing() (a tester's double Ctrl-C: 1 in 8 stale)
+        # and the command's handler asks closing()
         held = signal.pthread_sigmask(signal.SIG_BLOCK, _STOP_SIGNALS)
         _CLOSING[0] += 1
         try:
@@ -543,7 +540,7 @@ class ResultsDirectory:
             self.close("failed", f"{exc_type.__name__}: {exc}")
 
 
-class MemoryResults:
+class MemoryResults(_Results):
     """A run's results kept in memory (``ntncontact.run(out=None)``): what
     :class:`ResultsDirectory` writes, received through the same methods, nothing on disk. The
     history rows, the contact rows of each step, the summary and the field frames (meshio
@@ -557,12 +554,6 @@ class MemoryResults:
         self.fields = _MemoryFrames() if write_fields else None
         self.summary = SummaryWriter(None, **summary_extra)
         self.closed = False
-
-    def write_history(self, row: Mapping[str, Any], **summary_fields: Any) -> None:
-        """As :meth:`ResultsDirectory.write_history`."""
-        self.history.write(row)
-        self.summary.record_energy(row["step"], row["total_energy"], row.get("time"))
-        self.summary.update(**summary_fields)
 
     def close(self, status: str = "completed", error: str | None = None,
               **summary_fields: Any) -> None:
@@ -587,10 +578,7 @@ class _MemoryTable:
         self.rows.append({c: row[c] for c in self.columns})
 
     def write_step(self, step: int, time: float, pairs: Mapping[str, ArrayLike]) -> int:
-        _check_keys(list(pairs), self.columns[2:], "contact")
-        count = max(np.asarray(v).shape[0] for v in pairs.values() if np.ndim(v) > 0)
-        columns = {name: np.broadcast_to(np.asarray(pairs[name]), (count,))
-                   for name in self.columns[2:]}
+        count, columns = _pair_columns(pairs, self.columns[2:], "contact")
         self.rows += [{"step": step, "time": time} | {n: c[i].item() for n, c in columns.items()}
                       for i in range(count)]
         return count
