@@ -73,9 +73,8 @@ def scenario_from_dict(data: Mapping[str, Any], base_dir: str | Path = ".",
                        overrides: Overrides = None) -> Scenario:
     """A scenario from a plain mapping with the keys of a scenario file (docs/scenarios.md);
     mesh files are looked up relative to ``base_dir``. NumPy scalars and arrays are taken as
-    the Python numbers and lists they hold (``np.int64(8)`` for a mesh's ``nx`` was refused
-    while ``np.float64`` passed, since NumPy's floats are Python floats and its integers are
-    not Python ints)."""
+    the Python numbers and lists they hold (NumPy's integers are not Python ints, which
+    strict validation requires)."""
     return _build(_plain(data), Path(base_dir), "<dict>", (), overrides)
 
 
@@ -159,14 +158,11 @@ class Results:
         k = int(np.argmin(np.abs(times - t)))
         scale = max(abs(times[-1]), 1.0)
         if abs(times[k] - t) > 1e-9 * scale:
-            raise ValueError(f"no field frame at t = {t:g}; frames at {_listing(times)}")
+            shown = ", ".join(f"{time:g}" for time in times[:8])
+            more = f", ... ({len(times)} in all)" if len(times) > 8 else ""
+            raise ValueError(f"no field frame at t = {t:g}; frames at {shown}{more}")
         frame = self.frames[k][1]
         return frame if isinstance(frame, meshio.Mesh) else read_frame_mesh(frame)
-
-
-def _listing(times: np.ndarray, most: int = 8) -> str:
-    shown = ", ".join(f"{t:g}" for t in times[:most])
-    return shown + (f", ... ({len(times)} in all)" if len(times) > most else "")
 
 
 def read_results(directory: str | Path) -> Results:
@@ -229,10 +225,8 @@ def run(scenario: Scenario | str | Path, out: str | Path | None = None, *,
 
 
 def _check_run_arguments(out: str | Path | None, progress: object) -> None:
-    """Refuse, before the build, what a tester's script passed and learnt of only later: a
-    ``progress`` that is not callable failed the run after its first step ("'int' object is
-    not callable", the folder's summary ``failed``), and an ``out`` naming a file gave a bare
-    FileExistsError."""
+    """Refuse, before the build, a ``progress`` that is not callable (it would fail the run
+    after its first step) and an ``out`` naming a file."""
     if progress is not None and not callable(progress):
         raise TypeError(f"progress must be a function of the time t (or None), not "
                         f"{type(progress).__name__} {progress!r}")
@@ -292,8 +286,7 @@ def _run_in_memory(scenario: Scenario, progress: Callable[[float], None] | None,
 @contextlib.contextmanager
 def _failed_with_summary(writer: ResultWriter):
     """A failed run's error, carried with its summary so far (:class:`_RunFailed`): the
-    warnings come before the error, as the command prints them (a tester's gap-law runs
-    whose energy grew 37-fold until an element inverted showed only the inversion)."""
+    warnings come before the error, as the command prints them."""
     try:
         yield
     except Exception as err:
@@ -302,8 +295,7 @@ def _failed_with_summary(writer: ResultWriter):
 
 def _issue_warnings(summary: Mapping[str, Any], static: bool) -> None:
     """The warnings ``ntncontact run`` prints after a run, as :class:`PhysicsWarning` at the
-    caller of :func:`run` (a tester's run that the command warned had gone 0.0309 inside its
-    partner surface was silent here)."""
+    caller of :func:`run`."""
     for line in result_warnings(dict(summary), static):
         warnings.warn(line, PhysicsWarning, stacklevel=3)
 

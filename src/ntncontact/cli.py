@@ -23,7 +23,7 @@ if TYPE_CHECKING:
     from .io.run_folder import RunLock
 
 #: seconds of wall time between two progress lines when stderr is not a terminal (a batch
-#: job's log, where tqdm's bar is off: a tester's 60 s of a run printed nothing)
+#: job's log, where tqdm's bar is off)
 PROGRESS_INTERVAL = 30.0
 
 
@@ -33,8 +33,7 @@ class StopOnSignal:
     closed. Raising KeyboardInterrupt from the handler instead could land inside a compiled
     kernel and surface as a SystemError. A second signal stops at once (KeyboardInterrupt).
     While the model is built (``building``) nothing is written and no step is to finish,
-    so the first signal stops at once: a tester's first Ctrl-C 8 s into a 31 s build was
-    silent until the build ended. The handlers are installed in the main thread only, and the
+    so the first signal stops at once. The handlers are installed in the main thread only, and the
     previous ones restored."""
 
     SIGNALS = (signal.SIGINT, signal.SIGTERM)
@@ -185,8 +184,7 @@ def _build(build_model: Callable, config: object, folder: Path, stop: StopOnSign
 
 
 def _out_folder(out: str) -> Path:
-    """``--out`` as a folder; an existing file is refused by name (it gave a bare "[Errno
-    17] File exists")."""
+    """``--out`` as a folder; an existing file is refused by name."""
     path = Path(out)
     if path.exists() and not path.is_dir():
         raise ValueError(f"--out {out}: is a file; --out names the results folder (a new or "
@@ -196,8 +194,8 @@ def _out_folder(out: str) -> Path:
 
 def _lock_before_build(out: Path) -> RunLock:
     """The results folder, created if need be and locked before the model's build (as long as
-    35 s for a tester's long interfaces), which ``ntncontact status`` reports as "starting"
-    and during which a second run into the folder is refused (it went ahead then)."""
+    35 s for long interfaces), which ``ntncontact status`` reports as "starting" and during
+    which a second run into the folder is refused."""
     from .io.run_folder import RunLock
 
     out.mkdir(parents=True, exist_ok=True)
@@ -246,9 +244,7 @@ class ProgressLines:
 def _finished_on_error(writer, stop: StopOnSignal, static: bool):
     """An exception before the time loop took over (a signal during start-up): the summary
     says so too (after the time loop, ``writer.on_finish`` does nothing). A failed or
-    interrupted run's warnings are printed before its error: a tester's gap-law runs whose
-    energy grew 37 and 206 times until an element inverted showed only the inversion, and a
-    run stopped with Ctrl-C showed none of the penetrations its summary held."""
+    interrupted run's warnings are printed before its error: they may name its cause."""
     try:
         yield
     except BaseException as err:
@@ -351,8 +347,7 @@ def _mesh_quality(args: argparse.Namespace) -> int:
 
 
 def _folder_quality(folder: Path) -> dict:
-    """The final meshes' statistics a run folder's summary.json holds, body by body (a
-    tester's results folder was refused as "no such file")."""
+    """The final meshes' statistics a run folder's summary.json holds, body by body."""
     from .io.run_folder import read_summary
 
     summary = folder / "summary.json"
@@ -372,10 +367,6 @@ def _print_quality(tables: dict) -> int:
         for key, value in stats.items():
             print(f"  {key:22s} {value:.6g}")
     return 0
-
-
-def _compare(args: argparse.Namespace) -> int:
-    return _print_comparison(Path(args.directory))
 
 
 def _print_comparison(directory: Path) -> int:
@@ -454,8 +445,7 @@ def _sweep(args: argparse.Namespace) -> int:
 def _interrupting_signals():
     """SIGINT and SIGTERM raise KeyboardInterrupt in the sweep's driver, which waits on its
     cases (no compiled kernel to land in): the cases done are kept in sweep.csv and a rerun
-    runs the rest. A tester's sweep started with SIGINT ignored (a background job of a
-    script) ran on through it, and SIGTERM ended it without a word or a sweep.csv."""
+    runs the rest. Installed also where SIGINT was ignored (a script's background job)."""
     def interrupt(signum: int, frame: object) -> None:
         raise KeyboardInterrupt(f"interrupted by {signal.Signals(signum).name}")
 
@@ -507,7 +497,7 @@ def build_parser() -> argparse.ArgumentParser:
     val.set_defaults(func=_validate)
     comp = sub.add_parser("compare", help="compare a results folder with the report's numbers")
     comp.add_argument("directory")
-    comp.set_defaults(func=_compare)
+    comp.set_defaults(func=lambda args: _print_comparison(Path(args.directory)))
     status = sub.add_parser("status", help="the status of the run in a results folder: "
                                            "running, completed, interrupted, failed, or stale "
                                            "(killed)")

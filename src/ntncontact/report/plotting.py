@@ -332,10 +332,10 @@ def plot_contact_tractions(
 
 
 def tractions_figure(contact: dict[str, NDArray], steps: Sequence[int] | None = None) -> Figure:
-    """The figure of :func:`plot_contact_tractions` from contact.csv's columns. One interface:
-    a colour and a legend entry per time. Several: a legend entry per time and interface
-    overflowed the axes (a tester's 4-block stack: 18 entries over the x tick labels), so
-    the time is a colour on a colour bar and the interface a marker in a legend of its own."""
+    """The figure of :func:`plot_contact_tractions` from contact.csv's columns. One interface: a
+    colour and a legend entry per time. Several: a legend entry per time and interface would
+    overflow the axes, so the time is a colour on a colour bar and the interface a marker in a
+    legend of its own."""
     chosen = _pick_steps(np.unique(contact["step"]), steps)
     interfaces = list(dict.fromkeys(contact["interface"].tolist()))
     fig, axes = _new_figure(*HISTORY_SHAPE)

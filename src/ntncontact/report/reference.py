@@ -309,9 +309,8 @@ def impact_rows(rows: list[Comparison], tolerance: float, friction: float, dt: f
 def _case(summary: dict) -> tuple[str, float, str]:
     """(example name, friction coefficient, mass type) of a run, from its summary: the
     values the run used (``contact_friction``, ``mass``), so also those its scenario file
-    sets; a tester's copy of the fast-sliding blocks with friction 0.2 in the file was
-    compared with the report's frictionless row. A summary written before those keys were
-    recorded gives them by its ``--set`` overrides only."""
+    sets. A summary written before those keys were recorded gives them by its ``--set``
+    overrides only."""
     example = Path(summary.get("scenario", "")).stem
     if "mass" in summary:
         friction = max(summary.get("contact_friction", {}).values(), default=0.0)
@@ -474,7 +473,7 @@ def _notes(example: str, summary: dict, ours: dict[str, float], static: bool,
     instead of a relative energy variation, and why a run has no rows."""
     notes = []
     status = summary.get("status", "completed")
-    if status != "completed":  # a tester's failed run was compared without a word of it
+    if status != "completed":
         error = summary.get("error")
         notes.append(f"note: the run is {status} (at t = {summary.get('time', 0.0):.6g}"
                      + (f": {error}" if error else "") + "); the values are those of the "
@@ -488,7 +487,7 @@ def _notes(example: str, summary: dict, ours: dict[str, float], static: bool,
             + ("" if balance is None else
                f", the energy balance closes to {balance:.3g} of the largest energy "
                "(summary.json energy_balance_max_relative_error)"))
-    if summary.get("overrides"):  # a tester's shortened runs read "pass" without a word
+    if summary.get("overrides"):  # a shortened run's "pass" is not the example's
         notes.append("note: the run was made with --set " + ", ".join(summary["overrides"])
                      + "; the report's values are those of the example as shipped")
     if not has_rows:
@@ -498,9 +497,7 @@ def _notes(example: str, summary: dict, ours: dict[str, float], static: bool,
 
 def _why_no_rows(example: str, summary: dict) -> str:
     """Why :func:`compare` has no row: the run's contact had not ended where the report gives
-    contact times only (a tester's rod impact cut at t = 1.0 was told that compare had the
-    report's values of rod_impact among others), or the example is not one of the report's
-    impacts."""
+    contact times only, or the example is not one of the report's impacts."""
     end = summary.get("contact_end_time")
     if example in TEXT_VALUES and end is not None and abs(end - summary.get("time", -1.0)) \
             <= 1e-9 * max(1.0, abs(end)):

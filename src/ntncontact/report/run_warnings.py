@@ -33,8 +33,7 @@ SPACING_RATIO = 1.5
 SELF_PENETRATION_WARNING = 0.01
 
 #: more than this share of a run's steps halved says that its dt is too large (the examples
-#: halve at most 3 of 30 load steps, the delamination's onset; a tester's block at 82 % of c
-#: 18 of 30)
+#: halve at most 3 of 30 load steps, the delamination's onset; a block at 82 % of c 18 of 30)
 CUT_BACK_SHARE = 0.25
 
 #: an ALE node ending farther than this fraction of the surface spacing from its partner's
@@ -42,8 +41,8 @@ CUT_BACK_SHARE = 0.25
 MISMATCH_WARNING = 0.1
 
 #: a pressed pair open by more than this fraction of its interface's surface spacing is worth
-#: a warning, as a penetration is (the ring impact holds 8.1e-4, 0.8 %; a tester's soft block
-#: between walls 0.022, 18 %)
+#: a warning, as a penetration is (the ring impact holds 8.1e-4, 0.8 %; a soft block between
+#: walls 0.022, 18 %)
 OPENING_WARNING = 0.1
 
 #: an element of a linear elastic body turned by more than this (radians) is worth a warning:
@@ -52,8 +51,8 @@ OPENING_WARNING = 0.1
 ROTATION_WARNING = LINEAR_ROTATION_LIMIT
 
 #: a linear elastic element's largest principal stretch above this (it more than doubled) says
-#: the rotation warning's polar rotation is not how far the body turned: a tester's block spun
-#: 6 rad in free flight stretched 6.1-fold, and its polar rotation atan(6) read 1.41 rad
+#: the rotation warning's polar rotation is not how far the body turned: a block spun 6 rad
+#: in free flight stretched 6.1-fold, and its polar rotation atan(6) read 1.41 rad
 STRETCH_WARNING = 2.0
 
 #: a linear elastic body's principal Green-Lagrange strain above this is worth a warning
@@ -77,7 +76,7 @@ UNRETURNED_WARNING = 1e-8
 
 #: the net moment of an interface's contact forces above this fraction of their sum |f| times
 #: the contact zone's extent is worth a warning (summary.json max_contact_moment_imbalance):
-#: on tester X's press, moment-free pair forces leave round-off, 1e-17 of it, and an ALE base
+#: on a press, moment-free pair forces leave round-off, 1e-17 of it, and an ALE base
 #: (pairs node to node) 1.4e-7; the report's forces on a non-matching Lagrangian base 1.5e-2
 #: (nx = 10: reaction moment 2.3 % off the loads') and, nearly matching (spacing 0.099 against
 #: 0.1), 9.7e-3 (1.3 % off); the examples at most 1.1e-9 (delamination)
@@ -148,8 +147,7 @@ def _cures(setup: dict, static: bool) -> list[str]:
     """What keeps an interface's pairs closer, as far as it applies to its settings: the
     predicted detection in dynamic runs only (a quasi-static step takes in what its solution
     ends inside anyway), the penalty for the penalty method only (the augmented Lagrangian
-    converges to the constraint whatever its penalty: a tester's 10x stiffer one left the
-    depth the same to 1e-11)."""
+    converges to the constraint whatever its penalty)."""
     where = f"contact.{setup['index']}"
     cures = []
     if setup["detection"] == "penetration" and not static:  # a step late
@@ -206,9 +204,8 @@ def _surface_2(summary: dict, static: bool) -> str | None:
     """A surface-2 node went deeper into surface 1's body than the deepest pair by more than
     PENETRATION_WARNING of the surface spacing (summary.json ``max_penetration_surface_2_at``):
     pairs measure their depth at surface 1's nodes, so a surface-2 corner between them cuts
-    in unmeasured (a tester's 0.047 against pairs at 0.0). A paired surface-2 node's distance
-    to the boundary reads about its pair's depth (a spinning block's 0.0316 against its
-    pair's 0.0309), which the penetration warning reports already: hence the margin."""
+    in unmeasured. A paired surface-2 node's distance to the boundary reads about its pair's
+    depth, which the penetration warning reports already: hence the margin."""
     at = summary.get("max_penetration_surface_2_at")
     if not at or at["depth"] <= (PENETRATION_WARNING * at["element_size"]
                                  + (summary.get("max_penetration") or 0.0)):
@@ -239,7 +236,7 @@ def _self_crossing(summary: dict) -> str | None:
 def _cut_backs(summary: dict) -> str | None:
     """Steps whose solve failed at the full dt and were solved in halved sub-steps
     (summary.json ``cut_back_steps``): the run's results hold, but only the summary said
-    so (a tester's block at 82 % of c: 18 of 30 steps)."""
+    so."""
     cut, steps = summary.get("cut_back_steps") or 0, summary.get("steps") or 0
     if not cut:
         return None
@@ -252,9 +249,7 @@ def _cut_backs(summary: dict) -> str | None:
 
 def _unconverged_augmentations(summary: dict) -> str | None:
     """Steps that kept their last augmentation unconverged (``augmentation.on_limit =
-    "accept"``, summary.json ``unconverged_steps``): a tester's block with max_iterations = 2
-    kept 4 of 4 steps so, its gap 2.2e-8 against the converged 6.6e-12, and only the summary
-    said so."""
+    "accept"``, summary.json ``unconverged_steps``): else only the summary says so."""
     unconverged, steps = summary.get("unconverged_steps") or 0, summary.get("steps") or 0
     if not unconverged:
         return None
@@ -269,7 +264,7 @@ def _unconverged_augmentations(summary: dict) -> str | None:
 
 def _node(at: dict) -> str:
     """A global node, with its number in the user's mesh file where it has one: a gmsh user
-    cannot find the global number in their file (a tester's node 100 was file node 14745)."""
+    cannot find the global number in their file."""
     file_node = at.get("file_node", -1)
     return f"{at['node']}" + (f" (file node {file_node})" if file_node >= 0 else "")
 
@@ -301,8 +296,7 @@ def _linear_rotation(summary: dict, static: bool) -> str | None:
     ``max_linear_elastic_rotation``): the stretch, and in a dynamic run the angular momentum,
     which a body that turns and deforms does not keep (small strain is not objective). Where
     an element also stretched (``max_linear_elastic_stretch``), the polar rotation is not how
-    far the body turned: a tester's block spun 6 rad and stretched 6.1-fold read "turned by
-    1.41 rad, a stretch of 1 - cos = 0.84"."""
+    far the body turned (:func:`_turn`)."""
     at = summary.get("max_linear_elastic_rotation_at")
     angle = summary.get("max_linear_elastic_rotation") or 0.0
     if not at or angle <= ROTATION_WARNING:
@@ -346,7 +340,7 @@ def _turn(summary: dict, angle: float, at: dict) -> str:
 def _linear_strain(summary: dict) -> str | None:
     """A linear elastic body's principal Green-Lagrange strain passed LINEAR_STRAIN_WARNING
     (summary.json ``max_linear_elastic_strain``): its stress is then far from a finite-strain
-    one, and nothing said so (a tester's block at 40 % compression: 43.96 against 71.46)."""
+    one."""
     at = summary.get("max_linear_elastic_strain_at")
     strain = summary.get("max_linear_elastic_strain") or 0.0
     if not at or strain <= LINEAR_STRAIN_WARNING:
@@ -362,15 +356,10 @@ def _linear_strain(summary: dict) -> str | None:
 
 def _mismatch(summary: dict) -> str | None:
     """An ALE node ended far from its partner's place (summary.json ``max_ale_mismatch``):
-    the pair is then no longer node to node. The ring impact with the ring spinning at 3
-    rad/s (a tester) dragged the obstacle's surface nodes with the ring's: its segments
-    went from 0.1 to 0.58 and 0.028 and pairs pressed 0.55 apart; no ALE setting helped,
-    and with a Lagrangian obstacle no pressed pair is more than 0.125 apart. At a fixed end
-    of the ALE surface (``fixed_end``) nothing slides: a partner node off the ALE grid there
-    (a tester's head-on hit and static stack, offset from t = 0) is out of every node's
-    reach, and the slide advice does not apply. Nor does it to a long slide (tester X,
-    session 42: a block sliding 5 of its lengths over an ALE base, whatever max_stretch or
-    respace): the advice names the partner's length as the bound."""
+    the pair is then no longer node to node. At a fixed end of the ALE surface
+    (``fixed_end``) nothing slides: a partner node off the ALE grid there is out of every
+    node's reach, and the slide advice does not apply. Nor does it to a slide longer than
+    the partner: the advice names the partner's length as the bound."""
     at = summary.get("max_ale_mismatch_at")
     if not at or summary["max_ale_mismatch"] <= MISMATCH_WARNING * at["element_size"]:
         return None
@@ -406,8 +395,7 @@ def _degraded_mesh(summary: dict) -> str | None:
     """An ALE body's cell got a corner below ALE_ANGLE_LIMIT degrees (or above 180 minus it)
     where its initial mesh had none so bad (summary.json ``ale_mesh_degraded_at``, recorded by
     ``engine.diagnostics.AleQualityCheck``): a sliver the next steps may invert, whose
-    stiffness and remaps are poor. A tester's angle-smoothed base ended at 1.08 deg, a cell
-    0.01 thick and 0.9 long, and the run said "completed" and nothing else."""
+    stiffness and remaps are poor."""
     at = summary.get("ale_mesh_degraded_at")
     if not at:
         return None
@@ -426,12 +414,10 @@ def _surface_spacing(summary: dict) -> str | None:
     """An ALE contact surface's segment went beyond the SQUARE of the respacing's band of its
     ORIGINAL length, [(1 - t)^2, 1 / (1 - t)^2] = [0.25, 4] (summary.json
     ``ale_surface_spacing_at`` records what left the band itself, ``engine.diagnostics.
-    AleSpacingCheck``). The respacing keeps its band only around each run's current mean
-    stretch within one move; a partner dragged along the surface bunches the nodes ahead of
-    it and spreads those behind (a tester: 0.19x and 3.2x after a block dragged its own
-    length over an ALE base, cells of 17 deg, in silence). The examples leave the band a
-    little where their bodies deform (the disk drop's block: 0.46x, 2.43x; the ring
-    impact's obstacle 0.46x), which is not news: hence the square."""
+    AleSpacingCheck``). The respacing keeps its band only around each run's current mean stretch
+    within one move; a partner dragged along the surface bunches the nodes ahead of it and spreads
+    those behind. The examples leave the band a little where their bodies deform (the disk drop's
+    block: 0.46x, 2.43x; the ring impact's obstacle 0.46x), which is not news: hence the square."""
     at = summary.get("ale_surface_spacing_at") or {}
     sides = [(word, at[key]) for word, key in (("squeezed", "shortest"),
                                                 ("stretched", "longest")) if at.get(key)]
@@ -483,8 +469,7 @@ def _contact_moment(summary: dict, static: bool) -> str | None:
     """The contact forces of an interface exert a net moment (summary.json
     ``max_contact_moment_imbalance``, ``engine.diagnostics.contact_moment``): the report's
     pair force of a pair whose nodes are offset along the surface is a couple. The supports
-    take it up (a tester's static press: reaction moment 79.88 where the loads need 78.06,
-    the force reactions exact, no warning); free bodies gain angular momentum from it."""
+    take it up (off the loads' moment); free bodies gain angular momentum from it."""
     relative = summary.get("max_contact_moment_imbalance") or 0.0
     at = summary.get("max_contact_moment_imbalance_at")
     if not at or relative <= MOMENT_WARNING:
@@ -516,9 +501,8 @@ def _contact_energy(summary: dict, static: bool) -> str | None:
     energy came from contact, which frictionless contact cannot give. Dynamic runs: the gap
     law (report 5.5). Static runs, where the gap law is the only one: the report's pair forces
     on pairs whose nodes move apart along the surface, or the load steps
-    (:func:`_static_gain_cause`). A persistency-law run
-    with ``gap_restoring`` was told the gap law did it and advised the law it had (a tester:
-    +20 %): that option is named instead when an interface that adds energy has it."""
+    (:func:`_static_gain_cause`). Under the persistency law ``gap_restoring`` is named
+    instead when an interface that adds energy has it."""
     gain = summary.get("contact_work") or 0.0
     scale = _energy_scale(summary)
     if gain <= 0.0 or not scale or gain <= CONTACT_GAIN_WARNING * scale:
@@ -540,7 +524,7 @@ def _contact_energy(summary: dict, static: bool) -> str | None:
         cause = _static_gain_cause(summary)
     initial = summary.get("energy_initial") or 0.0
     # the scale holds the largest energy of the run, gain included: a gain of 4.8 E0 read
-    # "0.83 of its scale" (a tester), so the initial energy's ratio is given too
+    # "0.83 of its scale", so the initial energy's ratio is given too
     against = f"{gain / initial:.2g} times the initial energy, " if initial > 0.0 else ""
     return (f"the contact forces added {gain:.3g} to the bodies' energy "
             f"({against}{gain / scale:.2g} of its scale; summary.json contact_work): {cause}")
@@ -551,13 +535,10 @@ def _static_gain_cause(summary: dict) -> str:
     report's pair forces (``moment_free = false``, the static default): pairs whose nodes
     move apart along the surface, whose two forces along surface 1's normal then make a
     couple that does work. Matching nodes at t = 0 drift apart too where the bodies stretch
-    sideways differently: a tester's 3-block stack (matching nodes, pairs up to 0.0039 apart
-    at the end) gained 2.3e-4 at any load step (0.000228, 0.000231, 0.000231 at dt = 0.125,
-    0.0625, 0.03125) and was told its surfaces did not match; with moment_free = true,
-    -5.2e-6 and -1.3e-6 (dt = 0.125, 0.0625). Else the load steps: the work is summed by the
-    trapezoid rule, exact only for a force linear over each step: the report's Hertz
-    cylinder (ALE foundation) loaded and unloaded to zero gained 6,599 in its steps and 1,764
-    in steps half as long (a tester), where the non-matching surfaces were blamed."""
+    sideways differently (a 3-block stack gained 2.3e-4 at any load step; with moment_free =
+    true, -5.2e-6). Else the load steps: the work is summed by the trapezoid rule, exact only
+    for a force linear over each step (the Hertz cylinder loaded and unloaded to zero gained
+    6,599, in steps half as long 1,764)."""
     report_forces = {name: setup for name, setup in (summary.get("contact_setup") or {}).items()
                      if not (setup.get("ale_1") or setup.get("ale_2"))
                      and not setup.get("moment_free")}  # absent: a summary before it, static
@@ -592,8 +573,7 @@ def _gap_restoring(summary: dict) -> list[str]:
 def _contact_loss(summary: dict, static: bool) -> str | None:
     """Penalty interfaces under the persistency law took more than CONTACT_LOSS_WARNING of the
     energy scale beyond friction (summary.json ``contact_work`` + ``frictional_dissipation``):
-    that law's penalty resists the gap's rate, a dashpot (a tester's disk dropped on a slab
-    lost 15.8 % of its energy at 50 times the impedance, 8.3 % at 100 times, in silence)."""
+    that law's penalty resists the gap's rate, a dashpot."""
     lost = -((summary.get("contact_work") or 0.0) + (summary.get("frictional_dissipation")
                                                      or 0.0))
     scale = _energy_scale(summary)
@@ -612,9 +592,7 @@ def _unreturned_energy(summary: dict) -> str | None:
     """The ALE remaps changed the total energy by more than their conservation could give
     back (summary.json ``ale_unreturned_energy``): the energy balance error then holds it,
     and this names its cause. Only the kinetic energy beyond each body's rigid motion can be
-    given back (``engine.remap_conservation.hand_over_energy`` keeps the momenta): a
-    tester's warning said "no Lagrangian body, or none with the kinetic energy" beside a
-    Lagrangian block with 60 times the 0.002 to hand over, all of it in its rigid motion."""
+    given back (``engine.remap_conservation.hand_over_energy`` keeps the momenta)."""
     unreturned = summary.get("ale_unreturned_energy") or 0.0
     scale = _energy_scale(summary)
     if not unreturned or not scale or abs(unreturned) <= UNRETURNED_WARNING * scale:
@@ -643,7 +621,7 @@ def _balance(summary: dict, static: bool) -> str | None:
     cause = ("the time integration or an unconverged step did (history.csv's total_energy "
              "against external_work and contact_work shows when)")
     left_out = summary.get("outside_ledger") or []
-    if left_out:  # a tester's driven bar: the support's work closed it to 8e-12
+    if left_out:
         cause = ("the balance leaves out " + " and ".join(left_out) + ", which may account "
                  "for it; else " + cause)
     elif summary.get("integrator") == "midpoint":
@@ -657,8 +635,7 @@ def _balance(summary: dict, static: bool) -> str | None:
 
 def _against_initial(summary: dict) -> str:
     """The balance error against the initial energy E0, where it exceeds E0: the relative
-    figure's scale is the largest |E|, which a blow-up raises with it, so it cannot pass 1 (a
-    tester's mid-point spin went from E0 = 6.96 to 878 and read "off by 0.99")."""
+    figure's scale is the largest |E|, which a blow-up raises with it, so it cannot pass 1."""
     initial, error = summary.get("energy_initial"), summary.get("energy_balance_max_error")
     if not initial or not error or error <= abs(initial):
         return ""

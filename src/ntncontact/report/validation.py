@@ -10,8 +10,8 @@ written by :mod:`ntncontact.report.validation_report`.
 
 A stop request (``validate``'s ``stop``: the command's SIGINT/SIGTERM handling) stops the
 running cases after their current step, in the workers too, and starts no new one; the report
-then lists the finished cases and the rest as "not run: interrupted". A tester's SIGTERM left
-the workers running on, orphaned, and a Ctrl-C waited 82 s for every case and wrote no report.
+then lists the finished cases and the rest as "not run: interrupted"; no worker is left
+running on, orphaned.
 """
 
 from __future__ import annotations
@@ -188,12 +188,11 @@ def _init_worker(shared: ctypes.c_int) -> None:
 
 
 def _watch_parent(parent: int, shared: ctypes.c_int) -> None:
-    """Make the worker leave when the parent is gone (killed by SIGKILL: no one joins this
-    worker any more, and a tester's orphaned workers idled for ever; its case stops after its
-    step, given ORPHAN_GRACE to close its files) or asks for a stop at once (a second signal).
-    The worker's main thread waits in the pool's queue or runs a case, so it is told by a
-    SIGTERM to itself, repeated until it has gone (a case that catches the first one returns
-    to the queue, where the next one ends it)."""
+    """Make the worker leave when the parent is gone (killed by SIGKILL: no one joins this worker
+    any more, and it would idle for ever; its case stops after its step, given ORPHAN_GRACE to
+    close its files) or asks for a stop at once (a second signal). The worker's main thread waits
+    in the pool's queue or runs a case, so it is told by a SIGTERM to itself, repeated until it has
+    gone (a case that catches the first one returns to the queue, where the next one ends it)."""
     global _leaving, _own_signum
     while os.getppid() == parent and shared.value != STOP_NOW:
         time.sleep(1.0)

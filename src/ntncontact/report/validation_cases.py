@@ -8,15 +8,11 @@ the impact cases; the comments at its top say what each column means.
 
 from __future__ import annotations
 
-import sys
 from dataclasses import dataclass, fields
 from importlib import resources
 from pathlib import Path
 
-if sys.version_info >= (3, 11):
-    import tomllib
-else:  # pragma: no cover
-    import tomli as tomllib
+from ..io.scenario import tomllib
 
 EXAMPLES = Path(__file__).resolve().parents[3] / "examples"
 KINDS = ("impact", "mesh_motion", "block_sliding", "hertz", "delamination")

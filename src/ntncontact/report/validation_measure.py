@@ -57,8 +57,7 @@ def _model(case: Case, quick: bool):
 @contextmanager
 def quiet_build() -> Iterator[None]:
     """The build's warnings left unprinted: the shipped examples' (hertz.toml's slip_tolerance
-    serves its friction cases and is unread in the frictionless ones) are known, and
-    ``ntncontact validate`` printed them as Python warnings with source lines."""
+    serves its friction cases and is unread in the frictionless ones) are known."""
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", PhysicsWarning)
         yield

@@ -124,7 +124,7 @@ class SweepSpec(_Strict):
                                  f"one of {', '.join(REDUCTIONS)}")
             _check_history_column(f"reductions.{name} = '{spec}'", column)
         both = [key for key in self.grid if key in self.set]
-        if both:  # a tester's [set] value was dropped without a word
+        if both:  # else [set]'s value would be dropped without a word
             raise ValueError(f"'{both[0]}' is in both [set] and [grid]: the grid's values "
                              "would replace [set]'s in every case; give it in one of them")
         self._check_figures()
@@ -133,11 +133,10 @@ class SweepSpec(_Strict):
 
     def _check_repeats(self) -> None:
         """Two equal cases (as mappings: in any key order) would run in one folder, the second
-        stopped by the first's lock (a tester's repeated [[cases]] table was recorded
-        ``running``): refused, naming both."""
+        stopped by the first's lock: refused, naming both."""
         seen: dict[tuple, int] = {}
         for k, case in enumerate(self.case_overrides()):
-            # 10000 and 10000.0 are one value (a tester's two cases ran in two folders)
+            # 10000 and 10000.0 are one value
             same = tuple((key, _as_number(value)) for key, value in case.items())
             if same in seen:
                 items = override_strings(case)
@@ -155,13 +154,12 @@ class SweepSpec(_Strict):
         return list(keys)
 
     def _check_figures(self) -> None:
-        """Each figure's columns are sweep.csv's: refused here, not after every case ran (a
-        tester's figure of an unknown column failed once the sweep was done)."""
+        """Each figure's columns are sweep.csv's: refused here, not after every case ran."""
         known = (set(self.set) | set(self.grid) | {k for c in self.cases for k in c}
                  | set(self.reductions) | set(HEADLINE) | {"contact_duration"})
         for k, figure in enumerate(self.figures):
             listed = [v for v in self._values_of(figure.x) if isinstance(v, list | dict)]
-            if listed:  # a tester's velocity vectors as x crashed the figure after the run
+            if listed:  # vectors as x would fail the figure after the run
                 raise ValueError(f"figures.{k}.x = '{figure.x}': its values are not numbers "
                                  f"or text ({toml_value(listed[0])}): give a scalar key as x "
                                  "(a vector key can be `by`)")
@@ -195,9 +193,9 @@ MODEL_HISTORY_PREFIXES = ("reaction_", "tie_")
 
 
 def _check_history_column(where: str, column: str) -> None:
-    """Refuse a reduction of a column history.csv never has, naming the close ones (a
-    tester's misspelt column gave an empty sweep.csv column without a word). The columns come
-    from the writers' lists, not from a run: they are checked before any case runs."""
+    """Refuse a reduction of a column history.csv never has, naming the close ones (else a misspelt
+    column is an empty sweep.csv column). The columns come from the writers' lists, not from a run:
+    they are checked before any case runs."""
     known = (*HISTORY_COLUMNS, "external_work", *CONTACT_HISTORY, *OFF_SURFACE_HISTORY)
     if column in known or column.startswith(MODEL_HISTORY_PREFIXES):
         return
@@ -265,9 +263,8 @@ def run_case(scenario_path: str, overrides: Mapping[str, Any], folder: str,
 
 
 def _save_traceback(folder: str) -> str:
-    """Write the current exception's traceback to the case's folder and return its path: a
-    sweep.csv column of it held 2,486 characters of Python for a diverged solve (tester W),
-    where the one-line error says all a user needs."""
+    """Write the current exception's traceback to the case's folder and return its path: in
+    sweep.csv the one-line error says all a user needs."""
     path = Path(folder) / TRACEBACK_FILE
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
@@ -280,8 +277,7 @@ def _save_traceback(folder: str) -> str:
 def _written_so_far(folder: str, reductions: Mapping[str, str],
                     started: float) -> dict[str, Any]:
     """A failed case's headline figures and reductions from what its folder holds (how far it
-    got: a tester's failed case had steps, times and energies in its summary and NaN in
-    sweep.csv); nothing where the folder holds no results, or only results from before
+    got); nothing where the folder holds no results, or only results from before
     ``started`` (a time.time()): a case whose edited base no longer built was recorded with
     the old scenario's results, and their ``completed``, as its own."""
     summary = Path(folder) / "summary.json"
@@ -301,9 +297,9 @@ def _results_row(results: Any, reductions: Mapping[str, str]) -> dict[str, Any]:
     # the lines ntncontact run prints, from the summary (also of a skipped case)
     lines = list(summary.get("build_warnings") or []) + result_warnings(summary)
     row["warnings"] = " | ".join(lines) or None
-    # no duration where the run ended in contact (its end time is the run's): a tester's cut
-    # rod impact read 0.95 beside the full run's 2.05
-    row["contact_duration"] = None  # the column stays when no case's contact ended (tester R)
+    # no duration where the run ended in contact (its end time is the run's); the column
+    # stays when no case's contact ended
+    row["contact_duration"] = None
     if row.get("contact_end_time") is not None and row.get("contact_start_time") is not None \
             and not row.get("contact_at_end"):
         row["contact_duration"] = row["contact_end_time"] - row["contact_start_time"]
@@ -317,11 +313,9 @@ def _rows_on_disk(work: list[tuple[dict, str, float]], rows: list[dict | None],
     completed during this sweep (its summary written after ``started``, a time.time()) but
     whose result had not reached the client yet (CI caught a SIGINT in that window, and
     sweep.csv was written empty). A folder completed before it may hold another base
-    scenario's results (a tester's rerun after an edit listed them as this run's). A case
-    still running (``in_flight``, indices of ``work``) is listed ``interrupted``: its worker
-    is stopped when the sweep's cluster closes, or, on a running scheduler, may still
-    complete its folder, which a rerun then reads back (a tester's sweep.csv listed none of
-    the cases that were running)."""
+    scenario's results. A case still running (``in_flight``, indices of ``work``) is listed
+    ``interrupted``: its worker is stopped when the sweep's cluster closes, or, on a running
+    scheduler, may still complete its folder, which a rerun then reads back."""
     kept = []
     for i, ((case, folder, _), row) in enumerate(zip(work, rows, strict=True)):
         summary = Path(folder) / "summary.json"
@@ -339,9 +333,8 @@ def _rows_on_disk(work: list[tuple[dict, str, float]], rows: list[dict | None],
 
 def _completed(folder: Path, scenario: Scenario) -> bool:
     """Whether ``folder`` holds a completed run of this case: the same overrides, and the
-    same validated scenario and meshes (``scenario_hash``, as a checkpoint is matched). A
-    tester's sweep rerun after an edit of its base scenario (E 100 -> 400) reused the old
-    results as the new ones."""
+    same validated scenario and meshes (``scenario_hash``, as a checkpoint is matched): a
+    rerun after an edit of the base scenario runs the case again."""
     data = _completed_summary(folder, scenario.overrides)
     if data is None:
         return False
@@ -389,11 +382,11 @@ def sweep(spec: str | Path, out: str | Path, *, scheduler: str | None = None,
     keys = sweep_spec.key_order()
     checked = [_checked_case(spec, k, case, scenario_path, Path(folder), meshes, keys)
                for k, (case, folder) in enumerate(zip(cases, folders, strict=True))]
-    costs = [cost for cost, _ in checked]
-    ran_with = {Path(folder).name: values for folder, (_, values) in zip(folders, checked,
-                                                                          strict=True)}
+    ran_with = {Path(folder).name: values
+                for folder, (_, values) in zip(folders, checked, strict=True)}
     (out / "cases").mkdir(parents=True, exist_ok=True)
-    work = [(case, folder, cost) for case, folder, cost in zip(cases, folders, costs, strict=True)]
+    work = [(case, folder, cost)
+            for case, folder, (cost, _) in zip(cases, folders, checked, strict=True)]
     rows: list[dict | None] = [None] * len(work)
     in_flight: set[int] = set()  # the cases submitted whose rows are not in yet
     started = time.time()  # folders completed from now on are this sweep's
@@ -422,9 +415,7 @@ def _checked_case(spec: str | Path, k: int, case: Mapping[str, Any], scenario_pa
                   keys: Sequence[str]) -> tuple[float, dict[str, Any]]:
     """:func:`case_cost` of case ``k``, whose scenario and meshes are checked here, before any
     case runs, and the value of each sweep key ``keys`` it runs with; an error names the sweep
-    file and the case (a tester's bad key in ``[[cases]]`` was reported as the base
-    scenario's, and a missing mesh file failed only on its worker after the other cases had
-    run)."""
+    file and the case."""
     try:
         scenario = load_scenario(scenario_path, case)
         return case_cost(scenario, folder, meshes), _values(scenario, keys)
@@ -447,13 +438,11 @@ def _as_number(value: Any) -> Any:
 
 def _values(scenario: Scenario, keys: Sequence[str]) -> dict[str, Any]:
     """Each dotted key's value in the case's validated scenario (the base's, or the default):
-    a case that does not set a sweep key left its sweep.csv cell empty, and a figure dropped
-    the case without a word (a tester's 1 point of 3)."""
+    a case that does not set a sweep key has its value in sweep.csv and its figures too."""
     data = scenario.config.model_dump(mode="json")
     kind = scenario.config.analysis.kind
     for contact, config in zip(data.get("contact", []), scenario.config.contact, strict=True):
-        # the keys whose default the build resolves (None in the config): a tester's figure
-        # by contact.0.detection drew one "none" line through a predicted and a penetration case
+        # the keys whose default the build resolves (None in the config)
         contact |= {k: v for k, v in config.resolved(kind).items() if contact.get(k) is None}
     values = {}
     for key in keys:
@@ -482,8 +471,7 @@ def case_cost(scenario: Scenario, folder: Path, meshes: dict[str, int] | None = 
     """A case's expected run time up to a constant, to start the longest cases first: its
     steps times its elements; 0 for a case its folder says completed (a rerun may only read
     it). ``meshes`` caches element counts by mesh settings (a grid repeats the same meshes);
-    a mesh that cannot be built raises, also for a completed case (a tester's mesh file,
-    broken after a sweep, was not read here and the rerun reported the old results)."""
+    a mesh that cannot be built raises, also for a completed case."""
     meshes = {} if meshes is None else meshes
     cells = 0
     for body in scenario.config.bodies:
@@ -588,8 +576,7 @@ def _run_cases(client: Any, own_cluster: bool, spec: SweepSpec, scenario_path: s
 
 def _draw_figures(table: pd.DataFrame, figures: Sequence[FigureSpec], out: Path) -> None:
     """Each figure's PNG; one that cannot be drawn is a one-line warning, never an error: the
-    cases ran, and their table must reach the caller (a tester's figure of velocity vectors
-    raised, and the script lost the table)."""
+    cases ran, and their table must reach the caller."""
     if not figures:
         return  # nothing to draw: no plotting library to load (~0.5 s) after the last case
     import matplotlib.pyplot as plt
