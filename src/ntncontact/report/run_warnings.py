@@ -179,10 +179,15 @@ def _penetration(summary: dict, static: bool) -> str | None:
     at = summary.get("max_penetration_at")
     if not at or at["depth"] <= PENETRATION_WARNING * at["element_size"]:
         return None
-    return (f"node {_node(at)} of interface '{at['interface']}' went {at['depth']:.3g} "
-            f"inside its partner surface ({at['depth'] / at['element_size']:.2g} of the surface "
-            f"spacing, t = {at['time']:.6g}; summary.json max_penetration_at): "
+    return (f"{_went(at, '', 'its partner surface', 'max_penetration_at')}): "
             f"{_advice(summary, at['interface'], static)}")
+
+
+def _went(at: dict, which: str, inside: str, key: str) -> str:
+    """The head of a penetration warning: the node, how deep and where, the summary's key."""
+    return (f"node {_node(at)} of interface '{at['interface']}'{which} went {at['depth']:.3g} "
+            f"inside {inside} ({at['depth'] / at['element_size']:.2g} of the surface spacing, "
+            f"t = {at['time']:.6g}; summary.json {key}")
 
 
 def _unpaired(summary: dict, static: bool) -> str | None:
@@ -193,10 +198,8 @@ def _unpaired(summary: dict, static: bool) -> str | None:
     if not at or at["depth"] <= max(PENETRATION_WARNING * at["element_size"],
                                     summary.get("max_penetration") or 0.0):
         return None
-    return (f"node {_node(at)} of interface '{at['interface']}', in no pair, went "
-            f"{at['depth']:.3g} inside its partner body ({at['depth'] / at['element_size']:.2g} "
-            f"of the surface spacing, t = {at['time']:.6g}; summary.json "
-            "max_penetration_unpaired), deeper than any pair, with nothing holding it: "
+    return (f"{_went(at, ', in no pair,', 'its partner body', 'max_penetration_unpaired')}), "
+            "deeper than any pair, with nothing holding it: "
             f"{_advice(summary, at['interface'], static)}")
 
 
@@ -210,10 +213,8 @@ def _surface_2(summary: dict, static: bool) -> str | None:
     if not at or at["depth"] <= (PENETRATION_WARNING * at["element_size"]
                                  + (summary.get("max_penetration") or 0.0)):
         return None
-    return (f"node {_node(at)} of interface '{at['interface']}', on surface_2, went "
-            f"{at['depth']:.3g} inside surface_1's body ({at['depth'] / at['element_size']:.2g} "
-            f"of the surface spacing, t = {at['time']:.6g}; summary.json "
-            "max_penetration_surface_2), deeper than any pair measured: a pair measures its "
+    head = _went(at, ", on surface_2,", "surface_1's body", "max_penetration_surface_2")
+    return (f"{head}), deeper than any pair measured: a pair measures its "
             "depth at its surface_1 node, along that node's normal, so a surface_2 node "
             "between surface_1's nodes (a corner) cuts in unmeasured; with that face as "
             "surface_1 (its body as body_1) its nodes are the pairs' own")
