@@ -8,7 +8,6 @@ from ntncontact.ale.remap import (
     conservative_velocity_correction,
     inverse_bilinear,
     momenta,
-    remap_fields,
 )
 from ntncontact.mesh.quadmesh import MeshError
 
@@ -107,7 +106,7 @@ def test_linear_fields_are_reproduced_exactly(method):
     coeff = np.array([[0.3, -1.0], [2.0, 0.5], [-0.7, 1.5]])  # f = c0 + c1 x + c2 y, 2 components
     field = lambda x: coeff[0] + x[:, :1] * coeff[1] + x[:, 1:] * coeff[2]  # noqa: E731
     pts, _, _ = random_points(nodes, cells, 300)
-    out = remap_fields(nodes, cells, field(nodes), pts, method=method)
+    out = Remapper(nodes, cells).remap(field(nodes), pts, method=method)
     # isoparametric Q4 (and any quadratic fit) contain x and y: exact up to round-off
     np.testing.assert_allclose(out, field(pts), atol=1e-12)
 
@@ -132,10 +131,10 @@ def test_quadratic_option_reproduces_quadratic_fields_and_linear_does_not():
 def test_unmoved_nodes_keep_their_values_and_single_cell_falls_back_to_linear():
     nodes, cells = perturbed_grid(4, 4)
     field = np.sin(3.0 * nodes[:, 0]) * np.cos(2.0 * nodes[:, 1])
-    out = remap_fields(nodes, cells, field, nodes, method="quadratic")
+    out = Remapper(nodes, cells).remap(field, nodes, method="quadratic")
     np.testing.assert_array_equal(out, field)
     one = np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]])
-    val = remap_fields(one, [[0, 1, 2, 3]], [0.0, 1.0, 2.0, 1.0], [[0.5, 0.5]], "quadratic")
+    val = Remapper(one, [[0, 1, 2, 3]]).remap([0.0, 1.0, 2.0, 1.0], [[0.5, 0.5]], "quadratic")
     assert val[0] == pytest.approx(1.0, abs=1e-14)  # bilinear value; 4 nodes cannot fit 6 terms
 
 

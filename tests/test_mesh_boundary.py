@@ -1,4 +1,4 @@
-"""Tests of boundary edges, surface chains, nodal normals and tributary lengths."""
+"""Tests of boundary edges, surface chains, edge and tributary lengths."""
 
 from __future__ import annotations
 
@@ -11,7 +11,6 @@ from ntncontact.mesh.boundary import (
     chain_edge_lengths,
     chain_from_edges,
     hanging_nodes,
-    nodal_outward_normals,
     nodal_tributary_lengths,
     nodes_inside_cells,
     surface_chain,
@@ -116,23 +115,8 @@ def test_a_joined_surface_that_is_no_chain_is_refused(name, message):
         surface_chain(rectangle(3.0, 2.0, 3, 2), name)
 
 
-def test_nodal_normals_exact_on_circle_with_uneven_spacing():
-    rng = np.random.default_rng(7)
-    theta = np.sort(rng.uniform(0.0, 2 * np.pi, 25))
-    xy = 2.0 * np.column_stack((np.cos(theta), np.sin(theta)))
-    normals = nodal_outward_normals(xy, closed=True)  # CCW around the disk: body on the left
-    # inverse-length weighting gives the exact radius through any three points of a circle
-    assert np.abs(normals - xy / 2.0).max() < 100 * EPS
-    # walking clockwise puts the body outside the circle: normals point to the centre
-    assert np.abs(nodal_outward_normals(xy[::-1], True) + xy[::-1] / 2.0).max() < 100 * EPS
-
-
-def test_nodal_normals_open_chain_and_lengths():
+def test_edge_and_tributary_lengths():
     xy = np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 2.0]])
-    normals = nodal_outward_normals(xy, closed=False)
-    # end nodes take their single edge's normal; corner weights 1/L: (0,-1)/1 + (1,0)/2
-    expected = np.array([[0.0, -1.0], [0.5, -1.0] / np.sqrt(1.25), [1.0, 0.0]])
-    assert np.abs(normals - expected).max() < 10 * EPS
     assert chain_edge_lengths(xy, closed=False).tolist() == [1.0, 2.0]
     assert np.allclose(chain_edge_lengths(xy, closed=True), [1.0, 2.0, np.sqrt(5.0)],
                        rtol=10 * EPS, atol=0.0)
@@ -144,21 +128,18 @@ def test_nodal_normals_open_chain_and_lengths():
     assert trib.sum() == pytest.approx(3.0 + r5, rel=10 * EPS)
 
 
-def test_nodal_normals_reject_degenerate_chains():
-    with pytest.raises(MeshError, match="zero-length"):
-        nodal_outward_normals(np.array([[0.0, 0.0], [0.0, 0.0], [1.0, 0.0]]), False)
-    with pytest.raises(MeshError, match="folds back"):
-        nodal_outward_normals(np.array([[0.0, 0.0], [1.0, 0.0], [0.0, 0.0]]), False)
+def test_edge_lengths_reject_a_single_node():
     with pytest.raises(MeshError, match="shape"):
         chain_edge_lengths(np.zeros((1, 2)), False)
 
 
-def test_rectangle_surface_normals_point_outward():
+def test_rectangle_surfaces_have_the_body_on_the_left():
     m = rectangle(2.0, 1.0, 4, 2)
     for side, outward in (("bottom", [0, -1]), ("right", [1, 0]), ("top", [0, 1]),
                           ("left", [-1, 0])):
         chain = surface_chain(m, side)
-        normals = nodal_outward_normals(m.nodes[chain.nodes], chain.closed)
+        edge = np.diff(m.nodes[chain.nodes], axis=0)
+        normals = np.column_stack((edge[:, 1], -edge[:, 0])) / np.linalg.norm(edge, axis=1)[:, None]
         assert np.abs(normals - outward).max() < 10 * EPS
 
 

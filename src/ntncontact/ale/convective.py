@@ -19,13 +19,12 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-import scipy.sparse as sp
 from numpy.typing import NDArray
 
 from ..fem.assembly import element_dofs
 from ..fem.q4 import N_GP, kinematics
 
-__all__ = ["ConvectiveForce", "convective_force", "convective_matrix", "element_convective"]
+__all__ = ["ConvectiveForce", "convective_force", "element_convective"]
 
 Triplets = tuple[NDArray, NDArray, NDArray]
 
@@ -118,17 +117,3 @@ def convective_force(
     force = np.bincount(edofs.ravel(), weights=el.f.ravel(), minlength=2 * len(X))
     d_c = _triplets(edofs, el.df_dc) if el.df_dc is not None else None
     return ConvectiveForce(force, _triplets(edofs, el.df_dx), _triplets(edofs, el.df_dv), d_c)
-
-
-def convective_matrix(
-    X: NDArray, x: NDArray, c: NDArray, cells: NDArray, rho: NDArray
-) -> sp.csr_matrix:
-    """The scalar (per node) convective matrix C_ab = int rho N_a c . grad_x N_b dV, (n, n).
-
-    On dofs it acts on each velocity component alike: kron(C, I2) (report (5.9)).
-    """
-    cells = np.asarray(cells, dtype=np.int64).reshape(-1, 4)
-    _, WN, s = _weighted_parts(X[cells], x[cells], c[cells], np.asarray(rho, float))
-    rows, cols, vals = _triplets(cells, np.einsum("ega,egb->eab", WN, s))
-    n = len(X)
-    return sp.csr_matrix((vals, (rows, cols)), shape=(n, n))

@@ -57,7 +57,6 @@ __all__ = [
     "conservative_velocity_correction",
     "inverse_bilinear",
     "momenta",
-    "remap_fields",
     "remap_topology",
     "two_ring_patches",
 ]
@@ -414,18 +413,6 @@ def two_ring_patches(cells: ArrayLike, n_nodes: int) -> tuple[NDArray[np.int64],
     cols = np.arange(ring.nnz) - np.repeat(ring.indptr[:-1], lengths)
     patch[np.repeat(np.arange(n), lengths), cols] = ring.indices
     return patch, lengths
-
-
-def remap_fields(
-    old_nodes: ArrayLike,
-    old_cells: ArrayLike,
-    fields: ArrayLike,
-    points: ArrayLike,
-    method: RemapMethod = "linear",
-    outside_tol: float = 0.1,
-) -> NDArray[np.float64]:
-    """Evaluate old nodal fields at new points (see ``Remapper.remap``)."""
-    return Remapper(old_nodes, old_cells).remap(fields, points, method, outside_tol)
 
 
 def momenta(masses: ArrayLike, x: ArrayLike, v: ArrayLike) -> tuple[NDArray[np.float64], float]:

@@ -20,7 +20,7 @@ Cells that were already inverted may be improved, so a tangled mesh can be untan
 angle rules are meaningless in a tangled cell (its angles wrap around), the nodes of inverted cells
 follow the Laplacian rule until untangled. Uniform
 rectangular grids are a fixed point of all three rules; graded meshes are not a fixed point of the
-Laplacian rule, so free only the disturbed region (``nodes_within_layers``) to keep a grading.
+Laplacian rule, so free only the disturbed region (``AleBody.within_layers``) to keep a grading.
 
 ``harmonic_extension`` smooths the mesh DISPLACEMENT instead of the positions: given the moves of
 some nodes (the moved surface nodes of an ALE body), the free nodes take the graph-Laplacian
@@ -49,7 +49,6 @@ __all__ = [
     "boundary_node_mask",
     "harmonic_extension",
     "node_adjacency",
-    "nodes_within_layers",
 ]
 
 SmoothingMethod = Literal["laplacian", "angle", "weighted_angle"]
@@ -65,21 +64,6 @@ def boundary_node_mask(cells: ArrayLike, n_nodes: int) -> NDArray[np.bool_]:
     edges, counts = np.unique(pairs, axis=0, return_counts=True)
     mask = np.zeros(n_nodes, bool)
     mask[edges[counts == 1].ravel()] = True
-    return mask
-
-
-def nodes_within_layers(
-    cells: ArrayLike, n_nodes: int, seeds: ArrayLike, layers: int
-) -> NDArray[np.bool_]:
-    """Mask of the nodes reachable from ``seeds`` through at most ``layers`` shared cells."""
-    cell_arr = np.asarray(cells, dtype=np.int64).reshape(-1, 4)
-    rows = np.repeat(np.arange(len(cell_arr)), 4)
-    shape = (len(cell_arr), n_nodes)
-    incidence = sp.csr_matrix((np.ones(rows.size), (rows, cell_arr.ravel())), shape=shape)
-    mask = np.zeros(n_nodes, bool)
-    mask[np.asarray(seeds, dtype=np.int64)] = True
-    for _ in range(layers):
-        mask = (incidence.T @ (incidence @ mask.astype(float))) > 0
     return mask
 
 
@@ -362,7 +346,3 @@ class Smoother:
             if max_move <= rel_tol * scale:
                 break
         return SmoothingResult(x, sweeps, max_move, shortened, refused)
-
-    def smooth(self, nodes: ArrayLike, max_sweeps: int = 100, rel_tol: float = 1e-6) -> NDArray:
-        """Smoothed node positions (see ``run``)."""
-        return self.run(nodes, max_sweeps, rel_tol).nodes

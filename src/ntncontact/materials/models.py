@@ -62,11 +62,3 @@ class Material:
         if self.plane_stress:
             return 2.0 * self.lam * self.mu / (self.lam + 2.0 * self.mu)
         return self.lam
-
-    @property
-    def young(self) -> float:
-        return self.mu * (3.0 * self.lam + 2.0 * self.mu) / (self.lam + self.mu)
-
-    @property
-    def poisson(self) -> float:
-        return self.lam / (2.0 * (self.lam + self.mu))

@@ -23,7 +23,6 @@ __all__ = [
     "chain_from_edges",
     "hanging_nodes",
     "nodes_inside_cells",
-    "nodal_outward_normals",
     "nodal_tributary_lengths",
     "surface_chain",
 ]
@@ -201,28 +200,3 @@ def nodal_tributary_lengths(xy: NDArray[np.float64], closed: bool) -> NDArray[np
     if closed:
         return half + np.roll(half, 1)
     return np.concatenate((half, [0.0])) + np.concatenate(([0.0], half))
-
-
-def nodal_outward_normals(xy: NDArray[np.float64], closed: bool) -> NDArray[np.float64]:
-    """Unit outward normals at the nodes of an ordered chain (body on the left).
-
-    Each node's normal is the sum of its neighbouring edges' unit normals weighted by the
-    inverse edge length, ``rot(-90)(t_a / L_a^2 + t_b / L_b^2)``: this is exactly the radius
-    direction of the circle through the node and its two neighbours, whatever their spacing,
-    so it is second-order accurate on smooth curves; chain end nodes use their single edge.
-    """
-    vec = _chain_vectors(xy, closed)
-    squared = np.einsum("ij,ij->i", vec, vec)
-    if np.any(squared == 0.0):
-        raise MeshError("a chain has a zero-length edge (coincident consecutive nodes)")
-    weighted = vec / squared[:, None]  # t / L^2
-    if closed:
-        summed = weighted + np.roll(weighted, 1, axis=0)
-    else:
-        pad = np.zeros((1, 2))
-        summed = np.vstack((weighted, pad)) + np.vstack((pad, weighted))
-    normals = np.column_stack((summed[:, 1], -summed[:, 0]))
-    norms = np.linalg.norm(normals, axis=1)
-    if np.any(norms == 0.0):
-        raise MeshError("a chain folds back on itself at a node (opposite equal edges)")
-    return normals / norms[:, None]
