@@ -215,7 +215,7 @@ def test_pairwise_sum_is_accurate_like_numpys(n):
 
 
 def reference_try_hints(remapper, pts, hint, outside_tol):
-    """``Remapper._try_hints`` as it was in NumPy: (cell or -1, xi, clamped)."""
+    """The hinted location of ``Remapper.locate`` as it was in NumPy: (cell or -1, xi, clamped)."""
     n = len(pts)
     cell, xi, clamped = np.full(n, -1), np.zeros((n, 2)), np.zeros(n, bool)
     idx = np.flatnonzero(hint >= 0)

@@ -8,7 +8,6 @@ from ntncontact.ale.surface import (
     GAUSS_W,
     SurfaceCurve,
     local_slides,
-    point_at,
     respace_surface,
 )
 
@@ -84,7 +83,7 @@ def test_projection_of_radial_points_lands_on_the_radius():
     angles = np.array([0.1, 0.55, 1.2])
     points = 1.3 * np.column_stack([np.cos(angles), np.sin(angles)])
     s = SurfaceCurve.from_chain(chain).normal_foot(points)[0]
-    foot = point_at(chain, s)
+    foot = SurfaceCurve.from_chain(chain).point_at(s)
     foot_angle = np.arctan2(foot[:, 1], foot[:, 0])
     # the foot of the normal on a circle is on the radius, up to the O(h^3) curve error
     np.testing.assert_allclose(foot_angle, angles, atol=1e-4)

@@ -19,9 +19,8 @@ from . import kernel_cache_dir
 
 __all__ = ["njit", "COMPILE_NOTE", "read_only"]
 
-#: Not "once" (its wording until session 43): a configuration whose kernels (a branch, an
-#: argument type) the warm-up's runs do not reach compiles them at its first run, a few
-#: seconds; ~40 s is an empty cache's. What holds is that they are cached for later runs.
+#: Not "once": a configuration whose kernels (a branch, an argument type) the warm-up's runs
+#: do not reach compiles them at its first run, a few seconds; ~40 s is an empty cache's.
 COMPILE_NOTE = ("ntncontact: compiling kernels for this configuration (up to ~40 s with an empty "
                 "cache; cached in {directory} for later runs)")
 

@@ -15,30 +15,25 @@ that exactly the type signatures a run uses are cached:
   compiled by then);
 - where the run may assemble on several threads, two steps of a free block of
   2 x MIN_ELEMENTS_PER_THREAD elements: the threaded assembly, which every mesh of that many
-  elements a material group takes (an independent tester's first 10^4-element run compiled it,
-  18-23 s inside its wall_time_s).
+  elements a material group takes (18-23 s inside a first 10^4-element run otherwise).
 
 Numba compiles a kernel once per argument type, and a read-only array, a writable one and a
 broadcast view are three types: the callers pass each kernel one form (``jit.read_only``), so
-that the types these runs cache are the ones every run uses. Session 43 measured the nine
-examples, three validation variants and 29 common configurations (materials, mass, static,
-friction, each method, the energy-conserving variant, every ALE smoothing, interior, remap,
-repair and convection option, an ALE annulus, ties, XDMF, threaded assembly of either
-material), a sweep and ``ntncontact validate --quick`` after this warm-up: none compiled a
-kernel (before: the ALE annulus 10-16 s, the interior-smoothing ALE runs, three examples and a
-validation variant 0.8-2.2 s each, validate's mesh-motion example the curve kernels that
-``SurfaceCurve.point_at`` calls).
-``tests/test_warmup_coverage.py`` checks it. A branch these runs do not reach would still
-be compiled on first use, and the compile note says so.
+that the types these runs cache are the ones every run uses (the examples, validation and
+the common configurations then compile nothing; ``tests/test_warmup_coverage.py`` checks
+it). A branch these runs do not reach would still be compiled on first use, and the compile
+note says so.
 
 It also writes the package's Python bytecode (``__pycache__``), which the interpreter does not
-write where ``PYTHONDONTWRITEBYTECODE`` is set: without it every start compiled the package's
-modules from source again (~0.15-0.2 s of the ring demo's start-up).
+write where ``PYTHONDONTWRITEBYTECODE`` is set (~0.15-0.2 s of every start otherwise).
 """
 
 from __future__ import annotations
 
+import compileall
+import multiprocessing as mp
 import time
+from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
 import numpy as np
@@ -149,15 +144,10 @@ def compile_bytecode(directory: Path = Path(__file__).parent) -> bool:
     """Write the bytecode of every module under ``directory`` that lacks an up-to-date one
     (whatever ``sys.dont_write_bytecode`` says: this is an installation step); True if all
     compiled."""
-    import compileall
-
     return bool(compileall.compile_dir(directory, quiet=1))
 
 
 def main() -> int:
-    import multiprocessing as mp
-    from concurrent.futures import ProcessPoolExecutor
-
     start = time.perf_counter()
     compile_bytecode()
     print(f"Compiling the Numba kernels into {kernel_cache_dir()} (cached for later runs)...",

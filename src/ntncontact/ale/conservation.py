@@ -72,13 +72,10 @@ def _mass_solver(mass: sp.csr_matrix, dofs: NDArray) -> tuple[sp.spmatrix, Calla
     """(A = M_SS on the dofs (2 a + i), a function applying A^-1 to a vector or columns).
 
     Sparse, for a sparse LU: S is the neighbourhood of a few moved nodes, but the whole body
-    when that cannot take the energy. Dense, the whole lower block of the fast-sliding blocks
-    refined 4x (6,090 dofs) took 8 s a factorization, 8x (23,698 dofs) ~8 min and 4.5 GB, at
-    every augmentation of its first contact step, and the Hertz foundation refined 8x grew to
-    7.4 GB (issues 17, 18). Where S holds both dofs of each of its nodes (no support among
-    them) A is the scalar block M_NN for x and y alike, so that block is factored alone: the
-    8x block in 0.11 s against 0.18 s for the two (fast-sliding blocks 8x with both blocks ALE:
-    31 whole-body corrections in one contact step, 8.2 s of factorizations as they were)."""
+    when that cannot take the energy (dense, a whole block of 23,698 dofs took ~8 min and
+    4.5 GB a factorization). Where S holds both dofs of each of its nodes (no support among
+    them) A is the scalar block M_NN for x and y alike, so that block is factored alone (0.11
+    s against 0.18 s for the two on that block)."""
     pairs = dofs.reshape(-1, 2) if dofs.size % 2 == 0 else None
     if pairs is None or (pairs[:, 0] % 2).any() or not np.array_equal(pairs[:, 1], pairs[:, 0] + 1):
         A = _dof_block(mass, dofs)

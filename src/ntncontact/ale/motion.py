@@ -33,9 +33,7 @@ nothing is moved that need not be.
    are reported; a pair between two ALE bodies whose node is clamped is then followed by the
    partner instead (``engine.mesh_motion._hold_clamped``). The first clamp bounds the MEAN
    spacing between a node and the break, not each segment: the respacing of item 3 may grade
-   those segments down to about half that mean (a tester's block dragged its own length over
-   a base of spacing 0.1 left 15 segments in 0.505 ahead of it, 13 of them 0.0198 and the
-   last two untouched).
+   those segments down to about half that mean.
 3. The other surface nodes follow (``respace``):
    ``"local"`` (default): each moved anchor's slide is absorbed by the fewest neighbouring
    surface segments whose slack suffices, each shrinking or growing in proportion to its slack,
@@ -47,15 +45,14 @@ nothing is moved that need not be.
    segments' lengths against their original ones: a run its anchors keep squeezing has a
    smaller mean at every move, the segments next to the slide are squeezed again against it
    while those beyond keep their length, and a run between a partner and a fixed end can be
-   squeezed or stretched as a whole up to the clamps of item 2. The tester's block dragged
-   +-1 over the base left segments of 0.19x and 3.2x their original length (cells of 17 deg;
-   +-1.4: 0.17x, 13 deg); no respacing could keep 0.5x there (15 segments in 0.505: 0.34x
-   on average), only holding the contact nodes back, which would lose node-to-node contact.
+   squeezed or stretched as a whole up to the clamps of item 2 (a block dragged its own length
+   over a base leaves segments of 0.19x and 3.2x their original length; no respacing could
+   keep 0.5x there, only holding the contact nodes back, which would lose node-to-node
+   contact).
    ``engine.diagnostics.AleSpacingCheck`` reports a segment outside [1 - t, 1/(1 - t)] of
    its original length (summary.json ``ale_surface_spacing_at``, a run warning). A run whose
    whole slack does not suffice is respaced in the original proportions, restoring the
-   grading (``ale.surface.local_slides``; counted in ``AleUpdate.resets``; never happened in
-   the ring impact of report 6.4).
+   grading (``ale.surface.local_slides``; counted in ``AleUpdate.resets``).
    ``"reference"``: every free surface node is respaced between the anchors in the original
    proportions at every update (nodes move whenever the deformed spacing differs from them).
 4. The interior follows (``interior``) as far as the mesh quality needs. A cell is acceptable
@@ -72,8 +69,8 @@ nothing is moved that need not be.
    ``smoothing``, ``sweeps`` Jacobi sweeps, the whole boundary fixed, inverting moves refused),
    as a slide of several elements (Fig. 4.2) or accumulated shear needs; this also repairs the
    distortion that (a) and (b) let build up.
-   ``"displacement"`` starts at (b), ``"position"`` always does (c) (the earlier behaviour: the
-   interior moves at every update since a deformed mesh is no fixed point of the smoother).
+   ``"displacement"`` starts at (b), ``"position"`` always does (c) (the interior then moves at
+   every update, since a deformed mesh is no fixed point of the smoother).
    ``AleUpdate.interior`` tells which stage was used.
    A final element the move inverted (current or reference image), or left inverted and made
    worse, raises MeshError naming the body and the element, and the time loop cuts the step
@@ -126,7 +123,7 @@ from __future__ import annotations
 import copy
 from dataclasses import dataclass
 from functools import cached_property
-from typing import Literal
+from typing import Literal, get_args
 
 import numpy as np
 import scipy.sparse as sp
@@ -139,10 +136,8 @@ from ntncontact.ale.remap import (
     RemapTopology,
     conservative_velocity_correction,
     momenta,
-    remap_topology,
 )
 from ntncontact.ale.smoothing import (
-    SmoothedInversion,
     Smoother,
     SmoothingMethod,
     SmoothingResult,
@@ -168,11 +163,8 @@ __all__ = ["AleBody", "AleMotionError", "AleUpdate", "lumped_masses", "move_ale_
 RespaceMethod = Literal["local", "reference"]
 InteriorMethod = Literal["minimal", "displacement", "position"]
 Convection = Literal["remap", "convective_term"]
-_SMOOTHING = ("laplacian", "angle", "weighted_angle")
-_REMAP = ("linear", "quadratic")
-_RESPACE = ("local", "reference")
-_INTERIOR = ("minimal", "displacement", "position")
-_CONVECTION = ("remap", "convective_term")
+_CHOICES = {"smoothing": SmoothingMethod, "remap": RemapMethod, "respace": RespaceMethod,
+            "interior": InteriorMethod, "convection": Convection}
 # a move below this fraction of the smallest surface spacing is round-off (of the curve
 # evaluation, whose arc-length inversion is iterative, or of the sparse solve): such nodes keep
 # their old position exactly
@@ -258,15 +250,10 @@ class AleBody:
                              f"reference_spacing {n_seg} positive segment lengths")
         if not np.all(spacing > 0):
             raise ValueError(f"{self.name}: reference_spacing must be positive")
-        if self.smoothing not in _SMOOTHING or self.remap not in _REMAP:
-            raise ValueError(f"{self.name}: smoothing must be one of {_SMOOTHING} and remap one "
-                             f"of {_REMAP}, got {self.smoothing!r}, {self.remap!r}")
-        if self.respace not in _RESPACE or self.interior not in _INTERIOR:
-            raise ValueError(f"{self.name}: respace must be one of {_RESPACE} and interior one "
-                             f"of {_INTERIOR}, got {self.respace!r}, {self.interior!r}")
-        if self.convection not in _CONVECTION:
-            raise ValueError(f"{self.name}: convection must be one of {_CONVECTION}, got "
-                             f"{self.convection!r}")
+        for key, kind in _CHOICES.items():
+            if getattr(self, key) not in get_args(kind):
+                raise ValueError(f"{self.name}: {key} must be one of {get_args(kind)}, got "
+                                 f"{getattr(self, key)!r}")
         quality = np.ones(len(cells)) if self.reference_quality is None else _frozen(
             self.reference_quality, np.float64).reshape(-1)
         if quality.shape != (len(cells),):
@@ -340,24 +327,17 @@ class AleBody:
         return node_adjacency(self.cells, self.n_nodes)
 
     @cached_property
-    def _incidence(self) -> sp.csr_matrix:
-        rows = np.repeat(np.arange(len(self.cells)), 4)
-        return sp.csr_matrix((np.ones(rows.size), (rows, self.cells.ravel())),
-                             shape=(len(self.cells), self.n_nodes))
-
-    @cached_property
-    def _incidence_t(self) -> sp.csr_matrix:
-        return self._incidence.T.tocsr()
-
-    def cells_touching(self, nodes: NDArray[np.bool_]) -> NDArray[np.bool_]:
-        """Mask of the cells with a node in the mask ``nodes``."""
-        return nodes[self.cells].any(axis=1)
+    def _node_cells(self) -> sp.csr_matrix:
+        """Node-cell incidence (n_nodes, n_cells)."""
+        cols = np.repeat(np.arange(len(self.cells)), 4)
+        return sp.csr_matrix((np.ones(cols.size), (self.cells.ravel(), cols)),
+                             shape=(self.n_nodes, len(self.cells)))
 
     def within_layers(self, seeds: NDArray[np.bool_], layers: int) -> NDArray[np.bool_]:
         """Nodes reachable from the mask ``seeds`` through at most ``layers`` shared cells."""
         mask = seeds.copy()
         for _ in range(layers):
-            mask = (self._incidence_t @ self.cells_touching(mask).astype(float)) > 0
+            mask = (self._node_cells @ mask[self.cells].any(axis=1).astype(float)) > 0
         return mask
 
     @cached_property
@@ -400,7 +380,7 @@ class AleBody:
     @cached_property
     def _remap_topology(self) -> RemapTopology:
         """The remap's cell-only data (boundary edges, gradient-recovery patches)."""
-        return remap_topology(self.cells, self.n_nodes)
+        return RemapTopology(self.cells, self.n_nodes)
 
     @cached_property
     def cell_density(self) -> NDArray[np.float64]:
@@ -504,10 +484,9 @@ def _kinks(xy: NDArray, closed: bool, angle_deg: float) -> NDArray[np.bool_]:
     much more sharply than at both neighbours (a kink of a flat or smooth surface: turn above
     KINK_MIN_DEG, curvature turn / mean adjacent edge above KINK_CURVATURE_RATIO times the
     neighbours'; a discretized arc, graded or not, has nearly equal curvatures). The move
-    slides the nodes between corners along a smooth curve through them: a tester's
-    foundation bending down by 12 degrees lost its corner node to the curve, one remap
-    created 5.4 % of the energy and the next step inverted the corner cell; at 5 degrees the
-    corner was cut by 9 % of the spacing in silence. Open ends excluded."""
+    slides the nodes between corners along a smooth curve through them, which cuts a kink
+    it does not know (a foundation bending down by 12 degrees: one remap created 5.4 % of
+    the energy and the next step inverted the corner cell). Open ends excluded."""
     before = xy - np.roll(xy, 1, axis=0)
     after = np.roll(xy, -1, axis=0) - xy
     cross = before[:, 0] * after[:, 1] - before[:, 1] * after[:, 0]
@@ -579,11 +558,9 @@ class _Chain:
     position: NDArray[np.int64]  # chain index of each active node
 
     def __post_init__(self) -> None:
-        # read-only views whichever way the chain was opened: the kernels (slide_chain,
-        # _hint_cells) are compiled for one array type, and an open chain's arrays are the
-        # body's frozen ones while a closed chain's are new, writable arrays. Numba types the
-        # two apart, so the first closed (annulus, disk) ALE surface compiled slide_chain again
-        # inside the user's run (~10 s) although the warm-up had cached the open form.
+        # read-only views whichever way the chain was opened (an open chain's arrays are the
+        # body's frozen ones, a closed chain's new ones): the kernels (slide_chain,
+        # _hint_cells) are compiled for one array type, and a second costs ~10 s in a run
         for name in ("nodes", "breaks", "spacing", "position"):
             object.__setattr__(self, name, read_only(getattr(self, name)))
 
@@ -675,11 +652,9 @@ def _move_interior(
     quality, and whether a surface node moves at all is one on its slide. So the surface
     positions of successive augmentations that differ by round-off could alternate between
     moving an interior region and not: a jump of the remapped fields at every other
-    augmentation, and the augmentations cycled instead of converging. Disk drop refined 4x:
-    at step 68 interior nodes went 2.8e-5 to and fro between stages (report 5.4's test stuck at
-    3e-6 against 1e-8); with its remap energy handed to the disk, at step 63 two surface nodes
-    moved 5e-8 at every other augmentation, the smoothed region around them changed, and the
-    interior went 5.9e-5 to and fro."""
+    augmentation, and the augmentations cycled instead of converging (the disk drop refined
+    4x: interior nodes went 2.8e-5 to and fro, report 5.4's test stuck at 3e-6 against
+    1e-8)."""
     changes = _changes(body, tn, x_surf)
     seeds = changes[0]  # surface nodes only: x_surf moved no other
     if least_seeds is not None:
@@ -785,8 +760,8 @@ def move_ale_body(
     try:
         x_new, (moved, touched, _, degenerate), smoothing, stage, seeds = _move_interior(
             body, tn, x_surf, least_interior, least_seeds)
-    except SmoothedInversion as err:
-        raise _explained(body, slid, err, err.nodes, x_old, None) from None
+    except MeshError as err:  # the smoothed interior has an inverted cell
+        raise _explained(body, slid, err) from None
     if not moved.any():
         return _unchanged(X, d, v, a, mismatch, active[clamped])
     if degenerate:
@@ -812,21 +787,16 @@ def _check_move(body: AleBody, slid: NDArray, new: NDArray, old: NDArray, name: 
     try:
         check_move(new, old, body.cells, name, touched)
     except MeshError as err:
-        raise _explained(body, slid, err, new, old, touched) from None
+        raise _explained(body, slid, err) from None
 
 
-def _explained(body: AleBody, slid: NDArray, err: MeshError, new: NDArray, old: NDArray,
-               which: NDArray | None) -> MeshError:
-    """``err`` (a move from ``old`` to ``new`` refused, ``check_move`` of the cells ``which``,
-    default all), with why and what to change where the cell it names holds a surface node
-    this move slid (``slid``). A partner surface that runs on through the contact (a disk
-    sliding around the inside of an ALE ring: a tester's ring segments went from 0.098 to
-    0.019 ahead of the disk and 0.21 behind it) drags the ALE nodes along until a surface
-    cell inverts, and the plain "element N is inverted" named no cause; with a Lagrangian
-    ring the same run completed. Neither a finer ring, nor ``ale.respace = "reference"``
-    helped (docs/theory.md, "An ALE body under a surface that runs through the contact")."""
-    cell = _refused_cell(body.cells, new, old, which)
-    if cell < 0 or not np.isin(body.cells[cell], slid).any():
+def _explained(body: AleBody, slid: NDArray, err: MeshError) -> MeshError:
+    """``err`` (a move refused by ``check_move``), with why and what to change where the cell
+    it names holds a surface node this move slid (``slid``): a partner surface that runs on
+    through the contact (a disk sliding around the inside of an ALE ring) drags the ALE nodes
+    along until a surface cell inverts, which only a Lagrangian body avoids (docs/theory.md,
+    "An ALE body under a surface that runs through the contact")."""
+    if err.cell < 0 or not np.isin(body.cells[err.cell], slid).any():
         return err
     return MeshError(
         f"{err}, a cell beside the contact-surface nodes this move slid after their "
@@ -835,19 +805,6 @@ def _explained(body: AleBody, slid: NDArray, err: MeshError, new: NDArray, old: 
         "one), its nodes drag this body's along and bunch them up until a cell inverts, "
         f"which no ALE setting or smaller dt prevents; make body '{body.name}' Lagrangian "
         "(mesh_motion = \"lagrangian\")")
-
-
-def _refused_cell(cells: NDArray, new: NDArray, old: NDArray, which: NDArray | None) -> int:
-    """The cell ``check_move`` names (-1 on none): the first of ``which`` that the move
-    leaves inverted or degenerate and worse than it was."""
-    which = np.arange(len(cells)) if which is None else np.asarray(which, np.int64).reshape(-1)
-    q_new, q_old = cell_min_sines(new, cells[which]), cell_min_sines(old, cells[which])
-    refused = np.flatnonzero(~(q_new > _REFUSED) & ~(q_new >= q_old))
-    return int(which[refused[0]]) if refused.size else -1
-
-
-#: ``check_move``'s tolerance on a cell's smallest corner sine
-_REFUSED = 1e-10
 
 
 def _remapped(body: AleBody, tn: _TnState, chain: _Chain, slides: NDArray, x_new: NDArray,

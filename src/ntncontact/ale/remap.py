@@ -22,12 +22,9 @@ Two interpolants:
   every quadratic field on ANY bilinear quad (not only parallelograms), interpolates the nodal
   values (N_a(x_b) = delta_ab and the correction vanishes at the nodes), and is continuous
   across cell edges (on an edge only the edge's two nodes contribute): a node moved by delta
-  takes a value that tends to its own as delta -> 0. The earlier "quadratic" option, a
-  least-squares quadratic over the containing cell's patch evaluated at the point, did none of
-  this: it does not pass through the nodal values, so the smallest move of a node replaced its
-  value by a smoothed one (an O(h^2 f'') jump, worst near boundaries where the one-sided patch
-  fit extrapolates), and it jumped between neighbouring patches. In the time loop that showed as
-  energy jumping up at every update and then decaying (11 % on the ring impact, report 6.4).
+  takes a value that tends to its own as delta -> 0 (a patch fit evaluated at the point would
+  replace the value of a node moved by any amount with a smoothed one: an energy jump at every
+  update).
 
 Points that coincide with an old node take its value exactly, so unmoved nodes keep their
 fields.
@@ -57,7 +54,6 @@ __all__ = [
     "conservative_velocity_correction",
     "inverse_bilinear",
     "momenta",
-    "remap_topology",
     "two_ring_patches",
 ]
 
@@ -79,10 +75,8 @@ def inverse_bilinear(
     """
     cell_xy, points = np.asarray(cell_xy, dtype=float), np.asarray(points, dtype=float)
     lead = np.broadcast_shapes(cell_xy.shape[:-2], points.shape[:-1])
-    # C-contiguous and writable whatever the inputs: np.broadcast_to returns a read-only view
-    # (copied only where it broadcasts), which Numba types apart from a writable array, so
-    # unbroadcast inputs compiled the kernel a second time inside a run (~1.2 s: the ALE
-    # examples whose interior nodes move)
+    # C-contiguous and writable whatever the inputs: np.broadcast_to's read-only view is a
+    # second Numba type, compiled again inside a run
     cells = np.require(np.broadcast_to(cell_xy, (*lead, 4, 2)).reshape(-1, 4, 2),
                        requirements=["C", "W"])
     pts = np.require(np.broadcast_to(points, (*lead, 2)).reshape(-1, 2), requirements=["C", "W"])
@@ -94,7 +88,8 @@ class RemapTopology:
     """What a Remapper needs from the cells alone: the outer (boundary) cell edges and the
     two-ring node patches of the gradient recovery (built on first use)."""
 
-    def __init__(self, cells: NDArray[np.int64], n_nodes: int) -> None:
+    def __init__(self, cells: ArrayLike, n_nodes: int) -> None:
+        cells = np.asarray(cells, dtype=np.int64).reshape(-1, 4)
         self.cells, self.n_nodes = cells, n_nodes
         keys = np.sort(np.stack([cells, np.roll(cells, -1, axis=1)], -1), -1)
         _, inverse, counts = np.unique(keys.reshape(-1, 2), axis=0, return_inverse=True,
@@ -104,11 +99,6 @@ class RemapTopology:
     @cached_property
     def patches(self) -> tuple[NDArray[np.int64], NDArray]:
         return two_ring_patches(self.cells, self.n_nodes)
-
-
-def remap_topology(cells: ArrayLike, n_nodes: int) -> RemapTopology:
-    """The cell-only data of a Remapper, to share between meshes with the same cells."""
-    return RemapTopology(np.asarray(cells, dtype=np.int64).reshape(-1, 4), n_nodes)
 
 
 class PointLocation(NamedTuple):
@@ -122,13 +112,13 @@ class Remapper:
 
     def __init__(self, nodes: ArrayLike, cells: ArrayLike, candidates: int = 8,
                  topology: RemapTopology | None = None) -> None:
-        """``topology``: ``remap_topology(cells, len(nodes))`` if kept from another mesh with
+        """``topology``: ``RemapTopology(cells, len(nodes))`` if kept from another mesh with
         the same cells (it depends on the cells only)."""
         self.nodes = np.asarray(nodes, dtype=float)
         self.cells = np.asarray(cells, dtype=np.int64).reshape(-1, 4)
         xc = self.nodes[self.cells]
         self._cell_xy = xc
-        self._topology = topology or remap_topology(self.cells, len(self.nodes))
+        self._topology = topology or RemapTopology(self.cells, len(self.nodes))
         self._outer_edge = self._topology.outer_edge
         d1, d2 = xc[:, 2] - xc[:, 0], xc[:, 3] - xc[:, 1]
         area = 0.5 * (d1[:, 0] * d2[:, 1] - d1[:, 1] * d2[:, 0])
@@ -216,8 +206,9 @@ class Remapper:
         pts = np.atleast_2d(np.asarray(points, dtype=float))
         n = len(pts)
         if hint is not None:  # the kernel's misses are -1, xi = 0, not clamped, as below
-            cell, xi, clamped = self._try_hints(pts, np.asarray(hint, dtype=np.int64).reshape(n),
-                                                outside_tol)
+            cell, xi, clamped = _locate_in_hints(
+                self._cell_xy, self.cell_size, self._outer_edge, np.ascontiguousarray(pts),
+                np.asarray(hint, dtype=np.int64).reshape(n), outside_tol, _INSIDE_TOL, 12)
         else:
             cell, xi, clamped = np.full(n, -1), np.zeros((n, 2)), np.zeros(n, bool)
         todo = np.flatnonzero(cell < 0)
@@ -240,13 +231,6 @@ class Remapper:
             self._clamp(pts, todo, cell, xi, outside_tol)
             clamped[todo] = True
         return PointLocation(cell, xi, clamped)
-
-    def _try_hints(self, pts: NDArray, hint: NDArray, outside_tol: float
-                   ) -> tuple[NDArray, NDArray, NDArray]:
-        """(cell or -1, xi, clamped) of the points found in (or just outside a boundary edge
-        of) their hint cell."""
-        return _locate_in_hints(self._cell_xy, self.cell_size, self._outer_edge,
-                                np.ascontiguousarray(pts), hint, outside_tol, _INSIDE_TOL, 12)
 
     def _clamp(
         self, pts: NDArray, todo: NDArray, cell: NDArray, xi: NDArray, outside_tol: float
@@ -536,7 +520,7 @@ def _nearest_on_boundaries(cell_xy, cand, pts):
 @njit(cache=True)
 def _locate_in_hints(cell_xy, cell_size, outer_edge, pts, hint, outside_tol, inside_tol,
                     iterations):
-    """``Remapper._try_hints``: (cell or -1, xi, clamped) of points found in their hint cell or
+    """(cell or -1, xi, clamped) of points found in their hint cell (``Remapper.locate``) or
     just outside one of its mesh-boundary edges (clamped onto it). The hinted points are
     inverted as one batch (the Newton loop stops for the whole batch)."""
     n = pts.shape[0]

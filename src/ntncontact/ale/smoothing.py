@@ -39,7 +39,7 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 from numpy.typing import ArrayLike, NDArray
 
-from ntncontact.mesh.quadmesh import MeshError
+from ntncontact.mesh.overlap import boundary_edges
 from ntncontact.mesh.quality import check_elements, check_move, corner_jacobians, unique_edges
 
 __all__ = [
@@ -59,11 +59,8 @@ _DENSE_LIMIT = 400  # free nodes up to which the harmonic extension solves a den
 
 def boundary_node_mask(cells: ArrayLike, n_nodes: int) -> NDArray[np.bool_]:
     """Nodes on edges that belong to exactly one cell."""
-    cell_arr = np.asarray(cells, dtype=np.int64).reshape(-1, 4)
-    pairs = np.sort(np.stack([cell_arr, np.roll(cell_arr, -1, axis=1)], -1).reshape(-1, 2), 1)
-    edges, counts = np.unique(pairs, axis=0, return_counts=True)
     mask = np.zeros(n_nodes, bool)
-    mask[edges[counts == 1].ravel()] = True
+    mask[boundary_edges(np.asarray(cells, dtype=np.int64).reshape(-1, 4)).ravel()] = True
     return mask
 
 
@@ -141,15 +138,6 @@ def _angle_weights(beta: NDArray, alpha1: NDArray, alpha2: NDArray) -> NDArray:
     return 2.0 ** np.digitize(ratio, [0.3, 0.5, 0.8])
 
 
-class SmoothedInversion(MeshError):
-    """A smoothed mesh with an inverted or degenerate cell (``Smoother.run``); ``nodes``: the
-    smoothed positions, so that the ALE move can tell which cell it was and why."""
-
-    def __init__(self, message: str, nodes: NDArray) -> None:
-        super().__init__(message)
-        self.nodes = nodes
-
-
 @dataclass(frozen=True)
 class SmoothingResult:
     nodes: NDArray[np.float64]
@@ -160,7 +148,7 @@ class SmoothingResult:
 
 
 class Smoother:
-    """Interior smoother for one mesh topology; build once, call ``smooth`` on positions."""
+    """Interior smoother for one mesh topology; build once, call ``run`` on positions."""
 
     def __init__(
         self,
@@ -293,10 +281,10 @@ class Smoother:
     ) -> SmoothingResult:
         """Sweep until the largest move is below ``rel_tol`` times the mean edge length.
 
-        Raises MeshError (naming element, node and body) if the result has an inverted or
-        degenerate cell; with ``reference`` (an ALE body's mesh at t_n), only if that cell is
-        also worse than it was there (``check_move``: the material's own deformation may have
-        turned a corner reflex before any mesh moved).
+        Raises MeshError (naming element, node and body; its ``cell``) if the result has an
+        inverted or degenerate cell; with ``reference`` (an ALE body's mesh at t_n), only if
+        that cell is also worse than it was there (``check_move``: the material's own
+        deformation may have turned a corner reflex before any mesh moved).
 
         Where the free nodes touch fewer than half of the cells (an ALE body's smoothing
         layers), the sweeps run on the cells around them only (``_around_free``): a free
@@ -316,13 +304,10 @@ class Smoother:
             result = replace(result, nodes=x)
         else:
             result = self._sweeps(x, max_sweeps, rel_tol, scale)
-        try:
-            if reference is None:
-                check_elements(result.nodes, self.cells, self.body_name)
-            else:
-                check_move(result.nodes, reference, self.cells, self.body_name)
-        except MeshError as err:
-            raise SmoothedInversion(str(err), result.nodes) from None
+        if reference is None:
+            check_elements(result.nodes, self.cells, self.body_name)
+        else:
+            check_move(result.nodes, reference, self.cells, self.body_name)
         return result
 
     def _around_free(self, around: NDArray[np.bool_]) -> tuple[Smoother, NDArray[np.int64]]:

@@ -168,26 +168,20 @@ def restore_strain_energy(repair: StrainRepair, X: NDArray, x: NDArray, free: ND
     root of a quadratic fitted through the trial, else halved, until the residual
     |W - target| decreases and no element inverts; after a shortened step the next direction
     is conjugate to the last (Polak-Ribiere in the 1/weight metric), so the steps stop
-    zig-zagging across W's curved valley. Measured against halving along g alone, fast-sliding
-    blocks refined 4x to t = 0.093: repairs restored 55 of 127 -> 69 of 118, the energy the
-    remaps move from W to K 6.52e-5 -> 1.95e-5 of E0, the repair 1.23 -> 0.56 s; before,
-    each overshot full step was halved and the residual fell ~0.8 an iteration. Returns X
+    zig-zagging across W's curved valley (against halving along g alone, the fast-sliding
+    blocks refined 4x: 69 of 118 repairs restored instead of 55 of 127). Returns X
     unchanged (restored False) if W cannot reach the target this way (the energy gradient
     vanishes on the free nodes, or the residual stops decreasing: W has a minimum on the
     way), unless the residual where it stopped is at most ``round_off``: W's round-off floor.
     At fixed x a one-ulp change of X changes d = x - X, hence W, by the nodal force times
     that ulp, which can exceed ``tolerance``: a Newton that converged quadratically to that
     floor then ground on by ~1e-20 an iteration, and whether it crossed the tolerance before
-    giving up was the round-off's draw (a disk sliding on an ALE block, W = 2.08e-7, tolerance
-    2.08e-19: stalls at 2.1e-19 to 3.5e-19 in the frame rotated by 30 deg, met in the
-    axis-aligned one; a failed repair widened the relabelled nodes by a layer and the two
-    frames parted by 8e-7 of the momentum a step).
+    giving up was the round-off's draw, which made a run depend on its frame.
     """
     X = np.asarray(X, dtype=float)
     local, nodes, which = repair.around(cells)
     # positions from a whole-number point near the nodes (subtracted exactly): at |x| ~ 100
-    # the round-off of x - X kept W from its target to 1e-12 in 40 of 166 repairs of a
-    # tester's impact that restored all 118 at the origin, and the runs parted by 0.7 %
+    # the round-off of x - X kept W from its target in a quarter of the repairs
     origin = np.round(X[nodes].mean(axis=0))
     result = _restore(local, X[nodes] - origin, np.asarray(x, dtype=float)[nodes] - origin,
                       np.asarray(free, bool)[nodes], np.asarray(weights, float)[nodes], which,

@@ -20,7 +20,7 @@ The loops are compiled (Numba; the arrays are tiny, a few points on a chain of t
 so NumPy was dominated by per-call overhead): the curve's construction and evaluation, the
 normal foot, and the ALE update's whole surface move (``slide_chain``: wanted arc lengths,
 clamping, respacing, new positions). Sums over a run of segments follow NumPy's pairwise order
-(``_pairwise_sum``), so the results equal those of the NumPy code they replaced bit for bit.
+(``_pairwise_sum``): the slides are np.sum's to the bit.
 Nothing in the surface move scans the whole chain per active node: the segments near a point
 come from a tree of bounding boxes (``_nearest_segments``) and the nearest break from a search
 of their sorted arc lengths, so a pavement layer or a joint of 10^3-10^4 contact nodes costs
@@ -43,15 +43,13 @@ from numpy.typing import ArrayLike, NDArray
 
 from ..jit import njit, read_only
 
-__all__ = ["SurfaceCurve", "local_slides", "point_at", "respace_surface", "slide_chain"]
+__all__ = ["SurfaceCurve", "local_slides", "respace_surface", "slide_chain"]
 
-# 8-point Gauss-Legendre on [0, 1]: |x'(u)| is the root of a quadratic in u, smooth on a segment
+# 8-point Gauss-Legendre on [0, 1]: |x'(u)| is the root of a quadratic in u, smooth on a segment;
+# read-only, as a kernel sees a global array (a writable one is a second type to compile)
 _GX, _GW = np.polynomial.legendre.leggauss(8)
 GAUSS_U = read_only(0.5 * (_GX + 1.0))
 GAUSS_W = read_only(0.5 * _GW)
-# read-only, as a kernel sees a global array: slide_chain passes them on to _point_at as such,
-# while SurfaceCurve.point_at passed the writable module arrays, a second type that the
-# validation's mesh-motion example (respace_surface) compiled inside `ntncontact validate`
 CONVERGED = 1e-14  # Newton updates of a local parameter u in [0, 1] below this: round-off
 
 
@@ -269,9 +267,9 @@ def _nearest_segments(points, bulge, pts, keep):
     """Per point the ``keep`` segments with the closest of 9 samples each, in the order of a
     stable argsort of those distances (ties to the lower index). A branch-and-bound descent of
     the samples' box tree (``_sample_boxes``) visits only the boxes no farther than the
-    keep-th best so far: testing every segment for every active node cost n^2 (153 ms a call
-    on a 2,020-node chain, 721 ms on 4,020, half of a long sliding run). The tests are the same
-    (a box is skipped only when it is strictly farther), so the picks are the same."""
+    keep-th best so far (testing every segment for every active node cost n^2: 721 ms a call
+    on a 4,020-node chain). A box is skipped only when it is strictly farther, so the picks
+    are those of the plain search."""
     n_seg = bulge.shape[0]
     p = pts.shape[0]
     out = np.empty((p, keep), np.int64)
@@ -473,13 +471,6 @@ class SurfaceCurve:
                             GAUSS_U, GAUSS_W)
 
 
-def point_at(
-    chain_xy: ArrayLike, s: ArrayLike, corner_mask: ArrayLike | None = None
-) -> NDArray[np.float64]:
-    """Positions on the chain's piecewise-quadratic surface at arc-length parameters s."""
-    return SurfaceCurve.from_chain(chain_xy, corner_mask).point_at(s)
-
-
 def respace_surface(
     chain_xy: ArrayLike,
     anchor_mask: ArrayLike,
@@ -677,10 +668,8 @@ def _anchor_targets(node_s, breaks, pos, wanted, slide_tolerance, ratio, snap, s
     each segment, which the respacing may grade below it) and the anchors; (targets,
     clamped, mismatch, anchor indices, anchor slides, first pair of anchors out of order or
     -1). The smallest segment at t_n would ratchet: a node held at the clamp shortens its
-    stretch's smallest segment, and the next step's clamp lets it nearer. An ALE block's
-    surface node next to a fixed corner, following a partner that slides past the corner,
-    came 0.0144, 0.002, 0.00012 from it in successive steps, and its cell inverted (the
-    fast-sliding blocks with both bodies ALE, step 27)."""
+    stretch's smallest segment, the next step's clamp lets it nearer, until its cell inverts
+    (a node following a partner that slides past a fixed corner)."""
     n, k = node_s.size, pos.size
     brk = np.flatnonzero(breaks)
     n_brk = brk.size
@@ -742,11 +731,10 @@ def _stretch_clamp(node_s, brk, pos, spacing, stretch, snap, targets, clamped):
     active node of its run grows no longer than ``stretch`` times its reference length,
     scaled by the run's mean stretch at t_n; a bound never pulls a node back past where it
     is. The mirror of the clamp before a break: an ALE body whose partners slide away from
-    its corner would otherwise leave the corner cell behind and stretch it without bound (the
-    fast-sliding blocks refined 4x with both blocks ALE: the upper block's leading cell 9
-    times its length at t = 0.096, and its neighbour inverted). Only the stretches at breaks:
-    between two active nodes the spacing is their partners', which the partner body's own
-    deformation may stretch (a bound there held nodes that had to follow, seen at 8x)."""
+    its corner would otherwise leave the corner cell behind and stretch it without bound.
+    Only the stretches at breaks: between two active nodes the spacing is their partners',
+    which the partner body's own deformation may stretch (a bound there held back nodes that
+    had to follow)."""
     cum = np.zeros(spacing.size + 1)
     for j in range(spacing.size):
         cum[j + 1] = cum[j] + spacing[j]
@@ -897,12 +885,8 @@ def slide_chain(x, chain_nodes, points, bulge, node_s, t_start, t_end, breaks, s
     slides per chain node, clamped per active node, mismatch, resets, anchor chain indices,
     first pair of anchors out of order or -1: then nothing was moved).
 
-    Cost: about linear in the chain's nodes. CPU time a call on the sliding calls of an
-    independent tester's static slide (``gen_slide.py N``, a layer dragged over an ALE base,
-    N + 21 chain nodes, all but the two ends active): 4.8 / 27.6 / 107 / 420 ms at 421 / 1021 /
-    2021 / 4021 nodes before (every active node tested every segment for its nearest three and
-    scanned every node for breaks: n^2, half of the run from 2,000 nodes), 0.29 / 0.55 / 1.39 /
-    2.94 ms after, with the same results to the bit (benchmarks/README.md, session 40)."""
+    Cost: about linear in the chain's nodes (2.94 ms a call on a 4,021-node chain, all but its
+    ends active, against 420 ms for a search of every segment and break per active node)."""
     wanted = _wanted_arc(points, bulge, node_s, t_start, t_end, breaks, wanted_xy, pos, snap,
                          GAUSS_U, GAUSS_W)
     _, clamped, mismatch, idx, anchor_slide, bad = _anchor_targets(

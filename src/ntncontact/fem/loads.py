@@ -55,8 +55,7 @@ class TimeFunction:
         A step ending at t gives its prescribed dofs this rate (docs/theory.md, "Prescribed
         motion"): the segment after t is motion the step has not made. A t within round-off
         of a time point (1e-9 of the time scale) is that point: step 12 of dt = 0.025 ends at
-        0.30000000000000004, and a kink at 0.3 took the next segment's rate (a tester: the
-        reaction 1.3 % off, moved by one ulp of the time point)."""
+        0.30000000000000004, which must take the rate of the segment that ends at 0.3."""
         scale = max(abs(self.times[0]), abs(self.times[-1]), abs(t), 1e-300)
         t = t - KINK_ROUNDOFF * scale  # just before t: a point within round-off counts as t
         k = int(np.searchsorted(self.times, t, side="left"))

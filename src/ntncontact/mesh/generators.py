@@ -29,8 +29,7 @@ __all__ = [
 #: runs of 100 x 100 and 200 x 200 rectangles grew by 7.7 kB per element (stiffness triplets,
 #: the sparse factor, the state and output arrays). The sparse factor grows a little faster than
 #: the element count, so this under-estimates large meshes (contact runs of 10^4-6x10^4
-#: elements measure 8-13 kB: an independent tester's 62,446 elements 12.8 kB): only meshes
-#: that cannot fit are refused.
+#: elements measure 8-13 kB): only meshes that cannot fit are refused.
 BYTES_PER_ELEMENT = 8_000
 
 

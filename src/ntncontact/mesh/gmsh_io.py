@@ -8,12 +8,13 @@ first-order quads are accepted: a triangle would need a different element in eve
 from __future__ import annotations
 
 import warnings
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import BinaryIO
 
 import meshio
 import numpy as np
+from meshio._common import num_nodes_per_cell
 from numpy.typing import NDArray
 from scipy.spatial import cKDTree
 
@@ -70,9 +71,8 @@ _FORMATS = ("only gmsh .msh files (format 2.2 or 4.1) are read; convert another 
 
 
 def _read_meshio(path: Path) -> meshio.Mesh:
-    """meshio's gmsh reader, called directly: ``meshio.read`` exits the process on bad files.
-    Its own errors said nothing a user could act on (an Abaqus .inp: "ReadError: "; a v4.1
-    file whose groups name a missing entity: "KeyError: np.int32(2)")."""
+    """meshio's gmsh reader, called directly: ``meshio.read`` exits the process on bad files,
+    and its own errors say nothing a user can act on ("KeyError: np.int32(2)")."""
     if not path.is_file():
         raise FileNotFoundError(f"gmsh mesh file not found: {path}")
     with path.open("rb") as stream:
@@ -93,9 +93,7 @@ def _read_meshio(path: Path) -> meshio.Mesh:
 
 
 def _unreadable(path: Path) -> str:
-    """Why a file that begins as a gmsh file could not be read, by its format's version: a
-    tester's element citing an undefined node, and a format 4.0 file, were both told to
-    convert an Abaqus file."""
+    """Why a file that begins as a gmsh file could not be read, by its format's version."""
     with path.open("rb") as stream:
         stream.readline()
         version = stream.readline().split()[:1]
@@ -108,44 +106,43 @@ def _unreadable(path: Path) -> str:
 
 
 def _file_node_ids(path: Path, n_points: int) -> NDArray[np.int64]:
-    """The file's node numbers in file order (meshio's point order), which meshio reads and
-    drops: outputs give them so that a node of contact.csv can be found in the file. Read with
-    meshio's own node readers; -1 for every node if that fails (a format meshio reads
-    differently), since they only help find a node."""
-    try:
-        with path.open("rb") as stream:
-            stream.readline()  # $MeshFormat, checked by _read_meshio
-            version, data_size, is_ascii = meshio.gmsh.main._read_header(stream)
-            while stream.readline().strip() != b"$Nodes":
-                pass
-            if version == "2.2":
-                ids = np.asarray(meshio.gmsh._gmsh22._read_nodes(stream, is_ascii)[1], np.int64)
-            elif version == "4.1":  # its reader returns the tags less one
-                tags = meshio.gmsh._gmsh41._read_nodes(stream, is_ascii, data_size)[1]
-                ids = np.asarray(tags, np.int64) + 1
-            else:
-                ids = np.zeros(0, np.int64)
-        ids = ids.reshape(-1)
-    except Exception:  # noqa: BLE001 - the ids are a help for finding nodes, not the mesh
-        ids = np.zeros(0, np.int64)
-    return ids if ids.size == n_points else np.full(n_points, -1, np.int64)
+    """The file's node numbers in file order (meshio's point order): outputs give them so that
+    a node of contact.csv can be found in the file."""
+    return _file_ids(path, b"$Nodes", n_points, _node_ids)
 
 
 def _file_quad_ids(path: Path, n_quads: int) -> NDArray[np.int64]:
-    """The file's element numbers of the quads in file order (meshio's order of them), which
-    meshio drops: messages name a file's element by them (a tester looked for "element 50",
-    a 0-based index, in a file where it was element 51). -1 for every quad if the file cannot
-    be read here, since they only help find an element."""
+    """The file's element numbers of the quads in file order (meshio's order of them): messages
+    name a file's element by them, not by a 0-based index."""
+    return _file_ids(path, b"$Elements", n_quads, _quad_ids)
+
+
+def _file_ids(path: Path, section: bytes, count: int,
+              read: Callable[[BinaryIO, str, bool, int], NDArray]) -> NDArray[np.int64]:
+    """The numbers meshio reads and drops, by ``read`` from the first line of ``section`` on;
+    -1 for all ``count`` entries if that fails (a format read differently), since they only
+    help find an entry in the file."""
     try:
         with path.open("rb") as stream:
             stream.readline()  # $MeshFormat, checked by _read_meshio
             version, data_size, is_ascii = meshio.gmsh.main._read_header(stream)
-            while stream.readline().strip() != b"$Elements":
+            while stream.readline().strip() != section:
                 pass
-            ids = _quad_ids(stream, version, is_ascii, data_size)
-    except Exception:  # noqa: BLE001 - the ids are a help for finding elements, not the mesh
+            ids = np.asarray(read(stream, version, is_ascii, data_size), np.int64).reshape(-1)
+    except Exception:  # noqa: BLE001 - the ids are a help for finding entries, not the mesh
         ids = np.zeros(0, np.int64)
-    return ids if ids.size == n_quads else np.full(n_quads, -1, np.int64)
+    return ids if ids.size == count else np.full(count, -1, np.int64)
+
+
+def _node_ids(stream: BinaryIO, version: str, is_ascii: bool,
+              data_size: int) -> NDArray[np.int64]:
+    """The node numbers of a $Nodes section, by meshio's own node readers."""
+    if version == "2.2":
+        return np.asarray(meshio.gmsh._gmsh22._read_nodes(stream, is_ascii)[1], np.int64)
+    if version == "4.1":  # its reader returns the tags less one
+        return np.asarray(meshio.gmsh._gmsh41._read_nodes(stream, is_ascii, data_size)[1],
+                          np.int64) + 1
+    return np.zeros(0, np.int64)
 
 
 #: gmsh's element type number of a first-order quadrilateral
@@ -188,8 +185,6 @@ def _quad_ids(stream: BinaryIO, version: str, is_ascii: bool,
 
 def _nodes_of(kind: int) -> int:
     """The number of nodes of gmsh element type ``kind``."""
-    from meshio._common import num_nodes_per_cell
-
     return int(num_nodes_per_cell[meshio.gmsh.common._gmsh_to_meshio_type[int(kind)]])
 
 
@@ -214,7 +209,7 @@ def _file_group_names(path: Path) -> dict[tuple[int, int], str]:
 
 
 def _check_finite(xy: NDArray[np.float64], path: Path) -> None:
-    """Every coordinate a number (a tester's NaN was "data must be finite", naming nothing)."""
+    """Every coordinate a number, the first that is not named by its file node."""
     bad = np.flatnonzero(~np.all(np.isfinite(xy), axis=1))
     if bad.size:
         tag = _file_node_ids(path, xy.shape[0])[bad[0]]
@@ -255,8 +250,7 @@ COINCIDENT_RTOL = 1e-8
 
 def _check_distinct(xy: NDArray, label: str) -> None:
     """Refuses coincident nodes: the cells on either side of them are not joined, so the mesh
-    holds a crack whose faces nothing keeps apart (parts meshed separately and not merged:
-    the run completed with the two halves of a pressed block overlapping by 0.0125)."""
+    holds a crack whose faces nothing keeps apart (parts meshed separately and not merged)."""
     tolerance = COINCIDENT_RTOL * float(np.ptp(xy, axis=0).max())
     pairs = cKDTree(xy).query_pairs(tolerance, output_type="ndarray")
     if len(pairs) == 0:
@@ -361,10 +355,9 @@ def _unnamed_groups(raw: meshio.Mesh, blocks: list[tuple[str, NDArray]], label: 
     """Physical line and point groups without a name, each under its number (``set = "5"``),
     with a warning: gmsh writes a group without a name when its name was given to another
     group already (the second of two lines named "top"), and legacy .geo files number them
-    only (``Physical Line(5) = {...}``). Ignoring them silently halved a tester's top
-    pressure. A group whose name another group of another dimension has too (gmsh's names are
-    per dimension, meshio keeps one of them) is one of these, and its warning says so (it
-    said "has no name" of a point group named "bottom" beside the line group "bottom")."""
+    only (``Physical Line(5) = {...}``): ignored, a load on them would be lost in silence. A
+    group whose name another group of another dimension has too (gmsh's names are per
+    dimension, meshio keeps one of them) is one of these, and its warning says so."""
     tags = raw.cell_data.get("gmsh:physical")
     if tags is None:
         return {}
@@ -428,8 +421,7 @@ def _orient_on_boundary(mesh: QuadMesh, edges: NDArray[np.int64], group_name: st
                         label: str) -> NDArray[np.int64] | None:
     """The group's edges (file order) with the orientation of the matching boundary edge;
     None, with a warning, for a line inside the mesh (a material boundary, a line kept for
-    post-processing): a node set only, since surfaces and edge loads need boundary curves. A
-    tester's mesh with an unused interior line was refused as a whole."""
+    post-processing): a node set only, since surfaces and edge loads need boundary curves."""
     boundary = boundary_edges(mesh)
     n = np.int64(mesh.n_nodes)
     boundary_keys = np.sort(boundary, axis=1) @ np.array([n, 1])

@@ -150,8 +150,7 @@ def distance_to_segments(points: NDArray, a: NDArray, b: NDArray) -> NDArray:
 
 
 def _pair_distances(points: NDArray, a: NDArray, b: NDArray) -> NDArray:
-    """Squared distance of each point (m, 2) to its segment a[i] -> b[i] (the same operations,
-    in the same order, as the all-pairs form this replaced)."""
+    """Squared distance of each point (..., 2) to its segment a -> b (broadcast)."""
     ab = b - a
     rel = points - a
     t = np.clip(np.sum(rel * ab, axis=-1) / np.maximum(np.sum(ab * ab, axis=-1), 1e-300),
@@ -231,11 +230,8 @@ def deepest_overlap(points: NDArray, nodes: NDArray, cells: NDArray,
     distances of the points inside to the nearby boundary edges (a k-d tree,
     ``distance_to_segments``; every surface node of bodies that touch is inside within the
     tolerance); the depths along the normals (edges inside x boundary edges, ``ray_exit``)
-    only on an overlap. Measured (CPU time) on a 49 000-cell model, a 241-node surface on the
-    top of a 250 x 100-cell block: 28 ms a call with ``edges`` given, as before the edge test (the
-    sides of the edges are outside the block's bounding box: nothing to test; where they are
-    inside it, the edge test costs one more ``in_elements``, <= 10 ms there), plus ~40 ms for
-    ``boundary_edges`` when not given; the same surface lying on the block (refused): 64 ms."""
+    only on an overlap (CPU time: 28 ms a call for a 241-node surface on a 250 x 100-cell
+    block, ``edges`` given)."""
     edges = boundary_edges(cells) if edges is None else edges
     tolerance = DEPTH_TOLERANCE * (edge_size(nodes, edges) if size is None else size)
     inside, depth = _inside_deeper_than(points, nodes, cells, edges, tolerance)
@@ -305,10 +301,8 @@ def self_clearance(boundary: NDArray, nodes: NDArray, cells: NDArray) -> float:
     Only the pairs that can be nearest are measured: a cell is at least its centroid's
     distance minus its own radius away, so with ``bound`` the distance of some such pair
     (each node's nearest centroids), a cell counts only within ``bound`` + its radius, in
-    classes of cells of like radius (``_by_radius``). Searching within three times the
-    largest radius, as before, measured 200 000 pairs a call on Hertz refined 8x (graded:
-    its far cells' radii 8 times the contact zone's), 0.12 s of its 2.1 s step; the pairs'
-    distances are computed as before, so the minimum is the same to the bit."""
+    classes of cells of like radius (``_by_radius``): a single search within three times the
+    largest radius measured 200 000 pairs a call on a graded mesh (Hertz refined 8x)."""
     corners = nodes[cells]
     centroid = corners.mean(axis=1)
     radii = np.linalg.norm(corners - centroid[:, None], axis=-1).max(axis=1)
@@ -355,12 +349,9 @@ def _foreign_distance(boundary: NDArray, nodes: NDArray, cells: NDArray, corners
     clearance = np.inf
     for start in range(0, len(point), CHUNK):  # the distance to the quad's four edges
         quad = corners[cell[start:start + CHUNK]]
-        rel = nodes[boundary[point[start:start + CHUNK]], None, :] - quad
-        ab = np.roll(quad, -1, axis=1) - quad
-        t = np.clip(np.sum(rel * ab, axis=-1) / np.maximum(np.sum(ab * ab, axis=-1), 1e-300),
-                    0.0, 1.0)
-        gap = rel - t[..., None] * ab
-        clearance = min(clearance, float(np.sqrt(np.sum(gap * gap, axis=-1)).min()))
+        squared = _pair_distances(nodes[boundary[point[start:start + CHUNK]], None, :], quad,
+                                  np.roll(quad, -1, axis=1))
+        clearance = min(clearance, float(np.sqrt(squared).min()))
     return clearance
 
 
@@ -397,9 +388,9 @@ def facing_away(xy1: NDArray, closed1: bool, xy2: NDArray, closed2: bool) -> int
     of surface 1's node nearest surface 2, or None. At the FACING_NODES surface-1 nodes
     nearest surface 2, the node's outward normal and its nearest partner node's point the same
     way (cosine > SAME_WAY) and the partner lies behind one of the two surfaces: the face on
-    the far side of a body was named (a tester's block row with B's "left" against C's "left"
-    ran to "completed" with B 0.235 inside C). Surfaces that face each other, near or far,
-    have their nearest points in front of both and their normals opposed."""
+    the far side of a body was named, and the run would complete with one body inside the
+    other. Surfaces that face each other, near or far, have their nearest points in front of
+    both and their normals opposed."""
     distance, partner = cKDTree(xy2).query(xy1)
     nearest = np.argsort(distance, kind="stable")[:FACING_NODES]
     n1, n2 = chain_normals(xy1, closed1)[nearest], chain_normals(xy2, closed2)[partner[nearest]]

@@ -14,7 +14,12 @@ JOIN = "+"
 
 
 class MeshError(ValueError):
-    """A mesh that cannot be used: bad connectivity, unknown set, inverted element."""
+    """A mesh that cannot be used: bad connectivity, unknown set, inverted element;
+    ``cell``: the cell the message names (-1: none)."""
+
+    def __init__(self, message: str, cell: int = -1) -> None:
+        super().__init__(message)
+        self.cell = cell
 
 
 def _frozen(array: NDArray, dtype: type) -> NDArray:

@@ -213,13 +213,12 @@ def check_elements(
     element, node = _element_text(mesh_or_nodes, int(numbers[elem]),
                                   int(cell_arr[elem, corner]))
     raise MeshError(f"body '{body_name}': {element} is {kind} "
-                    f"(corner Jacobian {jac[elem, corner]:.3g} at {node})")
+                    f"(corner Jacobian {jac[elem, corner]:.3g} at {node})", int(numbers[elem]))
 
 
 def _element_text(mesh: QuadMesh | ArrayLike, elem: int, node: int) -> tuple[str, str]:
     """("element E", "node N") by the mesh's indices, or ("file element E", "file node N") by
-    the numbers of the file it was read from: a tester looked for element 50 and node 52 of a
-    gmsh file, 0-based indices, where the file says 51 and 53."""
+    the numbers of the file it was read from (which are what a user looks for in the file)."""
     if isinstance(mesh, QuadMesh) and mesh.file_element_ids is not None \
             and mesh.file_node_ids is not None:
         file_elem, file_node = int(mesh.file_element_ids[elem]), int(mesh.file_node_ids[node])
@@ -235,12 +234,9 @@ def check_move(new: ArrayLike, old: ArrayLike, cells: ArrayLike, body_name: str,
     degenerate *and* worse than it was (its smallest corner sine lower, ``cell_min_sines``).
 
     A cell the material's own deformation had already turned past 180 degrees at a corner,
-    with its Gauss points still positive (the step's check), is not the move's doing. Refusing
-    every move of its nodes stopped the fast-sliding blocks refined 8x (both blocks ALE, Newton
-    updates, from a restored t = 0.096 state) at t = 0.099 whatever the step: the cell beside
-    the upper block's trailing corner had a reflex corner (sine -0.025), and a surface node's
-    slide that made it better (-0.0095) was refused. Accepted, the run went on and the cell
-    recovered within a step (the body's worst sine 0.23 at t = 0.102)."""
+    with its Gauss points still positive (the step's check), is not the move's doing: refusing
+    every move of its nodes, even those that make it better, stopped a run whatever the step,
+    while accepted the cell recovers within a step."""
     cell_arr = np.ascontiguousarray(cells, dtype=np.int64).reshape(-1, 4)
     which = (np.arange(len(cell_arr)) if which is None
              else np.ascontiguousarray(which, dtype=np.int64).reshape(-1))
