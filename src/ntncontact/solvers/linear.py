@@ -329,14 +329,15 @@ PARDISO_MIN_UNKNOWNS = 10_000
 #: From this many unknowns precision "auto" factors in single precision (PARDISO only):
 #: where the factorization, not Python, is a Newton step's cost.
 MIXED_MIN_UNKNOWNS = 10_000
-#: A solution from a single-precision factor is refined in double until
-#: |b - A x| <= MIXED_RTOL |b| (per column). Why 1e-6: the strictest ratio the Newton loop
-#: works with is the inexact augmentations' 1e-4 of their start (kept-factor steps need 0.1),
-#: so the linear residual stays two orders below it. Measured at k = 8 (benchmarks/README.md,
-#: session 32): Hertz 134 -> 137 Newton iterations, the ring and the fast-sliding blocks the
-#: same counts. A single factor's first solve leaves ~2-3e-7 |b| as a rule, so 1e-7 (Hertz
-#: 134, 159 sweeps) and 1e-8 (134, 187) ask a sweep of nearly every solve and the ring then
-#: runs slower than in double (21.4 against 19.2 s); no check at all gives Hertz 141.
+#: A solution from a single-precision factor is refined in double until |b - A x| <= MIXED_RTOL |b|
+#: (per column), unless the caller states what it needs (``Factorization(b, rtol)``: Newton's
+#: forcing term, the multiplier sensitivity). Why 1e-6: the strictest ratio the Newton loop works
+#: with is the inexact augmentations' 1e-4 of their start (kept-factor steps need 0.1), so the
+#: linear residual stays two orders below it. Measured at k = 8 (benchmarks/README.md, session 32):
+#: Hertz 134 -> 137 Newton iterations, the ring and the fast-sliding blocks the same counts. A
+#: single factor's first solve leaves ~2-3e-7 |b| as a rule, so 1e-7 (Hertz 134, 159 sweeps) and
+#: 1e-8 (134, 187) ask a sweep of nearly every solve and the ring then runs slower than in double
+#: (21.4 against 19.2 s); no check at all gives Hertz 141.
 MIXED_RTOL = 1e-6
 #: Refinement sweeps before a single-precision factor is judged too inaccurate for its matrix
 #: (about cond(A) x 6e-8 >= 1): it is then factored again in double, and stays so.
@@ -346,15 +347,22 @@ MAX_REFINEMENTS = 3
 class Factorization:
     """A factored matrix: call it with b (n,) or (n, k) for the solution of A x = b."""
 
-    def __init__(self, owner: LinearSolver, n: int, solve, generation: int | None = None) -> None:
+    def __init__(self, owner: LinearSolver, n: int, solve, generation: int | None = None,
+                 refined: bool = False) -> None:
         self.owner, self.n, self._solve, self.generation = owner, n, solve, generation
+        self.refined = refined  # ``solve`` takes the caller's rtol (PARDISO's)
 
     @property
     def valid(self) -> bool:
         """False once a PARDISO factor was replaced by a later factorization of its solver."""
         return self.generation is None or self.generation == self.owner._generation
 
-    def __call__(self, b: NDArray) -> NDArray:
+    def __call__(self, b: NDArray, rtol: float = MIXED_RTOL) -> NDArray:
+        """x with |b - A x| <= rtol |b| in each column of b. ``rtol`` is what the caller needs
+        from a single-precision factor's refinement (:meth:`_PardisoBackend.solve`): a Newton
+        step its forcing term (``newton.forcing_term``), the multiplier sensitivity a loose
+        one; the default, :data:`MIXED_RTOL`, for everything else. A double factor's
+        solution is at round-off whatever ``rtol``."""
         b = np.asarray(b, dtype=float)
         if b.shape[0] != self.n:
             raise LinearSolverError(f"right-hand side has {b.shape[0]} rows, matrix has {self.n}")
@@ -362,7 +370,7 @@ class Factorization:
             raise LinearSolverError("this factorization was replaced by a later one")
         if self.n == 0:
             return np.zeros_like(b)
-        x = self._solve(b)
+        x = self._solve(b, rtol) if self.refined else self._solve(b)
         self.owner.stats.solves += 1
         if not np.all(np.isfinite(x)):
             raise LinearSolverError("the solution is not finite: the matrix is singular")
@@ -448,8 +456,9 @@ class LinearSolver:
         if self.check_pivots and isinstance(impl, _SuperLUBackend):
             impl.unchecked = True
         self._generation += 1
+        pardiso = backend == "pardiso"
         return Factorization(self, A.shape[0], impl.solver(),
-                             self._generation if backend == "pardiso" else None)
+                             self._generation if pardiso else None, refined=pardiso)
 
     def analysis_state(self) -> tuple[dict, dict[str, NDArray]]:
         """What decides how the next matrix is factored, for a restart checkpoint (JSON
@@ -748,14 +757,14 @@ class _PardisoBackend:
     factorization again with every matrix, which doubles a Newton factorization (module doc).
     Every call runs on :func:`pardiso_threads` MKL threads.
 
-    Precision. With ``single``, PARDISO factors the values rounded to single precision
-    (parameter 28) and each solution is refined in double against the double matrix
-    (:meth:`_refined`, to :data:`MIXED_RTOL`); a matrix the single factor cannot solve so
-    (perturbed pivots, or no convergence in :data:`MAX_REFINEMENTS` sweeps) is factored again
-    in double, as is every later one. Measured on Hertz refined 8x (123 178 unknowns, 2.2 M
-    entries, one thread): a factorization 0.38 -> 0.25 s, the factor's memory 163 -> 81 MB,
-    a solve 29 -> 26 ms; the whole run 35.4 -> 29.4 s (ring 8x window 19.2 -> 17.3 s), with
-    one refinement sweep in about a third of Hertz's solves and few of the ring's."""
+    Precision. With ``single``, PARDISO factors the values rounded to single precision (parameter
+    28) and each solution is refined in double against the double matrix (:meth:`_refined`, to the
+    caller's rtol, by default :data:`MIXED_RTOL`); a matrix the single factor cannot solve so
+    (perturbed pivots, or no convergence in :data:`MAX_REFINEMENTS` sweeps) is factored again in
+    double, as is every later one. Measured on Hertz refined 8x (123 178 unknowns, 2.2 M entries,
+    one thread): a factorization 0.38 -> 0.25 s, the factor's memory 163 -> 81 MB, a solve 29 -> 26
+    ms; the whole run 35.4 -> 29.4 s (ring 8x window 19.2 -> 17.3 s), with one refinement sweep in
+    about a third of Hertz's solves and few of the ring's."""
 
     def __init__(self, pattern: _Pattern, symmetric: bool, stats: SolverStats,
                  single: bool = False) -> None:
@@ -826,12 +835,13 @@ class _PardisoBackend:
     def solver(self):
         return self.solve
 
-    def solve(self, b: NDArray) -> NDArray:
+    def solve(self, b: NDArray, rtol: float = MIXED_RTOL) -> NDArray:
+        """x with |b - A x| <= rtol |b| per column (from a double factor: at round-off)."""
         if not self.single:
             return self._call(33, np.asfortranarray(b))
         if not np.all(np.isfinite(b)):  # no reason to leave single: reported as not finite
             return self._single_solve(b)
-        x = self._refined(b)
+        x = self._refined(b, rtol)
         if x is None:
             self._to_double()
             return self._call(33, np.asfortranarray(b))
@@ -840,19 +850,25 @@ class _PardisoBackend:
     def _single_solve(self, b: NDArray) -> NDArray:
         return self._call(33, np.asfortranarray(b, dtype=np.float32)).astype(float)
 
-    def _refined(self, b: NDArray) -> NDArray | None:
-        """x with |b - A x| <= MIXED_RTOL |b| in each column, from the single factor and
-        refinement sweeps x += A_single^-1 (b - A x) with the residual in double; None if
-        :data:`MAX_REFINEMENTS` sweeps do not get there."""
+    def _refined(self, b: NDArray, rtol: float) -> NDArray | None:
+        """x with |b - A x| <= rtol |b| in each column, from the single factor and refinement
+        sweeps x += A_single^-1 (b - A x) with the residual in double (a matvec, a fifth of a
+        solve), each sweep over the columns still above their limit only (a sensitivity's
+        64 columns had a sweep of all for a few); None if :data:`MAX_REFINEMENTS` sweeps do
+        not get there."""
         A = self.factored_matrix
         x = self._single_solve(b)
-        limit = MIXED_RTOL * np.linalg.norm(b, axis=0)
+        limit = rtol * np.linalg.norm(b, axis=0)
         for sweep in range(MAX_REFINEMENTS + 1):
             r = b - A @ x
-            if np.all(np.linalg.norm(r, axis=0) <= limit):  # False for NaN: then in double
+            above = ~(np.linalg.norm(r, axis=0) <= limit)  # True for NaN: then in double
+            if not above.any():
                 return x
             if sweep < MAX_REFINEMENTS:
-                x += self._single_solve(r)
+                if b.ndim == 1:
+                    x += self._single_solve(r)
+                else:
+                    x[:, above] += self._single_solve(r[:, above])
                 self.stats.refinements += 1
         return None
 

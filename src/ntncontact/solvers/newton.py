@@ -15,6 +15,8 @@ import numpy as np
 import scipy.sparse as sp
 from numpy.typing import NDArray
 
+from .linear import Factorization
+
 
 def norm2(v: NDArray) -> float:
     """Euclidean norm of a 1-D array: what ``np.linalg.norm`` computes (sqrt of the dot
@@ -106,6 +108,39 @@ class FactorCache:
     def drop(self) -> None:
         self.factor = None
 
+    def solve(self, b: NDArray, rtol: float) -> NDArray:
+        """The kept factor's solution of A x = b to |b - A x| <= rtol |b|, where the factor
+        can stop there (a :class:`~ntncontact.solvers.linear.Factorization`; a factor of
+        another kind solves as it does)."""
+        if isinstance(self.factor, Factorization):
+            return self.factor(b, rtol)
+        return self.factor(b)
+
+
+#: bounds of :func:`forcing_term`: the strictest is what every solve had before the forcing
+#: term (``linear.MIXED_RTOL``), the loosest Eisenstat and Walker's usual cap
+FORCING_MIN = 1e-6
+FORCING_MAX = 0.1
+#: Eisenstat and Walker's gamma of their "choice 2", gamma (|R_k| / |R_k-1|)^2
+FORCING_GAMMA = 0.9
+
+
+def forcing_term(norms: list[float]) -> float:
+    """eta of the inexact Newton step |J dy + R| <= eta |R| at |R| = norms[-1]: Eisenstat and
+    Walker's choice 2 from the last contraction (a step need not be solved much better than
+    its Newton contraction will be; quadratic convergence asks eta ~ |R|), within
+    [FORCING_MIN, FORCING_MAX], and FORCING_MIN at a solve's first step. Only a
+    single-precision factor's refinement reads it (``linear.Factorization``): its first
+    solution leaves 1e-7 to 2e-3 |R| (general mode, ring refined 8x), and a sweep costs a
+    solve. Measured at k = 8 (benchmarks/README.md, session 44): ring 244 -> 130 sweeps, the
+    same iterations; Hertz 54 -> 34, 138 -> 139 iterations. A term that also loosened the
+    steps near the tolerance (a tenth of it in the linear residual) saved more sweeps (ring
+    53, Hertz 11) but cost Hertz's load holds an augmentation each (142 iterations)."""
+    eta = FORCING_MIN
+    if len(norms) > 1 and norms[-2] > 0.0:
+        eta = FORCING_GAMMA * (norms[-1] / norms[-2]) ** 2
+    return min(max(eta, FORCING_MIN), FORCING_MAX)
+
 
 def newton(
     residual: Residual,
@@ -140,15 +175,15 @@ def _newton(residual: Residual, jacobian: Jacobian, solve: LinearSolve, y0: NDAr
     watch = _Watchdog(limit, settings.watchdog)
     for it in range(1, settings.max_iterations + 1):
         step = None
+        eta = forcing_term(norms)
         if reused < settings.max_reused_steps:
-            step = _modified_step(residual, y, R, norms[-1], factors, settings)
+            step = _modified_step(residual, y, R, norms[-1], factors, settings, eta)
         reused = reused + 1 if step is not None else 0
         try:
             if step is not None:
                 dy, y, R, scale = step
             else:
-                dy = -(factors.refresh(jacobian(y))(R) if factors is not None
-                       else solve(jacobian(y), R))
+                dy = -_newton_step(jacobian(y), R, solve, factors, eta)
                 if not np.all(np.isfinite(dy)):
                     raise NewtonError("linear solve returned non-finite values", norms[-1], it)
                 watch.used = watch.used or it > 1  # only a solve's first step
@@ -196,13 +231,24 @@ def _floor_note(norms: list[float], scale: float) -> str:
             "smaller penalty_factor, or the model near the origin, lowers it)")
 
 
+def _newton_step(J: sp.spmatrix, R: NDArray, solve: LinearSolve, factors: FactorCache | None,
+                 eta: float) -> NDArray:
+    """J^-1 R, by the factor cache (J factored and kept, the solve to the forcing term
+    ``eta``) or by ``solve``."""
+    if factors is None:
+        return solve(J, R)
+    factors.refresh(J)
+    return factors.solve(R, eta)
+
+
 def _modified_step(residual: Residual, y: NDArray, R: NDArray, norm0: float,
-                   factors: FactorCache | None, settings: NewtonSettings):
-    """(dy, y + dy, R, scale) with the kept factor if that step contracts |R| enough; else
-    None, and the kept factor is dropped so that the caller factors the current Jacobian."""
+                   factors: FactorCache | None, settings: NewtonSettings, eta: float):
+    """(dy, y + dy, R, scale) with the kept factor, solved to the forcing term ``eta``, if
+    that step contracts |R| enough; else None, and the kept factor is dropped so that the
+    caller factors the current Jacobian."""
     if factors is None or not factors.usable(y.size):
         return None
-    dy = -factors.factor(R)
+    dy = -factors.solve(R, eta)
     try:
         R_new, scale = residual(y + dy)
     except (ValueError, FloatingPointError):  # the stale step inverted an element
