@@ -212,13 +212,14 @@ def pardiso_threads(cores: int | None = None) -> int:
     order), else one thread on a machine of at most :data:`FEW_CORES` cores and half the
     cores, at most :data:`ntncontact.threads.MAX_THREADS`, on a larger one.
 
-    Why one on 2 cores: a second thread saves only ~5 % of a refined step (ring 8x 0.707 ->
-    0.671 s, Hertz 8x 2.668 -> 2.538 s, with the BLAS serial, ``benchmarks/scaling.py
-    --threads``), and PARDISO on several threads does not repeat its answers bit for bit,
-    even in its reproducible mode (:func:`_pardiso_iparm`): the ring refined 4x, killed and
-    restarted, differed from the uninterrupted run in 3 of 11 tries on two threads, in 1 of
-    19 on one. On a larger machine the threads pay more (the nested-dissection tree of a
-    2D mesh of 10^5 unknowns keeps up to ~8 busy), and a bit-for-bit restart there needs
+    Why one on 2 cores: a second thread saved only ~5 % of a refined step in session 30 (ring 8x
+    0.707 -> 0.671 s, Hertz 8x 2.668 -> 2.538 s, with the BLAS serial, ``benchmarks/ scaling.py
+    --threads``), and with single-precision factors (session 44, quiet machine, load ~1) it costs:
+    ring 8x 0.83 -> 0.96 s a step, Hertz 8x 2.21 -> 2.62 s; and PARDISO on several threads does not
+    repeat its answers bit for bit, even in its reproducible mode (:func:`_pardiso_iparm`): the ring
+    refined 4x, killed and restarted, differed from the uninterrupted run in 3 of 11 tries on two
+    threads, in 1 of 19 on one. On a larger machine the threads pay more (the nested-dissection tree
+    of a 2D mesh of 10^5 unknowns keeps up to ~8 busy), and a bit-for-bit restart there needs
     ``MKL_NUM_THREADS=1``."""
     requested = threads_from_environment("MKL_NUM_THREADS", "OMP_NUM_THREADS")
     if requested is not None:
