@@ -213,7 +213,7 @@ def pardiso_threads(cores: int | None = None) -> int:
     cores, at most :data:`ntncontact.threads.MAX_THREADS`, on a larger one.
 
     Why one on 2 cores: a second thread saved only ~5 % of a refined step in session 30 (ring 8x
-    0.707 -> 0.671 s, Hertz 8x 2.668 -> 2.538 s, with the BLAS serial, ``benchmarks/ scaling.py
+    0.707 -> 0.671 s, Hertz 8x 2.668 -> 2.538 s, with the BLAS serial, ``benchmarks/scaling.py
     --threads``), and with single-precision factors (session 44, quiet machine, load ~1) it costs:
     ring 8x 0.83 -> 0.96 s a step, Hertz 8x 2.21 -> 2.62 s; and PARDISO on several threads does not
     repeat its answers bit for bit, even in its reproducible mode (:func:`_pardiso_iparm`): the ring
