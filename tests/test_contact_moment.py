@@ -108,3 +108,17 @@ def test_the_keys_are_in_an_example_summary():
     summary = api.run(scenario).summary
     assert summary["max_contact_moment_imbalance"] >= 0.0
     assert "max_contact_moment_imbalance_at" in summary
+
+
+def test_a_moment_of_exactly_zero_is_measured():
+    """Forces along the line that joins their nodes: the net moment is 0.0 exactly, and the
+    interface was still measured (a moment-free press on one machine had 3 of its 8 steps at
+    exactly 0.0, which the diagnostic and the summary took for steps without contact)."""
+    from types import SimpleNamespace
+
+    from ntncontact.engine.diagnostics import contact_moment
+
+    x = np.array([[0.0, 0.0], [0.0, 1.0]])
+    result = SimpleNamespace(force=np.array([0.0, 1.0, 0.0, -1.0]))
+    found = contact_moment([SimpleNamespace(name="c")], [result], x)
+    assert found.interface == "c" and found.relative == 0.0 and found.moment == 0.0

@@ -401,7 +401,7 @@ def contact_moment(interfaces: Sequence, results: Sequence, x: NDArray) -> Conta
         q = p - p.mean(axis=0)
         about_centroid = float(np.sum(q[:, 0] * f[:, 1] - q[:, 1] * f[:, 0]))
         relative = abs(about_centroid) / (force * length)
-        if relative > worst.relative:
+        if relative > worst.relative or not worst.interface:  # 0 exactly is a measure too
             moment = float(np.sum(p[:, 0] * f[:, 1] - p[:, 1] * f[:, 0]))
             worst = ContactMoment(relative, ci.name, moment, force, length)
     return worst

@@ -401,8 +401,11 @@ class ResultWriter:
         zone's extent (``engine.diagnostics.contact_moment``), with the step, the time, the
         interface and the moment itself (about the origin: in a static step the reactions'
         moment plus the loads')."""
-        if found is None or found.relative <= summary.get("max_contact_moment_imbalance", 0.0):
+        if found is None or not found.interface:
             return {}
+        if (summary.get("max_contact_moment_imbalance_at") is not None
+                and found.relative <= summary["max_contact_moment_imbalance"]):
+            return {}  # the first measured step is kept even if its moment is exactly 0
         return {"max_contact_moment_imbalance": found.relative,
                 "max_contact_moment_imbalance_at": {
                     "step": s.step, "time": s.time, "interface": found.interface,
