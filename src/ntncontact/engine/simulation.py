@@ -549,7 +549,7 @@ class Simulation:
         of after the augmentations converge."""
         interfaces = self.model.interfaces
         base, motion = state, None
-        x_pred = self._predicted_end(state, contact, dt)  # for the first mesh motion
+        x_pred = state.x + dt * state.v  # first prediction of the end-of-step positions
         if start is not None:
             x_pred = state.X + (start[0] + (state.d - start[1]).ravel()).reshape(-1, 2)
         previous, before, iterations, guess, floor = None, None, 0, start, None
@@ -615,20 +615,6 @@ class Simulation:
             self._augmentations_converged = False
         return SolvedStep(state, d, used, results, augmentation, iterations,
                           **self._step_figures(problem, result, motion, state.X + d))
-
-    def _predicted_end(self, state: StepState, contact: tuple, dt: float) -> NDArray:
-        """The end-of-step positions the first augmentation's mesh motion is made for: those
-        of the step's first Newton start (``StepProblem.initial_guess``), x_n + dt v with the
-        mid-point velocity of held pairs (:meth:`_start_velocity`, ``persistent_velocities``)
-        in a dynamic step, not x_n + dt v_n, whose end velocity carries the mid-point rule's
-        odd-even mode on held nodes: the mesh was then moved for positions ~v dt off the
-        solution's (ring impact refined 4x: 5e-3 against 4e-4-1.2e-3 with this prediction),
-        and the second augmentation's remap onto a mesh moved that far undid most of the
-        first Newton multiplier update (ring refined 8x: gdot 2.9e-3 -> 2.0e-3)."""
-        if not self.dynamic:
-            return state.x + dt * state.v
-        return state.x + dt * persistent_velocities(self.model.interfaces, contact, state.x,
-                                                    self._start_velocity(state))
 
     def _solved_without(self, state: StepState, contact: tuple, kept: tuple, dt: float,
                         start: tuple | None, may_grow: bool, iterations: int) -> SolvedStep:
