@@ -51,7 +51,11 @@ def test_a_cycling_lagrange_active_set_fails_the_step_with_its_cause(alarm):
     with pytest.raises(SimulationError) as err:
         Simulation(_unloaded_block()).run()
     message = str(err.value)
-    assert message.startswith("step 9 (t = 2 -> 2.25) failed"), message  # as the AL's
+    # the load is 0 from t = 2 on, the end of step 8: whether that step's zero-load end still
+    # converges with the pairs closed at zero force is round-off (it did on one machine, not
+    # on another); either way the failing step is one that ends at zero load
+    assert message.startswith(("step 8 (t = 1.75 -> 2) failed", "step 9 (t = 2 -> 2.25) failed")), \
+        message
     assert "active set did not settle" in message and "ACTIVE_SET_REPEATS" in message
     assert "as at zero load" in message and "Lagrange interface(s) ['c']" in message
 
