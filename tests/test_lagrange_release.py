@@ -52,11 +52,18 @@ def test_round_off_multipliers_make_no_contact_time(tmp_path):
     """Tester B's block unloaded to zero at t = 2: its Lagrange pairs keep t_N ~ 1e-30 in the
     last step (t = 1.75 -> 2), which made contact_end_time 2.0; the augmented Lagrangian and
     penalty say 1.75."""
-    from ntncontact.engine.simulation import Simulation
+    from ntncontact.engine.simulation import Simulation, SimulationError
     from ntncontact.io.results import ResultWriter
 
     model = _unloaded_block(t_end=2.0)
-    Simulation(model, [ResultWriter(tmp_path, model)]).run()
+    try:
+        Simulation(model, [ResultWriter(tmp_path, model)]).run()
+    except SimulationError as err:
+        # whether the zero-load end of the last step still converges with the pairs closed
+        # is round-off (test_active_set_cycle.py): where it does not, the run fails there,
+        # and the summary written so far must say the same
+        assert str(err).startswith("step 8 (t = 1.75 -> 2) failed"), err
+        assert "as at zero load" in str(err)
     summary = json.loads((tmp_path / "summary.json").read_text())
     assert summary["contact_start_time"] == 0.0
     assert summary["contact_end_time"] == pytest.approx(1.75)
