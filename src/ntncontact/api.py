@@ -211,10 +211,8 @@ def run(scenario: Scenario | str | Path, out: str | Path | None = None, *,
     static = scenario.config.analysis.kind == "static"
     failed = None
     try:
-        if out is None:
-            results = _run_in_memory(scenario, progress, restart)
-        else:
-            results = _run_in_folder(scenario, Path(out), progress, overwrite, restart)
+        results = _run_with_writer(scenario, None if out is None else Path(out), progress,
+                                   overwrite, restart)
     except _RunFailed as err:
         failed = err
     if failed is not None:  # its warnings before its error, as the command prints them
@@ -243,9 +241,13 @@ class _RunFailed(Exception):
         self.summary, self.error = summary, error
 
 
-def _run_in_folder(scenario: Scenario, out: Path, progress: Callable[[float], None] | None,
-                   overwrite: bool, restart: bool) -> Results:
-    """:func:`run` into the results folder ``out``."""
+def _run_with_writer(scenario: Scenario, out: Path | None,
+                     progress: Callable[[float], None] | None, overwrite: bool,
+                     restart: bool) -> Results:
+    """:func:`run` into the results folder ``out``, or with ``out`` None in memory."""
+    if out is None and (restart or scenario.config.analysis.checkpoint_interval is not None):
+        raise ScenarioError(f"{scenario.source}: checkpoints and restarts need a results "
+                            "folder: give out=...")
     if restart and overwrite:
         raise ValueError("run: restart continues the run in out, overwrite replaces it: "
                          "give one of them")
@@ -259,28 +261,12 @@ def _run_in_folder(scenario: Scenario, out: Path, progress: Callable[[float], No
                           scenario_hash=identity["scenario_hash"],
                           build_warnings=build_warnings)
     simulation = Simulation(model, [writer])
-    checkpoint.attach(simulation, writer, out, scenario.config.analysis.checkpoint_interval,
-                      identity, resume)
+    if out is not None:
+        checkpoint.attach(simulation, writer, out,
+                          scenario.config.analysis.checkpoint_interval, identity, resume)
     with _failed_with_summary(writer):
-        simulation.run(progress)
-    return read_results(out)
-
-
-def _run_in_memory(scenario: Scenario, progress: Callable[[float], None] | None,
-                   restart: bool) -> Results:
-    """:func:`run` with ``out=None``: the writer keeps everything in memory."""
-    if restart or scenario.config.analysis.checkpoint_interval is not None:
-        raise ScenarioError(f"{scenario.source}: checkpoints and restarts need a results "
-                            "folder: give out=...")
-    with warnings_noted() as build_warnings:
-        model = build_model(scenario.config, scenario.base_dir)
-    identity = checkpoint.run_identity(scenario.config, scenario.overrides, model)
-    writer = ResultWriter(None, model, build_warnings=build_warnings, scenario=scenario.source,
-                          title=scenario.config.title, overrides=list(scenario.overrides),
-                          scenario_hash=identity["scenario_hash"])
-    with _failed_with_summary(writer):
-        Simulation(model, [writer]).run(progress)  # a failed step raises, as with a folder
-    return _results_of(writer.results)
+        simulation.run(progress)  # a failed step raises, with or without a folder
+    return read_results(out) if out is not None else _results_of(writer.results)
 
 
 @contextlib.contextmanager
@@ -305,5 +291,4 @@ def _results_of(kept: MemoryResults) -> Results:
     summary = json.loads(json.dumps(to_jsonable(kept.summary.data), allow_nan=False))
     history = pd.DataFrame(kept.history.rows, columns=list(kept.history.columns))
     contact = pd.DataFrame(kept.contact.rows, columns=list(kept.contact.columns))
-    frames = tuple(kept.fields.frames) if kept.fields is not None else ()
-    return Results(history, contact, summary, None, frames)
+    return Results(history, contact, summary, None, tuple(kept.fields.frames))

@@ -4,12 +4,10 @@ C_ab = int rho N_a c . grad_x N_b dV (report 2.4.2, (5.9)), integrated over each
 reference (X) image with 2 x 2 Gauss since rho dV = rho0 dV0; the spatial gradient is
 grad_x N = grad_X N F^-1 with F = dx/dX of the evaluation configuration x. The convective
 velocity c is nodal and interpolated with N. The report holds c constant during an iteration
-(the remark after (5.13)); the derivative with respect to c is returned as well so that the
-fully coupled form c = v - v_hat can be linearized by the caller.
+(the remark after (5.13)), so no derivative with respect to c is formed.
 
 Element derivatives (s_b = c . grad_x N_b, G_ik = (grad_x v)_ik, W = rho0 w_g det J):
     df_ai/dv_bj = C_ab delta_ij,
-    df_ai/dc_dk = sum_g W N_a N_d G_ik,
     df_ai/dx_dl = -sum_g W N_a s_d G_il      (from d grad_x N_b / dx_dl = -grad_x N_l grad_x N_d).
 The element quantities are vectorized over elements; assembly uses the Q4 dof order 2 a + i.
 """
@@ -31,13 +29,12 @@ Triplets = tuple[NDArray, NDArray, NDArray]
 
 @dataclass(frozen=True)
 class ElementConvective:
-    """Per element: C_e (ne, 4, 4), f_e (ne, 8) and the three (ne, 8, 8) derivatives of f_e."""
+    """Per element: C_e (ne, 4, 4), f_e (ne, 8) and the (ne, 8, 8) derivatives of f_e."""
 
     C: NDArray
     f: NDArray
     df_dx: NDArray
     df_dv: NDArray
-    df_dc: NDArray | None  # None when not asked for
 
 
 @dataclass(frozen=True)
@@ -47,7 +44,6 @@ class ConvectiveForce:
     force: NDArray
     d_x: Triplets
     d_v: Triplets
-    d_c: Triplets | None  # None when not asked for
 
 
 def _spatial(X_e: NDArray, x_e: NDArray) -> tuple[NDArray, NDArray]:
@@ -75,8 +71,7 @@ def _weighted_parts(
 
 
 def element_convective(
-    X_e: NDArray, x_e: NDArray, v_e: NDArray, c_e: NDArray, rho: NDArray,
-    need_dc: bool = True,
+    X_e: NDArray, x_e: NDArray, v_e: NDArray, c_e: NDArray, rho: NDArray
 ) -> ElementConvective:
     """Element convective matrices, forces and derivatives; arrays (ne, 4, 2), rho (ne,)."""
     gx, WN, s = _weighted_parts(X_e, x_e, c_e, rho)
@@ -86,11 +81,7 @@ def element_convective(
     f = np.einsum("eab,ebi->eai", C, v_e).reshape(-1, 8)
     df_dv = np.einsum("eab,ij->eaibj", C, np.eye(2)).reshape(-1, 8, 8)
     df_dx = -np.einsum("egad,egil->eaidl", WNs, G).reshape(-1, 8, 8)
-    df_dc = None
-    if need_dc:
-        WNN = np.einsum("ega,gd->egad", WN, N_GP)
-        df_dc = np.einsum("egad,egik->eaidk", WNN, G).reshape(-1, 8, 8)
-    return ElementConvective(C, f, df_dx, df_dv, df_dc)
+    return ElementConvective(C, f, df_dx, df_dv)
 
 
 def _triplets(edofs: NDArray, Ke: NDArray) -> Triplets:
@@ -101,19 +92,15 @@ def _triplets(edofs: NDArray, Ke: NDArray) -> Triplets:
 
 
 def convective_force(
-    X: NDArray, x: NDArray, v: NDArray, c: NDArray, cells: NDArray, rho: NDArray,
-    need_dc: bool = True,
+    X: NDArray, x: NDArray, v: NDArray, c: NDArray, cells: NDArray, rho: NDArray
 ) -> ConvectiveForce:
     """f = C(c) v over the listed ``cells`` (global node numbers, (ne, 4)), rho0 per cell.
 
     X, x, v, c are nodal (n, 2) arrays of all nodes; the force has 2 n entries and the
-    derivative triplets use global dofs 2 node + i (d_c only with ``need_dc``: a c held
-    constant in the iteration needs none).
+    derivative triplets use global dofs 2 node + i.
     """
     cells = np.asarray(cells, dtype=np.int64).reshape(-1, 4)
-    el = element_convective(X[cells], x[cells], v[cells], c[cells], np.asarray(rho, float),
-                            need_dc)
+    el = element_convective(X[cells], x[cells], v[cells], c[cells], np.asarray(rho, float))
     edofs = element_dofs(cells)
     force = np.bincount(edofs.ravel(), weights=el.f.ravel(), minlength=2 * len(X))
-    d_c = _triplets(edofs, el.df_dc) if el.df_dc is not None else None
-    return ConvectiveForce(force, _triplets(edofs, el.df_dx), _triplets(edofs, el.df_dv), d_c)
+    return ConvectiveForce(force, _triplets(edofs, el.df_dx), _triplets(edofs, el.df_dv))

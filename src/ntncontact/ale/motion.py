@@ -147,7 +147,7 @@ from ntncontact.ale.smoothing import (
 )
 from ntncontact.ale.surface import SurfaceCurve, slide_chain
 from ntncontact.mesh.boundary import chain_edge_lengths, surface_chain
-from ntncontact.mesh.quadmesh import MeshError, QuadMesh
+from ntncontact.mesh.quadmesh import MeshError, QuadMesh, frozen_array
 from ntncontact.mesh.quality import (
     cell_min_sines,
     changed_cells,
@@ -195,12 +195,6 @@ class AleCrossingError(AleMotionError):
         self.nodes = nodes
 
 
-def _frozen(values: ArrayLike, dtype: type) -> NDArray:
-    out = np.array(values, dtype=dtype, copy=True)
-    out.setflags(write=False)
-    return out
-
-
 @dataclass(frozen=True, eq=False)
 class AleBody:
     """Static data of one ALE body: topology, its contact surface chain and the options.
@@ -238,10 +232,10 @@ class AleBody:
     convection: Convection = "remap"
 
     def __post_init__(self) -> None:
-        cells = _frozen(self.cells, np.int64).reshape(-1, 4)
-        surface = _frozen(self.surface, np.int64).reshape(-1)
-        corner = _frozen(self.corner, np.bool_).reshape(-1)
-        spacing = _frozen(self.reference_spacing, np.float64).reshape(-1)
+        cells = frozen_array(self.cells, np.int64).reshape(-1, 4)
+        surface = frozen_array(self.surface, np.int64).reshape(-1)
+        corner = frozen_array(self.corner, np.bool_).reshape(-1)
+        spacing = frozen_array(self.reference_spacing, np.float64).reshape(-1)
         n_seg = surface.size if self.closed else surface.size - 1
         if surface.size < (3 if self.closed else 2) or np.unique(surface).size != surface.size:
             raise ValueError(f"{self.name}: the surface chain needs distinct nodes (>= 2)")
@@ -254,7 +248,7 @@ class AleBody:
             if getattr(self, key) not in get_args(kind):
                 raise ValueError(f"{self.name}: {key} must be one of {get_args(kind)}, got "
                                  f"{getattr(self, key)!r}")
-        quality = np.ones(len(cells)) if self.reference_quality is None else _frozen(
+        quality = np.ones(len(cells)) if self.reference_quality is None else frozen_array(
             self.reference_quality, np.float64).reshape(-1)
         if quality.shape != (len(cells),):
             raise ValueError(f"{self.name}: reference_quality needs one value per cell")

@@ -16,14 +16,9 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from ntncontact.mesh.boundary import SurfaceChain
+from ntncontact.mesh.quadmesh import frozen_array
 
 __all__ = ["ContactSurface", "Interface", "chord_normals", "corner_mask"]
-
-
-def _frozen(values: ArrayLike, dtype: type) -> NDArray:
-    out = np.array(values, dtype=dtype, copy=True).reshape(-1)
-    out.setflags(write=False)
-    return out
 
 
 @dataclass(frozen=True, eq=False)
@@ -42,13 +37,13 @@ class ContactSurface:
     partner_normal: bool = False
 
     def __post_init__(self) -> None:
-        nodes = _frozen(self.nodes, np.int64)
+        nodes = frozen_array(self.nodes, np.int64).reshape(-1)
         if nodes.size < (3 if self.closed else 2):
             raise ValueError("a contact surface needs >= 2 nodes (>= 3 when closed)")
         if np.unique(nodes).size != nodes.size:
             raise ValueError("a contact surface lists a node twice")
         corner = np.zeros(nodes.size, bool) if self.corner is None else self.corner
-        corner = _frozen(corner, np.bool_)
+        corner = frozen_array(corner, np.bool_).reshape(-1)
         if corner.size != nodes.size:
             raise ValueError("corner mask must have one entry per surface node")
         object.__setattr__(self, "nodes", nodes)

@@ -47,7 +47,7 @@ def _body_term(model: Model, setup: AleSetup, X: NDArray, c: NDArray) -> ExtraTe
         if v_eval is None:  # quasi-static: no inertia, no convection
             empty = np.zeros(0)
             return np.zeros(x_eval.size), (empty.astype(np.int64), empty.astype(np.int64), empty)
-        r = convective_force(X, x_eval, v_eval, c, cell_nodes, rho, need_dc=False)
+        r = convective_force(X, x_eval, v_eval, c, cell_nodes, rho)
         (rx, cx, kx), (rv, cv, kv) = r.d_x, r.d_v
         return r.force, (np.concatenate([rx, rv]), np.concatenate([cx, cv]),
                          np.concatenate([kx, rate * kv]))

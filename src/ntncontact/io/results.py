@@ -500,8 +500,6 @@ class ResultWriter:
                       before: StepRecord | None = None) -> None:
         """One frame: kinematics, stress and strain (cells and nodes), contact-node fields and
         the mesh velocity (``before``: the previous step's record, for the ALE remap rate)."""
-        if self.results.fields is None:
-            return
         s = record.state
         moving = before is not None and record.dt > 0.0
         F_bodies = [a.body_index for a in model.ale_bodies] if moving else []
@@ -543,7 +541,7 @@ class ResultWriter:
             return
         try:
             self._write_fields(self.model, last, self._before)
-            if self.results.fields is not None and hasattr(self.results.fields, "flush"):
+            if hasattr(self.results.fields, "flush"):
                 self.results.fields.flush()  # its error here, not in place of the run's
         except BaseException:  # noqa: BLE001 - the summary must still be written
             return

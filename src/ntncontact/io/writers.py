@@ -432,7 +432,6 @@ class ResultsDirectory(_Results):
         self,
         directory: str | os.PathLike,
         history_columns: Sequence[str] = (),
-        contact_columns: Sequence[str] = (),
         write_fields: bool = True,
         overwrite: bool = False,
         resume: Mapping[str, Any] | None = None,
@@ -469,7 +468,7 @@ class ResultsDirectory(_Results):
             if step is not None and self.history.last_step() != step:
                 raise RunFolderError(f"{self.history.path} does not reach the checkpoint's "
                                      f"step {step}: it is not the checkpointed run's")
-            self.contact = ContactWriter(self.directory, contact_columns, step)
+            self.contact = ContactWriter(self.directory, resume_step=step)
             self.summary = SummaryWriter(self.directory, **summary_extra)
             if resume is not None:
                 self.summary.restore(resume["summary"])
@@ -546,12 +545,10 @@ class MemoryResults(_Results):
     history rows, the contact rows of each step, the summary and the field frames (meshio
     meshes, the VTU files' content) are read back as tables by ``ntncontact.api``."""
 
-    def __init__(self, history_columns: Sequence[str] = (),
-                 contact_columns: Sequence[str] = (), write_fields: bool = True,
-                 **summary_extra: Any) -> None:
+    def __init__(self, history_columns: Sequence[str] = (), **summary_extra: Any) -> None:
         self.history = _MemoryTable(_check_columns(history_columns, HISTORY_COLUMNS))
-        self.contact = _MemoryTable(_check_columns(contact_columns, CONTACT_COLUMNS))
-        self.fields = _MemoryFrames() if write_fields else None
+        self.contact = _MemoryTable(CONTACT_COLUMNS)
+        self.fields = _MemoryFrames()
         self.summary = SummaryWriter(None, **summary_extra)
         self.closed = False
 

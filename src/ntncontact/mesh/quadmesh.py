@@ -3,11 +3,11 @@
 from __future__ import annotations
 
 from collections.abc import Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from types import MappingProxyType
 
 import numpy as np
-from numpy.typing import NDArray
+from numpy.typing import ArrayLike, NDArray
 
 #: joins edge-set names into one surface: ``surface_1 = "bottom+right"``
 JOIN = "+"
@@ -22,8 +22,9 @@ class MeshError(ValueError):
         self.cell = cell
 
 
-def _frozen(array: NDArray, dtype: type) -> NDArray:
-    out = np.array(array, dtype=dtype, copy=True)
+def frozen_array(values: ArrayLike, dtype: type) -> NDArray:
+    """A read-only copy of ``values`` as ``dtype`` (the arrays of the package's immutable types)."""
+    out = np.array(values, dtype=dtype, copy=True)
     out.setflags(write=False)
     return out
 
@@ -50,31 +51,28 @@ class QuadMesh:
     file_element_ids: NDArray[np.int64] | None = None
 
     def __post_init__(self) -> None:
-        nodes = _frozen(self.nodes, np.float64)
-        cells = _frozen(self.cells, np.int64)
+        nodes = frozen_array(self.nodes, np.float64)
+        cells = frozen_array(self.cells, np.int64)
         if nodes.ndim != 2 or nodes.shape[1] != 2:
             raise MeshError(f"{self.name}: nodes must have shape (n, 2), got {nodes.shape}")
         if cells.ndim != 2 or cells.shape[1] != 4:
             raise MeshError(f"{self.name}: cells must have shape (m, 4), got {cells.shape}")
         if cells.size and (cells.min() < 0 or cells.max() >= len(nodes)):
             raise MeshError(f"{self.name}: cell connectivity refers to a node that does not exist")
-        node_sets = {k: _frozen(v, np.int64).reshape(-1) for k, v in self.node_sets.items()}
-        edge_sets = {k: _frozen(v, np.int64).reshape(-1, 2) for k, v in self.edge_sets.items()}
+        node_sets = {k: frozen_array(v, np.int64).reshape(-1) for k, v in self.node_sets.items()}
+        edge_sets = {k: frozen_array(v, np.int64).reshape(-1, 2) for k, v in self.edge_sets.items()}
         for label, sets in (("node set", node_sets), ("edge set", edge_sets)):
             for key, idx in sets.items():
                 if idx.size and (idx.min() < 0 or idx.max() >= len(nodes)):
                     raise MeshError(f"{self.name}: {label} '{key}' refers to a missing node")
-        if self.file_node_ids is not None:
-            ids = _frozen(self.file_node_ids, np.int64).reshape(-1)
-            if ids.size != len(nodes):
-                raise MeshError(f"{self.name}: {ids.size} file node ids for {len(nodes)} nodes")
-            object.__setattr__(self, "file_node_ids", ids)
-        if self.file_element_ids is not None:
-            ids = _frozen(self.file_element_ids, np.int64).reshape(-1)
-            if ids.size != len(cells):
-                raise MeshError(f"{self.name}: {ids.size} file element ids for {len(cells)} "
-                                "cells")
-            object.__setattr__(self, "file_element_ids", ids)
+        for key, things, count in (("file_node_ids", "nodes", len(nodes)),
+                                   ("file_element_ids", "cells", len(cells))):
+            if getattr(self, key) is not None:
+                ids = frozen_array(getattr(self, key), np.int64).reshape(-1)
+                if ids.size != count:
+                    raise MeshError(f"{self.name}: {ids.size} {key.replace('_', ' ')} for {count} "
+                                    f"{things}")
+                object.__setattr__(self, key, ids)
         object.__setattr__(self, "nodes", nodes)
         object.__setattr__(self, "cells", cells)
         object.__setattr__(self, "node_sets", MappingProxyType(node_sets))
@@ -124,8 +122,7 @@ class QuadMesh:
 
     def with_nodes(self, nodes: NDArray[np.float64]) -> QuadMesh:
         """The same topology and sets at new node coordinates."""
-        return QuadMesh(nodes, self.cells, dict(self.node_sets), dict(self.edge_sets), self.name,
-                        self.file_node_ids, self.file_element_ids)
+        return replace(self, nodes=nodes)
 
     def with_sets(
         self,
@@ -133,10 +130,8 @@ class QuadMesh:
         edge_sets: Mapping[str, NDArray[np.int64]] | None = None,
     ) -> QuadMesh:
         """A copy with extra (or replaced) named sets."""
-        ns = dict(self.node_sets) | dict(node_sets or {})
-        es = dict(self.edge_sets) | dict(edge_sets or {})
-        return QuadMesh(self.nodes, self.cells, ns, es, self.name, self.file_node_ids,
-                        self.file_element_ids)
+        return replace(self, node_sets=dict(self.node_sets) | dict(node_sets or {}),
+                       edge_sets=dict(self.edge_sets) | dict(edge_sets or {}))
 
     def transformed(
         self, angle_deg: float = 0.0, translation: tuple[float, float] = (0.0, 0.0),
