@@ -275,12 +275,12 @@ def _status(args: argparse.Namespace) -> int:
     from .io.run_folder import run_status
 
     status = run_status(Path(args.directory))
+    gone = " (gone)" if status.state == "stale" else ""
     if status.state == "starting" or status.steps is None:  # nothing written yet
         doing = "building the model" if status.phase == "building" else "preparing the folder"
         note = f" ({doing})" if status.state == "starting" else " (killed before its first step)"
         print(f"status: {status.state}{note}")
         lock = status.lock or {}
-        gone = " (gone)" if status.state == "stale" else ""
         print(f"pid:    {lock.get('pid')}{gone} on {lock.get('host')}, "
               f"started {lock.get('started')}")
         return 0
@@ -288,7 +288,6 @@ def _status(args: argparse.Namespace) -> int:
     print(f"step:   {status.steps}")
     print(f"time:   {_short(status.time)}")
     if status.lock is not None and status.state in ("running", "stale"):
-        gone = " (gone)" if status.state == "stale" else ""
         print(f"pid:    {status.lock.get('pid')}{gone} on {status.lock.get('host')}")
     if status.error:
         print(f"error:  {status.error}")

@@ -154,17 +154,17 @@ class ResultWriter:
         if model.ties:
             extra_history = extra_history + tie_history(model)
             summary_extra = {"max_tie_violation": 0.0} | summary_extra
-        summary_extra = {"max_self_penetration": 0.0,  # a body through itself
-                         "max_self_penetration_at": None} | summary_extra
-        summary_extra = dict.fromkeys(EnergyAudit.KEYS) | summary_extra  # energy balance
-        summary_extra = {"cut_back_steps": 0} | summary_extra  # steps solved in sub-steps
-        # Newton iterations of the accepted sub-steps, and of the attempts halvings discarded
-        summary_extra = {"newton_iterations": 0, "failed_newton_iterations": 0} | summary_extra
-        summary_extra = {"mass": model.analysis.mass} | summary_extra  # as `compare` needs it
-        # the energy warning names the mid-point rule as the cause of a gain (report.run_warnings)
-        summary_extra = {"integrator": None if model.analysis.kind == "static"
-                         else model.analysis.integrator,
-                         "outside_ledger": outside_ledger(model)} | summary_extra
+        summary_extra = {
+            # the energy warning names the mid-point rule as the cause of a gain
+            "integrator": None if model.analysis.kind == "static" else model.analysis.integrator,
+            "outside_ledger": outside_ledger(model),
+            "mass": model.analysis.mass,  # as `compare` needs it
+            # Newton iterations of the accepted sub-steps, and of the attempts halvings discarded
+            "newton_iterations": 0, "failed_newton_iterations": 0,
+            "cut_back_steps": 0,  # steps solved in sub-steps
+            **dict.fromkeys(EnergyAudit.KEYS),  # energy balance
+            "max_self_penetration": 0.0, "max_self_penetration_at": None,  # a body through itself
+        } | summary_extra
         self._energy = EnergyAudit()
         # last, so that the earlier columns keep their places
         extra_history = extra_history + ("failed_newton_iterations",)
@@ -232,10 +232,8 @@ class ResultWriter:
         if "tie_violation" in record.extra:
             fields["max_tie_violation"] = max(record.extra["tie_violation"],
                                               summary.get("max_tie_violation", 0.0))
-        if "contact_work" in row:  # cumulative: the summary keeps the last
-            fields["contact_work"] = row["contact_work"]
-        if "frictional_dissipation" in row:  # cumulative, as contact_work
-            fields["frictional_dissipation"] = row["frictional_dissipation"]
+        # cumulative: the summary keeps the last
+        fields |= {k: row[k] for k in ("contact_work", "frictional_dissipation") if k in row}
         fields |= self._rotation_summary(model, s, summary)
         if row.get("ale_unreturned_energy"):  # cumulative: the summary keeps the last
             fields["ale_unreturned_energy"] = row["ale_unreturned_energy"]
@@ -272,9 +270,8 @@ class ResultWriter:
             fields |= self._widest_pressed_opening(s.time, rows, summary)
         self.results.write_history(row, **fields)
         self._before, self._last = self._last, record
-        before = self._before
         if framed:
-            self._write_fields(model, record, before)
+            self._write_fields(model, record, self._before)
 
     def _previous_frame_written(self) -> None:
         """Wait for the frame in flight (a VTU written in the background) before this step's

@@ -14,7 +14,7 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.spatial import cKDTree
 
-from ntncontact.mesh.quadmesh import MeshError, QuadMesh
+from ntncontact.mesh.quadmesh import MeshError, QuadMesh, cell_edges
 
 __all__ = [
     "SurfaceChain",
@@ -36,18 +36,13 @@ class SurfaceChain:
     closed: bool
 
 
-def _cell_edges(cells: NDArray[np.int64]) -> NDArray[np.int64]:
-    """All cell edges ``(c_k, c_k+1)``; with CCW cells each has its cell on the left."""
-    return np.stack((cells, np.roll(cells, -1, axis=1)), axis=-1).reshape(-1, 2)
-
-
 def boundary_edges(mesh: QuadMesh) -> NDArray[np.int64]:
     """Edges used by exactly one cell, oriented with the body on the left, in cell order.
 
     Raises :class:`MeshError` when an edge is shared by more than two cells or twice in the
     same direction (overlapping or inverted cells), since then "boundary" is meaningless.
     """
-    edges = _cell_edges(mesh.cells)
+    edges = cell_edges(mesh.cells)
     keys = np.sort(edges, axis=1)
     _, first, inverse, counts = np.unique(
         keys, axis=0, return_index=True, return_inverse=True, return_counts=True

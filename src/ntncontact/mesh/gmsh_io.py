@@ -46,7 +46,8 @@ def read_msh(path: str | Path, name: str | None = None) -> QuadMesh:
         raise MeshError(f"{label}: no quadrilateral cells (is the surface in a physical group?)")
     # format 2.2 repeats an element once per physical group it belongs to
     _, first = np.unique(np.sort(quads, axis=1), axis=0, return_index=True)
-    element_ids = _file_quad_ids(path, quads.shape[0])[np.sort(first)]
+    # the file's element numbers: messages name a file's element by them, not by an index
+    element_ids = _file_ids(path, b"$Elements", quads.shape[0], _quad_ids)[np.sort(first)]
     quads = quads[np.sort(first)]
     xy = _planar_points(np.asarray(raw.points, dtype=float), label)
     _check_finite(xy, path)
@@ -109,12 +110,6 @@ def _file_node_ids(path: Path, n_points: int) -> NDArray[np.int64]:
     """The file's node numbers in file order (meshio's point order): outputs give them so that
     a node of contact.csv can be found in the file."""
     return _file_ids(path, b"$Nodes", n_points, _node_ids)
-
-
-def _file_quad_ids(path: Path, n_quads: int) -> NDArray[np.int64]:
-    """The file's element numbers of the quads in file order (meshio's order of them): messages
-    name a file's element by them, not by a 0-based index."""
-    return _file_ids(path, b"$Elements", n_quads, _quad_ids)
 
 
 def _file_ids(path: Path, section: bytes, count: int,

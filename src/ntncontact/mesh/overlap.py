@@ -16,6 +16,8 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.spatial import cKDTree
 
+from ntncontact.mesh.quadmesh import cell_edges
+
 #: A point deeper than this fraction of the body's median edge length below its boundary is an
 #: overlap: surfaces that touch (up to round-off) are not.
 DEPTH_TOLERANCE = 1e-6
@@ -101,7 +103,7 @@ def _largest_radius(corners: NDArray, centroid: NDArray) -> float:
 
 def boundary_edges(cells: NDArray) -> NDArray:
     """Edges (k, 2) of the mesh that belong to one element only."""
-    edges = np.stack([cells, np.roll(cells, -1, axis=1)], axis=-1).reshape(-1, 2)
+    edges = cell_edges(cells)
     _, index, count = np.unique(np.sort(edges, axis=1), axis=0, return_index=True,
                                 return_counts=True)
     return edges[index[count == 1]]

@@ -29,6 +29,12 @@ def frozen_array(values: ArrayLike, dtype: type) -> NDArray:
     return out
 
 
+def cell_edges(cells: NDArray[np.int64]) -> NDArray[np.int64]:
+    """All cell edges ``(c_k, c_k+1)``, cell by cell; with CCW cells each has its cell on the
+    left."""
+    return np.stack((cells, np.roll(cells, -1, axis=1)), axis=-1).reshape(-1, 2)
+
+
 @dataclass(frozen=True)
 class QuadMesh:
     """Node coordinates and counter-clockwise Q4 connectivity with named sets.
