@@ -311,11 +311,11 @@ def _rows_on_disk(work: list[tuple[dict, str, float]], rows: list[dict | None],
                   in_flight: Collection[int] = ()) -> list[dict]:
     """The rows of an interrupted sweep: those returned, and those of cases whose folder
     completed during this sweep (its summary written after ``started``, a time.time()) but
-    whose result had not reached the client yet (CI caught a SIGINT in that window, and
-    sweep.csv was written empty). A folder completed before it may hold another base
-    scenario's results. A case still running (``in_flight``, indices of ``work``) is listed
-    ``interrupted``: its worker is stopped when the sweep's cluster closes, or, on a running
-    scheduler, may still complete its folder, which a rerun then reads back."""
+    whose result had not reached the client yet. A folder completed before it may hold
+    another base scenario's results. A case still running (``in_flight``, indices of
+    ``work``) is listed ``interrupted``: its worker is stopped when the sweep's cluster
+    closes, or, on a running scheduler, may still complete its folder, which a rerun then
+    reads back."""
     kept = []
     for i, ((case, folder, _), row) in enumerate(zip(work, rows, strict=True)):
         summary = Path(folder) / "summary.json"
@@ -511,9 +511,8 @@ def _quiet_worker_logs() -> None:
     """Run on each worker of the sweep's own cluster once every case's result is in: its
     Dask logs below CRITICAL are dropped. A worker whose heartbeat is in flight while the
     scheduler drops it at the scale-down logs "Failed to communicate with scheduler during
-    heartbeat" with a traceback to the user's terminal (a race inside Distributed, seen under
-    load in test_the_sweep_command_exits_1_when_a_case_failed even with the wait below);
-    nothing a worker can report then changes the sweep's results."""
+    heartbeat" with a traceback to the user's terminal (a race inside Distributed, even with
+    the wait below); nothing a worker can report then changes the sweep's results."""
     logging.getLogger("distributed").setLevel(logging.CRITICAL)
 
 
@@ -525,7 +524,7 @@ def _wait_until_workers_left(client: Any) -> None:
     """Wait until the scheduler has no worker left (the sweep scaled its cluster to 0 while
     it wrote the results). Closed before that, the scheduler met a retiring worker's last
     heartbeat with a closed connection, and the worker logged an error with a traceback to
-    the user's terminal (seen on a loaded machine)."""
+    the user's terminal."""
     deadline = time.monotonic() + WORKERS_LEAVE_TIMEOUT_S
     while client.scheduler_info().get("workers") and time.monotonic() < deadline:
         time.sleep(0.05)
