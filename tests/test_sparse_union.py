@@ -213,3 +213,47 @@ def test_reserved_entries_join_the_union_when_it_grows_and_only_then():
     new_r, new_c = outside[9]
     grown = union.add(K, np.append(rows, new_r), np.append(cols, new_c), np.ones(4), reserve)
     assert len(calls) == 2 and grown.nnz == first.nnz + 1
+
+
+def test_repeated_growth_matches_a_union_built_at_once():
+    """Growth after growth (rows of several entries each, repeated and reserved places)
+    keeps the pattern, the values and the triplets' places of a union built at once."""
+    rng = np.random.default_rng(11)
+    n = 60
+    K = (sp.random(n, n, density=0.1, random_state=rng) + sp.eye(n)).tocsr()
+    union = TripletUnion()
+    seen_rows, seen_cols = np.zeros(0, np.int64), np.zeros(0, np.int64)
+    for _ in range(6):
+        rows, cols = rng.integers(0, n, 40), rng.integers(0, n, 40)
+        extra_rows, extra_cols = rng.integers(0, n, 5), rng.integers(0, n, 5)
+        vals = rng.normal(size=40)
+        got = union.add(K, rows, cols, vals, lambda r=extra_rows, c=extra_cols: (r, c))
+        seen_rows = np.concatenate([seen_rows, rows, extra_rows])
+        seen_cols = np.concatenate([seen_cols, cols, extra_cols])
+        places = np.zeros(K.shape)
+        places[seen_rows, seen_cols] = 1.0
+        pattern = (K + sp.csr_matrix(places)).tocsr()
+        pattern.sort_indices()
+        assert np.array_equal(got.indptr, pattern.indptr)
+        assert np.array_equal(got.indices, pattern.indices)
+        want = K.toarray()
+        np.add.at(want, (rows, cols), vals)
+        np.testing.assert_array_equal(got.toarray(), want)
+        keys = np.repeat(np.arange(n), np.diff(pattern.indptr)) * n + pattern.indices
+        assert np.array_equal(union.keys, keys)
+
+
+def test_the_union_keeps_no_array_of_keys():
+    """Between calls the union holds its indices (int32) and K's places in it (int32), not
+    an int64 key per entry as well (issue 18: 17 MB alive at Hertz refined 8x's
+    factorizations); its keys for a checkpoint are made when asked."""
+    rng = np.random.default_rng(12)
+    n = 400
+    K = (sp.random(n, n, density=0.02, random_state=rng) + sp.eye(n)).tocsr()
+    rows, cols = rng.integers(0, n, 50), rng.integers(0, n, 50)
+    union = TripletUnion()
+    matrix = union.add(K, rows, cols, rng.normal(size=50))
+    held = sum(v.nbytes for v in vars(union).values() if isinstance(v, np.ndarray))
+    held += sum(a.nbytes for a in union._t_key)
+    assert held <= 4 * matrix.nnz + 4 * K.nnz + 8 * (n + 1) + 3 * 8 * rows.size
+    assert union.keys.size == matrix.nnz

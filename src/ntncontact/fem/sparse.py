@@ -30,8 +30,10 @@ class TripletUnion:
     def __init__(self) -> None:
         self._k_key: tuple | None = None  # K's (indptr, indices) the union was built for
         self._t_key: tuple | None = None  # the triplets' (rows, cols) that _t_map places
-        self._keys = np.zeros(0, dtype=np.int64)  # union entries as row * n_cols + col, sorted
+        # a checkpoint's union entries (row * n_cols + col, sorted), taken in by the first build
+        self._restored = np.zeros(0, dtype=np.int64)
         self._k_map = self._t_map = self._indptr = self._indices = None
+        self._shape = (0, 0)
         self.free_block = FreeBlock()  # the Newton matrix's free-dof block, same lifetime
 
     def add(self, K: sp.csr_matrix, rows: NDArray, cols: NDArray, vals: NDArray,
@@ -39,9 +41,7 @@ class TripletUnion:
         """``reserve``: called only when the pattern must grow, (rows, cols) of entries that
         the triplets are expected to take soon, added to the union with the triplets' own
         (a growing contact zone's next pairs: one analysis instead of one per growth)."""
-        if not self._same_k(K):
-            if self._k_key is not None:  # a new K pattern: start afresh (a first K takes up
-                self._keys = np.zeros(0, dtype=np.int64)  # the keys of a restore)
+        if not self._same_k(K):  # a new K pattern starts afresh (a first K takes up a restore)
             self._build(K)
         if not self._same_triplets(rows, cols):
             # placed in the union of K and the keys so far, and so grown and reserved at the
@@ -55,19 +55,28 @@ class TripletUnion:
 
     def holds(self, K: sp.csr_matrix) -> bool:
         """Whether a union pattern beyond K's own was built (or restored) for K's pattern."""
-        return self._keys.size > K.nnz and (self._k_key is None or self._same_k(K))
+        if self._k_key is None:
+            return self._restored.size > K.nnz
+        return self._indices.size > K.nnz and self._same_k(K)
 
     @property
     def keys(self) -> NDArray:
-        """The union's entries (row * n_cols + col, sorted), for a restart checkpoint."""
-        return self._keys
+        """The union's entries (row * n_cols + col, sorted), for a restart checkpoint. Made
+        from the CSR arrays when asked: kept, they were an int64 array of the union's size
+        alive at every factorization (17 MB at Hertz refined 8x; issue 18, memory)."""
+        if self._k_key is None:
+            return self._restored
+        n_rows, n_cols = self._shape
+        keys = np.repeat(np.arange(n_rows, dtype=np.int64) * n_cols, np.diff(self._indptr))
+        keys += self._indices
+        return keys
 
     def restore(self, keys: NDArray) -> None:
         """Start from a checkpoint's union (its K pattern is the model's, rebuilt the same):
         without it a restarted run would factor a smaller pattern than the run it continues,
         which PARDISO and the static LU order differently (other round-off)."""
         self.__init__()
-        self._keys = np.asarray(keys, dtype=np.int64)
+        self._restored = np.asarray(keys, dtype=np.int64)
 
     def _same_k(self, K: sp.csr_matrix) -> bool:
         if self._k_key is None:
@@ -86,45 +95,58 @@ class TripletUnion:
         """New triplet places: found in the union (pattern kept), else the union grown (by
         the reserved entries too)."""
         keys_t = _keys(rows, cols, K.shape[1])
-        found = self._found(keys_t)
+        at, found = self._locate(keys_t)
         if not found.all():
-            reserved = _reserved_keys(reserve, K.shape[1])
-            new = np.unique(np.concatenate([keys_t[~found], reserved]))
-            self._grow(new[~self._found(new)], K.shape)
-        at = np.searchsorted(self._keys, keys_t)
+            new = np.unique(np.concatenate([keys_t[~found], _reserved_keys(reserve, K.shape[1])]))
+            self._grow(new[~self._locate(new)[1]])
+            at, _ = self._locate(keys_t)
         self._t_map = at
         self._t_key = (np.array(rows, copy=True), np.array(cols, copy=True))
 
-    def _found(self, keys: NDArray) -> NDArray[np.bool_]:
-        at = np.searchsorted(self._keys, keys)
-        found = at < self._keys.size
-        found[found] = self._keys[at[found]] == keys[found]
-        return found
+    def _locate(self, keys: NDArray) -> tuple[NDArray, NDArray[np.bool_]]:
+        """Where the entries ``keys`` (row * n_cols + col) are in the union's CSR arrays, or
+        would be inserted (before the entries of larger keys), and whether they are there.
+        Searched among the keys of the rows they touch only, so that no array of the union's
+        size is made or kept for it."""
+        n_cols = self._shape[1]
+        touched = np.unique(keys // n_cols)
+        starts = self._indptr[touched]
+        lengths = self._indptr[touched + 1] - starts
+        offsets = starts - (np.cumsum(lengths) - lengths)  # global minus local position
+        places = np.repeat(offsets, lengths) + np.arange(lengths.sum())
+        local_keys = np.repeat(touched * n_cols, lengths) + self._indices[places]
+        local = np.searchsorted(local_keys, keys)
+        found = local < local_keys.size
+        found[found] = local_keys[local[found]] == keys[found]
+        return local + offsets[np.searchsorted(touched, keys // n_cols)], found
 
-    def _grow(self, new: NDArray, shape: tuple[int, int]) -> None:
+    def _grow(self, new: NDArray) -> None:
         """Insert keys ``new`` (sorted, none in the union) into the union for the same K: the
         same pattern as a rebuild from K, the triplets and the old union, and each K entry's
-        place shifted by the keys inserted before it. A rebuild sorted all the keys again:
+        place shifted by the entries inserted before it. A rebuild sorted all the keys again:
         at Hertz refined 8x (2.1 M entries) it held ~100 MB of temporaries, the largest
-        transient of a step (issue 18); the insertion holds ~3 arrays of entries."""
-        before = np.searchsorted(self._keys, new)  # np.insert puts new[i] before index at[i]
-        self._keys = np.insert(self._keys, before, new)
-        self._indices = np.insert(self._indices, before, (new % shape[1]).astype(
+        transient of a step (issue 18); the insertion holds ~2 arrays of entries."""
+        n_rows, n_cols = self._shape
+        before, _ = self._locate(new)  # np.insert puts new[i] before index before[i]
+        self._indices = np.insert(self._indices, before, (new % n_cols).astype(
             self._indices.dtype))
-        self._indptr = _row_starts(self._keys, shape)
+        added = np.bincount(new // n_cols, minlength=n_rows)
+        self._indptr = self._indptr + np.concatenate([[0], np.cumsum(added)])
         shift = np.searchsorted(before, self._k_map, side="right")
         self._k_map = (self._k_map + shift).astype(self._k_map.dtype)
 
     def _build(self, K: sp.csr_matrix) -> None:
-        """Union pattern (sorted, unique) of K and the union so far (a restored one), and
-        each K entry's place in it; the triplets are placed next (:meth:`_place`)."""
+        """Union pattern (sorted, unique) of K and a restored union (before the first K only),
+        and each K entry's place in it; the triplets are placed next (:meth:`_place`)."""
         n_rows, n_cols = K.shape
         keys_k = np.repeat(np.arange(n_rows, dtype=np.int64) * n_cols, np.diff(K.indptr))
         keys_k += K.indices  # row * n_cols + col, built in place
-        union = _sorted_unique(np.concatenate([keys_k, self._keys]))
+        restored = self._restored if self._k_key is None else np.zeros(0, dtype=np.int64)
+        union = _sorted_unique(np.concatenate([keys_k, restored]))
+        self._restored = np.zeros(0, dtype=np.int64)
+        self._shape = K.shape
         self._indptr = _row_starts(union, K.shape)
         self._indices = (union % n_cols).astype(K.indices.dtype)
-        self._keys = union
         position = np.int32 if union.size < 2**31 else np.int64  # kept: half the bytes
         self._k_map = np.searchsorted(union, keys_k).astype(position)
         self._k_key = (K.indptr, K.indices)  # by reference, see FreeBlock._build
