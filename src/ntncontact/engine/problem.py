@@ -283,13 +283,16 @@ class StepProblem:
 
     def jacobian(self, y: NDArray) -> sp.csr_matrix:
         if ("y" not in self._cache or not np.array_equal(self._cache["y"], y)
-                or self._cache["K"] is None):
+                or self._cache.get("K", self._cache.get("Kff")) is None):
             self._cache = {}  # replaced: its tangent need not live beside the new one
             R, K = self._evaluate(y, need_tangent=True)
             self._cache = {"y": y.copy(), "K": K, "blocks": self._blocks,
                            "C": getattr(self, "_multiplier_block", None)}
-        K = self._cache["K"]
-        Kff = self._free_block(K)
+        if "Kff" not in self._cache:
+            # only the free block is kept: the whole K's data (an array of the union's size)
+            # would otherwise live beside it through the factorization (issue 18, memory)
+            self._cache["Kff"] = self._free_block(self._cache.pop("K"))
+        Kff = self._cache["Kff"]
         h, G, B = self._cache["blocks"]
         if not h.size:
             return Kff
