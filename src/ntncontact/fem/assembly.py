@@ -25,7 +25,9 @@ class CsrPattern:
 
     indptr: NDArray
     indices: NDArray
-    entry_map: NDArray  # (ne * k * k,) position of each element entry in the CSR data array
+    #: (ne * k * k,) position of each element entry in the CSR data array; int32 while the
+    #: positions fit (half of int64's 512 bytes an element for Q4 dofs; issue 18, memory)
+    entry_map: NDArray
     shape: tuple[int, int]
 
     @classmethod
@@ -38,7 +40,9 @@ class CsrPattern:
         urows = unique // ndof
         indptr = np.zeros(ndof + 1, dtype=np.int64)
         np.add.at(indptr, urows + 1, 1)
-        return cls(np.cumsum(indptr), (unique % ndof).astype(np.int32), entry_map, (ndof, ndof))
+        position = np.int32 if unique.size < 2**31 else np.int64
+        return cls(np.cumsum(indptr), (unique % ndof).astype(np.int32),
+                   entry_map.astype(position), (ndof, ndof))
 
     @property
     def nnz(self) -> int:
