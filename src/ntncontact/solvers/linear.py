@@ -431,7 +431,9 @@ class LinearSolver:
         """Factor A once to solve for many right-hand sides, later ones included (modified
         Newton): the result stays valid until this solver factors another matrix with PARDISO
         (whose factor lives in the shared handle); SuperLU and static-LU factors are kept by the
-        result (each static factor has its own value arrays)."""
+        result (each static factor has its own value arrays). A single-precision PARDISO factor
+        refines its solutions against A's own values (no copy is kept): change no value of A
+        while its factorization is in use."""
         A = _canonical_csr(A)
         if self._pattern is None or not self._pattern.matches(A):
             self._release()
@@ -786,16 +788,18 @@ class _PardisoBackend:
         #: a restart checkpoint; and a restored run's, for its first analysis
         self.analysis_values: NDArray | None = None
         self.restored_values: NDArray | None = None
-        #: the factored matrix in double (all entries), for a single factor's refinement
+        #: the factored matrix in double (all entries), for a single factor's refinement: the
+        #: caller's values themselves, not a copy (8 bytes an entry, beside the factor's 4)
         self.factored_matrix: sp.csr_matrix | None = None
 
     def factor(self, data: NDArray) -> None:
+        self.factored_matrix = None  # the last matrix is not held beyond its factor
         values = np.ascontiguousarray(data[self.pattern.upper] if self.symmetric else data,
                                       dtype=np.float32 if self.single else float)
-        if self.single:  # a copy: the caller may assemble its next matrix into `data`
+        if self.single:  # the caller's values, not a copy (LinearSolver.factorize)
             p = self.pattern
-            self.factored_matrix = sp.csr_matrix((np.array(data, dtype=float), p.indices,
-                                                  p.indptr), shape=(p.n, p.n))
+            self.factored_matrix = sp.csr_matrix((data, p.indices, p.indptr), shape=(p.n, p.n),
+                                                 copy=False)
         fresh = not self.analysed
         if fresh:
             restored, self.restored_values = self.restored_values, None
