@@ -11,8 +11,7 @@ Three backends:
   thread), so the phases are set with pypardiso's ``set_phase`` and run by its
   ``_call_pardiso``. Symmetric matrices use the symmetric indefinite mode (Bunch-Kaufman),
   which is valid for the Neo-Hookean tangent away from equilibrium; unsymmetric ones
-  (friction, convective terms) the general mode, with scaling and weighted matching where a
-  diagonal entry is zero (bordered systems; :func:`_weighted_matching`). Threads:
+  (friction, convective terms) the general mode with scaling and weighted matching. Threads:
   :func:`pardiso_threads`. From :data:`MIXED_MIN_UNKNOWNS` unknowns it factors in single
   precision and refines each solution in double (:class:`_PardisoBackend`, "Precision").
 - ``"superlu"``: SciPy's SuperLU, always available. The MMD(A^T + A) column ordering is computed
@@ -828,16 +827,11 @@ class _PardisoBackend:
 
     def _analyse(self, values: NDArray) -> None:
         """Phase 11: the ordering and symbolic factorization, and the scaling and weighted
-        matching, which depend on the values (:func:`_weighted_matching` decides whether
-        the general mode has them). So the values are kept: a restarted run that
+        matching, which depend on the values. So the values are kept: a restarted run that
         analysed its own first matrix instead factored with another scaling, and its
         history differed in the last bits (the ring refined 4x on one thread: 1 restart in
         3 before, 1 in 19 after)."""
         self.matrix.data = values
-        if not self.symmetric:
-            matching = int(_weighted_matching(self.pattern, values))
-            self.pardiso.set_iparm(11, matching)
-            self.pardiso.set_iparm(13, matching)
         self._call(11)
         self.analysis_values = np.array(values, copy=True)
         self.analysed = True
@@ -969,30 +963,11 @@ def _pardiso_iparm(symmetric: bool, threads: int, single: bool = False) -> dict[
         2: 2,  # METIS nested-dissection ordering
         10: 8 if symmetric else 13,  # pivot perturbation 1e-8 / 1e-13 (the MKL defaults)
         11: 1,  # scaling ...
-        13: 1,  # ... and weighted matching (the general mode: see _weighted_matching)
+        13: 1,  # ... and weighted matching: robust for indefinite / unsymmetric tangents
         21: 1,  # Bunch-Kaufman pivoting (symmetric indefinite)
         28: 1 if single else 0,  # the values, factor and right-hand sides in single precision
         34: threads if threads > 1 else 0,  # reproducible results on `threads` threads
     }
-
-
-def _weighted_matching(pattern: _Pattern, values: NDArray) -> bool:
-    """Whether the general mode's analysis of ``values`` (all entries) computes PARDISO's
-    scaling and weighted matching (parameters 11 and 13): only for a matrix with a zero or
-    absent diagonal entry (a bordered system: Lagrange multipliers, ties), whose pivots need
-    the matching's row permutation.
-
-    Why not for every matrix: the matching is computed from the values at the analysis, once
-    per pattern, and every later factorization keeps it. The ring refined 8x analysed its
-    general mode on its first contact Jacobian (unsymmetric in 6 rows; the later ones in
-    10 000 of 46 530): its later single-precision factors left their Newton right-hand sides
-    8e-6 |b| (median; 90 % 5e-5, max 1.6e-3) after the first solve, a backward error of
-    2.6e-6, where without the matching, or with a fresh analysis of each matrix, they leave
-    3e-7 (max 2.3e-6), as the symmetric mode's 1.5e-7 (benchmarks/README.md, session 45).
-    The penalty and augmented tangents have their diagonal, and their factors need no
-    matching (session 20: none in the general mode, 4 % faster)."""
-    diagonal = pattern.diagonal
-    return bool((diagonal < 0).any() or (values[diagonal] == 0.0).any())
 
 
 _PARDISO_ERRORS = {

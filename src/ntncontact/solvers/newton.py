@@ -131,10 +131,9 @@ def forcing_term(norms: list[float]) -> float:
     its Newton contraction will be; quadratic convergence asks eta ~ |R|), within
     [FORCING_MIN, FORCING_MAX], and FORCING_MIN at a solve's first step. Only a
     single-precision factor's refinement reads it (``linear.Factorization``): its first
-    solution left 1e-7 to 2e-3 |R| (general mode, ring refined 8x; 2e-8 to 1e-5 since session
-    45, ``linear._weighted_matching``), and a sweep costs a solve. Measured at k = 8
-    (benchmarks/README.md, session 44): ring 244 -> 130 sweeps (5 since session 45), the same
-    iterations; Hertz 54 -> 34, 138 -> 139 iterations. A term that also loosened the
+    solution leaves 1e-7 to 2e-3 |R| (general mode, ring refined 8x), and a sweep costs a
+    solve. Measured at k = 8 (benchmarks/README.md, session 44): ring 244 -> 130 sweeps, the
+    same iterations; Hertz 54 -> 34, 138 -> 139 iterations. A term that also loosened the
     steps near the tolerance (a tenth of it in the linear residual) saved more sweeps (ring
     53, Hertz 11) but cost Hertz's load holds an augmentation each (142 iterations)."""
     eta = FORCING_MIN
