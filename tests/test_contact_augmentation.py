@@ -8,6 +8,8 @@ wall's three fixed nodes. Gap law, frictionless, node-to-node pairs.
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
@@ -22,6 +24,7 @@ from ntncontact.contact import (
     evaluate_contact,
     extrapolated_update,
     lagrange_blocks,
+    max_contraction,
     newton_update,
 )
 from ntncontact.contact.friction import SLIP
@@ -363,3 +366,25 @@ def test_extrapolated_update_leaves_slow_contractions_alone():
     assert np.all(uzawa[2:] / uzawa[1:-1] > 0.5)
     _, updates = _uzawa_errors(5.0, extrapolate=True)
     assert all(new is plain for plain, new in updates)
+
+
+def test_max_contraction_measures_the_uzawa_rate():
+    """The ratio of the pressed pairs' largest gaps between two augmentations follows the
+    Uzawa error's contraction (0.05-0.2 with this penalty, see above) and is 0 where no pair
+    was pressed before; results of different active sets are refused."""
+    x0, anchors, interface, pairs = setup()
+    law = ContactLaw("augmented_lagrangian", eps_N=200.0)
+    state, results = PairState.from_pairs(pairs), []
+    for _ in range(3):
+        _, res = solve_fixed_multipliers(x0, anchors, interface, state, law)
+        results.append(res)
+        state = augment(state, res, law)
+    first, second, third = results
+    both = (third.t_N > 0) & (second.t_N > 0)
+    expected = np.abs(third.normal_measure[both]).max() / np.abs(second.normal_measure[both]).max()
+    assert max_contraction(third, second) == pytest.approx(expected, rel=1e-15)
+    assert 0.05 < max_contraction(third, second) < 0.2
+    released = replace(second, t_N=np.zeros_like(second.t_N))
+    assert max_contraction(third, released) == 0.0
+    with pytest.raises(ValueError, match="share the active set"):
+        max_contraction(third, replace(second, pairs=second.pairs[::-1]))

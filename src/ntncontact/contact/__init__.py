@@ -12,6 +12,7 @@ from .augmentation import (
     check_augmentation,
     commit_step,
     extrapolated_update,
+    max_contraction,
     newton_update,
 )
 from .detection import Detection, detect, entering, release_mask
@@ -58,6 +59,7 @@ __all__ = [
     "corner_mask",
     "detect",
     "entering",
+    "max_contraction",
     "evaluate_contact",
     "extrapolated_update",
     "lagrange_blocks",

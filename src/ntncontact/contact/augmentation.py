@@ -39,7 +39,8 @@ from .laws import ContactLaw
 from .state import PairState
 
 __all__ = ["AugmentationCheck", "AugmentationTolerances", "augment", "check_augmentation",
-           "commit_step", "extrapolated_update", "newton_update"]
+           "commit_step", "extrapolated_update", "max_contraction", "newton_update",
+           "pressed_in_both"]
 
 #: :func:`extrapolated_update` acts only on a measured contraction below this: beyond it the
 #: geometric tail rho / (1 - rho) of a step would be larger than the Uzawa step itself
@@ -72,6 +73,23 @@ def newton_update(used: PairState, uzawa: PairState, result: ContactResult,
     return replace(uzawa, lambda_N=lam)
 
 
+def pressed_in_both(current: ContactResult, previous: ContactResult) -> NDArray:
+    """The pairs pressed (t_N > 0) in two augmentations of one step, whose normal measures
+    compare: the pairs that show how fast a multiplier update contracts."""
+    if not np.array_equal(current.pairs, previous.pairs):
+        raise ValueError("augmentations of one step must share the active set")
+    return (current.t_N > 0.0) & (previous.t_N > 0.0)
+
+
+def max_contraction(current: ContactResult, previous: ContactResult) -> float:
+    """max |m_k| / max |m_{k-1}| over :func:`pressed_in_both` (m the normal measure), 0 if
+    none was measured: the last update's contraction as a ratio of maxima, the measure of
+    the error an inexact solve may leave (``Simulation._adapted_early_ratio``)."""
+    both = pressed_in_both(current, previous)
+    last = np.abs(previous.normal_measure[both]).max(initial=0.0)
+    return float(np.abs(current.normal_measure[both]).max() / last) if last > 0.0 else 0.0
+
+
 def extrapolated_update(uzawa: PairState, current: ContactResult, previous: ContactResult,
                         law: ContactLaw) -> PairState:
     """``uzawa`` (``augment`` of ``current``) with the pairs pressed in both augmentations
@@ -84,9 +102,7 @@ def extrapolated_update(uzawa: PairState, current: ContactResult, previous: Cont
     k = 1, ~0.027 at k = 4), which is why refined meshes need more augmentations. Applied only
     for 0 < rho < MAX_EXTRAPOLATED_RATE; the multipliers stay >= 0, and report 5.4's test
     decides convergence as before."""
-    if not np.array_equal(current.pairs, previous.pairs):
-        raise ValueError("augmentations of one step must share the active set")
-    both = (current.t_N > 0.0) & (previous.t_N > 0.0)
+    both = pressed_in_both(current, previous)
     m, m_prev = current.normal_measure[both], previous.normal_measure[both]
     norm_prev = float(m_prev @ m_prev)
     rho = float(m @ m_prev) / norm_prev if norm_prev > 0.0 else 0.0

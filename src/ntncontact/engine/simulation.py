@@ -13,7 +13,14 @@ import scipy.sparse as sp
 from numpy.typing import NDArray
 
 from ..ale.motion import AleMotionError
-from ..contact import SLIP, PairState, extrapolated_update, lagrange_blocks, newton_update
+from ..contact import (
+    SLIP,
+    PairState,
+    extrapolated_update,
+    lagrange_blocks,
+    max_contraction,
+    newton_update,
+)
 from ..contact.kinematics import UndefinedNormalError
 from ..dynamics.energy import EndEnergy, EnergyConsistentContact
 from ..dynamics.mass import MovingMass
@@ -703,10 +710,7 @@ class Simulation:
         for now, before in zip(results, previous, strict=True):
             if now is None or before is None or not np.array_equal(now.pairs, before.pairs):
                 continue  # a Lagrangian interface re-paired: no contraction to measure
-            pressed = (now.t_N > 0.0) & (before.t_N > 0.0)
-            last = np.abs(before.normal_measure[pressed]).max(initial=0.0)
-            if last > 0.0:
-                rate = max(rate, np.abs(now.normal_measure[pressed]).max() / last)
+            rate = max(rate, max_contraction(now, before))
         return float(min(max(0.1 * rate, self._early_ratio), MAX_EARLY_RATIO))
 
     def _solve_augmentation(self, problem: StepProblem, y0: NDArray,
