@@ -23,8 +23,9 @@ from ntncontact.cli import main
 from ntncontact.engine import diagnostics
 from ntncontact.engine.diagnostics import SelfCrossingCheck, SelfPenetration
 from ntncontact.mesh import overlap
+from ntncontact.mesh.boundary import boundary_edges
 from ntncontact.mesh.generators import annulus, half_disk
-from ntncontact.mesh.overlap import boundary_edges, deepest_self_overlap, edge_size
+from ntncontact.mesh.overlap import deepest_self_overlap, edge_size
 from ntncontact.report.run_warnings import PENETRATION_WARNING, result_warnings
 
 #: the tester's t4_swap.toml: the corner of a 45-degree square (surface 2) on a flat block

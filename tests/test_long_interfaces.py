@@ -11,8 +11,9 @@ import pytest
 
 from ntncontact.ale import surface
 from ntncontact.ale.surface import SurfaceCurve, slide_chain
+from ntncontact.mesh.boundary import boundary_edges
 from ntncontact.mesh.generators import rectangle
-from ntncontact.mesh.overlap import boundary_edges, deepest_overlap, distance_to_segments
+from ntncontact.mesh.overlap import deepest_overlap, distance_to_segments
 
 
 def _cpu_time(f, *args, repeats=3) -> float:

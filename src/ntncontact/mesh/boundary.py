@@ -36,13 +36,15 @@ class SurfaceChain:
     closed: bool
 
 
-def boundary_edges(mesh: QuadMesh) -> NDArray[np.int64]:
-    """Edges used by exactly one cell, oriented with the body on the left, in cell order.
+def boundary_edges(mesh: QuadMesh | NDArray[np.int64]) -> NDArray[np.int64]:
+    """Edges used by exactly one cell, oriented with the body on the left, in cell order;
+    ``mesh`` a :class:`QuadMesh` or its cells (ne, 4).
 
     Raises :class:`MeshError` when an edge is shared by more than two cells or twice in the
     same direction (overlapping or inverted cells), since then "boundary" is meaningless.
     """
-    edges = cell_edges(mesh.cells)
+    cells, name = (mesh.cells, mesh.name) if isinstance(mesh, QuadMesh) else (mesh, "mesh")
+    edges = cell_edges(cells)
     keys = np.sort(edges, axis=1)
     _, first, inverse, counts = np.unique(
         keys, axis=0, return_index=True, return_inverse=True, return_counts=True
@@ -50,7 +52,7 @@ def boundary_edges(mesh: QuadMesh) -> NDArray[np.int64]:
     inverse = inverse.reshape(-1)
     if np.any(counts > 2):
         bad = keys[first[counts > 2][0]]
-        raise MeshError(f"{mesh.name}: edge {tuple(bad)} is shared by more than two cells")
+        raise MeshError(f"{name}: edge {tuple(bad)} is shared by more than two cells")
     # an interior edge must be traversed once in each direction by its two cells
     twice = counts[inverse] == 2
     forward = np.bincount(inverse[twice], weights=(edges[twice, 0] < edges[twice, 1]),
@@ -58,7 +60,7 @@ def boundary_edges(mesh: QuadMesh) -> NDArray[np.int64]:
     if np.any(forward[counts == 2] != 1):
         bad = keys[first[(counts == 2) & (forward != 1)][0]]
         raise MeshError(
-            f"{mesh.name}: edge {tuple(bad)} is traversed in the same direction by both of its"
+            f"{name}: edge {tuple(bad)} is traversed in the same direction by both of its"
             " cells (an inverted or clockwise cell)"
         )
     return edges[np.sort(first[counts == 1])]

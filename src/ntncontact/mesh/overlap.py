@@ -16,7 +16,7 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.spatial import cKDTree
 
-from ntncontact.mesh.quadmesh import cell_edges
+from ntncontact.mesh.boundary import boundary_edges
 
 #: A point deeper than this fraction of the body's median edge length below its boundary is an
 #: overlap: surfaces that touch (up to round-off) are not.
@@ -99,14 +99,6 @@ def _largest_radius(corners: NDArray, centroid: NDArray) -> float:
     ``np.linalg.norm`` values to the bit), at half their cost."""
     d = corners - centroid[:, None]
     return float(np.sqrt(np.max(d[..., 0] * d[..., 0] + d[..., 1] * d[..., 1])))
-
-
-def boundary_edges(cells: NDArray) -> NDArray:
-    """Edges (k, 2) of the mesh that belong to one element only."""
-    edges = cell_edges(cells)
-    _, index, count = np.unique(np.sort(edges, axis=1), axis=0, return_index=True,
-                                return_counts=True)
-    return edges[index[count == 1]]
 
 
 def distance_to_segments(points: NDArray, a: NDArray, b: NDArray) -> NDArray:
