@@ -30,7 +30,7 @@ from .pairing import (
     ordered_partners,
 )
 from .state import PairState
-from .surfaces import ContactSurface, Interface, chord_normals, corner_mask
+from .surfaces import ContactSurface, Interface, corner_mask
 
 __all__ = [
     "SLIP",
@@ -52,7 +52,6 @@ __all__ = [
     "beyond_reach",
     "blocks_of",
     "check_augmentation",
-    "chord_normals",
     "closest_pairs",
     "commit_step",
     "contact_term",

@@ -18,7 +18,7 @@ from numpy.typing import ArrayLike, NDArray
 from ntncontact.mesh.boundary import SurfaceChain
 from ntncontact.mesh.quadmesh import frozen_array
 
-__all__ = ["ContactSurface", "Interface", "chord_normals", "corner_mask"]
+__all__ = ["ContactSurface", "Interface", "corner_mask"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -129,14 +129,6 @@ class Interface:
     def __post_init__(self) -> None:
         if np.intersect1d(self.surface1.nodes, self.surface2.nodes).size:
             raise ValueError("the two surfaces of an interface share nodes")
-
-
-def chord_normals(x: NDArray[np.float64], surface: ContactSurface) -> NDArray[np.float64]:
-    """Nodal outward normals ``rot(-90)(x_next - x_prev)/|.|`` of every surface node
-    (one-sided at open ends; corners are NOT replaced here, see report 6.6)."""
-    chord = x[surface.next] - x[surface.prev]
-    length = np.linalg.norm(chord, axis=1)
-    return np.column_stack((chord[:, 1], -chord[:, 0])) / length[:, None]
 
 
 def corner_mask(

@@ -21,6 +21,7 @@ __all__ = [
     "boundary_edges",
     "chain_edge_lengths",
     "chain_from_edges",
+    "chord_normals",
     "hanging_nodes",
     "nodes_inside_cells",
     "nodal_tributary_lengths",
@@ -193,3 +194,15 @@ def nodal_tributary_lengths(xy: NDArray[np.float64], closed: bool) -> NDArray[np
     if closed:
         return half + np.roll(half, 1)
     return np.concatenate((half, [0.0])) + np.concatenate(([0.0], half))
+
+
+def chord_normals(xy: NDArray[np.float64], closed: bool) -> NDArray[np.float64]:
+    """Nodal outward unit normals ``rot(-90)(x_next - x_prev)/|.|`` of an ordered chain's
+    coordinates ``xy`` (n, 2), body on the left (report 2.1.1): one-sided at the ends of an
+    open chain; corners are NOT replaced here (report 6.6)."""
+    xy = np.asarray(xy, dtype=float)
+    after, before = np.roll(xy, -1, axis=0), np.roll(xy, 1, axis=0)
+    if not closed:
+        after[-1], before[0] = xy[-1], xy[0]
+    chord = after - before
+    return np.column_stack((chord[:, 1], -chord[:, 0])) / np.linalg.norm(chord, axis=1)[:, None]

@@ -16,7 +16,7 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.spatial import cKDTree
 
-from ntncontact.mesh.boundary import boundary_edges
+from ntncontact.mesh.boundary import boundary_edges, chord_normals
 
 #: A point deeper than this fraction of the body's median edge length below its boundary is an
 #: overlap: surfaces that touch (up to round-off) are not.
@@ -361,17 +361,6 @@ def rigid_deviation(reference: NDArray, current: NDArray) -> float:
     return float(np.sqrt(np.sum((b - turned) ** 2, axis=1)).max())
 
 
-def chain_normals(xy: NDArray, closed: bool) -> NDArray:
-    """Outward unit normals (n, 2) at the nodes of a surface chain walked with its body on
-    the left: the mean of the normals of the node's edges."""
-    edge = np.roll(xy, -1, axis=0) - xy if closed else xy[1:] - xy[:-1]
-    out = np.stack([edge[:, 1], -edge[:, 0]], axis=1)
-    out /= np.maximum(np.linalg.norm(out, axis=1, keepdims=True), 1e-300)
-    node = out.copy() if closed else np.vstack([out, out[-1:]])
-    node += np.roll(out, 1, axis=0) if closed else np.vstack([out[:1], out])
-    return node / np.maximum(np.linalg.norm(node, axis=1, keepdims=True), 1e-300)
-
-
 #: Surface-1 nodes nearest the partner surface that ``facing_away`` looks at, and the cosine
 #: between their normals and their nearest partners' above which the two point the same way
 FACING_NODES, SAME_WAY = 3, 0.5
@@ -387,7 +376,7 @@ def facing_away(xy1: NDArray, closed1: bool, xy2: NDArray, closed2: bool) -> int
     both and their normals opposed."""
     distance, partner = cKDTree(xy2).query(xy1)
     nearest = np.argsort(distance, kind="stable")[:FACING_NODES]
-    n1, n2 = chain_normals(xy1, closed1)[nearest], chain_normals(xy2, closed2)[partner[nearest]]
+    n1, n2 = chord_normals(xy1, closed1)[nearest], chord_normals(xy2, closed2)[partner[nearest]]
     ahead = xy2[partner[nearest]] - xy1[nearest]
     behind = (np.sum(ahead * n1, axis=1) < 0.0) | (np.sum(-ahead * n2, axis=1) < 0.0)
     same_way = np.sum(n1 * n2, axis=1) > SAME_WAY
