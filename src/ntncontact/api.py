@@ -15,7 +15,6 @@ import contextlib
 import copy
 import io
 import json
-import math
 import warnings
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
@@ -38,6 +37,7 @@ from .io.scenario import (
     apply_override,
     parse_scenario,
     read_toml,
+    toml_value,
 )
 from .io.vtk import find_field_series, read_frame_mesh, read_series
 from .io.writers import CONTACT_FILE, HISTORY_FILE, SUMMARY_FILE, MemoryResults, to_jsonable
@@ -109,28 +109,6 @@ def override_strings(overrides: Overrides) -> tuple[str, ...]:
     if isinstance(overrides, str):
         raise TypeError("overrides: give a mapping or a list of 'key=value' strings")
     return tuple(str(item) for item in overrides)
-
-
-def toml_value(value: Any) -> str:
-    """A Python value as a TOML value (the form ``--set key=value`` takes)."""
-    if isinstance(value, bool | np.bool_):
-        return "true" if value else "false"
-    if isinstance(value, int | np.integer):
-        return str(int(value))
-    if isinstance(value, float | np.floating):
-        value = float(value)
-        if math.isnan(value):
-            return "nan"
-        if math.isinf(value):
-            return "inf" if value > 0 else "-inf"
-        return repr(value)
-    if isinstance(value, str):
-        return json.dumps(value)  # a TOML basic string uses JSON's escapes
-    if isinstance(value, Mapping):
-        return "{" + ", ".join(f"{k} = {toml_value(v)}" for k, v in value.items()) + "}"
-    if isinstance(value, Sequence | np.ndarray):
-        return "[" + ", ".join(toml_value(v) for v in value) + "]"
-    raise TypeError(f"cannot give {value!r} ({type(value).__name__}) as a scenario value")
 
 
 @dataclass(frozen=True)

@@ -2,10 +2,13 @@
 
 from __future__ import annotations
 
+import json
 import sys
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Annotated, Any, Literal, get_args
 
+import numpy as np
 from pydantic import (
     BaseModel,
     BeforeValidator,
@@ -448,19 +451,33 @@ def _format_item(e: Any) -> str:
         return msg  # a check across keys that names them itself
     if isinstance(e["input"], dict):  # a check of a whole table: its message says what
         return f"{loc or '(top level)'}: {msg}"
-    return f"{loc} = {_toml_value(e['input'])}: {msg}"
+    return f"{loc} = {_shown(e['input'])}: {msg}"
 
 
-def _toml_value(value: Any, limit: int = 60) -> str:
-    """A value as it would be written in the scenario file (shortened)."""
+def toml_value(value: Any) -> str:
+    """A Python value (NumPy's too) as a TOML value (the form ``--set key=value`` takes)."""
+    if isinstance(value, np.generic | np.ndarray):
+        value = value.tolist()
     if isinstance(value, bool):
-        text = "true" if value else "false"
-    elif isinstance(value, str):
-        text = '"' + value.replace('"', '\\"') + '"'
-    elif isinstance(value, float):
+        return "true" if value else "false"
+    if isinstance(value, int | float):  # repr gives TOML's inf, -inf and nan
+        return str(int(value)) if isinstance(value, int) else repr(float(value))
+    if isinstance(value, str):  # a TOML basic string uses JSON's escapes; DEL is escaped too
+        return json.dumps(value, ensure_ascii=False).replace("\x7f", "\\u007f")
+    if isinstance(value, Mapping):
+        return "{" + ", ".join(f"{k} = {toml_value(v)}" for k, v in value.items()) + "}"
+    if isinstance(value, Sequence):
+        return "[" + ", ".join(toml_value(v) for v in value) + "]"
+    raise TypeError(f"cannot give {value!r} ({type(value).__name__}) as a scenario value")
+
+
+def _shown(value: Any, limit: int = 60) -> str:
+    """A value as it would be written in the scenario file (shortened); one TOML cannot hold
+    (None, an object in a dict) as Python shows it."""
+    try:
+        text = toml_value(value)
+    except TypeError:
         text = repr(value)
-    else:
-        text = repr(value).replace("'", '"')
     return text if len(text) <= limit else text[: limit - 3] + "..."
 
 
