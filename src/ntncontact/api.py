@@ -13,7 +13,6 @@ from __future__ import annotations
 
 import contextlib
 import copy
-import io
 import json
 import warnings
 from collections.abc import Callable, Mapping, Sequence
@@ -28,7 +27,7 @@ import pandas as pd
 from .engine.builder import build_model
 from .engine.diagnostics import warnings_noted
 from .engine.simulation import Simulation
-from .io import checkpoint
+from .io import checkpoint, writers
 from .io.results import ResultWriter
 from .io.run_folder import read_summary
 from .io.scenario import (
@@ -158,14 +157,9 @@ def read_results(directory: str | Path) -> Results:
 
 
 def read_table(path: Path) -> pd.DataFrame:
-    """A results CSV as a DataFrame; complete lines only (a killed run may cut the last)."""
-    if not path.is_file():
-        return pd.DataFrame()
-    text = path.read_text(encoding="utf-8")
-    complete = text[: text.rfind("\n") + 1]
-    if not complete.strip():
-        return pd.DataFrame()
-    return pd.read_csv(io.StringIO(complete), on_bad_lines="skip")
+    """A results CSV as a DataFrame (:func:`~ntncontact.io.writers.read_table`); an empty one
+    for a missing file."""
+    return writers.read_table(path) if path.is_file() else pd.DataFrame()
 
 
 def run(scenario: Scenario | str | Path, out: str | Path | None = None, *,

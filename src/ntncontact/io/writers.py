@@ -1,7 +1,7 @@
 """Result writers for a run folder: history CSV, contact CSV, summary JSON (and the VTU series).
 
 Every writer leaves valid files behind at any moment: CSV rows are flushed as they are written
-(a reader drops an unterminated last line, see :func:`read_csv_table`) and the summary JSON is
+(a reader drops an unterminated last line, see :func:`read_table`) and the summary JSON is
 replaced atomically. Files are created without following symbolic links (see
 :mod:`ntncontact.io.run_folder`). :class:`ResultsDirectory` bundles the four writers for a time
 loop and holds the folder's lock meanwhile.
@@ -22,6 +22,7 @@ from types import TracebackType
 from typing import Any
 
 import numpy as np
+import pandas as pd
 from numpy.typing import ArrayLike, NDArray
 
 from ntncontact.io.run_folder import (
@@ -596,28 +597,22 @@ class _MemoryFrames:
         self.frames.append((float(time), frame_mesh(points, cells, point_data, cell_data)))
 
 
+def read_table(path: str | os.PathLike) -> pd.DataFrame:
+    """A results CSV as a DataFrame of its complete lines (a run killed mid-write may cut the
+    last; rows with too many cells are dropped); empty when no line is complete. Only "nan"
+    is a missing value: an interface named "NA" or "null" stays a name."""
+    text = Path(path).read_text(encoding="utf-8")
+    complete = text[: text.rfind("\n") + 1]
+    if not complete.strip():
+        return pd.DataFrame()
+    return pd.read_csv(io.StringIO(complete), on_bad_lines="skip", keep_default_na=False,
+                       na_values=["nan"])
+
+
 def read_csv_table(path: str | os.PathLike) -> dict[str, NDArray]:
-    """Read a results CSV into columns: int, float or str arrays.
-
-    An unterminated last line (a run killed mid-write) and rows with the wrong number of cells
-    are dropped, so a partially written file still reads.
-    """
-    csv_path = Path(path)
-    text = csv_path.read_text(encoding="utf-8")
-    lines = text.split("\n")
-    # The last element is "" after a complete final line, or the cut-off fragment otherwise.
-    complete = [line for line in lines[:-1] if line]
-    rows = list(csv.reader(complete))
-    if not rows:
-        raise ValueError(f"{csv_path} has no header line")
-    header, body = rows[0], [r for r in rows[1:] if len(r) == len(rows[0])]
-    return {name: _parse_column([r[i] for r in body]) for i, name in enumerate(header)}
-
-
-def _parse_column(cells: list[str]) -> NDArray:
-    for kind in (int, float):
-        try:
-            return np.array([kind(c) for c in cells], dtype=kind)
-        except ValueError:
-            continue
-    return np.array(cells, dtype=str)
+    """A results CSV's columns as arrays (int, float, or object for text), as
+    :func:`read_table` reads it; a ValueError without a header line."""
+    table = read_table(path)
+    if table.columns.empty:
+        raise ValueError(f"{path} has no header line")
+    return {name: column.to_numpy() for name, column in table.items()}
