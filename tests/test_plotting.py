@@ -9,7 +9,6 @@ import numpy as np
 import pytest
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 
-from ntncontact.io.vtk import stack_bodies
 from ntncontact.io.writers import HISTORY_COLUMNS, ResultsDirectory
 from ntncontact.report import plotting
 from ntncontact.report.plotting import (
@@ -42,7 +41,9 @@ def grid(nx: int, ny: int, origin: tuple[float, float], size: float):
 def write_run(folder: Path) -> None:
     block, block_cells = grid(4, 2, (0.0, 1.0), 0.25)
     wall, wall_cells = grid(6, 1, (-0.25, 0.0), 0.25)
-    points, cells, body_id = stack_bodies([block, wall], [block_cells, wall_cells])
+    points = np.vstack([block, wall])
+    cells = np.vstack([block_cells, wall_cells + len(block)])
+    body_id = np.repeat([0, 1], [len(block_cells), len(wall_cells)])
     is_block = np.arange(len(points)) < len(block)
     with ResultsDirectory(folder, ("active_pairs",), scenario="synthetic") as out:
         for step in range(N_STEPS):

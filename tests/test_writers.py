@@ -10,7 +10,7 @@ import meshio
 import numpy as np
 import pytest
 
-from ntncontact.io.vtk import VtuSeriesWriter, read_pvd, read_vtu, stack_bodies
+from ntncontact.io.vtk import VtuSeriesWriter, read_pvd, read_vtu
 from ntncontact.io.writers import (
     CONTACT_COLUMNS,
     HISTORY_COLUMNS,
@@ -246,14 +246,6 @@ def test_vtu_rejects_wrong_point_count(tmp_path):
     point_data, cell_data = fields(len(points) - 1, len(cells), 1.0)
     with pytest.raises(ValueError, match="displacement"):
         VtuSeriesWriter(tmp_path).write(0, 0.0, points, cells, point_data, cell_data)
-
-
-def test_stack_bodies_offsets_cells():
-    points, cells = unit_square_mesh()
-    all_points, all_cells, body_id = stack_bodies([points, points + 5.0], [cells, cells[:1]])
-    assert all_points.shape == (12, 2)
-    np.testing.assert_array_equal(all_cells[2], cells[0] + 6)
-    np.testing.assert_array_equal(body_id, [0, 0, 1])
 
 
 def test_results_directory_marks_failure(tmp_path):

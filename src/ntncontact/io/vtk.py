@@ -59,24 +59,6 @@ def pad_to_3d(values: ArrayLike) -> NDArray:
     return array
 
 
-def stack_bodies(
-    points: Sequence[ArrayLike], cells: Sequence[ArrayLike]
-) -> tuple[NDArray[np.float64], NDArray[np.int64], NDArray[np.int64]]:
-    """Concatenate several bodies into one mesh: (points, cells with offsets, body_id per cell)."""
-    if len(points) != len(cells):
-        raise ValueError(f"got {len(points)} point arrays but {len(cells)} cell arrays")
-    offsets = np.cumsum([0] + [len(np.asarray(p)) for p in points])
-    stacked_cells = [
-        np.asarray(c, dtype=np.int64).reshape(-1, 4) + offset
-        for c, offset in zip(cells, offsets[:-1], strict=True)
-    ]
-    body_id = np.concatenate(
-        [np.full(len(c), i, dtype=np.int64) for i, c in enumerate(stacked_cells)]
-    )
-    all_points = np.vstack([np.asarray(p, dtype=float).reshape(-1, 2) for p in points])
-    return all_points, np.vstack(stacked_cells).reshape(-1, 4), body_id
-
-
 def _check_data(kind: str, data: Mapping[str, ArrayLike], count: int, required: Sequence[str]):
     missing = [name for name in required if name not in data]
     if missing:
