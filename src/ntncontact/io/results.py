@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -98,6 +99,13 @@ def outside_ledger(model: Model) -> list[str]:
                      "energy nor the linear and angular momentum, docs/theory.md; "
                      "convection = \"remap\", the default, keeps all three)")
     return terms
+
+
+def _if_larger(summary: dict, key: str, value: float, at: Callable[[], dict]) -> dict:
+    """``key`` = ``value`` and ``key_at`` = ``at()`` (when and where) if ``value`` is above
+    the run's largest so far in ``summary`` (0 before any), else nothing. ``at`` is called
+    only then: a check that found nothing gives depth 0 and no interface to look up."""
+    return {} if value <= (summary.get(key) or 0.0) else {key: value, f"{key}_at": at()}
 
 
 #: the figures summary.json keeps of linear elastic bodies, max_linear_elastic_<key>(_at)
@@ -329,15 +337,11 @@ class ResultWriter:
         impact 2e-12 there, 0.058 at the step ends)."""
         depth = rows["end_gap"]
         deepest = int(np.argmax(depth))
-        if depth[deepest] <= (summary.get("max_penetration") or 0.0):
-            return {}
         name = str(rows["interface"][deepest])
-        return {"max_penetration": float(depth[deepest]),
-                "max_penetration_at": {"time": time, "interface": name,
-                                       "node": int(rows["node_1"][deepest]),
-                                       "file_node": self._file_node(rows["node_1"][deepest]),
-                                       "depth": float(depth[deepest]),
-                                       "element_size": self._spacing[name]}}
+        return _if_larger(summary, "max_penetration", float(depth[deepest]), lambda: {
+            "time": time, "interface": name, "node": int(rows["node_1"][deepest]),
+            "file_node": self._file_node(rows["node_1"][deepest]),
+            "depth": float(depth[deepest]), "element_size": self._spacing[name]})
 
     @staticmethod
     def _rotation_summary(model: Model, s, summary: dict) -> dict:
@@ -367,14 +371,12 @@ class ResultWriter:
         pressed = (rows["normal_traction"] > 0.0) & np.isin(rows["interface"], self._persistency)
         opening = np.where(pressed, -np.asarray(rows["end_gap"]), 0.0)
         widest = int(np.argmax(opening))
-        if opening[widest] <= (summary.get("max_separation_under_traction") or 0.0):
-            return {}
         name = str(rows["interface"][widest])
-        return {"max_separation_under_traction": float(opening[widest]),
-                "max_separation_under_traction_at": {
-                    "time": time, "interface": name, "node": int(rows["node_1"][widest]),
-                    "file_node": self._file_node(rows["node_1"][widest]),
-                    "opening": float(opening[widest]), "element_size": self._spacing[name]}}
+        key = "max_separation_under_traction"
+        return _if_larger(summary, key, float(opening[widest]), lambda: {
+            "time": time, "interface": name, "node": int(rows["node_1"][widest]),
+            "file_node": self._file_node(rows["node_1"][widest]),
+            "opening": float(opening[widest]), "element_size": self._spacing[name]})
 
     def _mismatch_summary(self, time: float, mismatch: float, where: dict | None,
                           summary: dict) -> dict:
@@ -414,26 +416,24 @@ class ResultWriter:
         in no pair (``max_penetration_unpaired``, ``engine.diagnostics.UnpairedCheck``) and
         the surface-2 nodes inside surface 1's body (``max_penetration_surface_2``,
         ``SurfaceTwoCheck``)."""
-        if found is None or found.depth <= (summary.get(key) or 0.0):
+        if found is None:
             return {}
-        return {key: found.depth,
-                f"{key}_at": {"time": time, "interface": found.interface, "node": found.node,
-                              "depth": found.depth, "file_node": self._file_node(found.node),
-                              "element_size": self._spacing[found.interface]}}
+        return _if_larger(summary, key, found.depth, lambda: {
+            "time": time, "interface": found.interface, "node": found.node,
+            "depth": found.depth, "file_node": self._file_node(found.node),
+            "element_size": self._spacing[found.interface]})
 
     def _self_summary(self, time: float, found, summary: dict) -> dict:
         """The deepest boundary node inside its own body so far, and where
         (``engine.diagnostics.SelfCrossingCheck``); ``first_time``: the end of the first step
         that found one, from which on the results are not physical."""
-        if found is None or found.depth <= (summary.get("max_self_penetration") or 0.0):
+        if found is None:
             return {}
         before = summary.get("max_self_penetration_at") or {}
-        return {"max_self_penetration": found.depth,
-                "max_self_penetration_at": {"time": time, "body": found.body,
-                                            "node": found.node,
-                                            "file_node": self._file_node(found.node),
-                                            "depth": found.depth, "element_size": found.size,
-                                            "first_time": before.get("first_time", time)}}
+        return _if_larger(summary, "max_self_penetration", found.depth, lambda: {
+            "time": time, "body": found.body, "node": found.node,
+            "file_node": self._file_node(found.node), "depth": found.depth,
+            "element_size": found.size, "first_time": before.get("first_time", time)})
 
     @staticmethod
     def _degraded_summary(time: float, found, summary: dict) -> dict:
@@ -476,13 +476,11 @@ class ResultWriter:
     def _off_surface_summary(time: float, found, summary: dict) -> dict:
         """The deepest boundary node inside another body off the contact surfaces so far, and
         where (``engine.diagnostics.PenetrationCheck``)."""
-        if found is None or found.depth <= (summary.get("max_penetration_off_surfaces") or 0.0):
+        if found is None:
             return {}
-        return {"max_penetration_off_surfaces": found.depth,
-                "max_penetration_off_surfaces_at": {"time": time, "body": found.body,
-                                                    "node": found.node, "inside": found.other,
-                                                    "element_size": found.size,
-                                                    "joined": found.joined}}
+        return _if_larger(summary, "max_penetration_off_surfaces", found.depth, lambda: {
+            "time": time, "body": found.body, "node": found.node, "inside": found.other,
+            "element_size": found.size, "joined": found.joined})
 
     def _due(self, time: float, model: Model) -> bool:
         last = time >= model.analysis.t_end - 1e-9 * model.analysis.dt
