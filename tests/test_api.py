@@ -49,7 +49,8 @@ def test_a_wrong_key_in_the_overrides_names_it():
 
 
 @pytest.mark.parametrize("value", [True, 3, -2.5, 1e-300, "lumped", 'a "quoted" \\ word',
-                                   [1.0, 2], {"a": 1, "b": [True, "x"]}, math.inf])
+                                   "caf\u00e9 \x7f\n", [1.0, 2], {"a": 1, "b": [True, "x"]},
+                                   math.inf, np.float32(0.5), np.int64(7)])
 def test_python_values_become_toml_values_that_read_back_equal(value):
     assert tomllib.loads(f"v = {toml_value(value)}")["v"] == value
 
