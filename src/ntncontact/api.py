@@ -152,14 +152,9 @@ def read_results(directory: str | Path) -> Results:
     summary = read_summary(directory)  # a file that is not JSON is named
     series = find_field_series(directory)  # fields.pvd, or fields.xdmf (field_format)
     frames = tuple(read_series(series)) if series is not None else ()
-    return Results(read_table(directory / HISTORY_FILE), read_table(directory / CONTACT_FILE),
-                   summary, directory, frames)
-
-
-def read_table(path: Path) -> pd.DataFrame:
-    """A results CSV as a DataFrame (:func:`~ntncontact.io.writers.read_table`); an empty one
-    for a missing file."""
-    return writers.read_table(path) if path.is_file() else pd.DataFrame()
+    history, contact = (writers.read_table(path) if path.is_file() else pd.DataFrame()
+                        for path in (directory / HISTORY_FILE, directory / CONTACT_FILE))
+    return Results(history, contact, summary, directory, frames)
 
 
 def run(scenario: Scenario | str | Path, out: str | Path | None = None, *,
