@@ -53,3 +53,20 @@ def test_a_move_beside_sheared_cells_above_the_threshold_keeps_its_interior():
     assert cell_min_sines(X + d, mesh.cells).min() > SLIVER_SINE
     body, out = slide_middle(mesh, X, d, v, a, 0.01)
     assert out.interior == "surface"
+
+
+def test_a_reflex_cell_the_material_made_is_smoothed_valid():
+    """test_ale_motion's reflex cell (a top node pushed 0.15 down and left, sine -0.38 at t_n):
+    the surface's move alone left it reflex (-0.13 / -0.32); with the region smoothed it is
+    valid again (measured 0.246 / 0.008)."""
+    mesh = rectangle(2.0, 1.0, 8, 4)
+    X = mesh.nodes.copy()
+    node = int(np.flatnonzero(np.isclose(X[:, 0], 1.0) & np.isclose(X[:, 1], 1.0))[0])
+    d, zero = np.zeros_like(X), np.zeros_like(X)
+    d[node] = [-0.15, -0.15]
+    x = X + d
+    for slide in (0.03, -0.03):
+        out = move_ale_body(AleBody.from_mesh(mesh, "top"), X, d, zero, zero, [node],
+                            x[[node]] + [[slide, 0.0]], x[[node]], DT)
+        assert out.interior == "position"
+        assert cell_min_sines(out.x_mesh, mesh.cells).min() > 0.0

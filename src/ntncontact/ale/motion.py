@@ -636,7 +636,8 @@ STAGES = ("none", "surface", "displacement", "position")
 #: acceptance test of a move repairs (each compares with t_n). A move whose smoothing
 #: region holds one smooths that region in position (stage "position"): under friction the
 #: contact-side rows of a sliding ALE body shear while its surface nodes are held under
-#: their partners, and the sheared cells fold (the fast-sliding blocks refined 8x, both ALE).
+#: their partners. A sliver the surface nodes shape (a stretched surface segment under a thin
+#: row) stays one (docs/theory.md, "Slivers the material made").
 SLIVER_SINE = 0.1
 
 
