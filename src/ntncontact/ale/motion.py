@@ -68,7 +68,8 @@ nothing is moved that need not be.
    (c) the interior nodes within those layers are smoothed in position (4.1.2, rule
    ``smoothing``, ``sweeps`` Jacobi sweeps, the whole boundary fixed, inverting moves refused),
    as a slide of several elements (Fig. 4.2) or accumulated shear needs; this also repairs the
-   distortion that (a) and (b) let build up.
+   distortion that (a) and (b) let build up. A move whose region holds a cell below
+   ``SLIVER_SINE`` at t_n goes to (c) at once, whatever ``interior`` (with ``sweeps`` > 0).
    ``"displacement"`` starts at (b), ``"position"`` always does (c) (the interior then moves at
    every update, since a deformed mesh is no fixed point of the smoother).
    ``AleUpdate.interior`` tells which stage was used.
