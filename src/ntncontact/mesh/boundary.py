@@ -199,10 +199,12 @@ def nodal_tributary_lengths(xy: NDArray[np.float64], closed: bool) -> NDArray[np
 def chord_normals(xy: NDArray[np.float64], closed: bool) -> NDArray[np.float64]:
     """Nodal outward unit normals ``rot(-90)(x_next - x_prev)/|.|`` of an ordered chain's
     coordinates ``xy`` (n, 2), body on the left (report 2.1.1): one-sided at the ends of an
-    open chain; corners are NOT replaced here (report 6.6)."""
+    open chain, zero where a node's neighbours coincide; corners are NOT replaced here (report
+    6.6)."""
     xy = np.asarray(xy, dtype=float)
     after, before = np.roll(xy, -1, axis=0), np.roll(xy, 1, axis=0)
     if not closed:
         after[-1], before[0] = xy[-1], xy[0]
     chord = after - before
-    return np.column_stack((chord[:, 1], -chord[:, 0])) / np.linalg.norm(chord, axis=1)[:, None]
+    length = np.maximum(np.linalg.norm(chord, axis=1), 1e-300)  # coincident neighbours: 0
+    return np.column_stack((chord[:, 1], -chord[:, 0])) / length[:, None]
