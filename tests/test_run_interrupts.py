@@ -19,7 +19,6 @@ from helpers import EXAMPLES, history_steps, wait_until
 
 from ntncontact import cli
 from ntncontact.cli import main
-from ntncontact.engine import builder
 from ntncontact.io.run_folder import LOCK_FILE, RunLock, read_lock, run_status
 from ntncontact.io.vtk import read_pvd
 
@@ -40,7 +39,7 @@ def frame_steps(out: Path) -> list[int]:
 def test_a_first_signal_during_the_build_stops_it_at_once(tmp_path, capsys, monkeypatch):
     """A tester's first Ctrl-C 8 s into a 31 s build was silent until the build ended. The
     build here takes 20 s after the signal: the run must end well before."""
-    build = builder.build_model
+    build = cli.build_model
 
     def slow_build(*args, **kwargs):
         os.kill(os.getpid(), signal.SIGINT)
@@ -48,7 +47,7 @@ def test_a_first_signal_during_the_build_stops_it_at_once(tmp_path, capsys, monk
             time.sleep(0.05)
         return build(*args, **kwargs)
 
-    monkeypatch.setattr(builder, "build_model", slow_build)
+    monkeypatch.setattr(cli, "build_model", slow_build)
     out = tmp_path / "spin"
     started = time.monotonic()
     assert main(["run", str(SPIN), "--out", str(out), "--quiet"]) == 130
@@ -65,7 +64,7 @@ def test_the_folder_is_locked_and_starting_during_the_build(tmp_path, capsys, mo
     out = tmp_path / "spin"
     assert main(["run", str(SPIN), "--out", str(out), "--quiet", *SHORT]) == 0
     capsys.readouterr()
-    build = builder.build_model
+    build = cli.build_model
     seen = {}
 
     def checked_build(*args, **kwargs):
@@ -76,7 +75,7 @@ def test_the_folder_is_locked_and_starting_during_the_build(tmp_path, capsys, mo
                                    "--overwrite", *SHORT]), capsys.readouterr()
         return build(*args, **kwargs)
 
-    monkeypatch.setattr(builder, "build_model", checked_build)
+    monkeypatch.setattr(cli, "build_model", checked_build)
     assert main(["run", str(SPIN), "--out", str(out), "--quiet", "--overwrite", *SHORT]) == 0
     assert seen["lock"]["pid"] == os.getpid() and seen["lock"]["phase"] == "building"
     code, printed = seen["status"]
@@ -222,15 +221,13 @@ def test_an_interrupted_run_prints_the_warnings_of_its_steps(tmp_path, capsys, m
     """A tester's run stopped with Ctrl-C printed none of the warnings its summary called for
     (a failed run printed them). The summary's warnings stand in for a real one here: which
     lines a summary calls for is ``report.run_warnings``' own test."""
-    from ntncontact.report import run_warnings
-
     seen = []
 
     def one_warning(summary, static):
         seen.append(summary["steps"])
         return ["a stand-in warning"]
 
-    monkeypatch.setattr(run_warnings, "result_warnings", one_warning)
+    monkeypatch.setattr(cli, "result_warnings", one_warning)
     stop_at_call(monkeypatch, 4, lambda: os.kill(os.getpid(), signal.SIGINT))
     out = tmp_path / "spin"
     assert main(["run", str(SPIN), "--out", str(out), "--quiet", *SPARSE]) == 130

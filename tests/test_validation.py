@@ -348,8 +348,8 @@ def test_validate_command_exits_non_zero_when_a_case_fails(tmp_path, monkeypatch
                                                           outcomes, code):
     """`ntncontact validate` exits 1 when any case fails or errors, 0 when all pass (the cases'
     results stand in for runs: validate itself is tested above)."""
+    from ntncontact import cli
     from ntncontact.cli import main
-    from ntncontact.report import validation
 
     def fake_validate(out, quick=False, progress=None, **_):
         results = []
@@ -363,7 +363,7 @@ def test_validate_command_exits_non_zero_when_a_case_fails(tmp_path, monkeypatch
                 progress(case.name)
         return results
 
-    monkeypatch.setattr(validation, "validate", fake_validate)
+    monkeypatch.setattr(cli, "validate", fake_validate)
     assert main(["validate", "--quick", "--out", str(tmp_path)]) == code
     summary = capsys.readouterr().out.strip().splitlines()[-1]
     assert summary.startswith("report: ") and f"{outcomes.count(True)} passed" in summary

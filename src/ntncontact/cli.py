@@ -14,13 +14,27 @@ import traceback
 import warnings
 from collections.abc import Callable
 from pathlib import Path
-from typing import TYPE_CHECKING
+
+from tqdm import tqdm
 
 from . import __version__
+from .engine.builder import build_model
+from .engine.diagnostics import warnings_noted
+from .engine.simulation import RunInterrupted, Simulation
+from .io import checkpoint
+from .io.results import ResultWriter
+from .io.run_folder import RunLock, read_summary, run_status
+from .io.scenario import ScenarioError, load_scenario
+from .io.vtk import read_vtu
 from .io.writers import closing
-
-if TYPE_CHECKING:
-    from .io.run_folder import RunLock
+from .mesh.gmsh_io import read_msh
+from .mesh.quality import quality_statistics
+from .report import validation_cases
+from .report.plotting import check_times, plot_all
+from .report.reference import compare, format_comparison, write_comparison_csv
+from .report.run_warnings import result_warnings
+from .report.validation import validate
+from .studies.sweep import SWEEP_FILE, sweep
 
 #: seconds of wall time between two progress lines when stderr is not a terminal (a batch
 #: job's log, where tqdm's bar is off)
@@ -105,14 +119,7 @@ def _run(args: argparse.Namespace) -> int:
 
 
 def _run_until_stopped(args: argparse.Namespace, stop: StopOnSignal) -> int:
-    from tqdm import tqdm
 
-    from .engine.builder import build_model
-    from .engine.diagnostics import warnings_noted
-    from .engine.simulation import RunInterrupted, Simulation
-    from .io import checkpoint
-    from .io.results import ResultWriter
-    from .io.scenario import load_scenario
 
     started = time.monotonic()
     scenario = Path(args.scenario)
@@ -129,7 +136,6 @@ def _run_until_stopped(args: argparse.Namespace, stop: StopOnSignal) -> int:
         if stop.signum is not None:  # before any file is written
             raise RunInterrupted(stop.reason())
         if args.times:  # refused before the run, not after it
-            from .report.plotting import check_times
 
             check_times(args.times, 0.0, model.analysis.t_end, f"the run of {scenario}")
         identity = checkpoint.run_identity(config, args.set or [], model)
@@ -196,7 +202,6 @@ def _lock_before_build(out: Path) -> RunLock:
     """The results folder, created if need be and locked before the model's build (as long as
     35 s for long interfaces), which ``ntncontact status`` reports as "starting" and during
     which a second run into the folder is refused."""
-    from .io.run_folder import RunLock
 
     out.mkdir(parents=True, exist_ok=True)
     return RunLock.acquire(out, phase="building")
@@ -259,7 +264,6 @@ def _finished_on_error(writer, stop: StopOnSignal, static: bool):
 def _warn_results(summary: dict, static: bool) -> None:
     """The warnings a run's summary calls for (``report.run_warnings``), one line each on
     stderr."""
-    from .report.run_warnings import result_warnings
 
     for line in result_warnings(summary, static):
         print(f"warning: {line}", file=sys.stderr)
@@ -272,7 +276,6 @@ def _short(value: float | None) -> str:
 
 def _status(args: argparse.Namespace) -> int:
     """The run in a results folder: its status (stale: killed), step, time."""
-    from .io.run_folder import run_status
 
     status = run_status(Path(args.directory))
     gone = " (gone)" if status.state == "stale" else ""
@@ -295,7 +298,6 @@ def _status(args: argparse.Namespace) -> int:
 
 
 def _draw_figures(directory: Path, args: argparse.Namespace) -> list[Path]:
-    from .report.plotting import plot_all
 
     return plot_all(directory, times=args.times, gif=args.gif)
 
@@ -313,7 +315,6 @@ QUALITY_INPUTS = ("a scenario (.toml), a Gmsh mesh (.msh), a results VTU file (.
 def _mesh_quality(args: argparse.Namespace) -> int:
     """Table 4.1 statistics of every body of a scenario (reference meshes), of a Gmsh mesh or
     of a VTU file."""
-    from .mesh.quality import quality_statistics
 
     path = Path(args.path)
     if path.is_dir():
@@ -323,7 +324,6 @@ def _mesh_quality(args: argparse.Namespace) -> int:
     if args.set and path.suffix != ".toml":
         raise ValueError(f"{path}: --set changes scenario keys; this is not a scenario (.toml)")
     if path.suffix == ".vtu":
-        from .io.vtk import read_vtu
 
         frame = read_vtu(path)
         # a results frame: its current configuration; a plain quad mesh: its points
@@ -331,12 +331,9 @@ def _mesh_quality(args: argparse.Namespace) -> int:
                   else frame.points)
         tables = {path.name: quality_statistics(points, frame.cells)}
     elif path.suffix == ".msh":
-        from .mesh.gmsh_io import read_msh
 
         tables = {path.name: quality_statistics(read_msh(path, name=path.stem))}
     elif path.suffix == ".toml":
-        from .engine.builder import build_model
-        from .io.scenario import load_scenario
 
         model = build_model(load_scenario(path, args.set), path.parent)
         tables = {b.name: quality_statistics(b.mesh) for b in model.bodies}
@@ -347,7 +344,6 @@ def _mesh_quality(args: argparse.Namespace) -> int:
 
 def _folder_quality(folder: Path) -> dict:
     """The final meshes' statistics a run folder's summary.json holds, body by body."""
-    from .io.run_folder import read_summary
 
     summary = folder / "summary.json"
     if not summary.is_file():
@@ -372,7 +368,6 @@ def _print_comparison(directory: Path) -> int:
     """The run's headline numbers beside the report's, each with its verdict, tolerance and
     reason (as `validate` checks them); also DIR/comparison.csv. A folder that is not a run's
     results is an error naming what was expected."""
-    from .report.reference import compare, format_comparison, write_comparison_csv
 
     label, rows = compare(directory)
     print(format_comparison(label, rows))
@@ -384,10 +379,7 @@ def _validate(args: argparse.Namespace) -> int:
     """Run every example of the report and write DIR/report.html and report.md. SIGINT and
     SIGTERM stop the cases after their step and start no other; the report of the finished
     ones is written, and the command ends as interrupted (130/143, as ``run``)."""
-    from tqdm import tqdm
 
-    from .report import validation_cases
-    from .report.validation import validate
 
     cases = validation_cases.CASES  # looked up here: a test runs the command on a few cases
     out = Path(args.out)
@@ -425,7 +417,6 @@ def _validate(args: argparse.Namespace) -> int:
 
 def _sweep(args: argparse.Namespace) -> int:
     """Run a sweep file's cases on Dask; write OUT/sweep.csv and the figures it asks for."""
-    from .studies.sweep import SWEEP_FILE, sweep
 
     _out_folder(args.out)
     with _interrupting_signals():
@@ -564,7 +555,6 @@ def _save_traceback() -> str:
 def _with_source(err: BaseException, args: argparse.Namespace) -> str:
     """The message, led by the scenario file when it is about the scenario and does not name
     it yet (the model builder knows the keys, not the file)."""
-    from .io.scenario import ScenarioError
 
     text = str(err) or type(err).__name__  # a bare MemoryError has no message
     if isinstance(err, MemoryError):
