@@ -39,7 +39,7 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 from numpy.typing import ArrayLike, NDArray
 
-from ntncontact.mesh.overlap import boundary_edges
+from ntncontact.mesh.boundary import boundary_edges
 from ntncontact.mesh.quality import check_elements, check_move, corner_jacobians, unique_edges
 
 __all__ = [

@@ -34,8 +34,8 @@ from ..io.scenario import (
 )
 from ..materials.models import Material, MaterialError
 from ..mesh import generators
-from ..mesh.boundary import chain_edge_lengths, surface_chain
-from ..mesh.overlap import boundary_edges, deepest_overlap, facing_away
+from ..mesh.boundary import boundary_edges, chain_edge_lengths, surface_chain
+from ..mesh.overlap import deepest_overlap, facing_away
 from ..mesh.quadmesh import MeshError, QuadMesh
 from ..mesh.quality import check_elements
 from .diagnostics import PhysicsWarning

@@ -16,8 +16,8 @@ from numpy.typing import NDArray
 from ..contact.kinematics import UndefinedNormalError
 from ..fem.loads import dirichlet_values
 from ..fem.q4 import DN_GP, InvertedElementError, shape_gradients
+from ..mesh.boundary import boundary_edges
 from ..mesh.overlap import (
-    boundary_edges,
     deepest_overlap,
     deepest_self_overlap,
     edge_size,
