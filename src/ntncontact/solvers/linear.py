@@ -302,11 +302,15 @@ class _Pattern:
         """Structurally symmetric and |A_ij - A_ji| <= SYMMETRY_RTOL max|A|."""
         if self.transpose is None:
             return False
-        scale = np.abs(data).max(initial=0.0)
-        difference = data[self.transpose]  # one temporary of nnz entries, worked in place
-        np.subtract(data, difference, out=difference)
-        np.abs(difference, out=difference)
-        return bool(difference.max(initial=0.0) <= SYMMETRY_RTOL * scale)
+        scale = max(data.max(initial=0.0), -data.min(initial=0.0))  # max |A|, no copy
+        largest = 0.0  # max |A_ij - A_ji|, a chunk of entries at a time (no nnz temporary)
+        for start in range(0, data.size, VALUE_CHUNK):
+            stop = start + VALUE_CHUNK
+            difference = data[self.transpose[start:stop]]
+            np.subtract(data[start:stop], difference, out=difference)
+            np.abs(difference, out=difference)
+            largest = max(largest, difference.max(initial=0.0))
+        return bool(largest <= SYMMETRY_RTOL * scale)
 
 
 def _transpose_map(indptr: NDArray, indices: NDArray, n: int,
@@ -793,8 +797,8 @@ class _PardisoBackend:
 
     def factor(self, data: NDArray) -> None:
         self.factored_matrix = None  # the last matrix is not held beyond its factor
-        values = np.ascontiguousarray(data[self.pattern.upper] if self.symmetric else data,
-                                      dtype=np.float32 if self.single else float)
+        values = _factor_values(data, self.pattern.upper if self.symmetric else None,
+                                np.float32 if self.single else np.float64)
         if self.single:  # the caller's values, not a copy (LinearSolver.factorize)
             p = self.pattern
             self.factored_matrix = sp.csr_matrix((data, p.indices, p.indptr), shape=(p.n, p.n),
@@ -845,7 +849,7 @@ class _PardisoBackend:
         if not self.single:
             return self._call(33, np.asfortranarray(b))
         if not np.all(np.isfinite(b)):  # no reason to leave single: reported as not finite
-            return self._single_solve(b)
+            return self._single_solve(b).astype(float)
         x = self._refined(b, rtol)
         if x is None:
             self._to_double()
@@ -853,27 +857,35 @@ class _PardisoBackend:
         return x
 
     def _single_solve(self, b: NDArray) -> NDArray:
-        return self._call(33, np.asfortranarray(b, dtype=np.float32)).astype(float)
+        """The single factor's solution, in single precision (added to a double x as it is:
+        the conversion is exact, and no double copy is made)."""
+        return self._call(33, np.asfortranarray(b, dtype=np.float32))
 
     def _refined(self, b: NDArray, rtol: float) -> NDArray | None:
         """x with |b - A x| <= rtol |b| in each column, from the single factor and refinement
         sweeps x += A_single^-1 (b - A x) with the residual in double (a matvec, a fifth of a
         solve), each sweep over the columns still above their limit only (a sensitivity's
         64 columns had a sweep of all for a few); None if :data:`MAX_REFINEMENTS` sweeps do
-        not get there."""
+        not get there. Besides b and x, a sweep holds about one array of b's size at a time:
+        the residual is formed in place, its norms a few columns at a time, and it is let go
+        once rounded for the solve (the ring refined 8x held ~6 arrays of 37 columns of
+        46,530 unknowns here, its run's peak memory; issue 18)."""
         A = self.factored_matrix
-        x = self._single_solve(b)
-        limit = rtol * np.linalg.norm(b, axis=0)
+        x = self._single_solve(b).astype(float)
+        limit = rtol * _column_norms(b)
         for sweep in range(MAX_REFINEMENTS + 1):
-            r = b - A @ x
-            above = ~(np.linalg.norm(r, axis=0) <= limit)  # True for NaN: then in double
+            r = A @ x
+            np.subtract(b, r, out=r)
+            above = ~(_column_norms(r) <= limit)  # True for NaN: then in double
             if not above.any():
                 return x
             if sweep < MAX_REFINEMENTS:
-                if b.ndim == 1:
+                every = b.ndim == 1 or above.all()
+                r = np.asfortranarray(r if every else r[:, above], dtype=np.float32)
+                if every:
                     x += self._single_solve(r)
                 else:
-                    x[:, above] += self._single_solve(r[:, above])
+                    x[:, above] += self._single_solve(r)
                 self.stats.refinements += 1
         return None
 
@@ -923,6 +935,43 @@ class _PardisoBackend:
                 self.pardiso.free_memory(everything=True)  # all of PARDISO's memory (phase -1)
         _IDLE_PARDISO.append(self.pardiso)
         self.pardiso = None
+
+
+#: entries :meth:`_Pattern.is_symmetric` and :func:`_factor_values` work on at a time
+VALUE_CHUNK = 1 << 16
+
+
+def _factor_values(data: NDArray, kept: NDArray | None, dtype: type) -> NDArray:
+    """``data[kept]`` (all of data if None) in ``dtype``, a chunk at a time: no double
+    temporary of the entries kept (half the matrix's size in symmetric mode) beside the
+    caller's matrix and the previous one (issue 18, memory). The caller's own array when it
+    is already all in ``dtype``."""
+    if kept is None and data.dtype == dtype and data.flags.c_contiguous:
+        return data
+    size = data.size if kept is None else kept.size
+    values = np.empty(size, dtype=dtype)
+    for start in range(0, size, VALUE_CHUNK):
+        stop = min(start + VALUE_CHUNK, size)
+        values[start:stop] = data[start:stop] if kept is None else data[kept[start:stop]]
+    return values
+
+
+#: :func:`_column_norms` squares this many columns at a time
+NORM_COLUMNS = 8
+
+
+def _column_norms(r: NDArray) -> NDArray:
+    """``np.linalg.norm(r, axis=0)``, the same bits, with a temporary of a few columns (the
+    norm squares all of r at once, and makes a conjugate copy of it first). No block is one
+    column wide: NumPy sums a lone column of a C-order block pairwise, not row by row."""
+    if r.ndim == 1 or r.shape[1] <= NORM_COLUMNS + 1:
+        return np.linalg.norm(r, axis=0)
+    starts = list(range(0, r.shape[1], NORM_COLUMNS))
+    if r.shape[1] - starts[-1] == 1:
+        starts.pop()  # the last column joins the block before it
+    ends = starts[1:] + [r.shape[1]]
+    return np.concatenate([np.linalg.norm(r[:, j:k], axis=0)
+                           for j, k in zip(starts, ends, strict=True)])
 
 
 #: PyPardisoSolver objects whose PARDISO memory was released, for the next pattern or solver:
