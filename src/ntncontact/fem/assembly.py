@@ -88,7 +88,7 @@ class Assembler:
 
     def internal(
         self, X: NDArray, *, d: NDArray, need_tangent: bool = True,
-        d_start: NDArray | None = None,
+        d_start: NDArray | None = None, spare: int = 0,
     ) -> tuple[NDArray, sp.csr_matrix | None, float]:
         """Internal force vector, tangent stiffness (CSR) and total strain energy at the
         nodal displacements ``d`` from the reference positions ``X`` (x = X + d), from the
@@ -98,13 +98,16 @@ class Assembler:
         relative to the stresses (from x it would be eps E L / h, L the size of x). Keyword
         only, so that no caller passes positions by mistake.
         ``d_start`` = d_n with d = d_{n+1/2}: the energy-momentum scheme's force of the
-        Neo-Hookean elements and its tangent with respect to d."""
+        Neo-Hookean elements and its tangent with respect to d.
+        ``spare``: the tangent's data are the head of an array this many entries longer
+        (``fem.sparse.TripletUnion`` spreads them into its pattern there, in place)."""
         X = np.ascontiguousarray(X, dtype=float)
         d = np.ascontiguousarray(np.reshape(d, (-1, 2)), dtype=float)
         if d_start is not None:
             d_start = np.reshape(d_start, (-1, 2))
         force = np.zeros(self.ndof)
-        data = np.zeros(self.pattern.nnz) if need_tangent else None
+        nnz = self.pattern.nnz
+        data = np.zeros(nnz + spare)[:nnz] if need_tangent else None
         energy = 0.0
         for kernel in self._numba_groups:
             energy += kernel.add(X, d, self.lam, self.mu, self.pattern.entry_map, force, data,

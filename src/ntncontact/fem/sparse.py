@@ -33,6 +33,7 @@ class TripletUnion:
         # a checkpoint's union entries (row * n_cols + col, sorted), taken in by the first build
         self._restored = np.zeros(0, dtype=np.int64)
         self._k_map = self._t_map = self._indptr = self._indices = None
+        self._gaps: NDArray | None = None  # the union's places that are not K's
         self._shape = (0, 0)
         self.free_block = FreeBlock()  # the Newton matrix's free-dof block, same lifetime
 
@@ -47,11 +48,38 @@ class TripletUnion:
             # placed in the union of K and the keys so far, and so grown and reserved at the
             # same calls in a restored run as in the run it continues (bit for bit)
             self._place(K, rows, cols, reserve)
-        data = np.zeros(self._indices.size)
-        data[self._k_map] = K.data
+        data = self._union_data(K)
         # only the few triplets' places (a bincount to the full size took another nnz array)
         np.add.at(data, self._t_map, vals)
         return sp.csr_matrix((data, self._indices, self._indptr), shape=K.shape)
+
+    def spare(self, nnz: int) -> int:
+        """How many entries to leave free after a tangent of ``nnz`` entries
+        (``Assembler.internal``'s ``spare``) for :meth:`add` to spread it into the union in
+        its own array: the union's entries beyond it, and room for a growth."""
+        size = nnz if self._indices is None else max(self._indices.size, nnz)
+        return size - nnz + max(MIN_GROWTH_ROOM, int(GROWTH_ROOM * size))
+
+    def _union_data(self, K: sp.csr_matrix) -> NDArray:
+        """K's values in the union pattern, zeros elsewhere: in K's own array when it is the
+        head of one long enough (:meth:`spare`), else in a new one. Hertz refined 8x held K's
+        and the union's data (2 x 17.7 MB) together here, its run's peak (issue 18)."""
+        size = self._indices.size
+        data = _head(K.data, size)
+        if data is None:
+            data = np.zeros(size)
+            data[self._k_map] = K.data
+            return data
+        _spread(data, K.nnz, self._k_map)
+        data[self._gap_places()] = 0.0
+        return data
+
+    def _gap_places(self) -> NDArray:
+        if self._gaps is None:
+            is_k = np.zeros(self._indices.size, dtype=bool)
+            is_k[self._k_map] = True
+            self._gaps = np.flatnonzero(~is_k)
+        return self._gaps
 
     def holds(self, K: sp.csr_matrix) -> bool:
         """Whether a union pattern beyond K's own was built (or restored) for K's pattern."""
@@ -138,6 +166,7 @@ class TripletUnion:
         firsts = np.searchsorted(self._k_map, before)  # first K place each insertion shifts
         runs = np.diff(np.concatenate([[0], firsts, [self._k_map.size]]))
         self._k_map += np.repeat(np.arange(before.size + 1, dtype=self._k_map.dtype), runs)
+        self._gaps = None
 
     def _build(self, K: sp.csr_matrix) -> None:
         """Union pattern (sorted, unique) of K and a restored union (before the first K only),
@@ -157,6 +186,44 @@ class TripletUnion:
         self._k_map = np.searchsorted(union, keys_k).astype(position)
         self._k_key = (K.indptr, K.indices)  # by reference, see FreeBlock._build
         self._t_key = None
+        self._gaps = None
+
+
+#: :meth:`TripletUnion.spare`'s room for a growth: this fraction of the union's entries, at
+#: least MIN_GROWTH_ROOM (a growing contact zone adds a few hundred to a few thousand)
+GROWTH_ROOM = 0.01
+MIN_GROWTH_ROOM = 4096
+#: entries moved at a time by the in-place moves (a temporary of this size at most)
+MOVE_CHUNK = 1 << 16
+
+
+def _head(values: NDArray, size: int) -> NDArray | None:
+    """The first ``size`` entries of the array that ``values`` begins (a view of its head,
+    as ``Assembler.internal`` makes with ``spare``), or None if there is no such array."""
+    base = values.base
+    if (not isinstance(base, np.ndarray) or base.ndim != 1 or base.dtype != values.dtype
+            or base.size < size or not base.flags.c_contiguous
+            or not values.flags.c_contiguous
+            or base.__array_interface__["data"][0] != values.__array_interface__["data"][0]):
+        return None
+    return base[:size]
+
+
+def _spread(data: NDArray, n: int, places: NDArray) -> None:
+    """``data[places] = data[:n]`` in place, ``places`` rising and ``places[i] >= i``: moved
+    from the end, a chunk at a time, so that no value is overwritten before it moves."""
+    for stop in range(n, 0, -MOVE_CHUNK):
+        start = max(stop - MOVE_CHUNK, 0)
+        data[places[start:stop]] = data[start:stop]
+
+
+def _gather(data: NDArray, places: NDArray) -> NDArray:
+    """``data[places]`` into the head of ``data`` itself, ``places`` rising and ``places[i] >=
+    i``: moved from the start, a chunk at a time; the values beyond the head are spent."""
+    for start in range(0, places.size, MOVE_CHUNK):
+        stop = min(start + MOVE_CHUNK, places.size)
+        data[start:stop] = data[places[start:stop]]
+    return data[:places.size]
 
 
 #: () -> (rows, cols) of entries to reserve in the union pattern (``TripletUnion.add``)
@@ -209,6 +276,14 @@ class FreeBlock:
         return sp.csr_matrix((K.data[self._map], self._indices, self._indptr),
                              shape=self._shape)
 
+    def take(self, K: sp.csr_matrix, free: NDArray) -> sp.csr_matrix:
+        """The same block made in K's own data array, which it spends (K is not to be used
+        again): no second array of K's size (issue 18, memory)."""
+        if not self._same(K, free):
+            self._build(K, free)
+        return sp.csr_matrix((_gather(K.data, self._map), self._indices, self._indptr),
+                             shape=self._shape)
+
     def _same(self, K: sp.csr_matrix, free: NDArray) -> bool:
         if self._key is None:
             return False
@@ -217,18 +292,30 @@ class FreeBlock:
                 and _same_array(free, kept))
 
     def _build(self, K: sp.csr_matrix, free: NDArray) -> None:
+        """The map, indptr and indices of the block, with no temporary beyond a boolean per
+        entry and a chunk (the map built by index arrays of K's size, one of them int64,
+        was Hertz refined 8x's peak once the union's growth was made in place; issue 18)."""
         n = K.shape[0]
-        # int32 rows and positions: the temporaries below are arrays of nnz entries (Hertz
-        # k = 8: 67 MB over 2.1 M entries with int64; issue 18, memory)
-        index = np.int32 if n < 2**31 else np.int64
-        position = np.full(n, -1, dtype=index)  # free dof -> its row/column in the block
-        position[free] = np.arange(free.size)
-        rows = np.repeat(np.arange(n, dtype=index), np.diff(K.indptr))
-        keep = (position[rows] >= 0) & (position[K.indices] >= 0)
-        self._map = np.flatnonzero(keep).astype(np.int32 if K.nnz < 2**31 else np.int64)
-        counts = np.bincount(position[rows[keep]], minlength=free.size)
+        is_free = np.zeros(n, dtype=bool)
+        is_free[free] = True
+        keep = np.repeat(is_free, np.diff(K.indptr))  # the entry's row is free ...
+        keep &= is_free[K.indices]  # ... and its column
+        position = np.int32 if K.nnz < 2**31 else np.int64
+        self._map = np.empty(np.count_nonzero(keep), dtype=position)
+        taken = 0
+        for start in range(0, keep.size, MOVE_CHUNK):
+            found = np.flatnonzero(keep[start:start + MOVE_CHUNK]) + start
+            self._map[taken:taken + found.size] = found
+            taken += found.size
+        del keep
+        counts = np.diff(np.searchsorted(self._map, K.indptr))[free]  # kept entries a row
         self._indptr = np.concatenate([[0], np.cumsum(counts)]).astype(K.indptr.dtype)
-        self._indices = position[K.indices[keep]].astype(K.indices.dtype, copy=False)
+        column = np.full(n, -1, dtype=K.indices.dtype)  # free dof -> its column in the block
+        column[free] = np.arange(free.size)
+        self._indices = np.empty(self._map.size, dtype=K.indices.dtype)
+        for start in range(0, self._map.size, MOVE_CHUNK):
+            stop = start + MOVE_CHUNK
+            self._indices[start:stop] = column[K.indices[self._map[start:stop]]]
         self._shape = (free.size, free.size)
         # K's pattern arrays by reference (no copy of nnz entries): the assembler's and the
         # union's patterns are replaced, never changed in place

@@ -1,0 +1,67 @@
+"""The Newton matrix made in the tangent's own data array (issue 18, memory): the assembler
+leaves room after the tangent's entries, the triplet union spreads them into its pattern
+there and the free block is gathered there, so that no second array of the pattern's size
+is made (Hertz refined 8x held K's and the union's data together, its run's peak)."""
+
+import tracemalloc
+
+import numpy as np
+import scipy.sparse as sp
+
+from ntncontact.fem import sparse
+from ntncontact.fem.assembly import Assembler, MaterialGroup
+from ntncontact.fem.sparse import TripletUnion
+from ntncontact.mesh.generators import rectangle
+
+
+def _tangent(union: TripletUnion, spare: bool = True) -> sp.csr_matrix:
+    mesh = rectangle(2.0, 1.0, 40, 20)
+    ne = len(mesh.cells)
+    asm = Assembler(mesh.cells, len(mesh.nodes), [MaterialGroup("neo_hookean", np.arange(ne))],
+                    np.full(ne, 3.0), np.full(ne, 2.0), np.ones(ne))
+    X = np.asarray(mesh.nodes, dtype=float)
+    d = 1e-2 * np.random.default_rng(7).normal(size=X.shape)
+    room = union.spare(asm.pattern.nnz) if spare else 0
+    return asm.internal(X, d=d, spare=room)[1]
+
+
+def _triplets(n: int):
+    rng = np.random.default_rng(8)
+    rows = rng.integers(0, n, 300)
+    return rows, (rows + rng.integers(50, 400, 300)) % n, rng.normal(size=300)
+
+
+def test_the_union_is_made_in_the_tangents_array_with_the_same_values(monkeypatch):
+    monkeypatch.setattr(sparse, "MOVE_CHUNK", 1000)  # chunks well below this pattern's size
+    union = TripletUnion()
+    K = _tangent(union)
+    rows, cols, vals = _triplets(K.shape[0])
+    want = K.copy() + sp.csr_matrix((vals, (rows, cols)), shape=K.shape)
+    union.add(K.copy(), rows, cols, vals)  # the union pattern, built from a plain copy
+    union.add(_tangent(union), rows, cols, vals)  # its gaps found once a pattern
+    K = _tangent(union)
+    tracemalloc.start()
+    try:
+        got = union.add(K, rows, cols, vals)
+        _, peak = tracemalloc.get_traced_memory()
+    finally:
+        tracemalloc.stop()
+    assert got.nnz > K.nnz and np.shares_memory(got.data, K.data)
+    assert peak < 0.2 * got.data.nbytes  # a new array of the union's size was all of it
+    np.testing.assert_array_equal(got.toarray(), want.toarray())
+    free = np.flatnonzero(np.arange(K.shape[0]) % 7 != 0)
+    block = union.free_block(got, free)
+    taken = union.free_block.take(got, free)  # spends got
+    assert np.shares_memory(taken.data, K.data)
+    np.testing.assert_array_equal(taken.toarray(), block.toarray())
+    np.testing.assert_array_equal(taken.toarray(), want[free][:, free].toarray())
+
+
+def test_a_tangent_without_room_is_copied_into_a_new_union_array():
+    union = TripletUnion()
+    K = _tangent(union, spare=False)
+    rows, cols, vals = _triplets(K.shape[0])
+    want = K + sp.csr_matrix((vals, (rows, cols)), shape=K.shape)
+    got = union.add(K, rows, cols, vals)
+    assert not np.shares_memory(got.data, K.data)
+    np.testing.assert_array_equal(got.toarray(), want.toarray())
