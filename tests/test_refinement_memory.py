@@ -42,7 +42,8 @@ def test_a_refined_solve_of_many_columns_holds_under_three_of_their_arrays():
 
 @pytest.mark.parametrize("columns", [1, 2, 9, 10, 17, 33, 37, 64])
 @pytest.mark.parametrize("order", ["C", "F"])
-def test_the_column_norms_are_numpys_to_the_bit(columns, order):
-    r = np.asarray(np.random.default_rng(columns).standard_normal((20_011, columns))
+@pytest.mark.parametrize("rows", [3, 4096, 20_011])
+def test_the_column_norms_are_numpys_to_the_bit(columns, order, rows):
+    r = np.asarray(np.random.default_rng(columns).standard_normal((rows, columns))
                    * np.logspace(-3, 3, columns), order=order)
     assert np.array_equal(linear._column_norms(r), np.linalg.norm(r, axis=0))

@@ -956,22 +956,36 @@ def _factor_values(data: NDArray, kept: NDArray | None, dtype: type) -> NDArray:
     return values
 
 
-#: :func:`_column_norms` squares this many columns at a time
+#: :func:`_column_norms` squares this many columns (F order) or rows (C order) at a time
 NORM_COLUMNS = 8
+NORM_ROWS = 4096
 
 
 def _column_norms(r: NDArray) -> NDArray:
-    """``np.linalg.norm(r, axis=0)``, the same bits, with a temporary of a few columns (the
-    norm squares all of r at once, and makes a conjugate copy of it first). No block is one
-    column wide: NumPy sums a lone column of a C-order block pairwise, not row by row."""
-    if r.ndim == 1 or r.shape[1] <= NORM_COLUMNS + 1:
+    """``np.linalg.norm(r, axis=0)``, the same bits, with a temporary of a few columns or rows
+    (the norm squares all of r at once, and makes a conjugate copy of it first). NumPy sums
+    each column of an F-order block pairwise, so F-order r goes by blocks of columns, none
+    one column wide (a lone column of a C-order block is summed pairwise too); it sums the
+    rows of a C-order array one after the other, so C-order r goes by blocks of rows, each
+    carrying the sums so far in its first row."""
+    if r.ndim == 1 or r.shape[1] <= 1 or r.shape[0] == 0:
         return np.linalg.norm(r, axis=0)
-    starts = list(range(0, r.shape[1], NORM_COLUMNS))
-    if r.shape[1] - starts[-1] == 1:
-        starts.pop()  # the last column joins the block before it
-    ends = starts[1:] + [r.shape[1]]
-    return np.concatenate([np.linalg.norm(r[:, j:k], axis=0)
-                           for j, k in zip(starts, ends, strict=True)])
+    if r.flags.f_contiguous and r.shape[1] > NORM_COLUMNS + 1:
+        starts = list(range(0, r.shape[1], NORM_COLUMNS))
+        if r.shape[1] - starts[-1] == 1:
+            starts.pop()  # the last column joins the block before it
+        ends = starts[1:] + [r.shape[1]]
+        return np.concatenate([np.linalg.norm(r[:, j:k], axis=0)
+                               for j, k in zip(starts, ends, strict=True)])
+    if r.flags.c_contiguous and r.shape[0] > NORM_ROWS:
+        sums = None
+        for start in range(0, r.shape[0], NORM_ROWS):
+            squares = np.square(r[start:start + NORM_ROWS])
+            if sums is not None:
+                squares[0] += sums
+            sums = np.add.reduce(squares, axis=0)
+        return np.sqrt(sums)
+    return np.linalg.norm(r, axis=0)
 
 
 #: PyPardisoSolver objects whose PARDISO memory was released, for the next pattern or solver:
