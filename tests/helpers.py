@@ -12,8 +12,10 @@ from ntncontact.contact import pair_gaps
 from ntncontact.engine.builder import build_model
 from ntncontact.engine.model import Model
 from ntncontact.engine.simulation import Simulation
+from ntncontact.fem.assembly import Assembler, MaterialGroup
 from ntncontact.io.scenario import load_scenario, parse_scenario
 from ntncontact.io.writers import read_csv_table
+from ntncontact.mesh.generators import rectangle
 
 EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
 
@@ -211,3 +213,24 @@ def headline_of(results) -> dict:
             "off_surfaces": results.summary["max_penetration_off_surfaces"],
             "ledger": results.summary["energy_balance_max_relative_error"],
             "status": results.summary["status"]}
+
+
+def neo_hookean_assembler(mesh, seed: int) -> tuple[Assembler, np.ndarray, np.ndarray]:
+    """One neo-Hookean group over ``mesh`` (mu 3, lambda 2, unit thickness), its reference
+    nodes and a random displacement of 1e-2 (``seed``)."""
+    ne = len(mesh.cells)
+    asm = Assembler(mesh.cells, len(mesh.nodes), [MaterialGroup("neo_hookean", np.arange(ne))],
+                    np.full(ne, 3.0), np.full(ne, 2.0), np.ones(ne))
+    X = np.asarray(mesh.nodes, dtype=float)
+    return asm, X, 1e-2 * np.random.default_rng(seed).normal(size=X.shape)
+
+
+def reflex_cell_block():
+    """A 2 x 1 block of 8 x 4 cells whose top node at x = 1 is pushed 0.15 down and left,
+    leaving a reflex cell (sine -0.38): (mesh, X, d, node, x = X + d)."""
+    mesh = rectangle(2.0, 1.0, 8, 4)
+    X = mesh.nodes.copy()
+    node = int(np.flatnonzero(np.isclose(X[:, 0], 1.0) & np.isclose(X[:, 1], 1.0))[0])
+    d = np.zeros_like(X)
+    d[node] = [-0.15, -0.15]
+    return mesh, X, d, node, X + d

@@ -3,6 +3,7 @@ homogeneous deformation, large slides (Fig. 4.2), momentum correction, corners a
 
 import numpy as np
 import pytest
+from helpers import reflex_cell_block
 
 from ntncontact.ale.example_mesh_motion import layer_mesh
 from ntncontact.ale.motion import AleBody, AleMotionError, lumped_masses, move_ale_body
@@ -598,12 +599,8 @@ def test_a_reflex_cell_left_by_the_deformation_does_not_block_a_move_that_improv
     test_slide_over_several_elements_lands_on_target_without_inversion.) Without position
     sweeps: with them the region around such a cell is smoothed (``SLIVER_SINE``,
     tests/test_ale_robust.py), and this move is the surface's alone."""
-    mesh = rectangle(2.0, 1.0, 8, 4)
-    X = mesh.nodes.copy()
-    node = int(np.flatnonzero(np.isclose(X[:, 0], 1.0) & np.isclose(X[:, 1], 1.0))[0])
-    d, zero = np.zeros_like(X), np.zeros_like(X)
-    d[node] = [-0.15, -0.15]
-    x = X + d
+    mesh, X, d, node, x = reflex_cell_block()
+    zero = np.zeros_like(X)
     before = cell_min_sines(x, mesh.cells)
     cell = int(np.argmin(before))
     assert before[cell] < -0.3 and node in mesh.cells[cell]

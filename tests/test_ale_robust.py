@@ -5,6 +5,7 @@ its surface nodes are held under their partners (the fast-sliding blocks refined
 blocks ALE: the upper block's second-row cell folded at t = 0.126)."""
 
 import numpy as np
+from helpers import reflex_cell_block
 
 from ntncontact.ale.motion import SLIVER_SINE, AleBody, move_ale_body
 from ntncontact.mesh.generators import rectangle
@@ -59,12 +60,8 @@ def test_a_reflex_cell_the_material_made_is_smoothed_valid():
     """test_ale_motion's reflex cell (a top node pushed 0.15 down and left, sine -0.38 at t_n):
     the surface's move alone left it reflex (-0.13 / -0.32); with the region smoothed it is
     valid again (measured 0.246 / 0.008)."""
-    mesh = rectangle(2.0, 1.0, 8, 4)
-    X = mesh.nodes.copy()
-    node = int(np.flatnonzero(np.isclose(X[:, 0], 1.0) & np.isclose(X[:, 1], 1.0))[0])
-    d, zero = np.zeros_like(X), np.zeros_like(X)
-    d[node] = [-0.15, -0.15]
-    x = X + d
+    mesh, X, d, node, x = reflex_cell_block()
+    zero = np.zeros_like(X)
     for slide in (0.03, -0.03):
         out = move_ale_body(AleBody.from_mesh(mesh, "top"), X, d, zero, zero, [node],
                             x[[node]] + [[slide, 0.0]], x[[node]], DT)

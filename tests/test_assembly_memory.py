@@ -2,8 +2,9 @@
 
 import numpy as np
 import scipy.sparse as sp
+from helpers import neo_hookean_assembler
 
-from ntncontact.fem.assembly import Assembler, CsrPattern, MaterialGroup, element_dofs
+from ntncontact.fem.assembly import CsrPattern, element_dofs
 from ntncontact.mesh.generators import rectangle
 
 
@@ -21,11 +22,7 @@ def test_the_entry_map_is_int32_and_assembles_what_coo_sums_give():
 
 def test_the_kernel_scatters_the_same_bits_through_an_int32_or_int64_map():
     mesh = rectangle(2.0, 1.0, 6, 4)
-    ne = len(mesh.cells)
-    asm = Assembler(mesh.cells, len(mesh.nodes), [MaterialGroup("neo_hookean", np.arange(ne))],
-                    np.full(ne, 3.0), np.full(ne, 2.0), np.ones(ne))
-    X = np.asarray(mesh.nodes, dtype=float)
-    d = 1e-2 * np.random.default_rng(4).normal(size=X.shape)
+    asm, X, d = neo_hookean_assembler(mesh, seed=4)
     kernel = asm._numba_groups[0]
     out = []
     for dtype in (np.int64, np.int32):

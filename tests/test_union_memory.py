@@ -7,20 +7,16 @@ import tracemalloc
 
 import numpy as np
 import scipy.sparse as sp
+from helpers import neo_hookean_assembler
 
 from ntncontact.fem import sparse
-from ntncontact.fem.assembly import Assembler, MaterialGroup
 from ntncontact.fem.sparse import TripletUnion
 from ntncontact.mesh.generators import rectangle
 
 
 def _tangent(union: TripletUnion, spare: bool = True) -> sp.csr_matrix:
     mesh = rectangle(2.0, 1.0, 40, 20)
-    ne = len(mesh.cells)
-    asm = Assembler(mesh.cells, len(mesh.nodes), [MaterialGroup("neo_hookean", np.arange(ne))],
-                    np.full(ne, 3.0), np.full(ne, 2.0), np.ones(ne))
-    X = np.asarray(mesh.nodes, dtype=float)
-    d = 1e-2 * np.random.default_rng(7).normal(size=X.shape)
+    asm, X, d = neo_hookean_assembler(mesh, seed=7)
     room = union.spare(asm.pattern.nnz) if spare else 0
     return asm.internal(X, d=d, spare=room)[1]
 
