@@ -1,6 +1,6 @@
 """Quasi-static active-set passes (issue 18): a pass ends at the first unconverged augmentation
-whose solution shows new penetrating pairs (not the first augmentation of a pass that starts
-without multipliers), and the step's next pass takes
+whose solution shows new penetrating pairs (the first too, with or without multipliers, on
+augmented-Lagrangian interfaces), and the step's next pass takes
 them in from there, instead of converging the augmentations of an active set that is known
 to be incomplete.
 
@@ -32,6 +32,10 @@ def _run(monkeypatch, overrides: list[str], early: bool):
         return solved
 
     monkeypatch.setattr(Simulation, "_solve_step", spy)
+    # without the pairs taken in at the Newton start (test_hertz_passes.py), which leave mesh
+    # 1 no step after the first whose pass shows new pairs
+    monkeypatch.setattr(Simulation, "_with_predicted_penetrations",
+                        lambda self, contact, state, dt: contact)
     records = Recorder()
     sim = Simulation(model_from_example("hertz.toml", overrides), [records])
     sim.run()
@@ -46,15 +50,13 @@ def test_a_pass_ends_when_an_augmentation_shows_new_pairs(monkeypatch, friction)
     old, rec_old, passes_old = _run(monkeypatch, overrides, early=False)
     stopped = [p for p in passes_new if p[3] is not None]
     assert stopped, "Hertz mesh 1 takes new pairs in within its first load steps"
-    for step, pairs, augmentations, grown, carried in stopped:
+    for step, pairs, augmentations, grown, _carried in stopped:
         assert sum(len(g) for g in grown) > pairs  # it stopped because pairs were added
-        # ... before the augmentations converged (the old passes of the step took more), and
-        # at the first only when the pass came with multipliers (from the last step or pass):
-        # without any, its solution holds the load on penalty pairs of a far-from-complete set
+        # ... before the augmentations converged (the old passes of the step took more)
         assert augmentations < min(p[2] for p in passes_old if p[0] == step)
-        assert augmentations > 1 or carried
-    # both kinds occur: the first contact (no multipliers) and the steps after it
-    assert any(p[2] > 1 and not p[4] for p in stopped), stopped
+    # both kinds occur, each at its first augmentation: the first contact (no multipliers)
+    # and the steps after it (the probe of a pass whose pairs carry multipliers)
+    assert any(p[2] == 1 and not p[4] for p in stopped), stopped
     assert any(p[2] == 1 and p[4] for p in stopped), stopped
     iterations = [sum(r.newton_iterations for r in rec.records) for rec in (rec_new, rec_old)]
     assert iterations[0] < iterations[1], iterations

@@ -293,15 +293,20 @@ def _newton_updated(ci) -> bool:
     return ci.multiplier_update == "newton" and ci.law.method == "augmented_lagrangian"
 
 
+def _augmented_only(interfaces, states: tuple) -> bool:
+    """Whether every interface with pairs is augmented Lagrangian: a Lagrange interface
+    releases its tensile pairs at every solve, and a first solution, not converged, can show
+    them penetrating again (the static blocks of test_exact_touch, a Lagrange interface, did
+    not finish in 10 minutes with the first solution looked at)."""
+    return all(ci.law.method == "augmented_lagrangian"
+               for ci, state in zip(interfaces, states, strict=True) if len(state))
+
+
 def _carries_multipliers(interfaces, states: tuple) -> bool:
     """Whether the pairs come with augmented-Lagrangian multipliers (some lambda_N > 0) and
-    every interface with pairs is augmented Lagrangian: a Lagrange interface releases its
-    tensile pairs at every solve, and a first solution, not converged, can show them
-    penetrating again (the static blocks of test_exact_touch, a Lagrange interface, did not
-    finish in 10 minutes with the first solution looked at)."""
-    active = [(ci, state) for ci, state in zip(interfaces, states, strict=True) if len(state)]
-    return (all(ci.law.method == "augmented_lagrangian" for ci, _ in active)
-            and any(bool(np.any(state.lambda_N > 0.0)) for _, state in active))
+    every interface with pairs is augmented Lagrangian (``_augmented_only``)."""
+    return (_augmented_only(interfaces, states)
+            and any(bool(np.any(state.lambda_N > 0.0)) for state in states))
 
 
 def _no_nodes(interfaces) -> tuple:
@@ -566,7 +571,7 @@ class Simulation:
         fixed, then the multiplier update, until report 5.4's test is met. ``start``: (d, the
         d of the state it was solved on) of an earlier solve of this step, to start from.
         ``may_grow`` (quasi-static): an unconverged augmentation (the second or a later one;
-        also the first when the pairs came with multipliers from the last step or pass)
+        also the first where every interface with pairs is augmented Lagrangian)
         whose solution shows new penetrating pairs ends the solve there
         (``SolvedStep.grown``): the step's next active-set pass takes them in at once instead
         of after the augmentations converge."""
@@ -578,7 +583,8 @@ class Simulation:
         previous, before, iterations, guess, floor = None, None, 0, start, None
         factors = self._factor_cache()  # one factor serves the augmentations (modified Newton)
         sensitivities: dict = {}  # per interface and pressed set, for Newton multiplier updates
-        carried = _carries_multipliers(interfaces, contact)  # see grown below
+        carried = _carries_multipliers(interfaces, contact)  # see probe below
+        first_looks = _augmented_only(interfaces, contact)  # see grown below
         early_ratio = self._early_ratio
         for augmentation in range(1, self.max_augmentations + 1):  # noqa: B007 (used after)
             if self.model.ale_bodies and any(len(c) for c in contact):
@@ -615,14 +621,16 @@ class Simulation:
             if not done:
                 contact = self._next_multipliers(problem, result.y, d, used, contact, results,
                                                  previous, (factors, sensitivities))
-            # after the first augmentation only if the pass's pairs carried multipliers (from
-            # the last step or an earlier pass): with none, its solution holds the whole load
-            # on penalty pairs of a set that may be far from complete (Hertz k = 4 step 1: the
-            # pass it started went in 0.6 deep and failed); with them, the new pairs are the
-            # contact zone's next nodes (Hertz k = 4: 220 -> 196 solves, same solution)
+            # after the first augmentation too (augmented-Lagrangian interfaces): with the
+            # pass's pairs carrying multipliers the new pairs are the contact zone's next
+            # nodes (Hertz k = 4: 220 -> 196 solves, same solution); without (a first
+            # contact), its solution holds the whole load on penalty pairs of a set that may
+            # be far from complete, but the next pass, started from it, converges (Hertz's
+            # step 1: 12 / 15 / 15 / 20 -> 10 / 12 / 13 / 17 Newton iterations at k = 1 / 2
+            # / 4 / 8; the pass it started once went in 0.6 deep and failed at k = 4)
             grown = (self._with_new_penetrations(contact, state.X + d)
                      if may_grow and not done and not self.dynamic
-                     and (augmentation > 1 or carried) else None)
+                     and (augmentation > 1 or first_looks) else None)
             if grown is not None:
                 return SolvedStep(state, d, used, results, augmentation, iterations, 0.0,
                                   grown=grown)
