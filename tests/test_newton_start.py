@@ -53,9 +53,13 @@ def _hertz(steps: int):
 def test_active_set_re_pass_starts_from_the_previous_pass(monkeypatch):
     """Hertz mesh 1: steps 1, 2 and 4 take new penetrating pairs in and re-solve. Each re-pass
     must start from the solution of the pass before it, and need fewer Newton iterations in
-    all than re-passes started from the step's start, for the same converged state."""
+    all than re-passes started from the step's start, for the same converged state. Without
+    the pairs taken in at the Newton start (test_hertz_passes.py), which leave mesh 1 only
+    step 1's re-pass."""
     passes: list[tuple] = []
     solve_step = Simulation._solve_step
+    monkeypatch.setattr(Simulation, "_with_predicted_penetrations",
+                        lambda self, contact, state, dt: contact)
 
     def spy(self, state, contact, dt, start=None, may_grow=False):
         solved = solve_step(self, state, contact, dt, start, may_grow)
