@@ -61,3 +61,26 @@ def test_a_tangent_without_room_is_copied_into_a_new_union_array():
     got = union.add(K, rows, cols, vals)
     assert not np.shares_memory(got.data, K.data)
     np.testing.assert_array_equal(got.toarray(), want.toarray())
+
+
+
+def test_a_growth_makes_no_copy_of_ks_places_in_a_wider_type():
+    """A growth shifts K's places with a search among them for the insertion places, in their
+    own integer type: NumPy converts the searched array to the wider type of the two, and
+    int64 insertion places made an int64 copy of K's int32 places (Hertz refined 8x's growth,
+    17 MB)."""
+    union = TripletUnion()
+    K = _tangent(union)
+    rows, cols, vals = _triplets(K.shape[0])
+    union.add(K, rows, cols, vals)
+    places = union._k_map.nbytes
+    new = np.array([0 * K.shape[1] + 700, 5 * K.shape[1] + 900], dtype=np.int64)
+    assert not union._locate(new)[1].any()  # two entries the union lacks
+    tracemalloc.start()
+    try:
+        union._grow(new)
+        _, peak = tracemalloc.get_traced_memory()
+    finally:
+        tracemalloc.stop()
+    # the new union indices and the places' shift, each of the places' size (the copy: + 2)
+    assert peak < 2.5 * places

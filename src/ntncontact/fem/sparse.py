@@ -163,7 +163,9 @@ class TripletUnion:
         # K's places rise (K's keys are sorted, see _build) by the number of insertions at or
         # before them: one small-integer array of K's size, where a search of every place
         # made two int64 ones, the RSS peak of Hertz refined 8x's step (issue 18, memory)
-        firsts = np.searchsorted(self._k_map, before)  # first K place each insertion shifts
+        # before in the places' own type: NumPy's search would otherwise convert all of
+        # _k_map to int64 first (a temporary of twice its size: Hertz 8x's growth, 17 MB)
+        firsts = np.searchsorted(self._k_map, before.astype(self._k_map.dtype))
         runs = np.diff(np.concatenate([[0], firsts, [self._k_map.size]]))
         self._k_map += np.repeat(np.arange(before.size + 1, dtype=self._k_map.dtype), runs)
         self._gaps = None
