@@ -206,3 +206,26 @@ def test_an_out_that_is_a_file_is_refused_naming_it(tmp_path):
     with pytest.raises(ValueError, match="is a file: give the results folder"):
         ntc.run(ntc.load_scenario(SPIN, SHORT), path)
     assert path.read_text() == ""
+
+
+def test_a_run_failing_after_its_folder_was_prepared_says_failed_and_frees_it(tmp_path,
+                                                                              monkeypatch):
+    """A set-up error once the writer exists (here attaching the checkpoints) left the folder's
+    summary "running" and its lock held by the live process, which refused the next run into
+    the folder as "in use by another run"; the command already wrote "failed" there."""
+    from ntncontact.io import checkpoint
+    from ntncontact.io.run_folder import LOCK_FILE
+
+    def full_disk(*args, **kwargs):
+        raise OSError("No space left on device")
+
+    monkeypatch.setattr(checkpoint, "attach", full_disk)
+    out = tmp_path / "spin"
+    scenario = ntc.load_scenario(SPIN, SHORT)
+    with pytest.raises(OSError, match="^No space left on device$"):
+        ntc.run(scenario, out)
+    summary = ntc.read_results(out).summary
+    assert summary["status"] == "failed" and summary["error"] == "No space left on device"
+    assert not (out / LOCK_FILE).exists()
+    monkeypatch.undo()
+    assert ntc.run(scenario, out, overwrite=True).summary["status"] == "completed"

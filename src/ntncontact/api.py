@@ -15,7 +15,8 @@ import contextlib
 import copy
 import json
 import warnings
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Iterator, Mapping, Sequence
+from contextlib import AbstractContextManager
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -26,10 +27,11 @@ import pandas as pd
 
 from .engine.builder import build_model
 from .engine.diagnostics import warnings_noted
+from .engine.model import Model
 from .engine.simulation import Simulation
 from .io import checkpoint, writers
 from .io.results import ResultWriter
-from .io.run_folder import read_summary
+from .io.run_folder import RunLock, read_summary
 from .io.scenario import (
     ScenarioConfig,
     ScenarioError,
@@ -218,31 +220,52 @@ def _run_with_writer(scenario: Scenario, out: Path | None,
     if restart and overwrite:
         raise ValueError("run: restart continues the run in out, overwrite replaces it: "
                          "give one of them")
-    with warnings_noted() as build_warnings:  # issued, and kept in the summary
+    simulation, writer = start_run(scenario, out, overwrite=overwrite, restart=restart,
+                                   writing=_failed_with_summary)
+    with _failed_with_summary(writer):
+        simulation.run(progress)  # a failed step raises, with or without a folder
+    return read_results(out) if out is not None else _results_of(writer.results)
+
+
+def start_run(scenario: Scenario, out: Path | None, *, overwrite: bool, restart: bool,
+              writing: Callable[[ResultWriter], AbstractContextManager[object]],
+              lock: RunLock | None = None,
+              building: Callable[[], AbstractContextManager[object]] = contextlib.nullcontext,
+              built: Callable[[Model], None] | None = None) -> tuple[Simulation, ResultWriter]:
+    """The run of ``scenario`` into the results folder ``out`` (None: in memory), set up for
+    :meth:`Simulation.run`, for :func:`run` and ``ntncontact run``: the model, built inside
+    ``building()`` and then given to ``built`` (before any file is written); its results
+    writer (``restart``: cut back to the folder's last checkpoint; ``lock``: the folder's lock
+    if the caller took it); the simulation with the writer and the checkpoints attached, set
+    up inside ``writing(writer)``, which answers for the writer when that fails."""
+    with warnings_noted() as build_warnings, building():  # kept in the summary
         model = build_model(scenario.config, scenario.base_dir)
+    if built is not None:
+        built(model)
     identity = checkpoint.run_identity(scenario.config, scenario.overrides, model)
     resume = checkpoint.load_latest(out, identity) if restart else None
     writer = ResultWriter(out, model, overwrite=overwrite,
                           resume=resume and resume["writer"], scenario=scenario.source,
                           title=scenario.config.title, overrides=list(scenario.overrides),
                           scenario_hash=identity["scenario_hash"],
-                          build_warnings=build_warnings)
-    simulation = Simulation(model, [writer])
-    if out is not None:
-        checkpoint.attach(simulation, writer, out,
-                          scenario.config.analysis.checkpoint_interval, identity, resume)
-    with _failed_with_summary(writer):
-        simulation.run(progress)  # a failed step raises, with or without a folder
-    return read_results(out) if out is not None else _results_of(writer.results)
+                          build_warnings=build_warnings, lock=lock)
+    with writing(writer):
+        simulation = Simulation(model, [writer])
+        if out is not None:
+            checkpoint.attach(simulation, writer, out,
+                              scenario.config.analysis.checkpoint_interval, identity, resume)
+    return simulation, writer
 
 
 @contextlib.contextmanager
-def _failed_with_summary(writer: ResultWriter):
+def _failed_with_summary(writer: ResultWriter) -> Iterator[None]:
     """A failed run's error, carried with its summary so far (:class:`_RunFailed`): the
-    warnings come before the error, as the command prints them."""
+    warnings come before the error, as the command prints them. A run that failed before its
+    time loop (which finishes the writer itself) is finished here: its folder says so."""
     try:
         yield
     except Exception as err:
+        writer.on_finish("failed", str(err))
         raise _RunFailed(dict(writer.results.summary.data), err) from None
 
 

@@ -12,19 +12,19 @@ import threading
 import time
 import traceback
 import warnings
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from pathlib import Path
 
 from tqdm import tqdm
 
 from . import __version__
+from .api import load_scenario, start_run
 from .engine.builder import build_model
-from .engine.diagnostics import warnings_noted
-from .engine.simulation import RunInterrupted, Simulation
-from .io import checkpoint
+from .engine.model import Model
+from .engine.simulation import RunInterrupted
 from .io.results import ResultWriter
 from .io.run_folder import RunLock, read_summary, run_status
-from .io.scenario import ScenarioError, load_scenario
+from .io.scenario import ScenarioError
 from .io.vtk import read_vtu
 from .io.writers import closing
 from .mesh.gmsh_io import read_msh
@@ -88,6 +88,15 @@ class StopOnSignal:
         os.write(2, f"\n{signal.Signals(signum).name}: stopping after this step "
                     "(again to stop at once)\n".encode())
 
+    @contextlib.contextmanager
+    def building_model(self) -> Iterator[None]:
+        """The model is being built: a first signal stops at once (:attr:`building`)."""
+        self.building = True
+        try:
+            yield
+        finally:
+            self.building = False
+
     def reason(self) -> str | None:
         """Why the run should stop, or None."""
         return None if self.signum is None else \
@@ -119,11 +128,8 @@ def _run(args: argparse.Namespace) -> int:
 
 
 def _run_until_stopped(args: argparse.Namespace, stop: StopOnSignal) -> int:
-
-
     started = time.monotonic()
-    scenario = Path(args.scenario)
-    config = load_scenario(scenario, args.set)
+    scenario = load_scenario(args.scenario, args.set)
     out = _out_folder(args.out)
     if args.restart and args.overwrite:
         raise ValueError("--restart continues the run in --out, --overwrite replaces it: "
@@ -131,35 +137,22 @@ def _run_until_stopped(args: argparse.Namespace, stop: StopOnSignal) -> int:
     created = not out.exists()
     lock = _lock_before_build(out)
     try:
-        with warnings_noted() as build_warnings:  # printed as issued, and kept in the summary
-            model = _build(build_model, config, scenario.parent, stop)
-        if stop.signum is not None:  # before any file is written
-            raise RunInterrupted(stop.reason())
-        if args.times:  # refused before the run, not after it
-
-            check_times(args.times, 0.0, model.analysis.t_end, f"the run of {scenario}")
-        identity = checkpoint.run_identity(config, args.set or [], model)
-        resume = checkpoint.load_latest(out, identity) if args.restart else None
-        writer = ResultWriter(out, model, overwrite=args.overwrite,
-                              resume=resume and resume["writer"], scenario=str(scenario),
-                              title=config.title, overrides=list(args.set or []),
-                              scenario_hash=identity["scenario_hash"],
-                              build_warnings=build_warnings, lock=lock)
+        sim, writer = start_run(scenario, out, overwrite=args.overwrite, restart=args.restart,
+                                lock=lock, building=stop.building_model,
+                                built=lambda model: _check_built(model, args, stop),
+                                writing=lambda writer: _writing(writer, stop))
     except BaseException:
-        _release_unused(lock, out, created)
+        if not stop.writing:  # the writer would have released the lock
+            _release_unused(lock, out, created)
         raise
-    stop.writing = True
-    with _finished_on_error(writer, stop, model.analysis.kind == "static"):
-        sim = Simulation(model, [writer])
-        checkpoint.attach(sim, writer, out, config.analysis.checkpoint_interval, identity,
-                          resume)
-        t_end = model.analysis.t_end
+    name, t_end = Path(args.scenario).stem, sim.model.analysis.t_end
+    with _writing(writer, stop):
         if args.quiet or not sys.stderr.isatty():
-            lines = None if args.quiet else ProgressLines(scenario.stem, t_end,
+            lines = None if args.quiet else ProgressLines(name, t_end,
                                                           lambda: sim.state.step, started)
             sim.run(lines, stop.reason)
         else:
-            with tqdm(total=t_end, unit="t", desc=scenario.stem,
+            with tqdm(total=t_end, unit="t", desc=name,
                       bar_format="{l_bar}{bar}| t={n:.4g}/{total:.4g} "
                                  "[{elapsed}<{remaining}]") as bar:
 
@@ -168,9 +161,10 @@ def _run_until_stopped(args: argparse.Namespace, stop: StopOnSignal) -> int:
 
                 sim.run(progress, stop.reason)
     stop.at_once = True  # the run is complete: a signal from here on stops at once
-    fields = "fields.xdmf" if model.analysis.field_format == "xdmf" else "fields.pvd"
+    analysis = sim.model.analysis
+    fields = "fields.xdmf" if analysis.field_format == "xdmf" else "fields.pvd"
     print(f"results written to {out} (history.csv, summary.json, {fields})")
-    _warn_results(writer.results.summary.data, model.analysis.kind == "static")
+    _warn_results(writer.results.summary.data, analysis.kind == "static")
     if stop.signum is not None:  # asked to stop during the last step: no figures
         raise RunInterrupted(stop.reason())
     if args.compare:
@@ -180,13 +174,13 @@ def _run_until_stopped(args: argparse.Namespace, stop: StopOnSignal) -> int:
     return 0
 
 
-def _build(build_model: Callable, config: object, folder: Path, stop: StopOnSignal) -> object:
-    """The model, built with a first signal stopping at once (``StopOnSignal.building``)."""
-    stop.building = True
-    try:
-        return build_model(config, folder)
-    finally:
-        stop.building = False
+def _check_built(model: Model, args: argparse.Namespace, stop: StopOnSignal) -> None:
+    """Before any file is written: stop if asked to during the build, and refuse ``--times``
+    outside the run (before the run, not after it)."""
+    if stop.signum is not None:
+        raise RunInterrupted(stop.reason())
+    if args.times:
+        check_times(args.times, 0.0, model.analysis.t_end, f"the run of {Path(args.scenario)}")
 
 
 def _out_folder(out: str) -> Path:
@@ -246,10 +240,13 @@ class ProgressLines:
 
 
 @contextlib.contextmanager
-def _finished_on_error(writer, stop: StopOnSignal, static: bool):
-    """An exception before the time loop took over (a signal during start-up): the summary
-    says so too (after the time loop, ``writer.on_finish`` does nothing). A failed or
-    interrupted run's warnings are printed before its error: they may name its cause."""
+def _writing(writer: ResultWriter, stop: StopOnSignal) -> Iterator[None]:
+    """The run's files are being written: a first signal now stops after the step in
+    progress. An exception before the time loop took over (a signal during the set-up) is
+    written in the summary too (after the time loop, ``writer.on_finish`` does nothing). A
+    failed or interrupted run's warnings are printed before its error: they may name its
+    cause."""
+    stop.writing = True
     try:
         yield
     except BaseException as err:
@@ -257,7 +254,8 @@ def _finished_on_error(writer, stop: StopOnSignal, static: bool):
         writer.on_finish("interrupted" if interrupted else "failed",
                          stop.reason() or str(err) or "interrupted by the user")
         if interrupted or isinstance(err, Exception):
-            _warn_results(writer.results.summary.data, static)
+            _warn_results(writer.results.summary.data,
+                          writer.model.analysis.kind == "static")
         raise
 
 
@@ -335,7 +333,7 @@ def _mesh_quality(args: argparse.Namespace) -> int:
         tables = {path.name: quality_statistics(read_msh(path, name=path.stem))}
     elif path.suffix == ".toml":
 
-        model = build_model(load_scenario(path, args.set), path.parent)
+        model = build_model(load_scenario(path, args.set).config, path.parent)
         tables = {b.name: quality_statistics(b.mesh) for b in model.bodies}
     else:
         raise ValueError(f"{path}: expected {QUALITY_INPUTS}, by its file name extension")
