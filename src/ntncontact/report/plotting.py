@@ -50,13 +50,17 @@ def panels_shape(count: int) -> tuple[int, int, tuple[float, float]]:
 
 
 def _new_figure(nrows: int = 1, ncols: int = 1, size: tuple[float, float] = (7.0, 4.5),
-                layout: str = "constrained") -> tuple[Figure, NDArray]:
+                layout: str = "constrained", grid: bool = False) -> tuple[Figure, NDArray]:
     """A figure and its grid of axes (report/validation.py's figures too). ``layout="compressed"``
-    for a grid of equal-aspect axes: no white bands between them."""
+    for a grid of equal-aspect axes: no white bands between them; ``grid``: faint grid lines
+    on every axes."""
     from matplotlib.figure import Figure
 
     fig = Figure(figsize=size, dpi=DPI, layout=layout)
-    return fig, fig.subplots(nrows, ncols, squeeze=False)
+    axes = fig.subplots(nrows, ncols, squeeze=False)
+    for ax in axes.flat if grid else ():
+        ax.grid(True, alpha=0.3)
+    return fig, axes
 
 
 def _save(fig: Figure, path: str | os.PathLike) -> Path:
@@ -87,7 +91,7 @@ def plot_energies(directory: str | os.PathLike, path: str | os.PathLike | None =
     folder = Path(directory)
     history = _load_table(folder, HISTORY_FILE)
     time, total = history["time"], history["total_energy"]
-    fig, axes = _new_figure(*HISTORY_SHAPE)
+    fig, axes = _new_figure(*HISTORY_SHAPE, grid=True)
     top, bottom = axes[0, 0], axes[1, 0]
     for column in ("kinetic_energy", "strain_energy", "total_energy"):
         top.plot(time, history[column], label=column.replace("_", " "))
@@ -104,8 +108,6 @@ def plot_energies(directory: str | os.PathLike, path: str | os.PathLike | None =
     bottom.set_ylabel("(E - E0 - W_ext - W_c) / max|E, W|" if scale > 0
                       else "E - E0 - W_ext - W_c")
     bottom.set_xlabel("time")
-    for ax in (top, bottom):
-        ax.grid(True, alpha=0.3)
     return _save(fig, Path(path) if path else folder / "energies.png")
 
 
@@ -113,7 +115,7 @@ def plot_momenta(directory: str | os.PathLike, path: str | os.PathLike | None = 
     """Linear momentum components and angular momentum against time."""
     folder = Path(directory)
     history = _load_table(folder, HISTORY_FILE)
-    fig, axes = _new_figure(*HISTORY_SHAPE)
+    fig, axes = _new_figure(*HISTORY_SHAPE, grid=True)
     top, bottom = axes[0, 0], axes[1, 0]
     top.plot(history["time"], history["linear_momentum_x"], label="linear momentum x")
     top.plot(history["time"], history["linear_momentum_y"], label="linear momentum y")
@@ -122,8 +124,6 @@ def plot_momenta(directory: str | os.PathLike, path: str | os.PathLike | None = 
     bottom.plot(history["time"], history["angular_momentum"], color="C2")
     bottom.set_ylabel("angular momentum")
     bottom.set_xlabel("time")
-    for ax in (top, bottom):
-        ax.grid(True, alpha=0.3)
     return _save(fig, Path(path) if path else folder / "momenta.png")
 
 
@@ -338,7 +338,7 @@ def tractions_figure(contact: dict[str, NDArray], steps: Sequence[int] | None = 
     legend of its own."""
     chosen = _pick_steps(np.unique(contact["step"]), steps)
     interfaces = list(dict.fromkeys(contact["interface"].tolist()))
-    fig, axes = _new_figure(*HISTORY_SHAPE)
+    fig, axes = _new_figure(*HISTORY_SHAPE, grid=True)
     top, bottom = axes[0, 0], axes[1, 0]
     colours = _time_colours(fig, axes, contact, chosen) if len(interfaces) > 1 else None
     for k, step in enumerate(chosen):
@@ -361,8 +361,6 @@ def tractions_figure(contact: dict[str, NDArray], steps: Sequence[int] | None = 
         top.legend(loc="best", fontsize="small")
     else:
         _interface_legend(top, interfaces)
-    for ax in (top, bottom):
-        ax.grid(True, alpha=0.3)
     return fig
 
 
@@ -414,7 +412,7 @@ def plot_pair_history(
     node_1 = int(nodes[np.argmax(counts)])
     rows = contact["node_1"] == node_1
     node_2 = int(np.bincount(contact["node_2"][rows]).argmax())
-    fig, axes = _new_figure(*PAIR_SHAPE)
+    fig, axes = _new_figure(*PAIR_SHAPE, grid=True)
     tn = contact["normal_traction"][rows]
     peak = np.abs(tn).max() or 1.0
     axes[0, 0].plot(*broken_at_gaps(contact["step"][rows], contact["time"][rows], tn / peak),
@@ -434,8 +432,6 @@ def plot_pair_history(
         ax.set_ylabel(field)
         ax.legend(loc="best", fontsize="small")
     axes[2, 0].set_xlabel("time")
-    for ax in axes[:, 0]:
-        ax.grid(True, alpha=0.3)
     return _save(fig, Path(path) if path else folder / "pair_history.png")
 
 

@@ -6,6 +6,8 @@ from pathlib import Path
 
 import numpy as np
 
+from ..io.writers import read_csv_table
+from .plotting import _new_figure, _save
 from .reference import (
     TABLE_4_1_STAGES,
     hertz_plane_strain,
@@ -32,22 +34,17 @@ def _energy_column(case: Case) -> tuple[str, str, str] | None:
 
 def plot_report_overlay(directory: Path, case: Case) -> Path | None:
     """Our total energy history over the report's tabulated one."""
-    from ..io.writers import read_csv_table
-    from .plotting import _new_figure, _save
-
     spec = _energy_column(case)
     if spec is None:
         return None
     name, tcol, ecol = spec
     ref = table(name)
     ours = read_csv_table(directory / "history.csv")
-    fig, axes = _new_figure(1, 1)
+    fig, axes = _new_figure(1, 1, grid=True)
     ax = axes[0, 0]
     ax.plot(ours["time"], ours["total_energy"], "-", label="ntncontact")
     ax.plot(ref[tcol], ref[ecol], "o", ms=4, label=f"report ({name.split('_table_')[1]})")
-    ax.set_xlabel("time")
-    ax.set_ylabel("total energy")
-    ax.grid(True, alpha=0.3)
+    ax.set(xlabel="time", ylabel="total energy")
     ax.legend()
     return _save(fig, directory / "energy_vs_report.png")
 
@@ -55,10 +52,8 @@ def plot_report_overlay(directory: Path, case: Case) -> Path | None:
 def plot_block_sliding(directory: Path, nodes: np.ndarray, t_n: np.ndarray, t_t: np.ndarray,
                        slip: np.ndarray) -> Path:
     """Contact stresses vs node number over Table 6.1 (report Fig. 6.4)."""
-    from .plotting import _new_figure, _save
-
     t = table("block_sliding_table_6_1")
-    fig, axes = _new_figure(1, 1, size=(7.0, 4.8))
+    fig, axes = _new_figure(1, 1, size=(7.0, 4.8), grid=True)
     ax = axes[0, 0]
     for ours, key, name in ((t_n, "normal", "normal"), (t_t, "tangent", "tangential")):
         line = ax.plot(nodes, ours, "-", lw=1.5, label=f"{name}, ntncontact")[0]
@@ -69,18 +64,14 @@ def plot_block_sliding(directory: Path, nodes: np.ndarray, t_n: np.ndarray, t_t:
     ax.plot(nodes[slip], t_t[slip], "s", ms=7, mfc="none", color="k", label="sliding (ours)")
     ax.axvline(table_6_1_first_slip_node("report") - 0.5, color="0.5", ls="--",
                label="report's slip boundary")
-    ax.set_xlabel("node number")
-    ax.set_ylabel("contact stress")
-    ax.grid(True, alpha=0.3)
+    ax.set(xlabel="node number", ylabel="contact stress")
     ax.legend(fontsize="x-small", ncol=2)
     return _save(fig, directory / "table_6_1_stresses.png")
 
 
 def plot_hertz(directory: Path, snaps: list[HertzSnapshot], mu: float) -> Path:
     """Pressure (nodal force / reference length) over the Hertz ellipses; t_T with friction."""
-    from .plotting import _new_figure, _save
-
-    fig, axes = _new_figure(2 if mu else 1, 1, size=(7.0, 6.5 if mu else 4.5))
+    fig, axes = _new_figure(2 if mu else 1, 1, size=(7.0, 6.5 if mu else 4.5), grid=True)
     ax = axes[0, 0]
     for snap in snaps:
         a, p0 = hertz_plane_strain(snap.load)
@@ -92,23 +83,17 @@ def plot_hertz(directory: Path, snaps: list[HertzSnapshot], mu: float) -> Path:
         if mu:
             axes[1, 0].plot(snap.X, snap.t_t, "o-", ms=3, color=line[0].get_color(),
                             label=load_level(snap.fraction))
-    ax.set_ylabel("contact pressure (reference length)")
-    ax.set_xlabel("X")
-    ax.grid(True, alpha=0.3)
+    ax.set(ylabel="contact pressure (reference length)", xlabel="X")
     ax.legend(fontsize="x-small")
     if mu:
-        axes[1, 0].set_ylabel("tangential traction t_T")
-        axes[1, 0].set_xlabel("X")
-        axes[1, 0].grid(True, alpha=0.3)
+        axes[1, 0].set(ylabel="tangential traction t_T", xlabel="X")
         axes[1, 0].legend(fontsize="x-small")
     return _save(fig, directory / "hertz_pressure.png")
 
 
 def plot_hertz_versus(directory: Path, snaps: list[HertzSnapshot],
                       frictionless: list[HertzSnapshot], mu: float) -> Path:
-    from .plotting import _new_figure, _save
-
-    fig, axes = _new_figure(1, 1)
+    fig, axes = _new_figure(1, 1, grid=True)
     ax = axes[0, 0]
     theirs = {s.fraction: s for s in frictionless}
     for snap in snaps:
@@ -119,27 +104,22 @@ def plot_hertz_versus(directory: Path, snaps: list[HertzSnapshot],
         other = theirs[snap.fraction]
         ax.plot(other.X, other.p_ref, "x--", ms=4, color=line[0].get_color(),
                 label=f"frictionless, {load_level(snap.fraction)}")
-    ax.set_xlabel("X")
-    ax.set_ylabel("contact pressure (reference length)")
-    ax.grid(True, alpha=0.3)
+    ax.set(xlabel="X", ylabel="contact pressure (reference length)")
     ax.legend(fontsize="x-small")
     return _save(fig, directory / "hertz_vs_frictionless.png")
 
 
 def plot_delamination(directory: Path, positions: list[DelaminationPosition]) -> Path:
     """Contact tractions along the slit at each load position (report Fig. 6.17)."""
-    from .plotting import _new_figure, _save
-
     ncols = min(4, len(positions))
     nrows = -(-len(positions) // ncols)
-    fig, axes = _new_figure(nrows, ncols, size=(3.2 * ncols + 0.5, 2.8 * nrows))
+    fig, axes = _new_figure(nrows, ncols, size=(3.2 * ncols + 0.5, 2.8 * nrows), grid=True)
     for ax, p in zip(axes.flat, positions, strict=False):
         ax.plot(p.X1, p.t_n, "o-", ms=3, label="normal")
         ax.plot(p.X1, p.t_t, "s-", ms=3, label="tangential")
         ax.axvline(p.x_load, color="0.4", ls="--", lw=1)
         ax.set_title(f"P at {p.label} (x = {p.x_load:g})", fontsize="small")
         ax.set_xlim(DELAMINATION_SLIT[0] - 3, DELAMINATION_SLIT[1] + 3)
-        ax.grid(True, alpha=0.3)
     for ax in list(axes.flat)[len(positions):]:
         ax.set_visible(False)
     axes[0, 0].legend(fontsize="x-small")
@@ -154,8 +134,6 @@ TABLE_4_1_PLOTTED = (("min_angle_deg", "minimum angle (deg)"),
 
 def plot_table_4_1(directory: Path, stats: dict[str, dict[str, float]]) -> Path:
     """Table 4.1's statistics as bars, ours beside the report's."""
-    from .plotting import _new_figure, _save
-
     ref = table_4_1()
     fig, axes = _new_figure(2, 2, size=(9.0, 6.0))
     x = np.arange(len(TABLE_4_1_STAGES))
@@ -174,8 +152,6 @@ def plot_table_4_1(directory: Path, stats: dict[str, dict[str, float]]) -> Path:
 def plot_mesh_motion(directory: Path, meshes: dict) -> Path:
     """The layer at each stage (report Fig. 4.10)."""
     from matplotlib.collections import PolyCollection
-
-    from .plotting import _new_figure, _save
 
     fig, axes = _new_figure(3, 2, size=(10.0, 5.5))
     for ax, (stage, mesh) in zip(axes.flat, meshes.items(), strict=False):
