@@ -234,3 +234,14 @@ def reflex_cell_block():
     d = np.zeros_like(X)
     d[node] = [-0.15, -0.15]
     return mesh, X, d, node, X + d
+
+
+def same_pressed_pairs(records_a, records_b):
+    """Per step after the first of two runs' step records: (rows_a, rows_b, the pressed
+    pairs' first nodes), asserting that both runs pressed the same pairs (t_N > 0)."""
+    for a, b in zip(records_a[1:], records_b[1:], strict=True):
+        rows_a, rows_b = a.extra["contact_rows"], b.extra["contact_rows"]
+        pressed_a = rows_a["node_1"][rows_a["normal_traction"] > 0.0]
+        pressed_b = rows_b["node_1"][rows_b["normal_traction"] > 0.0]
+        np.testing.assert_array_equal(np.sort(pressed_a), np.sort(pressed_b))
+        yield rows_a, rows_b, pressed_a
