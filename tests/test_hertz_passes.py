@@ -1,22 +1,22 @@
-"""Quasi-static steps take in at their start the pairs that penetrate at the Newton start
-x_n + dt v_n (``Simulation._with_predicted_penetrations``). Detection releases a pair that
-ended the last step open and, the node being still paired while it tests the candidates, did
-not take it in again in the same detection, even where x + dt v put it inside: the step's
-first pass then stopped at its probe to take it in, one pass more (Hertz mesh 1: steps 2 and
-4; refined 4x: 13 of 18 steps).
+"""A quasi-static step's detection takes in again, at once, the pairs it releases where they
+penetrate at x_n + dt v_n (``interfaces.detect_all``, ``detection = "predicted"``). It used to
+test only the nodes not paired before the release: a pair that ended the last step open and
+was inside again at x + dt v waited for the step's first pass to stop at its probe, one pass
+more (Hertz mesh 1: steps 2 and 4; refined 4x: 13 of 18 steps).
 
-Hertz mesh 1 against the same run without the prediction (the code before this change).
+Hertz mesh 1 against the same run with released nodes kept out of their detection (the code
+before this change, ``helpers.released_nodes_wait``).
 """
 
 from __future__ import annotations
 
 import numpy as np
-from helpers import Recorder, model_from_example, same_pressed_pairs
+from helpers import Recorder, model_from_example, released_nodes_wait, same_pressed_pairs
 
 from ntncontact.engine.simulation import Simulation
 
 
-def _run(monkeypatch, predicted: bool):
+def _run(monkeypatch, retaken: bool):
     """(simulation, records, passes per step) of Hertz mesh 1's first five load steps."""
     passes: dict[int, int] = {}
     solve_step = Simulation._solve_step
@@ -32,9 +32,8 @@ def _run(monkeypatch, predicted: bool):
                 passes[state.step + 1] = passes.get(state.step + 1, 0) + 1
 
     monkeypatch.setattr(Simulation, "_solve_step", spy)
-    if not predicted:
-        monkeypatch.setattr(Simulation, "_with_predicted_penetrations",
-                            lambda self, contact, state, dt: contact)
+    if not retaken:
+        released_nodes_wait(monkeypatch)
     records = Recorder()
     sim = Simulation(model_from_example("hertz.toml", ["analysis.t_end=5"]), [records])
     sim.run()
@@ -42,9 +41,9 @@ def _run(monkeypatch, predicted: bool):
     return sim, records, passes
 
 
-def test_pairs_penetrating_at_the_newton_start_enter_with_the_first_pass(monkeypatch):
-    new, rec_new, passes_new = _run(monkeypatch, predicted=True)
-    old, rec_old, passes_old = _run(monkeypatch, predicted=False)
+def test_released_pairs_penetrating_at_the_newton_start_enter_with_the_first_pass(monkeypatch):
+    new, rec_new, passes_new = _run(monkeypatch, retaken=True)
+    old, rec_old, passes_old = _run(monkeypatch, retaken=False)
     # step 1 starts from rest (v = 0: nothing is predicted) and grows its one pair; after it
     # every step finds its active set at the start (the old code: 2 passes in steps 2 and 4)
     assert passes_new == {1: 2, 2: 1, 3: 1, 4: 1, 5: 1}, passes_new

@@ -23,7 +23,8 @@ DT = 0.01
 
 
 def blocks(mesh_motion: str = "lagrangian", detection: str = "penetration",
-           angle_deg: float = 0.0, gap: float = 0.1, t_end: float = 0.1):
+           angle_deg: float = 0.0, gap: float = 0.1, t_end: float = 0.1,
+           law: str = "persistency"):
     """A 1 x 0.2 block (8 x 2, soft) falling at v = (0.5, -1) onto a 2 x 0.2 block (16 x 2,
     stiffer, 8x denser), ``gap`` apart: with gap = 10 v dt the face touches at the end of step
     10. The whole set-up is turned by ``angle_deg`` about the origin (other round-off)."""
@@ -45,7 +46,8 @@ def blocks(mesh_motion: str = "lagrangian", detection: str = "penetration",
                           "density": 8.0}},
         ],
         "contact": [{"body_1": "upper", "surface_1": "bottom", "body_2": "lower",
-                     "surface_2": "top", "penalty_normal": 100.0, "detection": detection}],
+                     "surface_2": "top", "penalty_normal": 100.0, "detection": detection,
+                     "law": law}],
     })
 
 
