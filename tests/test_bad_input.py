@@ -235,7 +235,11 @@ def _children_cpu() -> float:
 @pytest.fixture(scope="module")
 def startup(tmp_path_factory) -> Timed:
     """The start-up of `ntncontact run` (the faster of two runs)."""
-    cwd = tmp_path_factory.mktemp("startup")
+    return _startup(tmp_path_factory.mktemp("startup"))
+
+
+def _startup(cwd: Path) -> Timed:
+    """The faster of two start-ups of `ntncontact run`, run in ``cwd``."""
     runs = [_timed([sys.executable, "-c", STARTUP], cwd) for _ in range(2)]
     assert all(r.returncode == 0 for r in runs), runs[0].stderr
     return min(runs, key=lambda r: r.wall)
@@ -277,11 +281,20 @@ def test_bad_input_is_refused_fast_with_one_clear_line(case: Case, tmp_path, sta
         assert part in message, f"{part!r} not in: {message}"
     # nothing ran: no results folder beyond what the writer sets up
     assert not (tmp_path / "out" / "history.csv").exists()
-    waited = max(0.0, startup.wall - startup.cpu)  # the load's share of the start-up run
     assert done.cpu - startup.cpu < LIMIT_S, (done.cpu, startup.cpu)
-    if done.wall - startup.wall >= LIMIT_S + waited:  # a burst of load, or a slow refusal:
-        done = _timed(_argv(case, path, tmp_path), tmp_path)  # a slow refusal is slow twice
+    if done.wall - startup.wall >= LIMIT_S + _waited(startup):  # a burst of load, or slow:
+        # a slow refusal is slow twice, against a start-up measured under the same load (the
+        # module's start-up ran minutes before, and the suite's load varies: at load 11 on
+        # the 2 cores this failed with refusals that took 0.3 s of CPU)
+        startup = _startup(tmp_path)
+        done = _timed(_argv(case, path, tmp_path), tmp_path)
+    waited = _waited(startup)
     assert done.wall - startup.wall < LIMIT_S + waited, (done.wall, startup.wall, waited)
+
+
+def _waited(startup: Timed) -> float:
+    """The load's share of a start-up run: its wall time beyond its CPU time."""
+    return max(0.0, startup.wall - startup.cpu)
 
 
 def test_the_base_scenario_is_good(tmp_path):
