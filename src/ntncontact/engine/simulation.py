@@ -223,8 +223,11 @@ NEW_PAIR_PROBE = 0.1
 #: 37-column PARDISO solve 12-17 ms against 33-35 ms for 37 single ones, ring k = 8), but
 #: its dense unknowns x pairs blocks grow as n^1.5 on a 2D mesh. Hertz refined 8x with
 #: Newton updates (~130 pressed pairs, 124k unknowns; load ~1.5): peak memory 1,323 -> 1,185
-#: MB, 3.98 -> 4.13 s a step (three solves a sensitivity instead of one)
-SENSITIVITY_COLUMNS = 64
+#: MB, 3.98 -> 4.13 s a step (three solves a sensitivity instead of one) with 64 columns.
+#: 64 -> 16 columns, ring k = 8 (37 pressed pairs, 46k unknowns; two runs each, load ~6): peak
+#: 502 / 501 -> 468 / 472 MB (10.6 -> 9.1 KB an element), the sensitivities' CPU 2.6 / 2.4 ->
+#: 2.75 / 2.4 s of ~26 s a run; 8 columns saved nothing more (466 MB), 32 nothing (503 MB)
+SENSITIVITY_COLUMNS = 16
 #: |B - A X| <= SENSITIVITY_RTOL |B| per column of S's solve, where a single-precision factor
 #: stops its refinement there: S only has to contract the multipliers' error (it is kept for
 #: the step's augmentations anyway). Ring refined 8x: the first solution's worst column
