@@ -12,8 +12,7 @@ import pandas as pd
 import pytest
 
 import ntncontact as ntc
-from ntncontact.api import toml_value
-from ntncontact.io.scenario import ScenarioError, read_toml
+from ntncontact.io.scenario import ScenarioError, read_toml, toml_value
 from ntncontact.io.writers import CONTACT_COLUMNS, HISTORY_COLUMNS
 
 if sys.version_info >= (3, 11):

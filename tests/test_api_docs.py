@@ -61,7 +61,7 @@ def reduced(path: Path, tmp_path: Path, **replace: object) -> Path:
     """The study file with its scenario path made absolute and some tables replaced."""
     data = tomllib.loads(path.read_text())
     data["scenario"] = str((path.parent / data["scenario"]).resolve())
-    from ntncontact.api import toml_value
+    from ntncontact.io.scenario import toml_value
 
     lines = [f"scenario = {toml_value(data['scenario'])}"]
     for table in ("set", "grid", "reductions"):

@@ -12,6 +12,7 @@ import ntncontact as ntc
 from ntncontact import api
 from ntncontact.cli import main
 from ntncontact.engine.builder import _warn_ineffective_keys as warn_ineffective_keys
+from ntncontact.io.scenario import toml_value
 
 
 def pressed_block(contact: dict) -> dict:
@@ -113,7 +114,7 @@ def test_the_command_prints_it_once_and_keeps_it_in_the_summary(tmp_path, capsys
     scenario = tmp_path / "press.toml"
     data = pressed_block({"method": "penalty", "penalty_normal": 1e4,
                           "augmentation": {"max_iterations": 5}})
-    text = "\n".join(f"{key} = {api.toml_value(value)}" for key, value in data.items())
+    text = "\n".join(f"{key} = {toml_value(value)}" for key, value in data.items())
     scenario.write_text(text, encoding="utf-8")
     assert main(["run", str(scenario), "--out", str(tmp_path / "run"), "--quiet"]) == 0
     err = capsys.readouterr().err

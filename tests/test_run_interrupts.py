@@ -17,8 +17,9 @@ from pathlib import Path
 import pytest
 from helpers import EXAMPLES, history_steps, wait_until
 
-from ntncontact import api, cli
+from ntncontact import cli
 from ntncontact.cli import main
+from ntncontact.io import run_setup
 from ntncontact.io.run_folder import LOCK_FILE, RunLock, read_lock, run_status
 from ntncontact.io.vtk import read_pvd
 
@@ -39,7 +40,7 @@ def frame_steps(out: Path) -> list[int]:
 def test_a_first_signal_during_the_build_stops_it_at_once(tmp_path, capsys, monkeypatch):
     """A tester's first Ctrl-C 8 s into a 31 s build was silent until the build ended. The
     build here takes 20 s after the signal: the run must end well before."""
-    build = api.build_model
+    build = run_setup.build_model
 
     def slow_build(*args, **kwargs):
         os.kill(os.getpid(), signal.SIGINT)
@@ -47,7 +48,7 @@ def test_a_first_signal_during_the_build_stops_it_at_once(tmp_path, capsys, monk
             time.sleep(0.05)
         return build(*args, **kwargs)
 
-    monkeypatch.setattr(api, "build_model", slow_build)
+    monkeypatch.setattr(run_setup, "build_model", slow_build)
     out = tmp_path / "spin"
     started = time.monotonic()
     assert main(["run", str(SPIN), "--out", str(out), "--quiet"]) == 130
@@ -64,7 +65,7 @@ def test_the_folder_is_locked_and_starting_during_the_build(tmp_path, capsys, mo
     out = tmp_path / "spin"
     assert main(["run", str(SPIN), "--out", str(out), "--quiet", *SHORT]) == 0
     capsys.readouterr()
-    build = api.build_model
+    build = run_setup.build_model
     seen = {}
 
     def checked_build(*args, **kwargs):
@@ -75,7 +76,7 @@ def test_the_folder_is_locked_and_starting_during_the_build(tmp_path, capsys, mo
                                    "--overwrite", *SHORT]), capsys.readouterr()
         return build(*args, **kwargs)
 
-    monkeypatch.setattr(api, "build_model", checked_build)
+    monkeypatch.setattr(run_setup, "build_model", checked_build)
     assert main(["run", str(SPIN), "--out", str(out), "--quiet", "--overwrite", *SHORT]) == 0
     assert seen["lock"]["pid"] == os.getpid() and seen["lock"]["phase"] == "building"
     code, printed = seen["status"]

@@ -413,19 +413,19 @@ def test_a_sigint_during_the_build_over_an_old_run_says_one_true_line(tmp_path, 
     """A tester's Ctrl-C a second into `ntncontact run --overwrite` over a folder holding an
     earlier completed run printed "stopping after this step" (no step existed) and then "files
     written so far are valid", and status said "completed": the old run, untouched."""
-    from ntncontact import api
+    from ntncontact.io import run_setup
 
     out = tmp_path / "spin"
     assert run_spin(out, "--set", "analysis.t_end=0.1") == 0
     before = (out / "summary.json").read_bytes()
     capsys.readouterr()
-    build = api.build_model
+    build = run_setup.build_model
 
     def signalled(*args, **kwargs):
         os.kill(os.getpid(), signal.SIGINT)  # lands in the command's handler, mid-build
         return build(*args, **kwargs)
 
-    monkeypatch.setattr(api, "build_model", signalled)
+    monkeypatch.setattr(run_setup, "build_model", signalled)
     assert main(["run", str(SPIN), "--out", str(out), "--quiet", "--overwrite"]) == 130
     err = capsys.readouterr().err
     assert err == "interrupted by SIGINT before the run began: nothing was written\n"

@@ -21,6 +21,7 @@ from helpers import model_from_dict
 
 import ntncontact as ntc
 from ntncontact.cli import main
+from ntncontact.io.scenario import toml_value
 from ntncontact.report.run_warnings import BALANCE_WARNING, result_warnings
 
 #: the tester's oblique impact of a spinning Neo-Hookean block on a free base (freeimpact.toml)
@@ -46,11 +47,11 @@ IMPACT = {
 
 def _toml(data: dict) -> str:
     """``data`` as a scenario file (the command reads files)."""
-    lines = ["[analysis]\n" + "".join(f"{k} = {ntc.api.toml_value(v)}\n"
+    lines = ["[analysis]\n" + "".join(f"{k} = {toml_value(v)}\n"
                                        for k, v in data["analysis"].items())]
     for key in ("bodies", "contact"):
         for entry in data[key]:
-            lines.append(f"[[{key}]]\n" + "".join(f"{k} = {ntc.api.toml_value(v)}\n"
+            lines.append(f"[[{key}]]\n" + "".join(f"{k} = {toml_value(v)}\n"
                                                   for k, v in entry.items()))
     return "\n".join(lines)
 
@@ -219,8 +220,8 @@ def test_a_sweep_case_records_its_warnings_also_when_skipped(tmp_path):
 def test_a_failed_run_warns_before_its_error_as_it_was_raised(monkeypatch):
     """The command prints a failed run's warnings before its error; so does the API (the
     step's failure is faked here: the summary so far shows a deep pair)."""
-    from ntncontact import api
     from ntncontact.engine.simulation import SimulationError
+    from ntncontact.io import run_setup
 
     class Failing:
         def __init__(self, model, observers):
@@ -230,7 +231,7 @@ def test_a_failed_run_warns_before_its_error_as_it_was_raised(monkeypatch):
             self.writer.results.summary.update(**_penetrated())
             raise SimulationError("step 3 failed")
 
-    monkeypatch.setattr(api, "Simulation", Failing)
+    monkeypatch.setattr(run_setup, "Simulation", Failing)
     with pytest.warns(ntc.PhysicsWarning, match="node 3 of interface 'if' went 0.03"):
         with pytest.raises(SimulationError, match="^step 3 failed$") as err:
             ntc.run(ntc.scenario_from_dict(IMPACT))

@@ -15,9 +15,8 @@ import contextlib
 import copy
 import json
 import warnings
-from collections.abc import Callable, Iterator, Mapping, Sequence
-from contextlib import AbstractContextManager
-from dataclasses import dataclass, field
+from collections.abc import Callable, Iterator, Mapping
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -25,49 +24,20 @@ import meshio
 import numpy as np
 import pandas as pd
 
-from .engine.builder import build_model
-from .engine.diagnostics import warnings_noted
-from .engine.model import Model
-from .engine.simulation import Simulation
-from .io import checkpoint, writers
+from .io import writers
 from .io.results import ResultWriter
-from .io.run_folder import RunLock, read_summary
-from .io.scenario import (
-    ScenarioConfig,
-    ScenarioError,
-    apply_override,
-    parse_scenario,
-    read_toml,
-    toml_value,
-)
+from .io.run_folder import read_summary
+from .io.run_setup import start_run
+from .io.scenario import Overrides, Scenario, ScenarioError
 from .io.vtk import find_field_series, read_frame_mesh, read_series
 from .io.writers import CONTACT_FILE, HISTORY_FILE, SUMMARY_FILE, MemoryResults, to_jsonable
 from .report.run_warnings import PhysicsWarning, result_warnings
-
-Overrides = Mapping[str, Any] | Sequence[str] | None
-
-
-@dataclass(frozen=True)
-class Scenario:
-    """A validated scenario: its configuration, the folder its relative paths (meshes) are
-    resolved against, where it came from, and the overrides applied (``key=value`` TOML)."""
-
-    config: ScenarioConfig
-    base_dir: Path
-    source: str
-    overrides: tuple[str, ...] = ()
-    data: Mapping[str, Any] = field(default_factory=dict, repr=False)
-
-    def with_overrides(self, overrides: Overrides) -> Scenario:
-        """The same scenario with more overrides applied (dotted keys, as ``--set``)."""
-        return _build(self.data, self.base_dir, self.source, self.overrides, overrides)
 
 
 def load_scenario(path: str | Path, overrides: Overrides = None) -> Scenario:
     """Read and validate a TOML scenario; ``overrides`` maps dotted keys to values
     (``{"contact.0.friction": 0.2}``) or lists ``"key=value"`` strings as ``--set`` takes."""
-    path = Path(path)
-    return _build(read_toml(path), path.parent, str(path), (), overrides)
+    return Scenario.from_file(path, overrides)
 
 
 def scenario_from_dict(data: Mapping[str, Any], base_dir: str | Path = ".",
@@ -76,7 +46,7 @@ def scenario_from_dict(data: Mapping[str, Any], base_dir: str | Path = ".",
     mesh files are looked up relative to ``base_dir``. NumPy scalars and arrays are taken as
     the Python numbers and lists they hold (NumPy's integers are not Python ints, which
     strict validation requires)."""
-    return _build(_plain(data), Path(base_dir), "<dict>", (), overrides)
+    return Scenario.from_data(_plain(data), Path(base_dir), "<dict>", overrides)
 
 
 def _plain(value: Any) -> Any:
@@ -88,28 +58,6 @@ def _plain(value: Any) -> Any:
     if isinstance(value, list | tuple):
         return [_plain(item) for item in value]
     return copy.deepcopy(value)
-
-
-def _build(data: Mapping[str, Any], base_dir: Path, source: str, applied: tuple[str, ...],
-           overrides: Overrides) -> Scenario:
-    items = applied + override_strings(overrides)
-    working = copy.deepcopy(dict(data))
-    where = Path(source)
-    for item in items:
-        apply_override(working, item, where)
-    config = parse_scenario(working, where)
-    return Scenario(config, base_dir, source, items, copy.deepcopy(dict(data)))
-
-
-def override_strings(overrides: Overrides) -> tuple[str, ...]:
-    """``{"analysis.dt": 0.01}`` -> ``("analysis.dt=0.01",)``; strings pass unchanged."""
-    if overrides is None:
-        return ()
-    if isinstance(overrides, Mapping):
-        return tuple(f"{key}={toml_value(value)}" for key, value in overrides.items())
-    if isinstance(overrides, str):
-        raise TypeError("overrides: give a mapping or a list of 'key=value' strings")
-    return tuple(str(item) for item in overrides)
 
 
 @dataclass(frozen=True)
@@ -225,36 +173,6 @@ def _run_with_writer(scenario: Scenario, out: Path | None,
     with _failed_with_summary(writer):
         simulation.run(progress)  # a failed step raises, with or without a folder
     return read_results(out) if out is not None else _results_of(writer.results)
-
-
-def start_run(scenario: Scenario, out: Path | None, *, overwrite: bool, restart: bool,
-              writing: Callable[[ResultWriter], AbstractContextManager[object]],
-              lock: RunLock | None = None,
-              building: Callable[[], AbstractContextManager[object]] = contextlib.nullcontext,
-              built: Callable[[Model], None] | None = None) -> tuple[Simulation, ResultWriter]:
-    """The run of ``scenario`` into the results folder ``out`` (None: in memory), set up for
-    :meth:`Simulation.run`, for :func:`run` and ``ntncontact run``: the model, built inside
-    ``building()`` and then given to ``built`` (before any file is written); its results
-    writer (``restart``: cut back to the folder's last checkpoint; ``lock``: the folder's lock
-    if the caller took it); the simulation with the writer and the checkpoints attached, set
-    up inside ``writing(writer)``, which answers for the writer when that fails."""
-    with warnings_noted() as build_warnings, building():  # kept in the summary
-        model = build_model(scenario.config, scenario.base_dir)
-    if built is not None:
-        built(model)
-    identity = checkpoint.run_identity(scenario.config, scenario.overrides, model)
-    resume = checkpoint.load_latest(out, identity) if restart else None
-    writer = ResultWriter(out, model, overwrite=overwrite,
-                          resume=resume and resume["writer"], scenario=scenario.source,
-                          title=scenario.config.title, overrides=list(scenario.overrides),
-                          scenario_hash=identity["scenario_hash"],
-                          build_warnings=build_warnings, lock=lock)
-    with writing(writer):
-        simulation = Simulation(model, [writer])
-        if out is not None:
-            checkpoint.attach(simulation, writer, out,
-                              scenario.config.analysis.checkpoint_interval, identity, resume)
-    return simulation, writer
 
 
 @contextlib.contextmanager

@@ -2,9 +2,11 @@
 
 from __future__ import annotations
 
+import copy
 import json
 import sys
 from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Annotated, Any, Literal, get_args
 
@@ -491,13 +493,58 @@ def parse_scenario(data: dict[str, Any], path: Path) -> ScenarioConfig:
                             ) from None
 
 
-def load_scenario(path: str | Path, overrides: list[str] | None = None) -> ScenarioConfig:
+Overrides = Mapping[str, Any] | Sequence[str] | None
+
+
+@dataclass(frozen=True)
+class Scenario:
+    """A validated scenario: its configuration, the folder its relative paths (meshes) are
+    resolved against, where it came from, and the overrides applied (``key=value`` TOML)."""
+
+    config: ScenarioConfig
+    base_dir: Path
+    source: str
+    overrides: tuple[str, ...] = ()
+    data: Mapping[str, Any] = field(default_factory=dict, repr=False)
+
+    @classmethod
+    def from_file(cls, path: str | Path, overrides: Overrides = None) -> Scenario:
+        """A TOML scenario file, its relative paths resolved against its folder."""
+        path = Path(path)
+        return cls.from_data(read_toml(path), path.parent, str(path), overrides)
+
+    @classmethod
+    def from_data(cls, data: Mapping[str, Any], base_dir: Path, source: str,
+                  overrides: Overrides = None) -> Scenario:
+        """The mapping of a scenario file with ``overrides`` applied, validated; errors name
+        ``source``."""
+        items = override_strings(overrides)
+        working = copy.deepcopy(dict(data))
+        for item in items:
+            apply_override(working, item, Path(source))
+        return cls(parse_scenario(working, Path(source)), base_dir, source, items,
+                   copy.deepcopy(dict(data)))
+
+    def with_overrides(self, overrides: Overrides) -> Scenario:
+        """The same scenario with more overrides applied (dotted keys, as ``--set``)."""
+        return Scenario.from_data(self.data, self.base_dir, self.source,
+                                  self.overrides + override_strings(overrides))
+
+
+def override_strings(overrides: Overrides) -> tuple[str, ...]:
+    """``{"analysis.dt": 0.01}`` -> ``("analysis.dt=0.01",)``; strings pass unchanged."""
+    if overrides is None:
+        return ()
+    if isinstance(overrides, Mapping):
+        return tuple(f"{key}={toml_value(value)}" for key, value in overrides.items())
+    if isinstance(overrides, str):
+        raise TypeError("overrides: give a mapping or a list of 'key=value' strings")
+    return tuple(str(item) for item in overrides)
+
+
+def load_scenario(path: str | Path, overrides: Overrides = None) -> ScenarioConfig:
     """Read and validate a TOML scenario, applying ``--set key=value`` overrides first."""
-    path = Path(path)
-    data = read_toml(path)
-    for item in overrides or []:
-        apply_override(data, item, path)
-    return parse_scenario(data, path)
+    return Scenario.from_file(path, overrides).config
 
 
 def read_toml(path: Path) -> dict[str, Any]:

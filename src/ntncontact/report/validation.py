@@ -28,6 +28,8 @@ from collections.abc import Callable
 from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
 from pathlib import Path
 
+from ..io.run_setup import start_run
+from ..io.scenario import Scenario
 from .reference import hertz_plane_strain
 from .validation_cases import CASES, EXAMPLES, Case
 from .validation_checks import (
@@ -52,20 +54,11 @@ ORPHAN_GRACE = 30.0
 def _run_scenario(case: Case, directory: Path, quick: bool, stop: StopReason | None) -> None:
     """Run the case's scenario into ``directory`` (results as ``ntncontact run`` writes them);
     raises if the run does not complete."""
-    from ..engine.builder import build_model
-    from ..engine.simulation import Simulation
-    from ..io.results import ResultWriter
-    from ..io.scenario import load_scenario
-
-    scenario = EXAMPLES / case.example
-    items = overrides(case, quick)
-    config = load_scenario(scenario, items)
-    with quiet_build():
-        model = build_model(config, scenario.parent)
-    writer = ResultWriter(directory, model, scenario=str(scenario), title=config.title,
-                          overrides=items, overwrite=True)  # validate reruns every case
+    scenario = Scenario.from_file(EXAMPLES / case.example, overrides(case, quick))
+    with quiet_build():  # validate reruns every case
+        simulation, _ = start_run(scenario, directory, overwrite=True, restart=False)
     # raises if the run fails, RunInterrupted after the step in progress when asked to stop
-    Simulation(model, [writer]).run(stop_reason=stop)
+    simulation.run(stop_reason=stop)
 
 
 def not_run(case: Case, out: Path, reason: str, seconds: float = 0.0) -> CaseResult:

@@ -16,8 +16,17 @@ from pathlib import Path
 
 import numpy as np
 
+from ..ale.example_mesh_motion import mesh_motion_example
 from ..contact import pair_gaps
+from ..engine.builder import build_model
 from ..engine.diagnostics import PhysicsWarning
+from ..engine.model import Model
+from ..io.scenario import load_scenario
+from ..io.vtk import read_pvd, read_vtu
+from ..io.writers import read_csv_table
+from ..mesh.boundary import nodal_tributary_lengths, surface_chain
+from ..mesh.quality import corner_jacobians
+from .plotting import plot_all, plot_contact_tractions, plot_deformed, plot_energies, plot_momenta
 from .reference import SMOOTHERS, compare
 from .validation_cases import EXAMPLES, Case
 from .validation_checks import (
@@ -44,11 +53,8 @@ def overrides(case: Case, quick: bool) -> list[str]:
     return list(case.overrides) + (list(case.quick) if quick else [])
 
 
-def _model(case: Case, quick: bool):
+def _model(case: Case, quick: bool) -> Model:
     """The case's model (reference coordinates, bodies, surfaces), not run."""
-    from ..engine.builder import build_model
-    from ..io.scenario import load_scenario
-
     with quiet_build():
         return build_model(load_scenario(EXAMPLES / case.example, overrides(case, quick)),
                            EXAMPLES)
@@ -67,9 +73,6 @@ class _Results:
     """contact.csv rows and VTU positions of a results folder at chosen times."""
 
     def __init__(self, directory: Path) -> None:
-        from ..io.vtk import read_pvd
-        from ..io.writers import read_csv_table
-
         self.contact = read_csv_table(directory / "contact.csv")
         self.series = read_pvd(directory / "fields.pvd")
 
@@ -89,8 +92,6 @@ class _Results:
         return {k: v[keep][order] for k, v in self.contact.items()}
 
     def positions(self, t: float) -> np.ndarray:
-        from ..io.vtk import read_vtu
-
         times = np.array([s for s, _ in self.series])
         i = int(np.argmin(np.abs(times - t)))
         if abs(times[i] - t) > 1e-9:
@@ -99,8 +100,6 @@ class _Results:
 
 
 def _measure_impact(case: Case, directory: Path, quick: bool, result: CaseResult) -> None:
-    from ..io.writers import read_csv_table
-
     result.label, result.rows = compare(directory, case.tolerance)
     t = read_csv_table(directory / "history.csv")["time"]
     if quick:
@@ -114,14 +113,6 @@ def _measure_impact(case: Case, directory: Path, quick: bool, result: CaseResult
 
 
 def _impact_plots(directory: Path, quick: bool) -> list[Path]:
-    from .plotting import (
-        plot_all,
-        plot_contact_tractions,
-        plot_deformed,
-        plot_energies,
-        plot_momenta,
-    )
-
     if not quick:
         return plot_all(directory)
     return [f(directory) for f in (plot_energies, plot_momenta, plot_deformed,
@@ -153,8 +144,6 @@ HERTZ_SNAPSHOTS = {5.0: 4.0 / 15.0, 11.0: 9.0 / 15.0, 18.0: 1.0}  # examples/her
 
 def hertz_snapshots(case: Case, directory: Path, quick: bool) -> list[HertzSnapshot]:
     """The report's load levels (26.7, 60, 100 %) that the run reached."""
-    from ..mesh.boundary import nodal_tributary_lengths, surface_chain
-
     model = _model(case, quick)
     res = _Results(directory)
     cylinder = model.body("cylinder")
@@ -242,15 +231,10 @@ def _measure_delamination(case: Case, directory: Path, quick: bool,
 
 
 def _quasi_static_plots(directory: Path, quick: bool) -> list[Path]:
-    from .plotting import plot_contact_tractions, plot_deformed
-
     return [plot_deformed(directory)] + ([] if quick else [plot_contact_tractions(directory)])
 
 
 def run_mesh_motion(case: Case, directory: Path, quick: bool, result: CaseResult) -> None:
-    from ..ale.example_mesh_motion import mesh_motion_example
-    from ..mesh.quality import corner_jacobians
-
     directory.mkdir(parents=True, exist_ok=True)
     out = mesh_motion_example()
     inverted = {s: int(np.count_nonzero((corner_jacobians(out["meshes"][s]) <= 0.0).any(axis=1)))

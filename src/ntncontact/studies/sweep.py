@@ -41,11 +41,11 @@ import numpy as np
 import pandas as pd
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
-from ..api import Scenario, load_scenario, override_strings, read_results, run, toml_value
+from ..api import load_scenario, read_results, run
 from ..engine.builder import build_mesh, build_model
 from ..io.checkpoint import run_identity
 from ..io.results import CONTACT_HISTORY, OFF_SURFACE_HISTORY
-from ..io.scenario import ScenarioError, read_toml
+from ..io.scenario import Scenario, ScenarioError, override_strings, read_toml, toml_value
 from ..io.writers import HISTORY_COLUMNS
 from ..report.run_warnings import result_warnings
 from ..threads import single_threaded
