@@ -9,26 +9,21 @@ computed here.
 
 from __future__ import annotations
 
-import warnings
-from collections.abc import Callable, Iterator
-from contextlib import contextmanager
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
 
 from ..ale.example_mesh_motion import mesh_motion_example
 from ..contact import pair_gaps
-from ..engine.builder import build_model
-from ..engine.diagnostics import PhysicsWarning
 from ..engine.model import Model
-from ..io.scenario import load_scenario
 from ..io.vtk import read_pvd, read_vtu
 from ..io.writers import read_csv_table
 from ..mesh.boundary import nodal_tributary_lengths, surface_chain
 from ..mesh.quality import corner_jacobians
 from .plotting import plot_all, plot_contact_tractions, plot_deformed, plot_energies, plot_momenta
 from .reference import SMOOTHERS, compare
-from .validation_cases import EXAMPLES, Case
+from .validation_cases import Case
 from .validation_checks import (
     CaseResult,
     DelaminationPosition,
@@ -47,26 +42,6 @@ from .validation_figures import (
     plot_report_overlay,
     plot_table_4_1,
 )
-
-
-def overrides(case: Case, quick: bool) -> list[str]:
-    return list(case.overrides) + (list(case.quick) if quick else [])
-
-
-def _model(case: Case, quick: bool) -> Model:
-    """The case's model (reference coordinates, bodies, surfaces), not run."""
-    with quiet_build():
-        return build_model(load_scenario(EXAMPLES / case.example, overrides(case, quick)),
-                           EXAMPLES)
-
-
-@contextmanager
-def quiet_build() -> Iterator[None]:
-    """The build's warnings left unprinted: the shipped examples' (hertz.toml's slip_tolerance
-    serves its friction cases and is unread in the frictionless ones) are known."""
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", PhysicsWarning)
-        yield
 
 
 class _Results:
@@ -99,7 +74,8 @@ class _Results:
         return read_vtu(self.series[i][1], time=times[i]).deformed_points
 
 
-def _measure_impact(case: Case, directory: Path, quick: bool, result: CaseResult) -> None:
+def _measure_impact(case: Case, model: Model, directory: Path, quick: bool,
+                    result: CaseResult) -> None:
     result.label, result.rows = compare(directory, case.tolerance)
     t = read_csv_table(directory / "history.csv")["time"]
     if quick:
@@ -119,9 +95,8 @@ def _impact_plots(directory: Path, quick: bool) -> list[Path]:
                                    plot_contact_tractions)]
 
 
-def _measure_block_sliding(case: Case, directory: Path, quick: bool,
+def _measure_block_sliding(case: Case, model: Model, directory: Path, quick: bool,
                            result: CaseResult) -> None:
-    model = _model(case, quick)
     res = _Results(directory)
     t_end = float(res.times()[-1])
     main = res.rows(t_end, "block_foundation")
@@ -142,9 +117,8 @@ def _measure_block_sliding(case: Case, directory: Path, quick: bool,
 HERTZ_SNAPSHOTS = {5.0: 4.0 / 15.0, 11.0: 9.0 / 15.0, 18.0: 1.0}  # examples/hertz.toml holds
 
 
-def hertz_snapshots(case: Case, directory: Path, quick: bool) -> list[HertzSnapshot]:
-    """The report's load levels (26.7, 60, 100 %) that the run reached."""
-    model = _model(case, quick)
+def hertz_snapshots(model: Model, directory: Path) -> list[HertzSnapshot]:
+    """The report's load levels (26.7, 60, 100 %) that the run of ``model`` reached."""
     res = _Results(directory)
     cylinder = model.body("cylinder")
     chain = surface_chain(cylinder.mesh, "arc").nodes + cylinder.node_offset
@@ -182,8 +156,9 @@ def hertz_snapshots(case: Case, directory: Path, quick: bool) -> list[HertzSnaps
     return out
 
 
-def _measure_hertz(case: Case, directory: Path, quick: bool, result: CaseResult) -> None:
-    snaps = hertz_snapshots(case, directory, quick)
+def _measure_hertz(case: Case, model: Model, directory: Path, quick: bool,
+                   result: CaseResult) -> None:
+    snaps = hertz_snapshots(model, directory)
     mu, h = case.friction, case.mesh_size
     result.label = (f"Hertz, contact element size {h:g}, "
                     + (f"mu = {mu:g}" if mu else "frictionless"))
@@ -198,9 +173,7 @@ DELAMINATION_POSITIONS = tuple(  # the report's x = L, 6/7 L, ..., 0 at t = 1, 3
     for k in range(8))
 
 
-def delamination_positions(case: Case, directory: Path, quick: bool
-                           ) -> list[DelaminationPosition]:
-    model = _model(case, quick)
+def delamination_positions(model: Model, directory: Path) -> list[DelaminationPosition]:
     res = _Results(directory)
     out = []
     for t, x_load, label in DELAMINATION_POSITIONS:
@@ -221,9 +194,9 @@ def delamination_positions(case: Case, directory: Path, quick: bool
     return out
 
 
-def _measure_delamination(case: Case, directory: Path, quick: bool,
+def _measure_delamination(case: Case, model: Model, directory: Path, quick: bool,
                           result: CaseResult) -> None:
-    positions = delamination_positions(case, directory, quick)
+    positions = delamination_positions(model, directory)
     result.label = "delamination under a moving point load (mu = 0.1)"
     result.rows = delamination_rows(positions)
     result.images = [plot_delamination(directory, positions),
@@ -245,7 +218,9 @@ def run_mesh_motion(case: Case, directory: Path, quick: bool, result: CaseResult
                      plot_mesh_motion(directory, out["meshes"])]
 
 
-MEASURES: dict[str, Callable[[Case, Path, bool, CaseResult], None]] = {
+#: the measure of each kind of case: (case, its model, its results folder, quick, the result
+#: to fill in)
+MEASURES: dict[str, Callable[[Case, Model, Path, bool, CaseResult], None]] = {
     "impact": _measure_impact,
     "block_sliding": _measure_block_sliding,
     "hertz": _measure_hertz,
