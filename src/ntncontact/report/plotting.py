@@ -19,6 +19,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from numpy.typing import NDArray
 
+from ntncontact.engine.diagnostics import energy_balance
 from ntncontact.io.vtk import FrameSource, VtuFrame, find_field_series, read_frame, read_series
 from ntncontact.io.writers import CONTACT_FILE, HISTORY_FILE, read_csv_table
 
@@ -86,8 +87,6 @@ def plot_energies(directory: str | os.PathLike, path: str | os.PathLike | None =
     below, the energy balance error (E - E0 - W_ext - W_contact) / S, S the largest energy of
     the ledger (``diagnostics.energy_balance``): it stays small with loads, where E - E0 does
     not."""
-    from ntncontact.engine.diagnostics import energy_balance
-
     folder = Path(directory)
     history = _load_table(folder, HISTORY_FILE)
     time, total = history["time"], history["total_energy"]

@@ -61,6 +61,10 @@ class CaseResult:
         return [r for r in self.checked() if not r.passed()]
 
 
+#: Table 4.1's measures the smoothers are ranked by, True where larger is better
+SMOOTHING_MEASURES = {"min_angle_deg": True, "max_angle_deg": False, "variance_angle": False}
+
+
 def mesh_motion_rows(stats: dict[str, dict[str, float]],
                      inverted: dict[str, int]) -> list[Comparison]:
     """Table 4.1 side by side: the smoothers' ranking and repair (checked) and every value
@@ -72,15 +76,13 @@ def mesh_motion_rows(stats: dict[str, dict[str, float]],
     ref = table_4_1()
     rows = []
     names = {"laplacian": "L", "simple_angle_based": "S", "weighted_angle_based": "W"}
-    for measure, larger in (("min_angle_deg", True), ("max_angle_deg", False),
-                            ("variance_angle", False)):
+    for measure, larger in SMOOTHING_MEASURES.items():
         ours = {s: stats[s][measure] for s in SMOOTHERS}
         rank = " > ".join(names[s] for s in smoother_ranking(ours, larger))
         rank_ref = " > ".join(names[s] for s in smoother_ranking(ref[measure], larger))
         rows.append(Comparison(f"ranking by {measure} (best first)", rank, rank_ref, 0.0,
                                "equal", note="L Laplacian, S simple, W weighted angle-based"))
-    for measure, larger in (("min_angle_deg", True), ("max_angle_deg", False),
-                            ("variance_angle", False)):
+    for measure, larger in SMOOTHING_MEASURES.items():
         sign = 1.0 if larger else -1.0
         for s in SMOOTHERS:
             rows.append(Comparison(
