@@ -197,7 +197,6 @@ def _lock_before_build(out: Path) -> RunLock:
     """The results folder, created if need be and locked before the model's build (as long as
     35 s for long interfaces), which ``ntncontact status`` reports as "starting" and during
     which a second run into the folder is refused."""
-
     out.mkdir(parents=True, exist_ok=True)
     return RunLock.acquire(out, phase="building")
 
@@ -263,7 +262,6 @@ def _writing(writer: ResultWriter, stop: StopOnSignal) -> Iterator[None]:
 def _warn_results(summary: dict, static: bool) -> None:
     """The warnings a run's summary calls for (``report.run_warnings``), one line each on
     stderr."""
-
     for line in result_warnings(summary, static):
         print(f"warning: {line}", file=sys.stderr)
 
@@ -275,7 +273,6 @@ def _short(value: float | None) -> str:
 
 def _status(args: argparse.Namespace) -> int:
     """The run in a results folder: its status (stale: killed), step, time."""
-
     status = run_status(Path(args.directory))
     gone = " (gone)" if status.state == "stale" else ""
     if status.state == "starting" or status.steps is None:  # nothing written yet
@@ -297,7 +294,6 @@ def _status(args: argparse.Namespace) -> int:
 
 
 def _draw_figures(directory: Path, args: argparse.Namespace) -> list[Path]:
-
     return plot_all(directory, times=args.times, gif=args.gif)
 
 
@@ -314,7 +310,6 @@ QUALITY_INPUTS = ("a scenario (.toml), a Gmsh mesh (.msh), a results VTU file (.
 def _mesh_quality(args: argparse.Namespace) -> int:
     """Table 4.1 statistics of every body of a scenario (reference meshes), of a Gmsh mesh or
     of a VTU file."""
-
     path = Path(args.path)
     if path.is_dir():
         return _print_quality(_folder_quality(path))
@@ -323,17 +318,14 @@ def _mesh_quality(args: argparse.Namespace) -> int:
     if args.set and path.suffix != ".toml":
         raise ValueError(f"{path}: --set changes scenario keys; this is not a scenario (.toml)")
     if path.suffix == ".vtu":
-
         frame = read_vtu(path)
         # a results frame: its current configuration; a plain quad mesh: its points
         points = (frame.deformed_points if "displacement" in frame.point_data
                   else frame.points)
         tables = {path.name: quality_statistics(points, frame.cells)}
     elif path.suffix == ".msh":
-
         tables = {path.name: quality_statistics(read_msh(path, name=path.stem))}
     elif path.suffix == ".toml":
-
         model = build_model(load_scenario(path, args.set).config, path.parent)
         tables = {b.name: quality_statistics(b.mesh) for b in model.bodies}
     else:
@@ -343,7 +335,6 @@ def _mesh_quality(args: argparse.Namespace) -> int:
 
 def _folder_quality(folder: Path) -> dict:
     """The final meshes' statistics a run folder's summary.json holds, body by body."""
-
     summary = folder / "summary.json"
     if not summary.is_file():
         raise FileNotFoundError(f"{folder}: a folder without summary.json (expected "
@@ -367,7 +358,6 @@ def _print_comparison(directory: Path) -> int:
     """The run's headline numbers beside the report's, each with its verdict, tolerance and
     reason (as `validate` checks them); also DIR/comparison.csv. A folder that is not a run's
     results is an error naming what was expected."""
-
     label, rows = compare(directory)
     print(format_comparison(label, rows))
     write_comparison_csv(directory / "comparison.csv", rows)
@@ -378,8 +368,6 @@ def _validate(args: argparse.Namespace) -> int:
     """Run every example of the report and write DIR/report.html and report.md. SIGINT and
     SIGTERM stop the cases after their step and start no other; the report of the finished
     ones is written, and the command ends as interrupted (130/143, as ``run``)."""
-
-
     cases = validation_cases.CASES  # looked up here: a test runs the command on a few cases
     out = Path(args.out)
     started: list[str] = []
@@ -416,7 +404,6 @@ def _validate(args: argparse.Namespace) -> int:
 
 def _sweep(args: argparse.Namespace) -> int:
     """Run a sweep file's cases on Dask; write OUT/sweep.csv and the figures it asks for."""
-
     _out_folder(args.out)
     with _interrupting_signals():
         table = sweep(args.sweep, args.out, scheduler=args.scheduler, workers=args.workers,
@@ -554,7 +541,6 @@ def _save_traceback() -> str:
 def _with_source(err: BaseException, args: argparse.Namespace) -> str:
     """The message, led by the scenario file when it is about the scenario and does not name
     it yet (the model builder knows the keys, not the file)."""
-
     text = str(err) or type(err).__name__  # a bare MemoryError has no message
     if isinstance(err, MemoryError):
         text = f"out of memory ({text})"

@@ -20,6 +20,7 @@ from ..engine.postprocess import (
 from ..engine.reactions import reaction_columns
 from ..engine.simulation import StepRecord
 from ..mesh.boundary import chain_edge_lengths
+from ..mesh.quality import quality_statistics
 from .run_folder import RunLock
 from .vtk import VtuSeriesWriter
 from .writers import MemoryResults, ResultsDirectory
@@ -543,8 +544,6 @@ class ResultWriter:
 
     def _mesh_quality(self) -> dict:
         """Table 4.1 statistics of each body's current mesh (node positions x) at the end."""
-        from ..mesh.quality import quality_statistics
-
         if self._last is None:
             return {}
         x = self._last.state.x
