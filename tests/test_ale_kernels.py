@@ -13,10 +13,11 @@ import pytest
 from test_ale_remap import XI, q4_shape
 
 from ntncontact.ale import remap, surface
-from ntncontact.ale.motion import _DN, _SHAPE, _element_masses, _masses_after
+from ntncontact.ale.motion import _element_masses, _masses_after
 from ntncontact.ale.remap import Remapper, inverse_bilinear
 from ntncontact.ale.surface import SurfaceCurve, local_slides
 from ntncontact.engine import mesh_motion
+from ntncontact.fem.q4 import DN_GP, N_GP
 from ntncontact.mesh import quality
 from ntncontact.mesh.generators import rectangle
 
@@ -318,14 +319,14 @@ def test_masses_after_equals_the_numpy_update_bit_for_bit(seed):
     rng = np.random.default_rng(400 + seed)
     X, cells = distorted_block(rng)
     density = rng.uniform(1.0, 3.0, len(cells))
-    old = _element_masses(X, cells, np.arange(len(cells)), density, _DN, _SHAPE)
+    old = _element_masses(X, cells, np.arange(len(cells)), density, DN_GP, N_GP)
     masses = np.bincount(cells.ravel(), old.ravel(), len(X))
     idx = np.sort(rng.choice(len(cells), 7, replace=False))
     X_new = X + 0.01 * rng.standard_normal(X.shape)
-    change = _element_masses(X_new, cells, idx, density[idx], _DN, _SHAPE)
+    change = _element_masses(X_new, cells, idx, density[idx], DN_GP, N_GP)
     change -= old[idx]
     want = masses + np.bincount(cells[idx].ravel(), change.ravel(), len(X))
-    got = _masses_after(X_new, cells, idx, density, _DN, _SHAPE, old, masses)
+    got = _masses_after(X_new, cells, idx, density, DN_GP, N_GP, old, masses)
     np.testing.assert_array_equal(got, want)
 
 

@@ -157,6 +157,7 @@ from ntncontact.mesh.quality import (
 )
 
 from ..fem.kernels_numba import gauss_jacobian
+from ..fem.q4 import DN_GP, N_GP
 from ..jit import njit, read_only
 
 __all__ = ["AleBody", "AleMotionError", "AleUpdate", "lumped_masses", "move_ale_body"]
@@ -171,14 +172,6 @@ _CHOICES = {"smoothing": SmoothingMethod, "remap": RemapMethod, "respace": Respa
 # their old position exactly
 _SNAP = 1e-10
 _DEGENERATE = 1e-10  # a corner sine at most this: the cell is checked (``check_move``)
-# 2 x 2 Gauss points (weights 1) and the Q4 corner signs
-_XI = np.array([[-1.0, -1.0], [1.0, -1.0], [1.0, 1.0], [-1.0, 1.0]])
-_GP = _XI / np.sqrt(3.0)
-# natural gradients (g, a, k) and values (g, a) of the Q4 shape functions at the Gauss points
-_DN = np.ascontiguousarray(0.25 * np.stack([_XI[:, 0] * (1.0 + _XI[:, 1] * _GP[:, 1:2]),
-                                            _XI[:, 1] * (1.0 + _XI[:, 0] * _GP[:, 0:1])],
-                                           axis=-1))
-_SHAPE = 0.25 * (1.0 + _GP[:, None, 0] * _XI[:, 0]) * (1.0 + _GP[:, None, 1] * _XI[:, 1])
 
 
 class AleMotionError(MeshError):
@@ -440,7 +433,7 @@ class _TnState:
     def element_masses(self) -> NDArray[np.float64]:
         body = self.body
         return _element_masses(self.X, body.cells, np.arange(len(body.cells)),
-                               body.cell_density, _DN, _SHAPE)
+                               body.cell_density, DN_GP, N_GP)
 
     @cached_property
     def masses(self) -> NDArray[np.float64]:
@@ -450,7 +443,7 @@ class _TnState:
         """Lumped masses with the reference images of the cells ``idx`` replaced by those of
         X_new."""
         body = self.body
-        return _masses_after(X_new, body.cells, idx, body.cell_density, _DN, _SHAPE,
+        return _masses_after(X_new, body.cells, idx, body.cell_density, DN_GP, N_GP,
                              self.element_masses, self.masses)
 
     @cached_property
@@ -539,7 +532,7 @@ def lumped_masses(X: ArrayLike, cells: ArrayLike, density: ArrayLike = 1.0) -> N
     X = np.ascontiguousarray(X, dtype=float)
     cell_arr = np.ascontiguousarray(cells, dtype=np.int64).reshape(-1, 4)
     rho = np.array(np.broadcast_to(np.asarray(density, dtype=float), (len(cell_arr),)))
-    masses = _element_masses(X, cell_arr, np.arange(len(cell_arr)), rho, _DN, _SHAPE)
+    masses = _element_masses(X, cell_arr, np.arange(len(cell_arr)), rho, DN_GP, N_GP)
     return np.bincount(cell_arr.ravel(), masses.ravel(), len(X))
 
 

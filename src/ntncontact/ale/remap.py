@@ -45,6 +45,7 @@ from scipy.spatial import cKDTree
 
 from ntncontact.mesh.quadmesh import MeshError
 
+from ..fem.q4 import CORNERS
 from ..jit import njit
 
 __all__ = [
@@ -58,8 +59,6 @@ __all__ = [
 ]
 
 RemapMethod = Literal["linear", "quadratic"]
-# reference coordinates of the CCW Q4 corners
-_XI = np.array([[-1.0, -1.0], [1.0, -1.0], [1.0, 1.0], [-1.0, 1.0]])
 _INSIDE_TOL = 1e-9  # reference-coordinate slack for points on a shared edge (round-off)
 _SAME_NODE = 1e-12  # a point this close (times the cell size) to an old node takes its value
 
@@ -498,8 +497,8 @@ def _nearest_on_cell_boundary(cell_xy, e, p0, p1):
         dist = np.sqrt(r0 * r0 + r1 * r1)
         if k == 0 or dist < best_dist:  # argmin: the first minimum
             best_dist, best_t, edge = dist, t, k
-    s0, s1 = _XI[edge, 0], _XI[edge, 1]
-    e0, e1 = _XI[(edge + 1) % 4, 0], _XI[(edge + 1) % 4, 1]
+    s0, s1 = CORNERS[edge, 0], CORNERS[edge, 1]
+    e0, e1 = CORNERS[(edge + 1) % 4, 0], CORNERS[(edge + 1) % 4, 1]
     return best_dist, s0 + best_t * (e0 - s0), s1 + best_t * (e1 - s1), edge
 
 
@@ -563,8 +562,8 @@ def _interpolate(nodes, cells, fields, cell, xi, pts, gradients, quadratic):
     for q in range(p):
         e = cell[q]
         for a in range(4):
-            shape[a] = 0.25 * (1.0 + xi[q, 0] * _XI[a, 0]) * (
-                1.0 + xi[q, 1] * _XI[a, 1])
+            shape[a] = 0.25 * (1.0 + xi[q, 0] * CORNERS[a, 0]) * (
+                1.0 + xi[q, 1] * CORNERS[a, 1])
         for j in range(k):
             total = 0.0
             for a in range(4):

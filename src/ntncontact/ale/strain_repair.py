@@ -43,8 +43,6 @@ from ..jit import njit, read_only
 
 __all__ = ["RepairResult", "StrainRepair", "restore_strain_energy"]
 
-_DN = np.ascontiguousarray(DN_GP)
-_GW = np.ascontiguousarray(GAUSS_WEIGHTS, dtype=float)
 _MAX_ITERATIONS = 30
 _HALVINGS = 20
 
@@ -60,7 +58,7 @@ def _energy_and_force(models, X, d, cells, which, lam, mu, want_force, force):
         e = which[k]
         model = models[e]
         for g in range(4):
-            J00, J01, J10, J11 = gauss_jacobian(_DN, g, X, cells[e])
+            J00, J01, J10, J11 = gauss_jacobian(DN_GP, g, X, cells[e])
             det = J00 * J11 - J01 * J10
             if not det > 0.0:
                 return energy, False
@@ -80,7 +78,7 @@ def _energy_and_force(models, X, d, cells, which, lam, mu, want_force, force):
                 return energy, False
             W, P00, P01, P10, P11, _, _, _, _, _ = _material(model, H00, H01, H10, H11,
                                                              lam[e], mu[e])
-            w = det * _GW[g]
+            w = det * GAUSS_WEIGHTS[g]
             energy += w * W
             if not want_force:
                 continue

@@ -33,7 +33,6 @@ MIN_ELEMENTS_PER_THREAD = 2000
 #: Codes of where an inverted element was found (``status[1]``).
 _WHERE = {1: "reference configuration", 2: "current configuration"}
 
-_DN = np.ascontiguousarray(DN_GP)  # (4 gp, 4 nodes, 2) natural gradients
 # dN_a/dxi and dN_a/deta per Gauss point as nested tuples: compile-time constants
 _DXI = tuple(tuple(float(v) for v in DN_GP[g, :, 0]) for g in range(4))
 _DETA = tuple(tuple(float(v) for v in DN_GP[g, :, 1]) for g in range(4))
@@ -653,13 +652,13 @@ def _raise_inverted(e: int, where: int, X: NDArray, configurations: list[NDArray
     the current configurations, given by their displacements, when where == 2)."""
     X_e = X[cells[e]]
     with np.errstate(all="ignore"):  # a non-finite element is told below, not warned about
-        J = np.einsum("gaj,ai->gij", _DN, X_e)
+        J = np.einsum("gaj,ai->gij", DN_GP, X_e)
         det = J[:, 0, 0] * J[:, 1, 1] - J[:, 0, 1] * J[:, 1, 0]
         d_e = np.stack([X_e - X_e] + [d[cells[e]] for d in configurations])
         size = float(np.abs(np.nan_to_num(d_e, nan=np.inf)).max())
         overflow = False
         if where == 2:
-            grad = np.einsum("gaj,gjI->gaI", _DN, np.linalg.inv(J))
+            grad = np.einsum("gaj,gjI->gaI", DN_GP, np.linalg.inv(J))
             F = np.eye(2) + np.einsum("cai,gaJ->cgiJ", d_e[1:], grad)
             det = F[..., 0, 0] * F[..., 1, 1] - F[..., 0, 1] * F[..., 1, 0]
             overflow = size * float(np.abs(grad).max()) > _OVERFLOWING_GRADIENT
