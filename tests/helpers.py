@@ -196,7 +196,7 @@ def headline_of(results) -> dict:
     and the upper block's exit velocity (its centre-of-mass velocity at t_end, free since
     ~0.13-0.16: the consistent mass's row sums weigh the nodes exactly, rho uniform) of a
     fast-sliding run's results."""
-    from ntncontact.fem.element import element_mass
+    from ntncontact.fem.q4 import element_mass
 
     frame = results.fields(0.2)
     cells = frame.cells_dict["quad"][frame.cell_data["body_id"][0] == 0]

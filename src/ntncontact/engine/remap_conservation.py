@@ -40,9 +40,9 @@ from ..ale.conservation import conserving_correction, dof_momenta
 from ..ale.motion import AleUpdate
 from ..ale.strain_repair import RepairResult, StrainRepair, restore_strain_energy
 from ..fem.assembly import CsrPattern
-from ..fem.element import element_mass
 from ..fem.kernels_numba import MODEL_CODES, NumbaAssembly
 from ..fem.loads import dirichlet_values
+from ..fem.q4 import element_mass
 from .model import AleSetup, Model
 
 __all__ = ["conserve_remap", "hand_over_energy"]

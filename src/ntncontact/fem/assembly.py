@@ -10,8 +10,8 @@ import scipy.sparse as sp
 from numpy.typing import NDArray
 
 from ..materials.models import MaterialKind
-from .element import element_mass
 from .kernels_numba import NumbaAssembly
+from .q4 import element_mass
 
 
 def element_dofs(cells: NDArray) -> NDArray:
