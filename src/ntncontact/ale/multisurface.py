@@ -27,10 +27,9 @@ from dataclasses import replace
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from ntncontact.ale.motion import STAGES, AleBody, AleUpdate, lumped_masses, move_ale_body
+from ntncontact.ale.motion import STAGES, AleBody, AleUpdate, move_ale_body
 
-__all__ = ["check_surfaces", "meeting_points", "move_ale_surfaces", "nodal_masses",
-           "surface_of_nodes"]
+__all__ = ["check_surfaces", "meeting_points", "move_ale_surfaces", "surface_of_nodes"]
 
 
 def check_surfaces(motions: Sequence[AleBody], names: Sequence[str]) -> None:
@@ -137,8 +136,3 @@ def meeting_points(x_own: NDArray, x_partner: NDArray, m_own: NDArray,
     w = np.asarray(m_own, float) / (np.asarray(m_own, float) + np.asarray(m_partner, float))
     return w[:, None] * np.asarray(x_own, float) + (1.0 - w[:, None]) * np.asarray(x_partner,
                                                                                    float)
-
-
-def nodal_masses(X: NDArray, motion: AleBody) -> NDArray[np.float64]:
-    """Lumped masses of a body's nodes (local rows) on the reference coordinates X."""
-    return lumped_masses(X, motion.cells, motion.cell_density)

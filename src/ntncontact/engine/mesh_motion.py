@@ -14,8 +14,8 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 from numpy.typing import NDArray
 
-from ..ale.motion import AleCrossingError, AleMotionError, AleUpdate, move_ale_body
-from ..ale.multisurface import meeting_points, move_ale_surfaces, nodal_masses, surface_of_nodes
+from ..ale.motion import AleCrossingError, AleMotionError, AleUpdate, lumped_masses, move_ale_body
+from ..ale.multisurface import meeting_points, move_ale_surfaces, surface_of_nodes
 from ..contact import PairState, pair_gaps
 from ..jit import njit
 from ..mesh.quadmesh import MeshError
@@ -292,7 +292,8 @@ class _AleMasses:
             self._mass = np.zeros(len(self.base.X))
             for setup in self.model.ale_bodies:
                 rows = slice(setup.node_offset, setup.node_offset + setup.n_nodes)
-                self._mass[rows] = nodal_masses(self.base.X[rows], setup.motion)
+                self._mass[rows] = lumped_masses(self.base.X[rows], setup.motion.cells,
+                                                 setup.motion.cell_density)
         return self._mass
 
 
