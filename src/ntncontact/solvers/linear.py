@@ -508,9 +508,9 @@ class LinearSolver:
             kind = _StaticLUBackend if mode["static"] else _SuperLUBackend
             impl = kind(self._pattern, mode["symmetric"], self.stats)
             impl.perm = np.asarray(arrays[f"perm_{index}"])
-            impl.permuted = impl._permutation_map()
+            p = self._pattern
+            impl.permuted = static_lu.permuted_csc(p.indptr, p.indices, impl.perm)
             if isinstance(impl, _StaticLUBackend):
-                p = self._pattern
                 impl.symbolic = static_lu.analyse(p.indptr, p.indices, impl.perm)
                 impl.usable = bool(mode["usable"]) and impl.symbolic is not None
                 impl.fallbacks_in_a_row = int(mode["fallbacks_in_a_row"])
@@ -587,7 +587,7 @@ class _SuperLUBackend:
                 A = sp.csc_matrix(sp.csr_matrix((data, p.indices, p.indptr), shape=(p.n, p.n)))
                 self.lu = spla.splu(A, permc_spec="MMD_AT_PLUS_A", **kwargs)
                 self.perm = np.argsort(self.lu.perm_c)
-                self.permuted = self._permutation_map()
+                self.permuted = static_lu.permuted_csc(p.indptr, p.indices, self.perm)
                 self.lu_is_permuted = False
                 self.stats.analyses += 1
                 self.unchecked = True
@@ -603,15 +603,6 @@ class _SuperLUBackend:
         self.weights = p.column_weights(data)
         if self.weights is not None and self.lu_is_permuted:
             self.weights = self.weights[self.perm]  # the factor's column c is A's perm[c]
-
-    def _permutation_map(self) -> tuple[NDArray, NDArray, NDArray]:
-        """CSC structure of A[p][:, p] and, per entry, its position in the CSR data of A."""
-        p = self.pattern
-        tracer = sp.csr_matrix((np.arange(1.0, p.indices.size + 1), p.indices, p.indptr),
-                               shape=(p.n, p.n))
-        Ap = sp.csc_matrix(tracer[self.perm][:, self.perm])
-        Ap.sort_indices()
-        return Ap.indptr, Ap.indices, Ap.data.astype(np.int64) - 1
 
     def solver(self):
         """The solve of the current factor, which keeps working after later factorizations.

@@ -45,7 +45,7 @@ from numpy.typing import NDArray
 
 from ..jit import njit
 
-__all__ = ["StaticFactor", "StaticSymbolic", "analyse", "factorize"]
+__all__ = ["StaticFactor", "StaticSymbolic", "analyse", "factorize", "permuted_csc"]
 
 
 @dataclass(frozen=True)
@@ -92,24 +92,30 @@ def analyse(indptr: NDArray, indices: NDArray, perm: NDArray) -> StaticSymbolic 
     pivoting, so such patterns are left to a pivoting LU)."""
     n = len(indptr) - 1
     perm = np.asarray(perm, dtype=np.int64)
-    nnz = len(indices)
-    # positions + 1 as values: the permuted CSC keeps, per entry, where it is in A's data
-    tracer = sp.csr_matrix((np.arange(1.0, nnz + 1), indices, indptr), shape=(n, n))
-    permuted = sp.csc_matrix(tracer[perm][:, perm])
-    permuted.sort_indices()
-    if np.any(permuted.diagonal() == 0):
+    a_ptr, a_rows, gather = permuted_csc(indptr, indices, perm)
+    ones = sp.csc_matrix((np.ones(a_rows.size), a_rows, a_ptr), shape=(n, n))
+    if np.any(ones.diagonal() == 0):
         return None
-    ones = sp.csc_matrix((np.ones(permuted.nnz), permuted.indices, permuted.indptr),
-                         shape=(n, n))
     sym = sp.csc_matrix(ones + ones.T)  # symmetric pattern with the diagonal, indices sorted
     sym.sort_indices()
     s_ptr, s_rows = sym.indptr.astype(np.int64), sym.indices.astype(np.int64)
     parent = _etree(s_ptr, s_rows)
     u_ptr, u_rows = _upper_pattern(s_ptr, s_rows, parent)
     l_ptr, l_rows = _transpose_pattern(u_ptr, u_rows)
-    gather = permuted.data.astype(np.int64) - 1
-    index_arrays = (perm, permuted.indptr, permuted.indices, gather, l_ptr, l_rows, u_ptr, u_rows)
+    index_arrays = (perm, a_ptr, a_rows, gather, l_ptr, l_rows, u_ptr, u_rows)
     return StaticSymbolic(n, *(a.astype(np.uint64) for a in index_arrays))
+
+
+def permuted_csc(indptr: NDArray, indices: NDArray, perm: NDArray
+                 ) -> tuple[NDArray, NDArray, NDArray[np.int64]]:
+    """CSC structure (indptr, row indices sorted) of A[perm][:, perm] for the CSR pattern
+    (indptr, indices) of A, and per entry its position in A's CSR data (the gather map)."""
+    n = len(indptr) - 1
+    # positions + 1 as values: the permuted CSC keeps, per entry, where it is in A's data
+    tracer = sp.csr_matrix((np.arange(1.0, len(indices) + 1), indices, indptr), shape=(n, n))
+    permuted = sp.csc_matrix(tracer[perm][:, perm])
+    permuted.sort_indices()
+    return permuted.indptr, permuted.indices, permuted.data.astype(np.int64) - 1
 
 
 def factorize(symbolic: StaticSymbolic, data: NDArray, threshold: float,
