@@ -365,6 +365,26 @@ class ContactNewtonTerm:
                                       SHARE_RESERVED_STEPS)
         return rows, cols
 
+    def opened(self, x_eval: NDArray, x_trial: NDArray, x_start: NDArray) -> NDArray[np.bool_]:
+        """Which pairs a quasi-static Newton step from ``x_eval`` to ``x_trial`` opens: taken
+        in without a multiplier (a held pair never opens within a solve), pressed at x_eval,
+        open at x_trial."""
+        state = self.state
+        before = self._evaluate(x_eval, None, None, x_start, state).t_N
+        after = self._evaluate(x_trial, None, None, x_start, state).t_N
+        return (state.lambda_N == 0.0) & (before > 0.0) & (after == 0.0)
+
+    def part(self, mask: NDArray[np.bool_], x_eval: NDArray, x_start: NDArray
+             ) -> tuple[NDArray, tuple[NDArray, NDArray, NDArray]]:
+        """What the pairs ``mask`` add to the force and the COO tangent at ``x_eval``
+        (quasi-static): the term less the term without them, since an unpaired share makes
+        a pair's force depend on its neighbours in the set."""
+        whole = self._evaluate(x_eval, None, None, x_start, self.state)
+        rest = self._evaluate(x_eval, None, None, x_start, self.state.take(~mask))
+        (r1, c1, v1), (r2, c2, v2) = whole.triplets(), rest.triplets()
+        return (whole.force - rest.force,
+                (np.concatenate([r1, r2]), np.concatenate([c1, c2]), np.concatenate([v1, -v2])))
+
     def _evaluate(self, x_eval, v_eval, rate, x_start, state: PairState) -> ContactResult:
         ci = self.ci
         rate_eval = rate if ci.persistency else None

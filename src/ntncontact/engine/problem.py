@@ -50,6 +50,23 @@ class ReservingTerm(Protocol):
                 x_start: NDArray) -> tuple[NDArray, NDArray]: ...
 
 
+@runtime_checkable
+class ReleasingTerm(Protocol):
+    """An extra term made of pairs that a Newton step can open (the gap law's contact pairs,
+    ``interfaces.ContactNewtonTerm``): which ones a step from x_eval to x_trial opens, and
+    those pairs' own force and COO tangent at x_eval (x_start: the step's start)."""
+
+    def opened(self, x_eval: NDArray, x_trial: NDArray, x_start: NDArray) -> NDArray: ...
+
+    def part(self, mask: NDArray, x_eval: NDArray, x_start: NDArray
+             ) -> tuple[NDArray, tuple[NDArray, NDArray, NDArray]]: ...
+
+
+#: Rounds of :meth:`StepProblem.active_set_step` on one linearization (each a multi-column
+#: solve with the step's factor); Hertz refined 4x took at most 3
+MAX_RELEASE_ROUNDS = 8
+
+
 class ConstraintTerm(Protocol):
     """Exact constraints h(x) = 0 with multipliers (bordered Newton system, report 2.2.1).
 
@@ -275,6 +292,72 @@ class StepProblem:
                        "C": getattr(self, "_multiplier_block", None), "R": R}
         h = self._blocks[0]
         return np.concatenate([R[self.free_dofs], h]), self._scale
+
+    def active_set_step(self, y: NDArray, dy: NDArray, solve: Callable[[NDArray], NDArray]
+                        ) -> NDArray | None:
+        """The Newton step dy = -K^-1 R at y, K factored (``solve``), corrected for the pairs
+        it opens (quasi-static steps; ``newton``'s active_set): those pairs' force and tangent
+        taken out of R and K, repeated while the corrected step opens more of them (a
+        semismooth Newton's active-set loop on one linearization). Without it the pairs a
+        step's start took in beyond the contact zone's edge were let go one a side per Newton
+        iteration, each with a factorization: with every pair pressed the outermost pair
+        alone pulls, and only once it is released does the next one inward go tensile
+        (Hertz refined 8x: ~3 pairs a side at a step's start, benchmarks/README.md, session
+        48). Pairs once let go stay so within the step; the next iteration's own branches
+        decide from there. None if the step opens no pair."""
+        terms = [t for t in self.extra if isinstance(t, ReleasingTerm)]
+        if self.dynamic or not terms:
+            return None
+        x_eval, x_start = self._positions(y), self.state.x
+        opened = [np.zeros(0, bool)] * len(terms)
+        step = None
+        for _ in range(MAX_RELEASE_ROUNDS):
+            x_trial = self._positions(y + (dy if step is None else step))
+            now = [t.opened(x_eval, x_trial, x_start) for t in terms]
+            grown = [n | o if o.size else n for n, o in zip(now, opened, strict=True)]
+            if sum(int(g.sum()) for g in grown) == sum(int(o.sum()) for o in opened):
+                break
+            opened = grown
+            parts = [t.part(o, x_eval, x_start)
+                     for t, o in zip(terms, opened, strict=True) if o.any()]
+            corrected = self._step_without(parts, dy, solve)
+            if corrected is None:
+                break
+            step = corrected
+        return step
+
+    def _positions(self, y: NDArray) -> NDArray:
+        return self.state.X + self.full(y).reshape(-1, 2)
+
+    def _step_without(self, parts: list, dy: NDArray, solve: Callable[[NDArray], NDArray]
+                      ) -> NDArray | None:
+        """-(K - J_S)^-1 (R - f_S) from dy = -K^-1 R, the factor of K and the force f_S and
+        tangent J_S of the pairs S (``parts``), by the Sherman-Morrison-Woodbury formula:
+        J_S = E A with E the unit columns of the rows J_S has (the pairs' nodes), W = K^-1 E,
+        (K - E A)^-1 = K^-1 + W (I - A W)^-1 A K^-1: one solve of as many columns as the
+        pairs have dofs, not a factorization. None if I - A W is singular (the pairs held a
+        body alone)."""
+        place = np.full(self.model.ndof, -1, dtype=np.int64)
+        place[self.free_dofs] = np.arange(self.free_dofs.size)
+        force = sum(f for f, _ in parts)
+        rows, cols, vals = (np.concatenate([np.asarray(c[i]) for _, c in parts])
+                            for i in range(3))
+        inside = (place[rows] >= 0) & (place[cols] >= 0)
+        J = sp.coo_matrix((vals[inside], (place[rows[inside]], place[cols[inside]])),
+                          shape=(dy.size, dy.size)).tocsr()  # duplicates summed
+        J.eliminate_zeros()  # the entries the pairs do not change
+        loaded = place[np.flatnonzero(force)]
+        where = np.union1d(np.flatnonzero(np.diff(J.indptr)), loaded[loaded >= 0])
+        A = J[where]
+        E = np.zeros((dy.size, where.size))
+        E[where, np.arange(where.size)] = 1.0
+        W = solve(E)
+        z = -dy - W @ force[self.free_dofs[where]]  # K^-1 (R - f_S)
+        try:
+            z = z + W @ np.linalg.solve(np.eye(where.size) - A @ W, A @ z)
+        except np.linalg.LinAlgError:
+            return None
+        return -z
 
     def full_residual(self, y: NDArray) -> NDArray:
         """R on all dofs, the prescribed ones included (there: the support reactions), from

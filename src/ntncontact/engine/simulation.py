@@ -734,7 +734,8 @@ class Simulation:
         pass before the rest of the solve (Hertz k = 4: 189 -> 165 solves); else it goes on
         to the inexact ratio of its start, as without the probe."""
         solve = partial(self._newton, problem.residual, problem.jacobian, self.solve,
-                        settings=self.settings, length_scale=self.length_scale, factors=factors)
+                        settings=self.settings, length_scale=self.length_scale, factors=factors,
+                        active_set=problem.active_set_step)
         if not probe:
             result = solve(y0, early_ratio=early_ratio)
             return result, result.iterations, None
@@ -783,7 +784,8 @@ class Simulation:
             if not (done and result.early):
                 return result, d, used, results, updated, done, iterations
             result = self._newton(problem.residual, problem.jacobian, self.solve, result.y,
-                                  self.settings, self.length_scale, factors)
+                                  self.settings, self.length_scale, factors,
+                                  active_set=problem.active_set_step)
             iterations += result.iterations
 
     def _extrapolated_multipliers(self, used: tuple, updated: tuple, results: tuple,

@@ -1,0 +1,104 @@
+"""A quasi-static Newton step lets go at once of every pair it opens
+(``StepProblem.active_set_step``): the step is solved again, with the kept factor and the
+Sherman-Morrison-Woodbury formula, without the force and tangent of the pairs taken in
+without a multiplier that it opens, until it opens no more. Before, a step's start that took
+in pairs beyond the contact zone's edge let them go one a side per Newton iteration from the
+outside in (with every pair pressed only the outermost one pulls), each iteration with a
+fresh factorization.
+
+Hertz mesh 2 with the penalty from the mesh (``penalty_factor``) against the same run with
+the step left as it is (the code before this change).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import scipy.sparse.linalg as spla
+from helpers import Recorder, model_from_example, same_pressed_pairs
+
+from ntncontact.engine.interfaces import ContactNewtonTerm
+from ntncontact.engine.problem import StepProblem
+from ntncontact.engine.simulation import Simulation
+from ntncontact.solvers.linear import LinearSolver
+
+OVERRIDES = ["bodies.0.mesh.file=meshes/hertz_cylinder_2.msh", "bodies.1.mesh.nx=75",
+             "contact.0.penalty_normal=0", "contact.0.penalty_tangential=0",
+             "contact.0.penalty_factor=89", "analysis.t_end=5"]
+
+
+def _run(monkeypatch, released: bool):
+    """(simulation, records, factorizations) of the first five load steps."""
+    if not released:
+        monkeypatch.setattr(StepProblem, "active_set_step", lambda self, y, dy, solve: None)
+    solver = LinearSolver()
+    records = Recorder()
+    sim = Simulation(model_from_example("hertz.toml", OVERRIDES), [records],
+                     linear_solve=solver.solve)
+    sim.run()
+    monkeypatch.undo()
+    return sim, records, solver.stats.factorizations
+
+
+def test_a_newton_step_lets_go_of_all_the_pairs_it_opens(monkeypatch):
+    new, rec_new, factored_new = _run(monkeypatch, released=True)
+    old, rec_old, factored_old = _run(monkeypatch, released=False)
+    iterations = [sum(r.newton_iterations for r in rec.records) for rec in (rec_new, rec_old)]
+    assert iterations[0] < iterations[1], iterations
+    assert factored_new <= factored_old, (factored_new, factored_old)
+    # The same converged steps: displacements to the Newton tolerance, the same pressed pairs,
+    # and their tractions to what the augmentation test fixes them to, eps_N x the gap
+    # tolerance (test_hertz_passes.py)
+    scale = np.abs(old.state.d).max()
+    np.testing.assert_allclose(new.state.d, old.state.d, rtol=0, atol=1e-8 * scale)
+    ci = new.model.interfaces[0]
+    bound = ci.law.eps_N * ci.tolerances.normal
+    for rows_a, rows_b, pressed_a in same_pressed_pairs(rec_new.records, rec_old.records):
+        traction_a = dict(zip(rows_a["node_1"], rows_a["normal_traction"], strict=True))
+        traction_b = dict(zip(rows_b["node_1"], rows_b["normal_traction"], strict=True))
+        for node in pressed_a:
+            assert abs(traction_a[node] - traction_b[node]) <= bound
+
+def test_the_corrected_step_is_the_newton_step_without_the_opened_pairs(monkeypatch):
+    """Woodbury's step against the Jacobian and residual evaluated without the pairs and
+    solved afresh, at the first Newton start whose step opens pairs."""
+    found = []
+    original = StepProblem.active_set_step
+
+    def spy(self, y, dy, solve):
+        step = original(self, y, dy, solve)
+        if step is not None and not found:
+            found.append((self, y.copy()))
+        return step
+
+    monkeypatch.setattr(StepProblem, "active_set_step", spy)
+    sim = Simulation(model_from_example("hertz.toml", OVERRIDES[:-1] + ["analysis.t_end=3"]))
+    sim.run()
+    monkeypatch.undo()
+    assert found, "a step of Hertz mesh 2 opens pairs it took in"
+    problem, y = found[0]
+    problem._cache = {}
+    R, _ = problem.residual(y)
+    lu = spla.splu(problem.jacobian(y).tocsc())
+    masks = []
+    part = ContactNewtonTerm.part
+
+    def record(self, mask, x_eval, x_start):
+        masks.append((self, mask.copy()))
+        return part(self, mask, x_eval, x_start)
+
+    monkeypatch.setattr(ContactNewtonTerm, "part", record)
+    step = problem.active_set_step(y, -lu.solve(R), lu.solve)
+    monkeypatch.undo()
+    term, mask = masks[-1]
+    assert 0 < mask.sum() < mask.size
+    full_state = term.state
+    term.state = full_state.take(~mask)
+    problem._cache = {}
+    R_without, _ = problem.residual(y)
+    expected = -spla.spsolve(problem.jacobian(y).tocsc(), R_without)
+    term.state = full_state
+    assert np.abs(step - expected).max() <= 1e-8 * np.abs(expected).max()
+    # and that step opens no pair beyond those let go
+    x_trial = problem.state.X + problem.full(y + step).reshape(-1, 2)
+    x_eval = problem.state.X + problem.full(y).reshape(-1, 2)
+    assert not np.any(term.opened(x_eval, x_trial, problem.state.x) & ~mask)
