@@ -120,6 +120,8 @@ class StepProblem:
     _cache: dict = field(default_factory=dict, repr=False)
     _row_scale: NDArray | None = field(default=None, repr=False)  # see _balanced_rows
     _same_pattern: bool | None = field(default=None, repr=False)
+    #: per releasing term, the pairs active_set_step has let go of in this problem's solves
+    _let_go: dict = field(default_factory=dict, repr=False)
 
     def __post_init__(self) -> None:
         ndof = self.model.ndof
@@ -304,16 +306,21 @@ class StepProblem:
         alone pulls, and only once it is released does the next one inward go tensile
         (Hertz refined 8x: ~3 pairs a side at a step's start, benchmarks/README.md, session
         48). Pairs once let go stay so within the step; the next iteration's own branches
-        decide from there. None if the step opens no pair."""
+        decide from there. A pair is let go of once in the problem's solves: one whose
+        solution lies at the kink (gap ~ 0) was otherwise pressed and let go in turn, every
+        other iteration (delamination, step 13: no convergence in 60 iterations). None if
+        the step opens no pair."""
         terms = [t for t in self.extra if isinstance(t, ReleasingTerm)]
         if self.dynamic or not terms:
             return None
         x_eval, x_start = self._positions(y), self.state.x
+        let_go = [self._let_go.setdefault(id(t), np.zeros(len(t.state), bool)) for t in terms]
         opened = [np.zeros(0, bool)] * len(terms)
         step = None
         for _ in range(MAX_RELEASE_ROUNDS):
             x_trial = self._positions(y + (dy if step is None else step))
-            now = [t.opened(x_eval, x_trial, x_start) for t in terms]
+            now = [t.opened(x_eval, x_trial, x_start) & ~g
+                   for t, g in zip(terms, let_go, strict=True)]
             grown = [n | o if o.size else n for n, o in zip(now, opened, strict=True)]
             if sum(int(g.sum()) for g in grown) == sum(int(o.sum()) for o in opened):
                 break
@@ -324,6 +331,9 @@ class StepProblem:
             if corrected is None:
                 break
             step = corrected
+        if step is not None:
+            for g, o in zip(let_go, opened, strict=True):
+                g |= o
         return step
 
     def _positions(self, y: NDArray) -> NDArray:
