@@ -65,6 +65,9 @@ class ReleasingTerm(Protocol):
 #: Rounds of :meth:`StepProblem.active_set_step` on one linearization (each a multi-column
 #: solve with the step's factor); Hertz refined 4x took at most 3
 MAX_RELEASE_ROUNDS = 8
+#: columns of K^-1 E solved at once by ``StepProblem._step_without`` (its memory: this many
+#: vectors of the unknowns' size, and the solver's work arrays for them)
+SOLVE_COLUMNS = 16
 
 
 class ConstraintTerm(Protocol):
@@ -344,9 +347,10 @@ class StepProblem:
         """-(K - J_S)^-1 (R - f_S) from dy = -K^-1 R, the factor of K and the force f_S and
         tangent J_S of the pairs S (``parts``), by the Sherman-Morrison-Woodbury formula:
         J_S = E A with E the unit columns of the rows J_S has (the pairs' nodes), W = K^-1 E,
-        (K - E A)^-1 = K^-1 + W (I - A W)^-1 A K^-1: one solve of as many columns as the
-        pairs have dofs, not a factorization. None if I - A W is singular (the pairs held a
-        body alone)."""
+        (K - E A)^-1 = K^-1 + W (I - A W)^-1 A K^-1, which gives the step
+        dy - W (s - f) with s = (I - A W)^-1 A (-dy - W f), f the force on those rows: only
+        A W is kept (W's columns are solved for SOLVE_COLUMNS at a time) and W (s - f) is one
+        more solve. None if I - A W is singular (the pairs held a body alone)."""
         place = np.full(self.model.ndof, -1, dtype=np.int64)
         place[self.free_dofs] = np.arange(self.free_dofs.size)
         force = sum(f for f, _ in parts)
@@ -359,15 +363,20 @@ class StepProblem:
         loaded = place[np.flatnonzero(force)]
         where = np.union1d(np.flatnonzero(np.diff(J.indptr)), loaded[loaded >= 0])
         A = J[where]
-        E = np.zeros((dy.size, where.size))
-        E[where, np.arange(where.size)] = 1.0
-        W = solve(E)
-        z = -dy - W @ force[self.free_dofs[where]]  # K^-1 (R - f_S)
+        AW = np.empty((where.size, where.size))
+        for start in range(0, where.size, SOLVE_COLUMNS):
+            block = np.arange(start, min(start + SOLVE_COLUMNS, where.size))
+            E = np.zeros((dy.size, block.size))
+            E[where[block], np.arange(block.size)] = 1.0
+            AW[:, block] = A @ solve(E)
+        f = force[self.free_dofs[where]]
         try:
-            z = z + W @ np.linalg.solve(np.eye(where.size) - A @ W, A @ z)
+            s = np.linalg.solve(np.eye(where.size) - AW, -(A @ dy) - AW @ f)
         except np.linalg.LinAlgError:
             return None
-        return -z
+        u = np.zeros(dy.size)
+        u[where] = s - f
+        return dy - solve(u)
 
     def full_residual(self, y: NDArray) -> NDArray:
         """R on all dofs, the prescribed ones included (there: the support reactions), from
