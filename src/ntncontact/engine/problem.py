@@ -68,6 +68,9 @@ MAX_RELEASE_ROUNDS = 8
 #: columns of K^-1 E solved at once by ``StepProblem._step_without`` (its memory: this many
 #: vectors of the unknowns' size, and the solver's work arrays for them)
 SOLVE_COLUMNS = 16
+#: singular values of J_S below this fraction of its largest are zero (its rank: measured
+#: exactly half its rows at 1e-12 and at 1e-8, Hertz 4x)
+RANK_RTOL = 1e-12
 
 
 class ConstraintTerm(Protocol):
@@ -344,13 +347,13 @@ class StepProblem:
 
     def _step_without(self, parts: list, dy: NDArray, solve: Callable[[NDArray], NDArray]
                       ) -> NDArray | None:
-        """-(K - J_S)^-1 (R - f_S) from dy = -K^-1 R, the factor of K and the force f_S and
-        tangent J_S of the pairs S (``parts``), by the Sherman-Morrison-Woodbury formula:
-        J_S = E A with E the unit columns of the rows J_S has (the pairs' nodes), W = K^-1 E,
-        (K - E A)^-1 = K^-1 + W (I - A W)^-1 A K^-1, which gives the step
-        dy - W (s - f) with s = (I - A W)^-1 A (-dy - W f), f the force on those rows: only
-        A W is kept (W's columns are solved for SOLVE_COLUMNS at a time) and W (s - f) is one
-        more solve. None if I - A W is singular (the pairs held a body alone)."""
+        """The Newton step x = -(K - J_S)^-1 (R - f_S) from dy = -K^-1 R, the factor of K and
+        the force f_S and tangent J_S of the pairs S (``parts``), by the Sherman-Morrison-
+        Woodbury formula on J_S = U V (the SVD of its nonzero block; its rank is half its
+        rows, a pair's force acting on both its nodes): with W = K^-1 U and
+        z = dy + K^-1 f_S, x = z + W (I - V W)^-1 V z = dy + K^-1 (f_S + U t). Solves: the
+        columns of U and f_S, SOLVE_COLUMNS at a time (only V times them kept), and one
+        more; no factorization. None if I - V W is singular (the pairs held a body alone)."""
         place = np.full(self.model.ndof, -1, dtype=np.int64)
         place[self.free_dofs] = np.arange(self.free_dofs.size)
         force = sum(f for f, _ in parts)
@@ -362,21 +365,26 @@ class StepProblem:
         J.eliminate_zeros()  # the entries the pairs do not change
         loaded = place[np.flatnonzero(force)]
         where = np.union1d(np.flatnonzero(np.diff(J.indptr)), loaded[loaded >= 0])
-        A = J[where]
-        AW = np.empty((where.size, where.size))
-        for start in range(0, where.size, SOLVE_COLUMNS):
-            block = np.arange(start, min(start + SOLVE_COLUMNS, where.size))
-            E = np.zeros((dy.size, block.size))
-            E[where[block], np.arange(block.size)] = 1.0
-            AW[:, block] = A @ solve(E)
-        f = force[self.free_dofs[where]]
+        block = J[where]
+        moved = np.unique(block.indices)  # the unknowns J_S reads
+        u_block, sigma, v_block = np.linalg.svd(block[:, moved].toarray(), full_matrices=False)
+        rank = int(np.count_nonzero(sigma > RANK_RTOL * sigma.max(initial=0.0)))
+        columns = np.column_stack([u_block[:, :rank] * sigma[:rank],
+                                   force[self.free_dofs[where]]])
+        v_block = v_block[:rank]
+        VW = np.empty((rank, rank + 1))  # V K^-1 [U, f_S]
+        for start in range(0, rank + 1, SOLVE_COLUMNS):
+            stop = min(start + SOLVE_COLUMNS, rank + 1)
+            E = np.zeros((dy.size, stop - start))
+            E[where] = columns[:, start:stop]
+            VW[:, start:stop] = v_block @ solve(E)[moved]
         try:
-            s = np.linalg.solve(np.eye(where.size) - AW, -(A @ dy) - AW @ f)
+            t = np.linalg.solve(np.eye(rank) - VW[:, :rank], v_block @ dy[moved] + VW[:, rank])
         except np.linalg.LinAlgError:
             return None
         u = np.zeros(dy.size)
-        u[where] = s - f
-        return dy - solve(u)
+        u[where] = columns @ np.append(t, 1.0)
+        return dy + solve(u)
 
     def full_residual(self, y: NDArray) -> NDArray:
         """R on all dofs, the prescribed ones included (there: the support reactions), from
