@@ -10,7 +10,6 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from functools import partial
 
 import numpy as np
 import scipy.sparse as sp
@@ -81,9 +80,11 @@ Residual = Callable[[NDArray], tuple[NDArray, float]]
 Jacobian = Callable[[NDArray], sp.spmatrix]
 LinearSolve = Callable[[sp.spmatrix, NDArray], NDArray]
 Factorize = Callable[[sp.spmatrix], Callable[[NDArray], NDArray]]
-#: (y, dy, solve) -> the step corrected for the branches of the Jacobian it switches, or
-#: None if it switches none; ``solve(B)`` solves with the factor that gave dy (``newton``)
-ActiveSetStep = Callable[[NDArray, NDArray, Callable[[NDArray], NDArray]], NDArray | None]
+#: (y, dy, solve, eta) -> the step corrected for the branches of the Jacobian it switches,
+#: or None if it switches none; ``solve(B, rtol)`` solves with the factor that gave dy, eta
+#: that step's forcing term (``newton``)
+ActiveSetStep = Callable[[NDArray, NDArray, Callable[[NDArray, float], NDArray], float],
+                         NDArray | None]
 
 
 @dataclass
@@ -194,7 +195,7 @@ def _newton(residual: Residual, jacobian: Jacobian, solve: LinearSolve, y0: NDAr
                 dy, y, R, scale = step
             else:
                 dy = -_newton_step(jacobian(y), R, solve, factors, eta)
-                corrected = (active_set(y, dy, partial(factors.solve, rtol=eta))
+                corrected = (active_set(y, dy, factors.solve, eta)
                              if active_set is not None and factors is not None else None)
                 if corrected is not None:
                     # the factor's matrix presses the pairs the step opened: modified Newton
