@@ -80,10 +80,10 @@ def _solves(monkeypatch, newton_keys: dict) -> list:
     solves = []
 
     def recording(residual, jacobian, solve, y0, settings, length_scale=1.0, factors=None,
-                  early_ratio=0.0):
+                  early_ratio=0.0, active_set=None):
         before = factors.factorizations if factors is not None else 0
         result = newton(residual, jacobian, solve, y0, settings, length_scale, factors,
-                        early_ratio)
+                        early_ratio, active_set)
         after = factors.factorizations if factors is not None else 0
         solves.append((result.residual_norms, result.iterations, after - before))
         return result
