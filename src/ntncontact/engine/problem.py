@@ -63,7 +63,7 @@ class ReleasingTerm(Protocol):
 
 
 #: Rounds of :meth:`StepProblem.active_set_step` on one linearization (each a multi-column
-#: solve with the step's factor); Hertz refined 4x took at most 3
+#: solve with the step's factor); Hertz refined 8x took at most 5
 MAX_RELEASE_ROUNDS = 8
 #: columns of K^-1 E solved at once by ``StepProblem._step_without`` (its memory: this many
 #: vectors of the unknowns' size, and the solver's work arrays for them)
