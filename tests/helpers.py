@@ -248,6 +248,22 @@ def same_pressed_pairs(records_a, records_b):
         yield rows_a, rows_b, pressed_a
 
 
+def same_converged_contact(sim_a, records_a, sim_b, records_b, atol: float) -> None:
+    """Two runs of one quasi-static contact problem by different iteration paths end each
+    step the same: displacements within ``atol`` of the largest, the same pressed pairs, and
+    their tractions within what the augmentation test fixes them to, eps_N x the gap
+    tolerance (it stops where the gaps change by less than that)."""
+    scale = np.abs(sim_b.state.d).max()
+    np.testing.assert_allclose(sim_a.state.d, sim_b.state.d, rtol=0, atol=atol * scale)
+    ci = sim_a.model.interfaces[0]
+    bound = ci.law.eps_N * ci.tolerances.normal
+    for rows_a, rows_b, pressed_a in same_pressed_pairs(records_a, records_b):
+        traction_a = dict(zip(rows_a["node_1"], rows_a["normal_traction"], strict=True))
+        traction_b = dict(zip(rows_b["node_1"], rows_b["normal_traction"], strict=True))
+        for node in pressed_a:
+            assert abs(traction_a[node] - traction_b[node]) <= bound
+
+
 def released_nodes_wait(monkeypatch) -> None:
     """Detection as it was before session 48: the nodes of the pairs it releases are not
     candidates in that same detection (a quasi-static pair that ended a step open waited for

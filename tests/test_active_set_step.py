@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import numpy as np
 import scipy.sparse.linalg as spla
-from helpers import Recorder, model_from_example, same_pressed_pairs
+from helpers import Recorder, model_from_example, same_converged_contact
 
 from ntncontact.engine.interfaces import ContactNewtonTerm
 from ntncontact.engine.problem import StepProblem
@@ -45,18 +45,9 @@ def test_a_newton_step_lets_go_of_all_the_pairs_it_opens(monkeypatch):
     iterations = [sum(r.newton_iterations for r in rec.records) for rec in (rec_new, rec_old)]
     assert iterations[0] < iterations[1], iterations
     assert factored_new <= factored_old, (factored_new, factored_old)
-    # The same converged steps: displacements to the Newton tolerance, the same pressed pairs,
-    # and their tractions to what the augmentation test fixes them to, eps_N x the gap
-    # tolerance (test_hertz_passes.py)
-    scale = np.abs(old.state.d).max()
-    np.testing.assert_allclose(new.state.d, old.state.d, rtol=0, atol=1e-8 * scale)
-    ci = new.model.interfaces[0]
-    bound = ci.law.eps_N * ci.tolerances.normal
-    for rows_a, rows_b, pressed_a in same_pressed_pairs(rec_new.records, rec_old.records):
-        traction_a = dict(zip(rows_a["node_1"], rows_a["normal_traction"], strict=True))
-        traction_b = dict(zip(rows_b["node_1"], rows_b["normal_traction"], strict=True))
-        for node in pressed_a:
-            assert abs(traction_a[node] - traction_b[node]) <= bound
+    # the same converged steps (helpers.same_converged_contact)
+    same_converged_contact(new, rec_new.records, old, rec_old.records, atol=1e-8)
+
 
 def test_the_corrected_step_is_the_newton_step_without_the_opened_pairs(monkeypatch):
     """Woodbury's step against the Jacobian and residual evaluated without the pairs and
