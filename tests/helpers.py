@@ -268,6 +268,5 @@ def released_nodes_wait(monkeypatch) -> None:
     """Detection as it was before session 48: the nodes of the pairs it releases are not
     candidates in that same detection (a quasi-static pair that ended a step open waited for
     the step's first pass to end, though x + dt v put it inside; test_hertz_passes.py)."""
-    monkeypatch.setattr(interfaces, "release_mask",
-                        lambda state, *args, **kwargs: (np.zeros(len(state), bool), None))
+    monkeypatch.setattr(interfaces, "_staying", lambda ci, state, released: state)
 

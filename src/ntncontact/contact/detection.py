@@ -79,6 +79,7 @@ def detect(
     gap_tol: float = 0.0,
     traction_tol: float = 0.0,
     objective: bool = False,
+    release: tuple[NDArray[np.bool_], NDArray[np.int64]] | None = None,
 ) -> Detection:
     """Release and add pairs (module docstring). ``candidates`` (C, 2) come from
     :func:`~ntncontact.contact.pairing.closest_pairs` at the step-start positions ``x`` and
@@ -86,10 +87,14 @@ def detect(
     appended after the kept ones. ``objective``: the approach test takes the moment-free law's
     rate dg/dx . v (``ContactLaw.moment_free``), the rate that the law and the release test of
     the same pair then see; with the report's rate a pair could enter as approaching and be
-    counted as separating in its first step."""
+    counted as separating in its first step. ``release``: :func:`release_mask` of ``state``
+    with these arguments, where the caller has it (``interfaces.detect_all``, which needs it
+    for its candidates)."""
     if release_steps < 1:
         raise ValueError("release_steps must be >= 1")
-    released, count = release_mask(state, persistency, release_steps, traction_tol)
+    if release is None:
+        release = release_mask(state, persistency, release_steps, traction_tol)
+    released, count = release
     kept = replace(state.take(~released), release_count=count[~released])
     candidates = np.asarray(candidates, dtype=np.int64).reshape(-1, 2)
     fresh = candidates[~np.isin(candidates[:, 0], kept.pairs[:, 0])]

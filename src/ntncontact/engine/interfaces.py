@@ -57,10 +57,11 @@ def detect_all(
         x = x + dt * v if ci.predicted_detection else x
         tol = touch_tolerance(x, ci)
         state = _kept_where_they_face(x, ci, state)
-        candidates = _candidates(x, v, dt, ci, _staying(ci, state), tol)
+        release = release_mask(state, ci.persistency, ci.release_steps)
+        candidates = _candidates(x, v, dt, ci, _staying(ci, state, release[0]), tol)
         found = detect(state, candidates, x, v, ci.interface, persistency=ci.persistency,
                        release_steps=ci.release_steps, gap_tol=tol,
-                       objective=ci.law.moment_free)
+                       objective=ci.law.moment_free, release=release)
         out.append(found.state)
     return tuple(out)
 
@@ -106,19 +107,18 @@ def _kept_where_they_face(x: NDArray, ci: ContactInterface, state: PairState) ->
     return state.take(keep & facing(x, ci.interface, state.pairs))
 
 
-def _staying(ci: ContactInterface, state: PairState) -> PairState:
+def _staying(ci: ContactInterface, state: PairState, released: NDArray[np.bool_]
+             ) -> PairState:
     """The pairs that detection keeps, whose nodes are no candidates: under the gap law those
-    it does not release, so that a released node that x puts inside enters again at once (a
-    pair that ended a quasi-static step open and penetrated at x + dt v waited for the step's
-    first pass to end: Hertz refined 4x, 13 of 18 steps). Under the persistency law all of
-    them: it releases a pair by the solve's mid-point rate, and the end velocity that
-    detection tests can point the other way (the mid-point rule's odd-even mode); a block
-    sliding off an ALE ledge had a pair released and taken in afresh at once, and the base
-    was left ringing (its momentum over the free fall 0.8 -> 3.7 % off, test_sliding_pairs)."""
-    if ci.persistency:
-        return state
-    released, _ = release_mask(state, ci.persistency, ci.release_steps)
-    return state.take(~released)
+    it does not release (``released``, ``contact.release_mask``), so that a released node
+    that x puts inside enters again at once (a pair that ended a quasi-static step open and
+    penetrated at x + dt v waited for the step's first pass to end: Hertz refined 4x, 13 of
+    18 steps). Under the persistency law all of them: it releases a pair by the solve's
+    mid-point rate, and the end velocity that detection tests can point the other way (the
+    mid-point rule's odd-even mode); a block sliding off an ALE ledge had a pair released and
+    taken in afresh at once, and the base was left ringing (its momentum over the free fall
+    0.8 -> 3.7 % off, test_sliding_pairs)."""
+    return state if ci.persistency else state.take(~released)
 
 
 #: How much more open than its last partner a pair's new partner may be, in lengths of the
