@@ -17,7 +17,6 @@ from pathlib import Path
 
 from tqdm import tqdm
 
-from . import __version__
 from .api import load_scenario
 from .engine.builder import build_model
 from .engine.model import Model
@@ -30,6 +29,7 @@ from .io.vtk import read_vtu
 from .io.writers import closing
 from .mesh.gmsh_io import read_msh
 from .mesh.quality import quality_statistics
+from .package import __version__
 from .report import validation_cases
 from .report.plotting import check_times, plot_all
 from .report.reference import compare, format_comparison, write_comparison_csv

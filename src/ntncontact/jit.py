@@ -1,6 +1,6 @@
 """The package's compiled kernels: every kernel module decorates with :func:`njit` from here.
 
-Compiled kernels are cached on disk in :func:`ntncontact.kernel_cache_dir` (set up when the
+Compiled kernels are cached on disk in :func:`ntncontact.package.kernel_cache_dir` (set up when the
 package is imported). Importing this module also registers a listener on Numba's compile
 events: the first time a process has to compile one of this package's kernels (an empty or
 outdated cache, or a configuration whose kernels the warm-up did not compile), it says so
@@ -15,7 +15,7 @@ import numba
 import numpy as np
 from numba.core import event
 
-from . import kernel_cache_dir
+from .package import kernel_cache_dir
 
 __all__ = ["njit", "COMPILE_NOTE", "read_only"]
 

@@ -38,12 +38,13 @@ from pathlib import Path
 
 import numpy as np
 
-from . import jit, kernel_cache_dir
+from . import jit
 from .engine.builder import build_model
 from .engine.postprocess import frame_fields
 from .engine.simulation import Simulation
 from .fem.kernels_numba import MIN_ELEMENTS_PER_THREAD
 from .io.scenario import parse_scenario
+from .package import kernel_cache_dir
 from .threads import run_threads
 
 #: Steps to run: contact starts at step 3 (initial gap 0.01, speed 1, dt 0.005); the ring is

@@ -21,11 +21,11 @@ from typing import Any
 
 import numpy as np
 
-from .. import __version__
 from ..contact import PairState
 from ..engine.model import Model
 from ..engine.problem import StepState
 from ..engine.simulation import Simulation, StepRecord
+from ..package import __version__
 from .results import ResultWriter
 from .run_folder import make_subfolder, replace_atomically
 from .scenario import ScenarioConfig, tomllib
