@@ -24,11 +24,12 @@ import meshio
 import numpy as np
 import pandas as pd
 
+from .engine.config import ScenarioError
 from .io import writers
 from .io.results import ResultWriter
 from .io.run_folder import read_summary
 from .io.run_setup import start_run
-from .io.scenario import Overrides, Scenario, ScenarioError
+from .io.scenario import Overrides, Scenario
 from .io.vtk import find_field_series, read_frame_mesh, read_series
 from .io.writers import CONTACT_FILE, HISTORY_FILE, SUMMARY_FILE, MemoryResults, to_jsonable
 from .report.run_warnings import PhysicsWarning, result_warnings

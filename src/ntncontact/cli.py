@@ -19,12 +19,12 @@ from tqdm import tqdm
 
 from .api import load_scenario
 from .engine.builder import build_model
+from .engine.config import ScenarioError
 from .engine.model import Model
 from .engine.simulation import RunInterrupted
 from .io.results import ResultWriter
 from .io.run_folder import RunLock, read_summary, run_status
 from .io.run_setup import start_run
-from .io.scenario import ScenarioError
 from .io.vtk import read_vtu
 from .io.writers import closing
 from .mesh.gmsh_io import read_msh

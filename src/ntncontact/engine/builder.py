@@ -21,7 +21,13 @@ from ..fem.loads import (
     point_load_vector,
     same_motions,
 )
-from ..io.scenario import (
+from ..materials.models import Material, MaterialError
+from ..mesh import generators
+from ..mesh.boundary import boundary_edges, chain_edge_lengths, surface_chain
+from ..mesh.overlap import deepest_overlap, facing_away
+from ..mesh.quadmesh import MeshError, QuadMesh
+from ..mesh.quality import check_elements
+from .config import (
     BodyConfig,
     ContactConfig,
     LoadConfig,
@@ -32,12 +38,6 @@ from ..io.scenario import (
     TieConfig,
     TimeFunctionConfig,
 )
-from ..materials.models import Material, MaterialError
-from ..mesh import generators
-from ..mesh.boundary import boundary_edges, chain_edge_lengths, surface_chain
-from ..mesh.overlap import deepest_overlap, facing_away
-from ..mesh.quadmesh import MeshError, QuadMesh
-from ..mesh.quality import check_elements
 from .diagnostics import PhysicsWarning
 from .initial import warn_overridden_velocities, warn_tied_velocities
 from .model import AleSetup, AnalysisSettings, Body, ContactInterface, Model, stack_bodies

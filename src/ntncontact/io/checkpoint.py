@@ -22,13 +22,14 @@ from typing import Any
 import numpy as np
 
 from ..contact import PairState
+from ..engine.config import ScenarioConfig
 from ..engine.model import Model
 from ..engine.problem import StepState
 from ..engine.simulation import Simulation, StepRecord
 from ..package import __version__
 from .results import ResultWriter
 from .run_folder import make_subfolder, replace_atomically
-from .scenario import ScenarioConfig, tomllib
+from .scenario import tomllib
 
 FORMAT = "ntncontact-checkpoint/1"
 CHECKPOINT_DIR = "checkpoints"

@@ -43,9 +43,10 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_valida
 
 from ..api import load_scenario, read_results, run
 from ..engine.builder import build_mesh, build_model
+from ..engine.config import ScenarioError
 from ..io.checkpoint import run_identity
 from ..io.results import CONTACT_HISTORY, OFF_SURFACE_HISTORY
-from ..io.scenario import Scenario, ScenarioError, override_strings, read_toml, toml_value
+from ..io.scenario import Scenario, override_strings, read_toml, toml_value
 from ..io.writers import HISTORY_COLUMNS
 from ..report.run_warnings import result_warnings
 from ..threads import single_threaded
