@@ -323,6 +323,17 @@ def test_restart_needs_a_readable_checkpoint_and_skips_a_corrupt_newest(tmp_path
     assert "give one of them" in capsys.readouterr().err
 
 
+def test_restart_with_overwrite_is_refused_alike_by_the_api_and_the_command(tmp_path, capsys):
+    """One check and one message (io.run_setup.check_run_mode) for ntncontact.run and
+    ``ntncontact run``, before the results folder is made or locked."""
+    spin, out = EXAMPLES / "spinning_block.toml", tmp_path / "spin"
+    with pytest.raises(ValueError, match="give one of them") as refused:
+        ntc.run(spin, out, restart=True, overwrite=True)
+    assert main(["run", str(spin), "--out", str(out), "--quiet", "--restart", "--overwrite"]) == 1
+    assert capsys.readouterr().err == f"error: {refused.value}\n"
+    assert not out.exists()
+
+
 def test_the_api_restarts_like_the_command(tmp_path):
     scenario = ntc.load_scenario(EXAMPLES / "spinning_block.toml",
                                  {"analysis.t_end": 0.08, "analysis.checkpoint_interval": 0.02})

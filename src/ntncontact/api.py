@@ -166,9 +166,6 @@ def _run_with_writer(scenario: Scenario, out: Path | None,
     if out is None and (restart or scenario.config.analysis.checkpoint_interval is not None):
         raise ScenarioError(f"{scenario.source}: checkpoints and restarts need a results "
                             "folder: give out=...")
-    if restart and overwrite:
-        raise ValueError("run: restart continues the run in out, overwrite replaces it: "
-                         "give one of them")
     simulation, writer = start_run(scenario, out, overwrite=overwrite, restart=restart,
                                    writing=_failed_with_summary)
     with _failed_with_summary(writer):

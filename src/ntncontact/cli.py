@@ -24,7 +24,7 @@ from .engine.model import Model
 from .engine.simulation import RunInterrupted
 from .io.results import ResultWriter
 from .io.run_folder import RunLock, read_summary, run_status
-from .io.run_setup import start_run
+from .io.run_setup import check_run_mode, start_run
 from .io.vtk import read_vtu
 from .io.writers import closing
 from .mesh.gmsh_io import read_msh
@@ -132,9 +132,7 @@ def _run_until_stopped(args: argparse.Namespace, stop: StopOnSignal) -> int:
     started = time.monotonic()
     scenario = load_scenario(args.scenario, args.set)
     out = _out_folder(args.out)
-    if args.restart and args.overwrite:
-        raise ValueError("--restart continues the run in --out, --overwrite replaces it: "
-                         "give one of them")
+    check_run_mode(overwrite=args.overwrite, restart=args.restart)  # before the folder is locked
     created = not out.exists()
     lock = _lock_before_build(out)
     try:

@@ -18,6 +18,14 @@ from .run_folder import RunLock
 from .scenario import Scenario
 
 
+def check_run_mode(*, overwrite: bool, restart: bool) -> None:
+    """Refuse a run asked both to continue and to replace the results folder's run (the one
+    check and message of ``ntncontact.run`` and ``ntncontact run``)."""
+    if restart and overwrite:
+        raise ValueError("restart continues the run in the results folder, overwrite replaces "
+                         "it: give one of them")
+
+
 def start_run(scenario: Scenario, out: Path | None, *, overwrite: bool, restart: bool,
               writing: Callable[[ResultWriter], AbstractContextManager[object]] = (
                   lambda writer: contextlib.nullcontext()),
@@ -30,6 +38,7 @@ def start_run(scenario: Scenario, out: Path | None, *, overwrite: bool, restart:
     last checkpoint; ``lock``: the folder's lock if the caller took it); the simulation with
     the writer and the checkpoints attached, set up inside ``writing(writer)``, which answers
     for the writer when that fails."""
+    check_run_mode(overwrite=overwrite, restart=restart)
     with warnings_noted() as build_warnings, building():  # kept in the summary
         model = build_model(scenario.config, scenario.base_dir)
     if built is not None:
