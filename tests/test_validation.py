@@ -368,21 +368,3 @@ def test_validate_command_exits_non_zero_when_a_case_fails(tmp_path, monkeypatch
     summary = capsys.readouterr().out.strip().splitlines()[-1]
     assert summary.startswith("report: ") and f"{outcomes.count(True)} passed" in summary
     assert (code == 0) == ("case1" not in summary)
-
-
-def test_validation_does_not_import_the_command_line():
-    """No import circle cli <-> validation: the cases run through the library, not the CLI."""
-    import ast
-
-    import ntncontact
-
-    source = Path(ntncontact.__file__).parent
-    for path in sorted(source.glob("validation*.py")) + [source / "report/reference.py"]:
-        for node in ast.walk(ast.parse(path.read_text())):
-            if isinstance(node, ast.ImportFrom):
-                names = [node.module or ""] + [a.name for a in node.names]
-            elif isinstance(node, ast.Import):
-                names = [a.name for a in node.names]
-            else:
-                continue
-            assert not any(n == "cli" or n.endswith(".cli") for n in names), path.name
