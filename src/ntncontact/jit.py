@@ -1,10 +1,10 @@
 """The package's compiled kernels: every kernel module decorates with :func:`njit` from here.
 
-Compiled kernels are cached on disk in :func:`ntncontact.package.kernel_cache_dir` (set up when the
-package is imported). Importing this module also registers a listener on Numba's compile
+Compiled kernels are cached on disk in :func:`ntncontact.package.kernel_cache_dir` (set up when
+the package is imported). Importing this module also registers a listener on Numba's compile
 events: the first time a process has to compile one of this package's kernels (an empty or
-outdated cache, or a configuration whose kernels the warm-up did not compile), it says so
-once on stderr, since a first run then spends up to ~40 s on it.
+outdated cache, or a configuration whose kernels the warm-up did not compile), it says so once
+on stderr, since a first run then spends up to ~40 s on it.
 """
 
 from __future__ import annotations
