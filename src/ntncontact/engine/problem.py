@@ -62,11 +62,12 @@ class ReleasingTerm(Protocol):
              ) -> tuple[NDArray, tuple[NDArray, NDArray, NDArray]]: ...
 
 
-#: Rounds of :meth:`StepProblem.active_set_step` on one linearization (each a multi-column
-#: solve with the step's factor); Hertz refined 8x took at most 5
+#: Rounds of :meth:`StepProblem.active_set_step` on one linearization (each a solve, with the
+#: step's factor, of the columns its new pairs add); Hertz refined 8x took at most 5
 MAX_RELEASE_ROUNDS = 8
-#: columns of K^-1 E solved at once by ``StepProblem._step_without`` (its memory: this many
-#: vectors of the unknowns' size, and the solver's work arrays for them)
+#: columns of K^-1 Q solved at once by ``_KeptColumns`` (the solver's work arrays are for
+#: this many; the columns solved are kept through the step's rounds: 2 vectors of the
+#: unknowns' size a pair let go, Hertz 8x at most 42 pairs, 84 x 123,178 x 8 B = 83 MB)
 SOLVE_COLUMNS = 16
 #: singular values of J_S below this fraction of its largest are zero (its rank: measured
 #: exactly half its rows at 1e-12 and at 1e-8, Hertz 4x)
@@ -76,6 +77,10 @@ RANK_RTOL = 1e-12
 #: Newton step anyway (forcing terms up to 0.1). Hertz 4x: the same counts as at the step's
 #: forcing term, 37 -> 9 refinement sweeps, CPU 0.741 -> 0.611 s a step
 COLUMNS_RTOL = 1e-3
+#: a direction of a round's J_S or f_S whose part outside the span of the columns already
+#: solved (unit vectors: an absolute size) is below this adds no column: round-off of ~1e-16
+#: otherwise, and far below the columns' own error (COLUMNS_RTOL)
+NEW_DIRECTION_TOL = 1e-8
 
 
 class ConstraintTerm(Protocol):
@@ -329,6 +334,7 @@ class StepProblem:
         x_eval, x_start = self._positions(y), self.state.x
         let_go = [self._let_go.setdefault(id(t), np.zeros(len(t.state), bool)) for t in terms]
         opened = [np.zeros(0, bool)] * len(terms)
+        kept = _KeptColumns(dy.size, partial(solve, rtol=max(eta, COLUMNS_RTOL)))
         step = None
         for _ in range(MAX_RELEASE_ROUNDS):
             x_trial = self._positions(y + (dy if step is None else step))
@@ -340,7 +346,7 @@ class StepProblem:
             opened = grown
             parts = [t.part(o, x_eval, x_start)
                      for t, o in zip(terms, opened, strict=True) if o.any()]
-            corrected = self._step_without(parts, dy, solve, eta)
+            corrected = self._step_without(parts, dy, kept)
             if corrected is None:
                 break
             step = corrected
@@ -352,17 +358,16 @@ class StepProblem:
     def _positions(self, y: NDArray) -> NDArray:
         return self.state.X + self.full(y).reshape(-1, 2)
 
-    def _step_without(self, parts: list, dy: NDArray,
-                      solve: Callable[[NDArray, float], NDArray], eta: float
+    def _step_without(self, parts: list, dy: NDArray, kept: _KeptColumns
                       ) -> NDArray | None:
-        """The Newton step x = -(K - J_S)^-1 (R - f_S) from dy = -K^-1 R, the factor of K and
-        the force f_S and tangent J_S of the pairs S (``parts``), by the Sherman-Morrison-
-        Woodbury formula on J_S = U V (the SVD of its nonzero block; its rank is half its
-        rows, a pair's force acting on both its nodes): with W = K^-1 U and
-        z = dy + K^-1 f_S, x = z + W (I - V W)^-1 V z = dy + K^-1 (f_S + U t). Solves: the
-        columns of U and f_S, SOLVE_COLUMNS at a time (only V times them kept) and to
-        COLUMNS_RTOL, and one more to eta; no factorization. None if I - V W is singular
-        (the pairs held a body alone)."""
+        """The Newton step x = -(K - J_S)^-1 (R - f_S) from dy = -K^-1 R, the force f_S and
+        tangent J_S of the pairs S (``parts``) and ``kept``, the columns W = K^-1 Q of an
+        orthonormal Q whose span holds the range of J_S and f_S (extended here by what
+        these pairs add to it), by the Sherman-Morrison-Woodbury formula on J_S = Q V,
+        V = Q^T J_S: with f_S = Q c, x = dy + W (c + t), (I - V W) t = V (dy + W c). No
+        factorization, and no solve but the new columns of Q (to COLUMNS_RTOL: the step's
+        correction W (c + t) is as accurate as t, which V W limits to that anyway). None if
+        I - V W is singular (the pairs held a body alone)."""
         place = np.full(self.model.ndof, -1, dtype=np.int64)
         place[self.free_dofs] = np.arange(self.free_dofs.size)
         force = sum(f for f, _ in parts)
@@ -376,24 +381,18 @@ class StepProblem:
         where = np.union1d(np.flatnonzero(np.diff(J.indptr)), loaded[loaded >= 0])
         block = J[where]
         moved = np.unique(block.indices)  # the unknowns J_S reads
-        u_block, sigma, v_block = np.linalg.svd(block[:, moved].toarray(), full_matrices=False)
-        rank = int(np.count_nonzero(sigma > RANK_RTOL * sigma.max(initial=0.0)))
-        columns = np.column_stack([u_block[:, :rank] * sigma[:rank],
-                                   force[self.free_dofs[where]]])
-        v_block = v_block[:rank]
-        VW = np.empty((rank, rank + 1))  # V K^-1 [U, f_S]
-        for start in range(0, rank + 1, SOLVE_COLUMNS):
-            stop = min(start + SOLVE_COLUMNS, rank + 1)
-            E = np.zeros((dy.size, stop - start))
-            E[where] = columns[:, start:stop]
-            VW[:, start:stop] = v_block @ solve(E, max(eta, COLUMNS_RTOL))[moved]
+        tangent = block[:, moved].toarray()
+        f_S = force[self.free_dofs[where]]
+        kept.extend(where, _range_with(tangent, f_S))
+        Q = kept.basis_on(where)
+        V = Q.T @ tangent
+        VW = V @ kept.at(moved)
+        c = Q.T @ f_S
         try:
-            t = np.linalg.solve(np.eye(rank) - VW[:, :rank], v_block @ dy[moved] + VW[:, rank])
+            t = np.linalg.solve(np.eye(VW.shape[0]) - VW, V @ dy[moved] + VW @ c)
         except np.linalg.LinAlgError:
             return None
-        u = np.zeros(dy.size)
-        u[where] = columns @ np.append(t, 1.0)
-        return dy + solve(u, eta)
+        return dy + kept.times(c + t)
 
     def full_residual(self, y: NDArray) -> NDArray:
         """R on all dofs, the prescribed ones included (there: the support reactions), from
@@ -426,6 +425,67 @@ class StepProblem:
         if self.fixed_dofs.size == 0:
             return K
         return self.union.free_block.take(K, self.free_dofs)
+
+
+def _range_with(tangent: NDArray, force: NDArray) -> NDArray:
+    """Unit columns spanning the range of ``tangent`` (orthonormal: its left singular vectors
+    above RANK_RTOL of the largest singular value) and ``force``'s direction (as a rule in
+    that range already: a pair's force acts on both its nodes, like its tangent's rows)."""
+    u, sigma, _ = np.linalg.svd(tangent, full_matrices=False)
+    rank = int(np.count_nonzero(sigma > RANK_RTOL * sigma.max(initial=0.0)))
+    size = np.linalg.norm(force)
+    return np.column_stack([u[:, :rank]] + ([force / size] if size > 0.0 else []))
+
+
+class _KeptColumns:
+    """The columns W = K^-1 Q of one linearization's ``active_set_step``, Q orthonormal
+    (nonzero on a few rows) and extended round by round by the directions a round's pairs
+    add to its span: each round solves only those, not again those of the earlier rounds'
+    pairs (Hertz 8x: 1-5 rounds a step, each round's pairs a superset of the last's).
+    ``solve(B)``: K^-1 B with the step's factor."""
+
+    def __init__(self, size: int, solve: Callable[[NDArray], NDArray]) -> None:
+        self.size, self.solve = size, solve
+        self.rows = np.zeros(0, dtype=np.int64)  # the unknowns Q is nonzero at, sorted
+        self.basis = np.zeros((0, 0))  # Q on those rows
+        self.blocks: list[NDArray] = []  # W, SOLVE_COLUMNS columns a block
+
+    def extend(self, where: NDArray, directions: NDArray) -> None:
+        """Q extended so that its span holds the columns of ``directions`` (unit vectors on
+        the unknowns ``where``), to NEW_DIRECTION_TOL; W with it."""
+        rows = np.union1d(self.rows, where)
+        Q = np.zeros((rows.size, self.basis.shape[1]))
+        Q[np.searchsorted(rows, self.rows)] = self.basis
+        D = np.zeros((rows.size, directions.shape[1]))
+        D[np.searchsorted(rows, where)] = directions
+        for _ in range(2):  # Gram-Schmidt twice: orthogonal to round-off
+            D -= Q @ (Q.T @ D)
+        u, sigma, _ = np.linalg.svd(D, full_matrices=False)
+        new = u[:, sigma > NEW_DIRECTION_TOL]
+        new -= Q @ (Q.T @ new)
+        self.rows, self.basis = rows, np.column_stack([Q, new])
+        for start in range(0, new.shape[1], SOLVE_COLUMNS):
+            E = np.zeros((self.size, min(SOLVE_COLUMNS, new.shape[1] - start)))
+            E[rows] = new[:, start:start + E.shape[1]]
+            self.blocks.append(self.solve(E))
+
+    def basis_on(self, where: NDArray) -> NDArray:
+        """Q's rows at the unknowns ``where`` (a subset of its rows)."""
+        return self.basis[np.searchsorted(self.rows, where)]
+
+    def at(self, index: NDArray) -> NDArray:
+        """W's rows at the unknowns ``index``."""
+        return np.column_stack([b[index] for b in self.blocks]) if self.blocks else (
+            np.zeros((index.size, 0)))
+
+    def times(self, coefficients: NDArray) -> NDArray:
+        """W times ``coefficients``."""
+        out = np.zeros(self.size)
+        start = 0
+        for b in self.blocks:
+            out += b @ coefficients[start:start + b.shape[1]]
+            start += b.shape[1]
+        return out
 
 
 def _add_triplets(K: sp.csr_matrix, triplets: list, union: TripletUnion,
