@@ -462,7 +462,7 @@ class _KeptColumns:
             D -= Q @ (Q.T @ D)
         u, sigma, _ = np.linalg.svd(D, full_matrices=False)
         new = u[:, sigma > NEW_DIRECTION_TOL]
-        new -= Q @ (Q.T @ new)
+        new -= Q @ (Q.T @ new)  # D's round-off against Q, divided by a small sigma
         self.rows, self.basis = rows, np.column_stack([Q, new])
         for start in range(0, new.shape[1], SOLVE_COLUMNS):
             E = np.zeros((self.size, min(SOLVE_COLUMNS, new.shape[1] - start)))
