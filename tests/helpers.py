@@ -7,6 +7,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+import scipy.sparse.linalg as spla
 
 from ntncontact.contact import pair_gaps
 from ntncontact.engine import interfaces
@@ -270,3 +271,19 @@ def released_nodes_wait(monkeypatch) -> None:
     the step's first pass to end, though x + dt v put it inside; test_hertz_passes.py)."""
     monkeypatch.setattr(interfaces, "_staying", lambda ci, state, released: state)
 
+
+
+def check_step_without(problem, y: np.ndarray, step: np.ndarray, term, mask: np.ndarray) -> None:
+    """``step`` (an active-set step at y that let go the pairs ``mask`` of ``term``) is the
+    Newton step with the residual and Jacobian evaluated without those pairs, solved afresh,
+    to 1e-8 of its largest entry, and it opens no pair beyond them."""
+    full_state = term.state
+    term.state = full_state.take(~mask)
+    problem._cache = {}
+    R_without, _ = problem.residual(y)
+    expected = -spla.spsolve(problem.jacobian(y).tocsc(), R_without)
+    term.state = full_state
+    assert np.abs(step - expected).max() <= 1e-8 * np.abs(expected).max()
+    x_trial = problem.state.X + problem.full(y + step).reshape(-1, 2)
+    x_eval = problem.state.X + problem.full(y).reshape(-1, 2)
+    assert not np.any(term.opened(x_eval, x_trial, problem.state.x) & ~mask)

@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import numpy as np
 import scipy.sparse.linalg as spla
-from helpers import model_from_example
+from helpers import check_step_without, model_from_example
 
 from ntncontact.engine.interfaces import ContactNewtonTerm
 from ntncontact.engine.problem import StepProblem
@@ -73,15 +73,5 @@ def test_each_round_solves_only_the_columns_of_its_new_pairs(monkeypatch):
     assert 0 < mask.sum() < mask.size
     # every direction solved once: 2 columns a pair let go, nothing for f_S or the step
     assert sum(columns) == 2 * mask.sum(), (columns, mask.sum())
-    # and the step is the Newton step without those pairs (the residual and Jacobian
-    # evaluated without them, solved afresh), to round-off of the exact factor
-    full_state = term.state
-    term.state = full_state.take(~mask)
-    problem._cache = {}
-    R_without, _ = problem.residual(y)
-    expected = -spla.spsolve(problem.jacobian(y).tocsc(), R_without)
-    term.state = full_state
-    assert np.abs(step - expected).max() <= 1e-8 * np.abs(expected).max()
-    x_trial = problem.state.X + problem.full(y + step).reshape(-1, 2)
-    x_eval = problem.state.X + problem.full(y).reshape(-1, 2)
-    assert not np.any(term.opened(x_eval, x_trial, problem.state.x) & ~mask)
+    # and the step is the Newton step without those pairs, to round-off of the exact factor
+    check_step_without(problem, y, step, term, mask)
