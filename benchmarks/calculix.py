@@ -63,7 +63,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 import numpy as np  # noqa: E402
 
 from ntncontact.engine.builder import build_mesh  # noqa: E402
-from ntncontact.io.scenario import ScenarioConfig, load_scenario  # noqa: E402
+from ntncontact.engine.config import ScenarioConfig  # noqa: E402
+from ntncontact.io.scenario import load_scenario  # noqa: E402
 from ntncontact.mesh.quadmesh import QuadMesh  # noqa: E402
 
 EXAMPLES = ROOT / "examples"

@@ -79,7 +79,7 @@ def test_keys_a_static_gap_law_run_leaves_unread_are_warned_of(sets, said):
     """Tester R (session 41): release_steps under the gap law, and gap_restoring or
     active_set_pass in a static run, changed nothing (contact.csv byte for byte), silently."""
     from ntncontact.engine.builder import _unread_in_this_run
-    from ntncontact.io.scenario import ContactConfig
+    from ntncontact.engine.config import ContactConfig
 
     contact = ContactConfig(body_1="a", surface_1="bottom", body_2="b", surface_2="top",
                             penalty_normal=1e4, **sets)
