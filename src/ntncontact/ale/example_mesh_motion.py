@@ -15,6 +15,7 @@ from numpy.typing import NDArray
 
 from ntncontact.ale.smoothing import Smoother, boundary_node_mask
 from ntncontact.ale.surface import SurfaceCurve, respace_surface
+from ntncontact.mesh.generators import rectangle
 from ntncontact.mesh.quadmesh import QuadMesh
 from ntncontact.mesh.quality import quality_statistics
 
@@ -53,24 +54,16 @@ def layer_mesh(
     growth = top_ratio ** (1.0 / max(ny - 1, 1))
     rows = growth ** np.arange(ny)
     y = np.concatenate([[0.0], np.cumsum(rows)]) * height / rows.sum()
-    xs, ys = np.meshgrid(np.linspace(0.0, width, nx + 1), y)
-    nodes = np.column_stack([xs.ravel(), ys.ravel()])
-    i, j = np.meshgrid(np.arange(nx), np.arange(ny))
-    n0 = (j * (nx + 1) + i).ravel()
-    cells = np.column_stack([n0, n0 + 1, n0 + nx + 2, n0 + nx + 1])
-    interior = ~boundary_node_mask(cells, len(nodes))
+    grid = rectangle(width, height, nx, ny, x_breaks=np.linspace(0.0, width, nx + 1),
+                     y_breaks=y)
+    nodes = grid.nodes.copy()
+    interior = ~boundary_node_mask(grid.cells, len(nodes))
     row_h = np.gradient(y)[np.repeat(np.arange(ny + 1), nx + 1)]
     local_h = np.column_stack([np.full(len(nodes), width / nx), row_h])
     rng = np.random.default_rng(seed)
     nodes[interior] += jitter * local_h[interior] * rng.uniform(-1, 1, (interior.sum(), 2))
-    grid = np.arange(len(nodes)).reshape(ny + 1, nx + 1)
-    edge_sets = {
-        "bottom": np.column_stack([grid[0, :-1], grid[0, 1:]]),
-        "right": np.column_stack([grid[:-1, -1], grid[1:, -1]]),
-        "top": np.column_stack([grid[-1, 1:], grid[-1, :-1]]),
-        "left": np.column_stack([grid[1:, 0], grid[:-1, 0]]),
-    }
-    return QuadMesh(nodes, cells, {"top": grid[-1]}, edge_sets, name="layer")
+    return QuadMesh(nodes, grid.cells, {"top": grid.node_sets["top"][::-1]}, grid.edge_sets,
+                    name="layer")
 
 
 def _push_and_respace(
