@@ -68,7 +68,7 @@ class Transfer:
     but on the ``distributed`` nodes (sorted), whose rows are ``weights`` (node level, CSR,
     one row per distributed node, columns: all nodes). S is applied on those rows only: an
     (ndof, ndof) sparse S made every contact evaluation O(ndof) (kron, S^T K S: 23 ms per
-    evaluation at ring k = 8, 8 % of a contact step, issue 18). ``dofs``: S itself."""
+    evaluation at ring k = 8, 8 % of a contact step, issue 18)."""
 
     surface1: ContactSurface
     distributed: NDArray[np.int64]
@@ -86,19 +86,6 @@ class Transfer:
         if self.segments is None:
             return None
         return _share_derivatives(self.x, self.surface1, self.segments, self.distributed)
-
-    @property
-    def dofs(self) -> sp.csr_matrix:
-        """S as an (ndof, ndof) map of the displacement dofs (for checks; not used per step)."""
-        n = self.weights.shape[1]
-        identity = np.ones(n, dtype=bool)
-        identity[self.distributed] = False
-        keep = np.flatnonzero(identity)
-        w = self.weights.tocoo()
-        nodes = sp.csr_matrix((np.concatenate([np.ones(keep.size), w.data]),
-                               (np.concatenate([keep, self.distributed[w.row]]),
-                                np.concatenate([keep, w.col]))), shape=(n, n))
-        return sp.kron(nodes, sp.identity(2), format="csr")
 
     def positions(self, x: NDArray[np.float64] | None) -> NDArray[np.float64] | None:
         if x is None:
