@@ -44,11 +44,7 @@ class TimeFunction:
 
     def rate(self, t: float) -> float:
         """ds/dt just after t: the slope of the segment that t starts (0 outside the times)."""
-        k = int(np.searchsorted(self.times, t, side="right"))
-        if k == 0 or k == len(self.times):
-            return 0.0
-        t0, t1 = self.times[k - 1], self.times[k]
-        return (self.values[k] - self.values[k - 1]) / (t1 - t0)
+        return self._slope(int(np.searchsorted(self.times, t, side="right")))
 
     def rate_before(self, t: float) -> float:
         """ds/dt just before t: the slope of the segment that ends at t (0 outside the times).
@@ -58,11 +54,13 @@ class TimeFunction:
         0.30000000000000004, which must take the rate of the segment that ends at 0.3."""
         scale = max(abs(self.times[0]), abs(self.times[-1]), abs(t), 1e-300)
         t = t - KINK_ROUNDOFF * scale  # just before t: a point within round-off counts as t
-        k = int(np.searchsorted(self.times, t, side="left"))
+        return self._slope(int(np.searchsorted(self.times, t, side="left")))
+
+    def _slope(self, k: int) -> float:
+        """The slope of the segment that ends at time point k (0 outside the times)."""
         if k == 0 or k == len(self.times):
             return 0.0
-        t0, t1 = self.times[k - 1], self.times[k]
-        return (self.values[k] - self.values[k - 1]) / (t1 - t0)
+        return (self.values[k] - self.values[k - 1]) / (self.times[k] - self.times[k - 1])
 
 
 def edge_traction_vector(
