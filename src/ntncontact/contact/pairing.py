@@ -260,12 +260,10 @@ def ordered_partners(
     edges2 = interface.surface2.edges()
     along = arc2[proj.segment] + proj.xi * np.linalg.norm(
         x[edges2[proj.segment, 1]] - x[edges2[proj.segment, 0]], axis=1)
-    chain_index = np.full(len(x), -1, dtype=np.int64)
-    chain_index[s2] = np.arange(s2.size)
     depth = np.maximum(proj.projection_gap[: node1.size], 0.0)
     cand, j, weight = _admissible_pairs(x, interface, node1, taken, kept_pairs, s2, depth,
                                         reference_arc)
-    kept_j = chain_index[kept_pairs[:, 1]]
+    kept_j = interface.surface2.index_of(kept_pairs[:, 1])
     spacing_arc = arc2 if reference_arc is None else np.asarray(reference_arc, dtype=float)
     picks = _best_matching(along[: node1.size], arc2, spacing_arc, cand, j, weight,
                            along[node1.size:], kept_j)
@@ -276,12 +274,17 @@ def ordered_partners(
 def _longest_adjacent_segment(x: NDArray, surface) -> NDArray[np.float64]:
     """Per node of ``surface`` (chain order) the length of its longer adjacent segment."""
     edges = surface.edges()
-    length = np.linalg.norm(x[edges[:, 1]] - x[edges[:, 0]], axis=1)
-    position = np.full(len(x), -1, dtype=np.int64)
-    position[surface.nodes] = np.arange(surface.size)
-    out = np.zeros(surface.size)
-    for end in (0, 1):
-        np.maximum.at(out, position[edges[:, end]], length)
+    return _longer_of_segments(np.linalg.norm(x[edges[:, 1]] - x[edges[:, 0]], axis=1),
+                               surface.size)
+
+
+def _longer_of_segments(length: NDArray, n_nodes: int) -> NDArray[np.float64]:
+    """Per chain node the longer of its adjacent segments' ``length`` (segment k joins chain
+    nodes k and k + 1, the last one of a closed chain node 0)."""
+    out = np.zeros(n_nodes)
+    k = np.arange(length.size)
+    np.maximum.at(out, k, length)
+    np.maximum.at(out, (k + 1) % n_nodes, length)
     return out
 
 
@@ -306,10 +309,7 @@ def _surface2_reach(x: NDArray, interface: Interface, reference_arc: ArrayLike |
     if reference_arc is None:
         return reach
     arc = np.asarray(reference_arc, dtype=float)
-    original = np.zeros(arc.size)
-    np.maximum.at(original, np.arange(arc.size - 1), np.diff(arc))
-    np.maximum.at(original, np.arange(1, arc.size), np.diff(arc))
-    return np.minimum(reach, REACH_STRETCH * original)
+    return np.minimum(reach, REACH_STRETCH * _longer_of_segments(np.diff(arc), arc.size))
 
 
 def beyond_reach(x: NDArray[np.float64], interface: Interface, pairs: ArrayLike,
