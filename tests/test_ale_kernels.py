@@ -275,7 +275,8 @@ def test_hinted_location_and_interpolation_equal_the_numpy_code(seed):
         loc = remapper.locate(pts, 10.0, hint)
         # C-contiguous, as the ALE update's (``LazyGradients``): NumPy's einsum sums in an
         # order that depends on the operands' memory layout
-        grads = np.ascontiguousarray(remapper.nodal_gradients(fields)[remapper.cells[loc.cell]])
+        grads = remapper.nodal_gradients(fields, np.arange(len(nodes)))
+        grads = np.ascontiguousarray(grads[remapper.cells[loc.cell]])
         for g in (None, grads):
             got = remap._interpolate(remapper.nodes, remapper.cells, fields, loc.cell, loc.xi,
                                       pts, np.zeros((p, 4, 6, 2)) if g is None else g,
@@ -295,7 +296,7 @@ def test_snapping_to_the_located_cells_corners_equals_the_node_tree_query(seed):
     nodes, cells = distorted_block(rng)
     remapper = Remapper(nodes, cells)
     fields = rng.standard_normal((len(nodes), 6))
-    grads = remapper.nodal_gradients(fields)
+    grads = remapper.nodal_gradients(fields, np.arange(len(nodes)))
     # points on nodes (interior and boundary), a round-off away from them, and elsewhere
     base = rng.choice(len(nodes), 12, replace=False)
     pts = nodes[base] + np.repeat([0.0, 1e-15, 1e-6, 0.05], 3)[:, None] * rng.standard_normal(

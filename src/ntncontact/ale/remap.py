@@ -123,7 +123,6 @@ class Remapper:
         area = 0.5 * (d1[:, 0] * d2[:, 1] - d1[:, 1] * d2[:, 0])
         self.cell_size = np.sqrt(np.abs(area))  # sqrt(area): the length scale of a cell
         self._k = min(candidates, len(self.cells))
-        self._gradient_ops: tuple[NDArray, NDArray] | None = None
 
     # the search structures are built on first use: a hinted ALE move rarely needs them
     @cached_property
@@ -268,32 +267,28 @@ class Remapper:
         fields: ArrayLike,
         points: ArrayLike,
         method: RemapMethod = "linear",
-        outside_tol: float = 0.1,
-        gradients: ArrayLike | LazyGradients | None = None,
+        gradients: LazyGradients | None = None,
         hint: ArrayLike | None = None,
     ) -> NDArray[np.float64]:
         """Old nodal fields (n,) or (n, k) evaluated at new points, (p,) or (p, k).
 
-        ``gradients`` (n, k, 2), only for "quadratic": nodal gradients of the fields if already
-        known (e.g. ``nodal_gradients`` of the same fields kept between calls), or a
-        ``LazyGradients`` of these fields on this remapper. ``hint``: likely
-        cells of the points (see ``locate``).
+        ``gradients``, only for "quadratic": a ``LazyGradients`` of these fields on this
+        remapper (default: recovered at the located cells' nodes). ``hint``: likely cells of
+        the points (see ``locate``).
         """
         if method not in ("linear", "quadratic"):
             raise ValueError(f"unknown remap method {method!r}; use 'linear' or 'quadratic'")
         f = np.asarray(fields, dtype=float)
         f2 = f.reshape(len(self.nodes), -1)
         pts = np.atleast_2d(np.asarray(points, dtype=float))
-        loc = self.locate(pts, outside_tol, hint)
+        loc = self.locate(pts, hint=hint)
         nodes = self.cells[loc.cell]  # (p, 4)
         g = np.zeros((0, 4, f2.shape[1], 2))  # "linear": not read
         if method == "quadratic":
             if gradients is None:
                 g = self.nodal_gradients(f2, nodes.ravel()).reshape(*nodes.shape, -1, 2)
-            elif isinstance(gradients, LazyGradients):
-                g = gradients.at(nodes)
             else:
-                g = np.asarray(gradients, float).reshape(len(self.nodes), f2.shape[1], 2)[nodes]
+                g = gradients.at(nodes)
         # sum_a N_a f_a, and for "quadratic" + 1/2 sum_a N_a g_a . (p - x_a) + 1/2 sum_a N_a
         # g_a . (p - x(xi)) (a clamped point lies off its cell: continue linearly to it)
         # ... and a point on an old node keeps that node's value exactly (no round-off of the
@@ -306,18 +301,14 @@ class Remapper:
         return out.reshape((len(pts), *f.shape[1:]))
 
     def _gradient_operators(
-        self, nodes: NDArray[np.int64] | None = None
+        self, nodes: NDArray[np.int64]
     ) -> tuple[NDArray[np.int64], NDArray[np.float64]]:
-        """Per node (all, or the given ones) its two-ring patch (padded with -1) and the rows
+        """Per node of ``nodes`` its two-ring patch (padded with -1) and the rows
         G (p, 2, maxp) with g_a = G_a (f_patch - f_a): least squares of
         f_j - f_a = g.d + d.H d / 2 over the patch (d = x_j - x_a), or of g.d alone where the
         patch does not determine a quadratic. Each node's rows depend on its own patch only."""
-        if nodes is None and self._gradient_ops is not None:
-            return self._gradient_ops
         patch, lengths = self._topology.patches
-        if nodes is not None:
-            patch, lengths = patch[nodes], lengths[nodes]
-        centre = self.nodes if nodes is None else self.nodes[nodes]
+        patch, lengths, centre = patch[nodes], lengths[nodes], self.nodes[nodes]
         valid = patch >= 0
         d = (self.nodes[np.where(valid, patch, 0)] - centre[:, None, :]) * valid[..., None]
         scale = np.sqrt(np.sum(d**2, axis=(1, 2)) / np.maximum(lengths, 1))
@@ -339,22 +330,17 @@ class Remapper:
             rows = rows[~ok]
             if rows.size == 0:
                 break
-        if nodes is None:
-            self._gradient_ops = (patch, ops)
         return patch, ops
 
-    def nodal_gradients(
-        self, fields: ArrayLike, nodes: ArrayLike | None = None
-    ) -> NDArray[np.float64]:
-        """Recovered nodal gradients (n, k, 2) of nodal fields (n,) or (n, k): exact for
-        quadratic fields wherever the two-ring patch carries a quadratic (every node of a mesh
-        at least two cells across), exact for linear fields everywhere else. With ``nodes``
-        only those nodes' gradients, (p, k, 2)."""
+    def nodal_gradients(self, fields: ArrayLike, nodes: ArrayLike) -> NDArray[np.float64]:
+        """Recovered gradients (p, k, 2) at the nodes ``nodes`` (p,) of nodal fields (n,) or
+        (n, k): exact for quadratic fields wherever the two-ring patch carries a quadratic
+        (every node of a mesh at least two cells across), exact for linear fields everywhere
+        else."""
         f2 = np.asarray(fields, dtype=float).reshape(len(self.nodes), -1)
-        idx = None if nodes is None else np.asarray(nodes, dtype=np.int64).reshape(-1)
+        idx = np.asarray(nodes, dtype=np.int64).reshape(-1)
         patch, ops = self._gradient_operators(idx)
-        own = f2 if idx is None else f2[idx]
-        diff = (f2[np.where(patch >= 0, patch, 0)] - own[:, None, :]) * (patch >= 0)[..., None]
+        diff = (f2[np.where(patch >= 0, patch, 0)] - f2[idx][:, None, :]) * (patch >= 0)[..., None]
         return np.einsum("niq,nqk->nki", ops, diff)
 
 
