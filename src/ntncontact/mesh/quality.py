@@ -56,10 +56,12 @@ def edge_lengths(mesh_or_nodes: QuadMesh | ArrayLike, cells: ArrayLike | None = 
     return np.linalg.norm(nodes[edges[:, 1]] - nodes[edges[:, 0]], axis=1)
 
 
-def _corner_vectors(nodes: NDArray, cells: NDArray) -> tuple[NDArray, NDArray]:
-    """At each corner k: a = x_{k+1} - x_k (to the next node), b = x_{k-1} - x_k (previous)."""
+def _corner_vectors(nodes: NDArray, cells: NDArray) -> tuple[NDArray, NDArray, NDArray]:
+    """At each corner k: a = x_{k+1} - x_k (to the next node), b = x_{k-1} - x_k (previous)
+    and the corner Jacobian cross(a, b)."""
     x = nodes[cells]  # (m, 4, 2)
-    return np.roll(x, -1, axis=1) - x, np.roll(x, 1, axis=1) - x
+    a, b = np.roll(x, -1, axis=1) - x, np.roll(x, 1, axis=1) - x
+    return a, b, a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]
 
 
 def corner_jacobians(
@@ -70,9 +72,7 @@ def corner_jacobians(
     Positive at every corner of a convex counter-clockwise cell; equals 4 det(dx/dxi) of the
     bilinear map evaluated at that corner. A non-positive value flags inversion or collapse.
     """
-    nodes, cell_arr = _nodes_cells(mesh_or_nodes, cells)
-    a, b = _corner_vectors(nodes, cell_arr)
-    return a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]
+    return _corner_vectors(*_nodes_cells(mesh_or_nodes, cells))[2]
 
 
 def corner_angles_deg(
@@ -84,11 +84,8 @@ def corner_angles_deg(
     so a reflex corner of a non-convex (but valid CCW) cell reads above 180 and the four angles of
     any simple CCW quadrilateral sum to 360.
     """
-    nodes, cell_arr = _nodes_cells(mesh_or_nodes, cells)
-    a, b = _corner_vectors(nodes, cell_arr)
-    cross = a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]
-    dot = np.einsum("...i,...i->...", a, b)
-    return np.mod(np.degrees(np.arctan2(cross, dot)), 360.0)
+    a, b, cross = _corner_vectors(*_nodes_cells(mesh_or_nodes, cells))
+    return np.mod(np.degrees(np.arctan2(cross, np.einsum("...i,...i->...", a, b))), 360.0)
 
 
 def cell_min_sines(nodes: ArrayLike, cells: ArrayLike) -> NDArray[np.float64]:
@@ -198,8 +195,7 @@ def check_elements(
     nodes, cell_arr = _nodes_cells(mesh_or_nodes, cells)
     numbers = np.arange(len(cell_arr)) if which is None else np.asarray(which, np.int64)
     cell_arr = cell_arr[numbers]
-    a, b = _corner_vectors(nodes, cell_arr)
-    jac = a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]
+    a, b, jac = _corner_vectors(nodes, cell_arr)
     scale = np.linalg.norm(a, axis=-1) * np.linalg.norm(b, axis=-1)
     bad = ~(jac > rel_tol * scale)  # also catches NaN coordinates
     if not bad.any():
