@@ -17,6 +17,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy.spatial import cKDTree
 
+from ..mesh.boundary import ball_pairs
 from .kinematics import pair_gaps
 from .surfaces import Interface
 
@@ -64,7 +65,7 @@ def _closest_on_segments(
     (CPU; both about linear, the ball query and its flattening dominating)."""
     if len(q) * len(a) <= BRUTE_FORCE_PAIRS:
         return _closest_of_all_segments(q, a, b)
-    owner, seg = _ball_pairs(0.5 * (a + b), q, radius)
+    owner, seg = ball_pairs(cKDTree(0.5 * (a + b)), q, radius, sort=True)
     ab = b[seg] - a[seg]
     xi = np.clip(np.einsum("ij,ij->i", q[owner] - a[seg], ab) / np.einsum("ij,ij->i", ab, ab),
                  0.0, 1.0)
@@ -75,17 +76,6 @@ def _closest_on_segments(
     lowest = np.minimum.reduceat(np.where(nearest, seg, len(a)), start)
     first = np.flatnonzero(nearest & (seg == lowest[owner]))
     return seg[first], xi[first], dist[first]
-
-
-def _ball_pairs(points: NDArray, q: NDArray, radius: NDArray | float
-                ) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
-    """(query index, point index) of every point within ``radius`` of each query, grouped by
-    query in order and, within a query, by point index (cKDTree sorts each ball's hits)."""
-    hits = cKDTree(points).query_ball_point(q, radius, return_sorted=True)
-    counts = np.fromiter((len(h) for h in hits), dtype=np.int64, count=len(hits))
-    owner = np.repeat(np.arange(len(q)), counts)
-    found = np.fromiter((s for h in hits for s in h), dtype=np.int64, count=int(counts.sum()))
-    return owner, found
 
 
 def _closest_of_all_segments(q: NDArray, a: NDArray, b: NDArray
@@ -373,7 +363,7 @@ def _nearby_pairs(q: NDArray, nodes: NDArray, radius: NDArray
     nodes: 0.76 and 2.76 s with ``_interval_matching``); a ball query is n log n."""
     if len(q) * len(nodes) <= BRUTE_FORCE_PAIRS:
         return np.divmod(np.arange(len(q) * len(nodes), dtype=np.int64), len(nodes))
-    return _ball_pairs(nodes, q, radius * (1.0 + 1e-9) + 1e-300)
+    return ball_pairs(cKDTree(nodes), q, radius * (1.0 + 1e-9) + 1e-300, sort=True)
 
 
 def _best_matching(along: NDArray, arc2: NDArray, spacing_arc: NDArray, cand: NDArray,

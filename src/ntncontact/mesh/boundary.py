@@ -18,6 +18,7 @@ from ntncontact.mesh.quadmesh import MeshError, QuadMesh, cell_edges
 
 __all__ = [
     "SurfaceChain",
+    "ball_pairs",
     "boundary_edges",
     "chain_edge_lengths",
     "chain_from_edges",
@@ -130,10 +131,19 @@ def _nodes_near(nodes: NDArray, candidates: NDArray[np.int64], centres: NDArray,
                 radii: NDArray) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
     """(node, centre index) pairs: each of ``candidates`` within its centre's radius (a k-d
     tree over the candidates), flattened for vectorized tests."""
-    near = cKDTree(nodes[candidates]).query_ball_point(centres, radii)
-    counts = np.fromiter(map(len, near), np.int64, count=len(near))
-    node = candidates[np.fromiter(chain.from_iterable(near), np.int64, count=counts.sum())]
-    return node, np.repeat(np.arange(len(centres)), counts)
+    centre, found = ball_pairs(cKDTree(nodes[candidates]), centres, radii)
+    return candidates[found], centre
+
+
+def ball_pairs(tree: cKDTree, centres: NDArray, radii: NDArray | float,
+               sort: bool | None = None) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
+    """(centre index, point index) of every point of ``tree`` within its centre's radius,
+    grouped by centre in order (``sort``: cKDTree's ``return_sorted``; True: each ball's
+    points by index), flattened for vectorized tests."""
+    hits = tree.query_ball_point(centres, radii, return_sorted=sort)
+    counts = np.fromiter(map(len, hits), np.int64, count=len(hits))
+    found = np.fromiter(chain.from_iterable(hits), np.int64, count=counts.sum())
+    return np.repeat(np.arange(len(hits)), counts), found
 
 
 def chain_from_edges(edges: NDArray[np.int64], label: str = "edges") -> SurfaceChain:

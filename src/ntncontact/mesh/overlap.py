@@ -16,7 +16,7 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.spatial import cKDTree
 
-from ntncontact.mesh.boundary import boundary_edges, chord_normals
+from ntncontact.mesh.boundary import ball_pairs, boundary_edges, chord_normals
 
 #: A point deeper than this fraction of the body's median edge length below its boundary is an
 #: overlap: surfaces that touch (up to round-off) are not.
@@ -131,11 +131,7 @@ def distance_to_segments(points: NDArray, a: NDArray, b: NDArray) -> NDArray:
     radius = (upper + reach) * (1.0 + 1e-9) + 1e-300
     for start in range(0, finite.size, CHUNK):
         block = finite[start:start + CHUNK]
-        near = tree.query_ball_point(points[block], radius[start:start + CHUNK],
-                                     return_sorted=False)
-        count = np.fromiter((len(n) for n in near), np.int64, len(near))
-        which = np.repeat(np.arange(len(block)), count)
-        seg = np.concatenate([np.asarray(n, np.int64) for n in near])
+        which, seg = ball_pairs(tree, points[block], radius[start:start + CHUNK], sort=False)
         squared = _pair_distances(points[block][which], a[seg], b[seg])
         best = np.full(len(block), np.inf)
         np.minimum.at(best, which, squared)
