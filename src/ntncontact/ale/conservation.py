@@ -106,12 +106,8 @@ def _momentum_change(mass: sp.csr_matrix, x: NDArray, p: NDArray, dofs: NDArray,
     (P_x, P_y, L about the origin), and u = A^-1 M v with its part along the rigid modes
     removed (the direction an energy change may take without changing the momenta).
     ``p`` = M v (n, 2); ``solve`` applies A^-1."""
-    m1 = mass @ np.ones(len(x))
-    mx, my = mass @ x[:, 0], mass @ x[:, 1]
-    B_full = np.zeros((2 * len(x), 3))  # (M G) on dofs: G the rigid modes
-    B_full[0::2, 0], B_full[1::2, 1] = m1, m1
-    B_full[0::2, 2], B_full[1::2, 2] = -my, mx
-    B = B_full[dofs]
+    # (M G) on dofs, G the rigid modes: the scalar mass times each node's (2, 3) block
+    B = (mass @ rigid_modes(x).reshape(len(x), 6)).reshape(-1, 3)[dofs]
     Phi = solve(B)
     C = B.T @ Phi
     current = np.array([p[:, 0].sum(), p[:, 1].sum(),
