@@ -1,7 +1,7 @@
 """Contact detection and release (report 2.1.4, 3.2).
 
 Called once at the start of a step with the committed state of the previous step:
-- an active pair is released when its normal traction vanished, t_N <= traction_tol, and
+- an active pair is released when its normal traction vanished, t_N <= 0, and
   * persistency law: it separates, gdot < 0, for ``release_steps`` consecutive committed steps
     (the gap stays roughly frozen under persistency, so its sign says nothing, 3.2);
   * gap law: its gap opened, g < 0 (Kuhn-Tucker 2.14-2.16);
@@ -55,10 +55,10 @@ def entering(gap: NDArray[np.float64], gap_rate: NDArray[np.float64] | None,
 
 
 def release_mask(
-    state: PairState, persistency: bool, release_steps: int = 2, traction_tol: float = 0.0
+    state: PairState, persistency: bool, release_steps: int = 2
 ) -> tuple[NDArray[np.bool_], NDArray[np.int64]]:
     """(released, updated release counters) for the committed pairs of ``state``."""
-    vanished = state.t_N <= traction_tol
+    vanished = state.t_N <= 0.0
     if not persistency:
         released = vanished & (state.gap < 0.0)
         return released, np.zeros(len(state), np.int64)
@@ -77,7 +77,6 @@ def detect(
     persistency: bool = True,
     release_steps: int = 2,
     gap_tol: float = 0.0,
-    traction_tol: float = 0.0,
     objective: bool = False,
     release: tuple[NDArray[np.bool_], NDArray[np.int64]] | None = None,
 ) -> Detection:
@@ -93,7 +92,7 @@ def detect(
     if release_steps < 1:
         raise ValueError("release_steps must be >= 1")
     if release is None:
-        release = release_mask(state, persistency, release_steps, traction_tol)
+        release = release_mask(state, persistency, release_steps)
     released, count = release
     kept = replace(state.take(~released), release_count=count[~released])
     candidates = np.asarray(candidates, dtype=np.int64).reshape(-1, 2)
