@@ -55,7 +55,9 @@ def read_msh(path: str | Path, name: str | None = None) -> QuadMesh:
     renumber = np.full(xy.shape[0], -1, dtype=np.int64)
     renumber[used] = np.arange(used.size)
     _check_distinct(xy[used], label)
-    node_ids = _file_node_ids(path, xy.shape[0])[used]
+    # the file's node numbers (meshio's point order): outputs give them so that a node of
+    # contact.csv can be found in the file
+    node_ids = _file_ids(path, b"$Nodes", xy.shape[0], _node_ids)[used]
     cells = _counter_clockwise(xy[used], renumber[quads], label, element_ids, node_ids)
     mesh = QuadMesh(xy[used], cells, name=name or path.stem, file_node_ids=node_ids,
                     file_element_ids=element_ids)
@@ -104,12 +106,6 @@ def _unreadable(path: Path) -> str:
                 "Mesh.MshFileVersion = 4.1, or File > Export)")
     return (f"a gmsh format {version} file that cannot be read: an element may cite a node "
             "that $Nodes does not define, or a section is cut short; write it again from gmsh")
-
-
-def _file_node_ids(path: Path, n_points: int) -> NDArray[np.int64]:
-    """The file's node numbers in file order (meshio's point order): outputs give them so that
-    a node of contact.csv can be found in the file."""
-    return _file_ids(path, b"$Nodes", n_points, _node_ids)
 
 
 def _file_ids(path: Path, section: bytes, count: int,
@@ -207,7 +203,7 @@ def _check_finite(xy: NDArray[np.float64], path: Path) -> None:
     """Every coordinate a number, the first that is not named by its file node."""
     bad = np.flatnonzero(~np.all(np.isfinite(xy), axis=1))
     if bad.size:
-        tag = _file_node_ids(path, xy.shape[0])[bad[0]]
+        tag = _file_ids(path, b"$Nodes", xy.shape[0], _node_ids)[bad[0]]
         raise MeshError(f"{path}: {bad.size} node(s) with a coordinate that is not a number, "
                         f"the first file node {tag} at {tuple(xy[bad[0]].tolist())}")
 
