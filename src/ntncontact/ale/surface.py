@@ -422,10 +422,6 @@ class SurfaceCurve:
         lengths = _segment_speeds(points, bulge, GAUSS_U) @ GAUSS_W
         return cls(points, breaks, bulge, np.concatenate([[0.0], np.cumsum(lengths)]))
 
-    @property
-    def length(self) -> float:
-        return float(self.node_s[-1])
-
     def point_at(self, s: ArrayLike) -> NDArray[np.float64]:
         """Positions (p, 2) at arc-length parameters s (values outside [0, L] are clamped)."""
         s_arr = np.ascontiguousarray(np.atleast_1d(np.asarray(s, dtype=float)).reshape(-1))
