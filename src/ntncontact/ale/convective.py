@@ -20,7 +20,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..fem.assembly import element_dofs
-from ..fem.q4 import N_GP, kinematics
+from ..fem.q4 import N_GP, deformation_gradient, reference_gradients
 
 __all__ = ["ConvectiveForce", "convective_force", "element_convective"]
 
@@ -48,8 +48,8 @@ class ConvectiveForce:
 
 def _spatial(X_e: NDArray, x_e: NDArray) -> tuple[NDArray, NDArray]:
     """grad_x N (ne, g, 4, 2) and reference weights det(dX/dxi) w_g (ne, g)."""
-    kin = kinematics(X_e, x_e)
-    F = kin.F
+    grad, weight = reference_gradients(X_e)
+    F = deformation_gradient(grad, x_e)
     det = F[..., 0, 0] * F[..., 1, 1] - F[..., 0, 1] * F[..., 1, 0]
     Finv = np.empty_like(F)
     Finv[..., 0, 0] = F[..., 1, 1] / det
@@ -57,7 +57,7 @@ def _spatial(X_e: NDArray, x_e: NDArray) -> tuple[NDArray, NDArray]:
     Finv[..., 0, 1] = -F[..., 0, 1] / det
     Finv[..., 1, 0] = -F[..., 1, 0] / det
     # dN/dx_k = dN/dX_J (F^-1)_Jk: the chain rule through X(x)
-    return np.einsum("egbJ,egJk->egbk", kin.grad, Finv), kin.weight
+    return np.einsum("egbJ,egJk->egbk", grad, Finv), weight
 
 
 def _weighted_parts(

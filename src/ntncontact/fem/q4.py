@@ -4,8 +4,6 @@ compiled kernel in :mod:`ntncontact.fem.kernels_numba`."""
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import numpy as np
 from numpy.typing import NDArray
 
@@ -74,15 +72,6 @@ class NonFiniteElementError(InvertedElementError):
         return self._text(label)
 
 
-@dataclass(frozen=True)
-class Kinematics:
-    """Per element and Gauss point: reference gradients, volume weights and F."""
-
-    grad: NDArray  # dN_a/dX_J, (ne, 4gp, 4, 2)
-    weight: NDArray  # det(dX/dxi) * w_g, (ne, 4gp)
-    F: NDArray  # deformation gradient, (ne, 4gp, 2, 2)
-
-
 def reference_gradients(X_e: NDArray) -> tuple[NDArray, NDArray]:
     """Gradients dN/dX and integration weights over each element's reference (X) image.
 
@@ -108,12 +97,6 @@ def reference_gradients(X_e: NDArray) -> tuple[NDArray, NDArray]:
 def deformation_gradient(grad: NDArray, x_e: NDArray) -> NDArray:
     """F_iJ = sum_a x_ai dN_a/dX_J at every Gauss point, shape (ne, 4, 2, 2)."""
     return np.matmul(np.swapaxes(x_e, 1, 2)[:, None], grad)  # (ne, 1, 2, 4) @ (ne, 4gp, 4, 2)
-
-
-def kinematics(X_e: NDArray, x_e: NDArray) -> Kinematics:
-    """Reference gradients, weights and deformation gradient for elements (ne, 4, 2)."""
-    grad, weight = reference_gradients(X_e)
-    return Kinematics(grad, weight, deformation_gradient(grad, x_e))
 
 
 def element_mass(X_e: NDArray, rho: NDArray) -> NDArray:
