@@ -22,19 +22,9 @@ from numpy.typing import NDArray
 from ..fem.assembly import element_dofs
 from ..fem.q4 import N_GP, deformation_gradient, reference_gradients
 
-__all__ = ["ConvectiveForce", "convective_force", "element_convective"]
+__all__ = ["ConvectiveForce", "convective_force"]
 
 Triplets = tuple[NDArray, NDArray, NDArray]
-
-
-@dataclass(frozen=True)
-class ElementConvective:
-    """Per element: C_e (ne, 4, 4), f_e (ne, 8) and the (ne, 8, 8) derivatives of f_e."""
-
-    C: NDArray
-    f: NDArray
-    df_dx: NDArray
-    df_dv: NDArray
 
 
 @dataclass(frozen=True)
@@ -60,30 +50,6 @@ def _spatial(X_e: NDArray, x_e: NDArray) -> tuple[NDArray, NDArray]:
     return np.einsum("egbJ,egJk->egbk", grad, Finv), weight
 
 
-def _weighted_parts(
-    X_e: NDArray, x_e: NDArray, c_e: NDArray, rho: NDArray
-) -> tuple[NDArray, NDArray, NDArray]:
-    """grad_x N, rho0 w N_a (ne, g, 4) and s_b = c . grad_x N_b (ne, g, 4) at the Gauss points."""
-    gx, w = _spatial(X_e, x_e)
-    WN = (w * rho[:, None])[..., None] * N_GP  # rho0 dV0 = rho dV at each Gauss point
-    c_g = np.einsum("ga,eak->egk", N_GP, c_e)
-    return gx, WN, np.einsum("egk,egbk->egb", c_g, gx)
-
-
-def element_convective(
-    X_e: NDArray, x_e: NDArray, v_e: NDArray, c_e: NDArray, rho: NDArray
-) -> ElementConvective:
-    """Element convective matrices, forces and derivatives; arrays (ne, 4, 2), rho (ne,)."""
-    gx, WN, s = _weighted_parts(X_e, x_e, c_e, rho)
-    G = np.einsum("ebi,egbk->egik", v_e, gx)  # grad_x v
-    WNs = np.einsum("ega,egd->egad", WN, s)
-    C = WNs.sum(axis=1)
-    f = np.einsum("eab,ebi->eai", C, v_e).reshape(-1, 8)
-    df_dv = np.einsum("eab,ij->eaibj", C, np.eye(2)).reshape(-1, 8, 8)
-    df_dx = -np.einsum("egad,egil->eaidl", WNs, G).reshape(-1, 8, 8)
-    return ElementConvective(C, f, df_dx, df_dv)
-
-
 def _triplets(edofs: NDArray, Ke: NDArray) -> Triplets:
     k = edofs.shape[1]
     rows = np.repeat(edofs, k, axis=1).ravel()
@@ -100,7 +66,17 @@ def convective_force(
     derivative triplets use global dofs 2 node + i.
     """
     cells = np.asarray(cells, dtype=np.int64).reshape(-1, 4)
-    el = element_convective(X[cells], x[cells], v[cells], c[cells], np.asarray(rho, float))
+    v_e = v[cells]
+    gx, w = _spatial(X[cells], x[cells])
+    # rho0 w N_a (e, g, a): rho0 dV0 = rho dV at each Gauss point; s_b = c . grad_x N_b
+    WN = (w * np.asarray(rho, float)[:, None])[..., None] * N_GP
+    s = np.einsum("egk,egbk->egb", np.einsum("ga,eak->egk", N_GP, c[cells]), gx)
+    WNs = np.einsum("ega,egd->egad", WN, s)
+    C = WNs.sum(axis=1)  # C_e (e, 4, 4)
+    f = np.einsum("eab,ebi->eai", C, v_e).reshape(-1, 8)
+    df_dv = np.einsum("eab,ij->eaibj", C, np.eye(2)).reshape(-1, 8, 8)
+    G = np.einsum("ebi,egbk->egik", v_e, gx)  # grad_x v
+    df_dx = -np.einsum("egad,egil->eaidl", WNs, G).reshape(-1, 8, 8)
     edofs = element_dofs(cells)
-    force = np.bincount(edofs.ravel(), weights=el.f.ravel(), minlength=2 * len(X))
-    return ConvectiveForce(force, _triplets(edofs, el.df_dx), _triplets(edofs, el.df_dv))
+    force = np.bincount(edofs.ravel(), weights=f.ravel(), minlength=2 * len(X))
+    return ConvectiveForce(force, _triplets(edofs, df_dx), _triplets(edofs, df_dv))
