@@ -288,13 +288,6 @@ class AleBody:
         return boundary_node_mask(self.cells, self.n_nodes)
 
     @cached_property
-    def on_surface(self) -> NDArray[np.bool_]:
-        """Mask of the body's nodes on this contact surface chain."""
-        mask = np.zeros(self.n_nodes, bool)
-        mask[self.surface] = True
-        return mask
-
-    @cached_property
     def min_spacing(self) -> float:
         """The smallest reference surface spacing."""
         return float(self.reference_spacing.min())
@@ -663,7 +656,7 @@ def _move_interior(
     changes = _changes(body, tn, x_surf)
     seeds = changes[0]  # surface nodes only: x_surf moved no other
     if least_seeds is not None:
-        seeds = seeds | (least_seeds & body.on_surface)
+        seeds = seeds | (least_seeds & (body._surface_index >= 0))
     if not seeds.any():
         return x_surf, changes, None, "none", seeds
     floor = STAGES.index(least)
