@@ -140,15 +140,14 @@ class Assembler:
         """Mass matrix on dofs: the scalar mass repeated for x and y."""
         return sp.kron(self.nodal_mass(X, lumped), sp.eye(2), format="csr")
 
-    def element_masses(self, X: NDArray, elements: NDArray | None = None) -> NDArray:
-        """Consistent scalar element masses (ne, 4, 4) of all elements or of ``elements``."""
-        idx = slice(None) if elements is None else elements
-        return element_mass(X[self.cells[idx]], self.rho[idx])
+    def element_masses(self, X: NDArray, elements: NDArray) -> NDArray:
+        """Consistent scalar element masses (ne, 4, 4) of ``elements``."""
+        return element_mass(X[self.cells[elements]], self.rho[elements])
 
     def dof_mass_data(self, element_masses: NDArray, lumped: bool,
-                      elements: NDArray | None = None) -> NDArray:
-        """The CSR data (stiffness pattern) of the dof mass of ``elements`` (all by default)
-        from their scalar element masses: ALE runs rebuild only their moving bodies' part."""
+                      elements: NDArray) -> NDArray:
+        """The CSR data (stiffness pattern) of the dof mass of ``elements`` from their scalar
+        element masses: ALE runs rebuild only their moving bodies' part."""
         me = element_masses
         if lumped:
             me = np.einsum("eab,ab->eab", np.broadcast_to(me.sum(axis=2)[:, :, None], me.shape),
@@ -156,9 +155,7 @@ class Assembler:
         blocks = np.zeros((len(me), 4, 2, 4, 2))
         blocks[:, :, 0, :, 0] = me
         blocks[:, :, 1, :, 1] = me
-        entries = self.pattern.entry_map
-        if elements is not None:
-            entries = entries.reshape(len(self.cells), -1)[elements].ravel()
+        entries = self.pattern.entry_map.reshape(len(self.cells), -1)[elements].ravel()
         return np.bincount(entries, weights=blocks.ravel(), minlength=self.pattern.nnz)
 
     def pattern_matrix(self, data: NDArray) -> sp.csr_matrix:
