@@ -540,6 +540,9 @@ class ContactResult:
         return sp.csr_matrix((vals, (rows, cols)), shape=(n, n))
 
 
+_NO_ARRAY = np.zeros((0, 2))
+
+
 def evaluate_contact(
     x_eval: NDArray[np.float64],
     v_eval: NDArray[np.float64] | None,
@@ -571,19 +574,6 @@ def evaluate_contact(
         raise ValueError("friction under the gap law needs x_start (tangential increment)")
     if rate_factor is not None and v_eval is None:
         raise ValueError("the rate law needs velocities v")
-    return _evaluate_compiled(x_eval, v_eval, rate_factor, interface, state, law, x_start,
-                              dt, deferred_tangent)
-
-
-_NO_ARRAY = np.zeros((0, 2))
-
-
-def _evaluate_compiled(
-    x_eval: NDArray, v_eval: NDArray | None, rate_factor: float | None, interface: Interface,
-    state: PairState, law: ContactLaw, x_start: NDArray | None, dt: float | None,
-    deferred_tangent: bool = False,
-) -> ContactResult:
-    """:func:`evaluate_contact` by :func:`evaluate_pairs`; bad input raises a ValueError."""
     rate_law = rate_factor is not None
     step = 1.0 if rate_factor is None else (dt if dt is not None else 2.0 / rate_factor)
     params = np.array([law.eps_N, law.eps_T, law.mu, rate_factor or 0.0, step])
