@@ -7,6 +7,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 from ntncontact.contact import pair_gaps
@@ -20,6 +21,14 @@ from ntncontact.io.writers import read_csv_table
 from ntncontact.mesh.generators import rectangle
 
 EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
+
+
+def lagrange_matrices(blocks, ndof: int) -> tuple[sp.csr_matrix, sp.csr_matrix]:
+    """(G, B) of ``contact.lagrange.LagrangeBlocks`` as CSR matrices of shapes (P, ndof) and
+    (ndof, P)."""
+    p = blocks.values.size
+    return (sp.csr_matrix((blocks.g_vals, (blocks.g_rows, blocks.g_cols)), shape=(p, ndof)),
+            sp.csr_matrix((blocks.b_vals, (blocks.b_rows, blocks.b_cols)), shape=(ndof, p)))
 
 #: A block sliding at 2 off the right end of a base under gravity (frictionless); the base's
 #: ``motion`` (lagrangian or ale) and ``t_end`` to fill in (tests/test_sliding_pairs.py,

@@ -12,6 +12,7 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
+from helpers import lagrange_matrices
 
 from ntncontact.contact import (
     AugmentationTolerances,
@@ -83,7 +84,7 @@ def solve_lagrange(x, anchors, interface, pairs, law=None):
         state = PairState.from_pairs(pairs).with_multipliers(lam)
         res = evaluate_contact(x, None, None, interface, state, law, x_start=x_start)
         blocks = lagrange_blocks(x, None, None, interface, state, law, x_start)
-        g_mat, b_mat = blocks.matrices(x.size)
+        g_mat, b_mat = lagrange_matrices(blocks, x.size)
         r = np.concatenate(((spring_residual(x, anchors) + res.force)[FREE], blocks.values))
         if np.linalg.norm(r) < NEWTON_TOL * np.linalg.norm(LOAD):
             return x, lam
@@ -232,8 +233,8 @@ def sensitivity(x, interface, state, law, res, x_start=None, blocks_law=None):
     G and B of ``blocks_law`` (default ``law``)."""
     pressed = res.t_N > 0.0
     jac = np.diag(np.repeat(K_SPRING, 2)) + res.tangent_matrix().toarray()[np.ix_(FREE, FREE)]
-    g_mat, b_mat = lagrange_blocks(x, None, None, interface, state, blocks_law or law,
-                                   x_start).matrices(x.size)
+    g_mat, b_mat = lagrange_matrices(lagrange_blocks(x, None, None, interface, state,
+                                                     blocks_law or law, x_start), x.size)
     response = np.linalg.solve(jac, b_mat.toarray()[FREE][:, pressed])
     return g_mat.toarray()[pressed][:, FREE] @ response
 

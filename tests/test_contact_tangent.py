@@ -13,6 +13,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 from contact_reference import pair_kinematics
+from helpers import lagrange_matrices
 
 from ntncontact.contact import (
     SLIP,
@@ -178,7 +179,7 @@ def test_lagrange_blocks_fd(rate_factor, moment_free):
     lam = np.linspace(2.0, 4.0, len(pairs))
     state = friction_history(x, v, rate_factor, interface, pairs, law, kinds, x_start, lam)
     blocks = lagrange_blocks(x, v, rate_factor, interface, state, law, x_start)
-    g_mat, b_mat = blocks.matrices(x.size)
+    g_mat, b_mat = lagrange_matrices(blocks, x.size)
 
     def h_of(xx):
         vv = None if v is None else v + (rate_factor or 0.0) * (xx - x)

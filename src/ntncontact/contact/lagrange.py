@@ -27,7 +27,6 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-import scipy.sparse as sp
 from numpy.typing import NDArray
 
 from .evaluate import ContactResult, evaluate_contact
@@ -50,13 +49,6 @@ class LagrangeBlocks:
     b_rows: NDArray[np.int64]
     b_cols: NDArray[np.int64]
     b_vals: NDArray[np.float64]
-
-    def matrices(self, ndof: int) -> tuple[sp.csr_matrix, sp.csr_matrix]:
-        """(G, B) as CSR matrices of shapes (P, ndof) and (ndof, P)."""
-        p = self.values.size
-        g = sp.csr_matrix((self.g_vals, (self.g_rows, self.g_cols)), shape=(p, ndof))
-        b = sp.csr_matrix((self.b_vals, (self.b_rows, self.b_cols)), shape=(ndof, p))
-        return g, b
 
 
 def lagrange_blocks(
