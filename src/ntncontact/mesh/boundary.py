@@ -183,18 +183,14 @@ def surface_chain(mesh: QuadMesh, edge_set_name: str) -> SurfaceChain:
                                                           f"'{edge_set_name}'")
 
 
-def _chain_vectors(xy: NDArray[np.float64], closed: bool) -> NDArray[np.float64]:
-    """Edge vectors ``x_{i+1} - x_i`` of an ordered chain (closing edge included if closed)."""
+def chain_edge_lengths(xy: NDArray[np.float64], closed: bool) -> NDArray[np.float64]:
+    """Lengths of the chain's edges ``x_{i+1} - x_i``: ``n - 1`` for an open chain, ``n``
+    for a closed one (the closing edge included)."""
     xy = np.asarray(xy, dtype=float)
     if xy.ndim != 2 or xy.shape[1] != 2 or xy.shape[0] < 2:
         raise MeshError(f"a chain needs coordinates of shape (n >= 2, 2), got {xy.shape}")
     nxt = np.roll(xy, -1, axis=0) if closed else xy[1:]
-    return nxt - (xy if closed else xy[:-1])
-
-
-def chain_edge_lengths(xy: NDArray[np.float64], closed: bool) -> NDArray[np.float64]:
-    """Lengths of the chain's edges: ``n - 1`` for an open chain, ``n`` for a closed one."""
-    return np.linalg.norm(_chain_vectors(xy, closed), axis=1)
+    return np.linalg.norm(nxt - (xy if closed else xy[:-1]), axis=1)
 
 
 def nodal_tributary_lengths(xy: NDArray[np.float64], closed: bool) -> NDArray[np.float64]:
