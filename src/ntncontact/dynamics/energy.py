@@ -82,11 +82,8 @@ class EnergyConsistentContact:
         return np.concatenate([t.initial for t in self.terms] + [np.zeros(1)])
 
     def split(self, lam: NDArray) -> tuple[list[NDArray], float]:
-        out, start = [], 0
-        for t in self.terms:
-            out.append(lam[start:start + t.size])
-            start += t.size
-        return out, float(lam[-1])
+        """(each term's multipliers, theta) of the term's unknowns ``lam``."""
+        return np.split(lam[:-1], np.cumsum([t.size for t in self.terms])[:-1]), float(lam[-1])
 
     def __call__(self, x_eval, v_eval, rate, x_start, lam):
         lams, theta = self.split(lam)
