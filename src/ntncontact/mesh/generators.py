@@ -311,10 +311,7 @@ def disk(
     quarter = np.arange(0, n_circ, n_circ // 4)  # exactly below, right of, above, left of it
     circle[quarter] = radius * np.array([[0.0, -1.0], [1.0, 0.0], [0.0, 1.0], [-1.0, 0.0]])
     fractions = _ring_fractions(n_radial, radius - c, surface_size)[1:, None, None]
-    ring_xy = (1.0 - fractions) * core[rim][None] + fractions * circle[None]
-    n_core = core.shape[0]
-    ring = np.vstack((rim[None], n_core + np.arange(n_radial * n_circ).reshape(n_radial, n_circ)))
-    nodes = np.vstack((core, ring_xy.reshape(-1, 2))) + np.asarray(center, float)
+    nodes, ring = _blended_rings(core, rim, circle, fractions, center)
     closed = np.concatenate((ring, ring[:, :1]), axis=1)  # column n_circ = column 0
     # ring: i runs counter-clockwise, j must run from the circle inward (as in ``annulus``)
     cells = np.vstack((_grid_cells(grid), _grid_cells(closed[::-1])))
@@ -415,11 +412,7 @@ def half_disk(
     node_spacing = np.concatenate((cell_arc[:1], 0.5 * (cell_arc[1:] + cell_arc[:-1]),
                                    cell_arc[-1:]))
     fractions = _layer_fractions(n_radial, radius - c, bottom_size, node_spacing)[1:, :, None]
-    ring_xy = (1.0 - fractions) * core_nodes[rim][None] + fractions * arc[None]
-    n_core = core_nodes.shape[0]
-    ring_grid = np.vstack((rim[None], n_core + np.arange(n_radial * (n_arc + 1)).reshape(
-        n_radial, n_arc + 1)))
-    nodes = np.vstack((core_nodes, ring_xy.reshape(-1, 2))) + np.asarray(center, float)
+    nodes, ring_grid = _blended_rings(core_nodes, rim, arc, fractions, center)
     # ring: i runs along the arc (counter-clockwise), j must run from the arc inward
     cells = np.vstack((_grid_cells(core_grid), _grid_cells(ring_grid[::-1])))
     arc_chain = ring_grid[-1]
@@ -433,6 +426,17 @@ def half_disk(
     }
     edge_sets = {"arc": _chain_edges(arc_chain), "flat": _chain_edges(flat_chain)}
     return QuadMesh(nodes, cells, node_sets, edge_sets, name)
+
+
+def _blended_rings(core: NDArray, rim: NDArray[np.int64], outline: NDArray, fractions: NDArray,
+                   center: Sequence[float]) -> tuple[NDArray, NDArray[np.int64]]:
+    """The nodes (the core's, then the ring layers' that blend linearly from the core's
+    ``rim`` nodes, 0, to ``outline``, 1, by ``fractions`` (layers, rim nodes or 1, 1)), moved
+    to ``center``, and the ring's node grid [layer, i] (row 0: the rim)."""
+    ring_xy = (1.0 - fractions) * core[rim][None] + fractions * outline[None]
+    layers = len(core) + np.arange(ring_xy.shape[0] * ring_xy.shape[1]).reshape(ring_xy.shape[:2])
+    nodes = np.vstack((core, ring_xy.reshape(-1, 2))) + np.asarray(center, float)
+    return nodes, np.vstack((rim[None], layers))
 
 
 def _core_block(arc: NDArray, n_side: int, c: float, blend: float
