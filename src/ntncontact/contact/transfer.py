@@ -443,11 +443,8 @@ def _without_inner_nodes(surface: ContactSurface, pos: NDArray,
                          links: list[tuple[int, int]]) -> ContactSurface:
     if not links:
         return surface
-    drop = np.zeros(surface.size, bool)
-    for a, b in links:
-        span = (pos[b] - pos[a]) % surface.size
-        drop[(pos[a] + np.arange(1, span)) % surface.size] = True
-    drop &= ~surface.corner
+    inner = [_inner_chain(surface, pos[a], pos[b])[1:-1] for a, b in links]
+    drop = np.isin(surface.nodes, np.concatenate(inner)) & ~surface.corner
     return ContactSurface(surface.nodes[~drop], surface.closed, surface.corner[~drop],
                           surface.partner_normal)
 
