@@ -131,7 +131,8 @@ class Checkpointer:
         header = {"format": FORMAT, "identity": self.identity, "step": state.step,
                   "time": state.time, "last_substep": saved["last_substep"],
                   "ledger": saved["ledger"], "energy_multiplier": saved["energy_multiplier"],
-                  "interfaces": len(state.contact), "next_checkpoint": self._next,
+                  "first_rate": saved["first_rate"], "interfaces": len(state.contact),
+                  "next_checkpoint": self._next,
                   "writer": self.writer.checkpoint_state()}
         arrays = {"X": state.X, "x": state.x, "d": state.d, "v": state.v, "a": state.a,
                   "union_keys": saved["union_keys"], "contact_force": saved["contact_force"]}
@@ -224,6 +225,8 @@ def _resume_values(header: dict, arrays: dict[str, np.ndarray]) -> dict:
     return {"simulation": {"state": state, "ledger": header["ledger"],
                            "energy_multiplier": header["energy_multiplier"],
                            "last_substep": header["last_substep"],
+                           # Simulation._first_early_ratio's (checkpoints before it: none)
+                           "first_rate": header.get("first_rate", 0.0),
                            # the stiffness pattern's union (checkpoints before it: none)
                            "union_keys": arrays.get("union_keys", np.zeros(0, np.int64)),
                            # static runs' trapezoidal contact work (checkpoints before: none)
