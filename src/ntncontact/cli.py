@@ -53,10 +53,11 @@ class StopOnSignal:
 
     SIGNALS = (signal.SIGINT, signal.SIGTERM)
 
-    def __init__(self) -> None:
+    def __init__(self, at_once: bool = False) -> None:
         self.signum: int | None = None
-        #: the run is complete (only figures and comparisons are left): stop at the first signal
-        self.at_once = False
+        #: the run is complete (only figures and comparisons are left), or nothing in progress
+        #: can land in a compiled kernel (a sweep's driver): stop at the first signal
+        self.at_once = at_once
         #: the model is being built: nothing written, nothing to finish: stop at the first signal
         self.building = False
         #: the run's results writer exists (its folder was prepared): before, nothing was written
@@ -169,7 +170,7 @@ def _run_until_stopped(args: argparse.Namespace, stop: StopOnSignal) -> int:
     if args.compare:
         _print_comparison(out)
     if args.plot or args.gif or args.times:
-        print("figures:", *_draw_figures(out, args), sep="\n  ")
+        print("figures:", *plot_all(out, times=args.times, gif=args.gif), sep="\n  ")
     return 0
 
 
@@ -291,12 +292,8 @@ def _status(args: argparse.Namespace) -> int:
     return 0
 
 
-def _draw_figures(directory: Path, args: argparse.Namespace) -> list[Path]:
-    return plot_all(directory, times=args.times, gif=args.gif)
-
-
 def _plot(args: argparse.Namespace) -> int:
-    for path in _draw_figures(Path(args.directory), args):
+    for path in plot_all(Path(args.directory), times=args.times, gif=args.gif):
         print(path)
     return 0
 
@@ -403,7 +400,10 @@ def _validate(args: argparse.Namespace) -> int:
 def _sweep(args: argparse.Namespace) -> int:
     """Run a sweep file's cases on Dask; write OUT/sweep.csv and the figures it asks for."""
     _out_folder(args.out)
-    with _interrupting_signals():
+    # the sweep's driver waits on its cases (no compiled kernel to land in): the first signal
+    # stops it, also where SIGINT was ignored (a script's background job); the cases done are
+    # kept in sweep.csv and a rerun runs the rest
+    with StopOnSignal(at_once=True):
         table = sweep(args.sweep, args.out, scheduler=args.scheduler, workers=args.workers,
                       progress=not args.quiet)
     failed = table[table["status"] != "completed"] if "status" in table else table.iloc[:0]
@@ -413,25 +413,6 @@ def _sweep(args: argparse.Namespace) -> int:
     for _, row in failed.iterrows():
         print(f"  {row['case']}: {row.get('status')}: {row.get('error')}", file=sys.stderr)
     return 1 if len(failed) else 0
-
-
-@contextlib.contextmanager
-def _interrupting_signals():
-    """SIGINT and SIGTERM raise KeyboardInterrupt in the sweep's driver, which waits on its
-    cases (no compiled kernel to land in): the cases done are kept in sweep.csv and a rerun
-    runs the rest. Installed also where SIGINT was ignored (a script's background job)."""
-    def interrupt(signum: int, frame: object) -> None:
-        raise KeyboardInterrupt(f"interrupted by {signal.Signals(signum).name}")
-
-    if threading.current_thread() is not threading.main_thread():
-        yield
-        return
-    previous = {signum: signal.signal(signum, interrupt) for signum in StopOnSignal.SIGNALS}
-    try:
-        yield
-    finally:
-        for signum, handler in previous.items():
-            signal.signal(signum, handler)
 
 
 def build_parser() -> argparse.ArgumentParser:
