@@ -148,7 +148,7 @@ def test_partial_run_is_still_plotted(tmp_path):
 
 
 def test_history_only_folder_makes_history_plots(tmp_path):
-    with ResultsDirectory(tmp_path, write_fields=False) as out:
+    with ResultsDirectory(tmp_path) as out:
         row = {name: 1.0 for name in HISTORY_COLUMNS} | {"step": 0, "newton_iterations": 2}
         out.write_history(row)
         out.write_history(row | {"step": 1, "time": 2.0})

@@ -261,11 +261,10 @@ def test_results_directory_marks_failure(tmp_path):
 
 
 def test_results_directory_marks_interrupt(tmp_path):
-    with pytest.raises(KeyboardInterrupt), ResultsDirectory(tmp_path, write_fields=False):
+    with pytest.raises(KeyboardInterrupt), ResultsDirectory(tmp_path):
         raise KeyboardInterrupt
     data = json.loads((tmp_path / "summary.json").read_text())
     assert data["status"] == "interrupted"
-    assert not (tmp_path / "fields").exists()
 
 
 def test_read_vtu_raises_on_corrupt_file(tmp_path):
@@ -280,7 +279,7 @@ def test_read_vtu_raises_on_corrupt_file(tmp_path):
 def test_summary_is_rewritten_at_every_update_with_step_and_time(tmp_path):
     """No throttling: what a reader finds on disk is always the latest update (the summary
     never lags history.csv by more than the step being written)."""
-    with ResultsDirectory(tmp_path, EXTRA, write_fields=False, scenario="ball") as out:
+    with ResultsDirectory(tmp_path, EXTRA, scenario="ball") as out:
         for step in range(4):
             row = history_row(step) | {"time": 0.25 * step}
             out.write_history(row, max_gap=0.5 * step)

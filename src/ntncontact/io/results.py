@@ -336,13 +336,20 @@ class ResultWriter:
         spacing, which ``ntncontact run`` compares it with. Measured at the step's end, as the
         frame shows it (the law's gap is at t_{n+1/2} in a dynamic step: the gap law's rod
         impact 2e-12 there, 0.058 at the step ends)."""
-        depth = rows["end_gap"]
-        deepest = int(np.argmax(depth))
-        name = str(rows["interface"][deepest])
-        return _if_larger(summary, "max_penetration", float(depth[deepest]), lambda: {
-            "time": time, "interface": name, "node": int(rows["node_1"][deepest]),
-            "file_node": self._file_node(rows["node_1"][deepest]),
-            "depth": float(depth[deepest]), "element_size": self._spacing[name]})
+        return self._largest_pair("max_penetration", "depth", rows["end_gap"], time, rows,
+                                  summary)
+
+    def _largest_pair(self, key: str, name: str, values: np.ndarray, time: float, rows: dict,
+                      summary: dict) -> dict:
+        """``key`` and ``key_at`` (:func:`_if_larger`) by the pair of this step's largest
+        ``values`` (one a contact row, shown as ``name``): the time, the interface, its
+        surface-1 node and the interface's surface spacing."""
+        k = int(np.argmax(values))
+        interface = str(rows["interface"][k])
+        return _if_larger(summary, key, float(values[k]), lambda: {
+            "time": time, "interface": interface, "node": int(rows["node_1"][k]),
+            "file_node": self._file_node(rows["node_1"][k]), name: float(values[k]),
+            "element_size": self._spacing[interface]})
 
     @staticmethod
     def _rotation_summary(model: Model, s, summary: dict) -> dict:
@@ -371,13 +378,8 @@ class ResultWriter:
         # the gap law holds its mid-step gap at zero, its step-end gap swings (rod: 0.058)
         pressed = (rows["normal_traction"] > 0.0) & np.isin(rows["interface"], self._persistency)
         opening = np.where(pressed, -np.asarray(rows["end_gap"]), 0.0)
-        widest = int(np.argmax(opening))
-        name = str(rows["interface"][widest])
-        key = "max_separation_under_traction"
-        return _if_larger(summary, key, float(opening[widest]), lambda: {
-            "time": time, "interface": name, "node": int(rows["node_1"][widest]),
-            "file_node": self._file_node(rows["node_1"][widest]),
-            "opening": float(opening[widest]), "element_size": self._spacing[name]})
+        return self._largest_pair("max_separation_under_traction", "opening", opening, time,
+                                  rows, summary)
 
     def _mismatch_summary(self, time: float, mismatch: float, where: dict | None,
                           summary: dict) -> dict:

@@ -250,7 +250,13 @@ def remove_results(directory: Path) -> None:
                 path.rmdir()
         else:
             path.unlink()
-    for leftover in directory.glob(".*.tmp"):  # see replace_atomically
+    remove_leftovers(directory)
+
+
+def remove_leftovers(directory: Path) -> None:
+    """Remove the temporary files of the results a killed run was writing (see
+    :func:`replace_atomically`)."""
+    for leftover in directory.glob(".*.tmp"):
         if any(leftover.name.startswith(f".{name}.") for name in RESULT_FILES) \
                 and not leftover.is_dir():
             leftover.unlink()

@@ -31,6 +31,7 @@ from ntncontact.io.run_folder import (
     create_new_text,
     new_temporary,
     prepare,
+    remove_leftovers,
     replace_atomically,
 )
 from ntncontact.io.vtk import VtuSeriesWriter, XdmfSeriesWriter, frame_mesh
@@ -109,21 +110,25 @@ def _check_keys(given: Sequence[str], expected: Sequence[str], what: str) -> Non
 
 
 class _CsvWriter:
-    """A new CSV file opened for writing with its header written and flushed (refused if the
-    name is taken, by a file or a symbolic link). With ``resume_step`` (a restart), the
-    existing file instead, cut back to its rows of steps up to ``resume_step`` (the first
-    column is the step) and opened for appending."""
+    """The new CSV file ``FILE`` in ``directory`` opened for writing with its header (the
+    ``REQUIRED`` columns then ``extra_columns``) written and flushed (refused if the name is
+    taken, by a file or a symbolic link). With ``resume_step`` (a restart), the existing file
+    instead, cut back to its rows of steps up to ``resume_step`` (the first column is the
+    step) and opened for appending."""
 
-    def __init__(self, path: Path, columns: tuple[str, ...],
+    FILE: str
+    REQUIRED: tuple[str, ...]
+
+    def __init__(self, directory: str | os.PathLike, extra_columns: Sequence[str] = (),
                  resume_step: int | None = None) -> None:
-        self.path = path
-        self.columns = columns
-        path.parent.mkdir(parents=True, exist_ok=True)
+        self.path = Path(directory) / self.FILE
+        self.columns = _check_columns(extra_columns, self.REQUIRED)
+        self.path.parent.mkdir(parents=True, exist_ok=True)
         if resume_step is not None:
-            self._file = _truncated_to_step(path, columns, resume_step)
+            self._file = _truncated_to_step(self.path, self.columns, resume_step)
             return
-        self._file = create_new_text(path)
-        self._write_rows([list(columns)])
+        self._file = create_new_text(self.path)
+        self._write_rows([list(self.columns)])
 
     def _write_rows(self, rows: Sequence[Sequence[str]]) -> None:
         """Append ``rows`` whole or not at all (the file object's own buffer is never used:
@@ -191,10 +196,7 @@ def _truncated_to_step(path: Path, columns: tuple[str, ...], step: int) -> io.Te
 class HistoryWriter(_CsvWriter):
     """``history.csv``: one row per output step, the required columns then ``extra_columns``."""
 
-    def __init__(self, directory: str | os.PathLike, extra_columns: Sequence[str] = (),
-                 resume_step: int | None = None) -> None:
-        columns = _check_columns(extra_columns, HISTORY_COLUMNS)
-        super().__init__(Path(directory) / HISTORY_FILE, columns, resume_step)
+    FILE, REQUIRED = HISTORY_FILE, HISTORY_COLUMNS
 
     def last_step(self) -> int | None:
         """The step of the last complete row (None: header only)."""
@@ -210,10 +212,7 @@ class HistoryWriter(_CsvWriter):
 class ContactWriter(_CsvWriter):
     """``contact.csv``: one row per active node pair per output step."""
 
-    def __init__(self, directory: str | os.PathLike, extra_columns: Sequence[str] = (),
-                 resume_step: int | None = None) -> None:
-        columns = _check_columns(extra_columns, CONTACT_COLUMNS)
-        super().__init__(Path(directory) / CONTACT_FILE, columns, resume_step)
+    FILE, REQUIRED = CONTACT_FILE, CONTACT_COLUMNS
 
     def write_step(self, step: int, time: float, pairs: Mapping[str, ArrayLike]) -> int:
         """Append the rows of one output step and return how many were written.
@@ -433,7 +432,6 @@ class ResultsDirectory(_Results):
         self,
         directory: str | os.PathLike,
         history_columns: Sequence[str] = (),
-        write_fields: bool = True,
         overwrite: bool = False,
         resume: Mapping[str, Any] | None = None,
         field_format: str = "vtu",
@@ -453,18 +451,13 @@ class ResultsDirectory(_Results):
         try:
             # the fields first: without h5py the xdmf writer stops before any file exists;
             # VTU frames are compressed and written beside the next step (VtuSeriesWriter)
-            self.fields = None if not write_fields else (
-                XdmfSeriesWriter(self.directory) if field_format == "xdmf"
-                else VtuSeriesWriter(self.directory, background=True))
+            self.fields = (XdmfSeriesWriter(self.directory) if field_format == "xdmf"
+                           else VtuSeriesWriter(self.directory, background=True))
             if resume is not None:
-                for leftover in self.directory.glob(".*.tmp"):  # a kill mid-write
-                    if leftover.name.startswith((".summary.json.", ".fields.pvd.",
-                                                 ".fields.xdmf.", ".history.csv.",
-                                                 ".contact.csv.")):
-                        leftover.unlink()
-                if self.fields is not None:  # may fail (an unreadable fields.h5): before
-                    # any other file is cut back or rewritten
-                    self.fields.resume(step, resume["pvd_entries"])
+                remove_leftovers(self.directory)  # of a kill mid-write
+                # may fail (an unreadable fields.h5): before any other file is cut back or
+                # rewritten
+                self.fields.resume(step, resume["pvd_entries"])
             self.history = HistoryWriter(self.directory, history_columns, step)
             if step is not None and self.history.last_step() != step:
                 raise RunFolderError(f"{self.history.path} does not reach the checkpoint's "
@@ -483,10 +476,8 @@ class ResultsDirectory(_Results):
     def checkpoint_state(self, step: int) -> dict[str, Any]:
         """What :class:`ResultsDirectory` needs as ``resume`` to continue after ``step``:
         the step, the PVD entries (the output cursor of the frames) and the summary."""
-        if self.fields is not None:
-            self.fields.flush()  # the frames so far on disk (XDMF: fields.h5 flushed)
-        entries = self.fields.entries if self.fields is not None else []
-        return {"step": int(step), "pvd_entries": [list(e) for e in entries],
+        self.fields.flush()  # the frames so far on disk (XDMF: fields.h5 flushed)
+        return {"step": int(step), "pvd_entries": [list(e) for e in self.fields.entries],
                 "summary": self.summary.checkpoint_state()}
 
     @property
@@ -508,12 +499,11 @@ class ResultsDirectory(_Results):
         try:
             self.history.close()
             self.contact.close()
-            if self.fields is not None:
-                try:
-                    self.fields.close()  # a VTU frame still in flight is written first
-                except Exception as err:  # its writing failed (a full disk): the run too
-                    status, error = "failed", error or f"{type(err).__name__}: {err}"
-                    raise
+            try:
+                self.fields.close()  # a VTU frame still in flight is written first
+            except Exception as err:  # its writing failed (a full disk): the run too
+                status, error = "failed", error or f"{type(err).__name__}: {err}"
+                raise
         finally:
             try:
                 self.summary.finish(status, error, **summary_fields)
@@ -587,10 +577,6 @@ class _MemoryFrames:
 
     def __init__(self) -> None:
         self.frames: list[tuple[float, Any]] = []
-
-    @property
-    def entries(self) -> list[tuple[float, str]]:
-        return [(t, "") for t, _ in self.frames]
 
     def write(self, step: int, time: float, points: ArrayLike, cells: ArrayLike,
               point_data: Mapping[str, ArrayLike], cell_data: Mapping[str, ArrayLike]) -> None:
