@@ -43,13 +43,6 @@ class ResultsNotFoundError(FileNotFoundError):
     """A results folder (or one of its files) is missing or holds no data yet."""
 
 
-def panels_shape(count: int) -> tuple[int, int, tuple[float, float]]:
-    """The shape of :func:`plot_deformed` for ``count`` meshes: up to 3 per row."""
-    ncols = min(3, count)
-    nrows = -(-count // ncols)
-    return nrows, ncols, (3.6 * ncols + 1.0, 3.2 * nrows)
-
-
 def _new_figure(nrows: int = 1, ncols: int = 1, size: tuple[float, float] = (7.0, 4.5),
                 layout: str = "constrained", grid: bool = False) -> tuple[Figure, NDArray]:
     """A figure and its grid of axes (report/validation.py's figures too). ``layout="compressed"``
@@ -61,6 +54,20 @@ def _new_figure(nrows: int = 1, ncols: int = 1, size: tuple[float, float] = (7.0
     axes = fig.subplots(nrows, ncols, squeeze=False)
     for ax in axes.flat if grid else ():
         ax.grid(True, alpha=0.3)
+    return fig, axes
+
+
+def _panels(count: int, per_row: int, panel: tuple[float, float], margin: float,
+            **options: Any) -> tuple[Figure, NDArray]:
+    """A figure of ``count`` panels, up to ``per_row`` in a row, each ``panel`` inches and
+    ``margin`` inches of width besides (``options``: :func:`_new_figure`'s); the axes beyond
+    ``count`` hidden."""
+    ncols = min(per_row, count)
+    nrows = -(-count // ncols)
+    fig, axes = _new_figure(nrows, ncols, (panel[0] * ncols + margin, panel[1] * nrows),
+                            **options)
+    for ax in axes.flat[count:]:
+        ax.set_visible(False)
     return fig, axes
 
 
@@ -299,13 +306,11 @@ def plot_deformed(
     else:
         states = frames_at(folder, times)
     frames = [frame for frame, _ in states]
-    fig, axes = _new_figure(*panels_shape(len(frames)), layout="compressed")
+    fig, axes = _panels(len(frames), 3, (3.6, 3.2), 1.0, layout="compressed")
     norm, xlim, ylim = _common_view(frames, field)
     for ax, (frame, interpolated) in zip(axes.flat, states, strict=False):
         collection = _draw_mesh(ax, frame, field, norm, (xlim, ylim))
         ax.set_title(_time_title(frame, interpolated), fontsize="small")
-    for ax in list(axes.flat)[len(frames):]:
-        ax.set_visible(False)
     fig.colorbar(collection, ax=axes, label=field.replace("_", " "))
     return _save(fig, Path(path) if path else folder / f"deformed_{field}.png")
 

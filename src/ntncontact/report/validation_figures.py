@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 
 from ..io.writers import read_csv_table
-from .plotting import _new_figure, _save
+from .plotting import _new_figure, _panels, _save
 from .reference import (
     TABLE_4_1_STAGES,
     hertz_plane_strain,
@@ -111,17 +111,13 @@ def plot_hertz_versus(directory: Path, snaps: list[HertzSnapshot],
 
 def plot_delamination(directory: Path, positions: list[DelaminationPosition]) -> Path:
     """Contact tractions along the slit at each load position (report Fig. 6.17)."""
-    ncols = min(4, len(positions))
-    nrows = -(-len(positions) // ncols)
-    fig, axes = _new_figure(nrows, ncols, size=(3.2 * ncols + 0.5, 2.8 * nrows), grid=True)
+    fig, axes = _panels(len(positions), 4, (3.2, 2.8), 0.5, grid=True)
     for ax, p in zip(axes.flat, positions, strict=False):
         ax.plot(p.X1, p.t_n, "o-", ms=3, label="normal")
         ax.plot(p.X1, p.t_t, "s-", ms=3, label="tangential")
         ax.axvline(p.x_load, color="0.4", ls="--", lw=1)
         ax.set_title(f"P at {p.label} (x = {p.x_load:g})", fontsize="small")
         ax.set_xlim(DELAMINATION_SLIT[0] - 3, DELAMINATION_SLIT[1] + 3)
-    for ax in list(axes.flat)[len(positions):]:
-        ax.set_visible(False)
     axes[0, 0].legend(fontsize="x-small")
     return _save(fig, directory / "delamination_tractions.png")
 
