@@ -533,10 +533,6 @@ class XdmfSeries:
     def __len__(self) -> int:
         return len(self.times)
 
-    def steps(self) -> list[tuple[float, XdmfStep]]:
-        """(time, :class:`XdmfStep`) of every frame, in the order written (time order)."""
-        return [(time, XdmfStep(self, k)) for k, time in enumerate(self.times)]
-
     def mesh(self, k: int) -> meshio.Mesh:
         """Frame k as the meshio Mesh of the VTU frame it replaces."""
         reader = self._reader
@@ -571,9 +567,6 @@ class XdmfStep:
     series: XdmfSeries
     index: int
 
-    def mesh(self) -> meshio.Mesh:
-        return self.series.mesh(self.index)
-
     def __str__(self) -> str:
         return f"{self.series.path} (frame {self.index})"
 
@@ -595,9 +588,10 @@ def find_field_series(directory: str | os.PathLike, name: str = "fields") -> Pat
 def read_series(path: str | os.PathLike) -> list[tuple[float, FrameSource]]:
     """(time, frame source) of every frame of a PVD (the VTU files that exist) or of an XDMF
     series, in time order; read a frame with :func:`read_frame` or :func:`read_frame_mesh`."""
-    if Path(path).suffix == ".xdmf":
-        return list(_open_xdmf(path).steps())
-    return list(read_pvd(path))
+    if Path(path).suffix != ".xdmf":
+        return list(read_pvd(path))
+    series = _open_xdmf(path)  # its frames in the order written, which is time order
+    return [(time, XdmfStep(series, k)) for k, time in enumerate(series.times)]
 
 
 def _open_xdmf(path: str | os.PathLike) -> XdmfSeries:
@@ -619,7 +613,7 @@ def read_frame(source: FrameSource, time: float = float("nan")) -> VtuFrame:
 def read_frame_mesh(source: FrameSource) -> meshio.Mesh:
     """One frame of a field series as the meshio Mesh of its VTU (see :class:`XdmfSeries`)."""
     if isinstance(source, XdmfStep):
-        return source.mesh()
+        return source.series.mesh(source.index)
     return _read_vtu_mesh(source)
 
 
