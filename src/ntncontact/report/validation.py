@@ -238,8 +238,8 @@ def validate(out: str | Path, quick: bool = False, cases: tuple[Case, ...] = CAS
     link_results(done)
     info = RunInfo(quick, time.perf_counter() - start, jobs, os.cpu_count() or 1, load_before,
                    os.getloadavg()[0])
-    write_markdown(out / "report.md", done, quick, info)
-    write_html(out / "report.html", done, quick, info)
+    write_markdown(out / "report.md", done, info)
+    write_html(out / "report.html", done, info)
     return done
 
 

@@ -83,11 +83,10 @@ def _row_cells(r: Comparison) -> list[str]:
             r.tolerance_text(), verdict(r), r.note]
 
 
-def write_markdown(path: Path, results: list[CaseResult], quick: bool,
-                   info: RunInfo | None = None) -> None:
-    lines = ["# ntncontact validation against Xu & Hjelmstad's report", ""]
-    lines += [info.text(results) if info else
-              f"Mode: {'quick (shortened runs)' if quick else 'full'}.", ""]
+def write_markdown(path: Path, results: list[CaseResult], info: RunInfo) -> None:
+    quick = info.quick
+    lines = ["# ntncontact validation against Xu & Hjelmstad's report", "",
+             info.text(results), ""]
     lines += results_table_md(results) + [""]
     for r in results:
         lines += [f"## {r.case.name}: {_status(r)}", "",
@@ -107,9 +106,8 @@ def write_markdown(path: Path, results: list[CaseResult], quick: bool,
     path.write_text("\n".join(lines))
 
 
-def write_html(path: Path, results: list[CaseResult], quick: bool,
-               info: RunInfo | None = None) -> None:
-    esc = html.escape
+def write_html(path: Path, results: list[CaseResult], info: RunInfo) -> None:
+    esc, quick = html.escape, info.quick
     parts = ["<!doctype html><html><head><meta charset='utf-8'>",
              "<title>ntncontact validation</title><style>body{font-family:sans-serif;"
              "max-width:1200px;margin:auto}table{border-collapse:collapse;margin:6px 0}"
@@ -117,8 +115,8 @@ def write_html(path: Path, results: list[CaseResult], quick: bool,
              ".PASS,.pass{color:green}.FAIL{color:#b00;font-weight:bold}.info{color:#777}"
              "img{max-width:560px;margin:4px}</style></head><body>",
              "<h1>ntncontact validation against Xu &amp; Hjelmstad's report</h1>",
-             f"<p>{esc(info.text(results)) if info else ('Mode: quick' if quick else 'full')}"
-             "</p>", "<table><tr><th>case</th><th>report</th><th>status</th>"
+             f"<p>{esc(info.text(results))}</p>",
+             "<table><tr><th>case</th><th>report</th><th>status</th>"
              "<th>checks passed</th><th>time (s)</th></tr>"]
     for r in results:
         status = _status(r)
