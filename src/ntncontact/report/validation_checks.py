@@ -149,12 +149,11 @@ def block_sliding_rows(nodes: np.ndarray, t_n: np.ndarray, t_t: np.ndarray, slip
     rows.append(Comparison("max gap (penetration > 0)", max_gap, 0.0, 0.0, "at_most", atol=1e-6,
                            note="no penetration beyond the augmentation tolerance"))
     for i, node in enumerate(nodes):
-        for key, name in columns:
-            rows.append(Comparison(f"t_N node {node} vs {name}", float(t_n[i]),
-                                   float(t[f"normal_{key}"][i]), scatter_n, "absolute"))
-        for key, name in columns:
-            rows.append(Comparison(f"t_T node {node} vs {name}", float(t_t[i]),
-                                   float(t[f"tangent_{key}"][i]), scatter_t, "absolute"))
+        for label, key, ours, scatter in (("t_N", "normal", t_n, scatter_n),
+                                          ("t_T", "tangent", t_t, scatter_t)):
+            rows += [Comparison(f"{label} node {node} vs {name}", float(ours[i]),
+                                float(t[f"{key}_{c}"][i]), scatter, "absolute")
+                     for c, name in columns]
     return rows
 
 
@@ -256,18 +255,18 @@ HERTZ_BETA = (1.0 - 2.0 * HERTZ_POISSON) / (2.0 * (1.0 - HERTZ_POISSON))
 HERTZ_TRACTION_TOLERANCE = 2.0 * 1.0e6 * 1.0e-7
 
 
-def hertz_friction_rows(snap: HertzSnapshot, h: float, mu: float,
-                        traction_tol: float = HERTZ_TRACTION_TOLERANCE) -> list[Comparison]:
+def hertz_friction_rows(snap: HertzSnapshot, h: float, mu: float) -> list[Comparison]:
     """With friction (the report compares with ABAQUS only, figures lost): at full load, stick
     at the centre and slip at both edges (report Figs 6.10-6.12; a pair slides when on the
-    Coulomb cone within ``traction_tol``); at every level the cone, equilibrium and node-to-node
-    pairs. The comparison with the frictionless run is made by :func:`link_results`."""
+    Coulomb cone within HERTZ_TRACTION_TOLERANCE); at every level the cone, equilibrium and
+    node-to-node pairs. The comparison with the frictionless run is made by
+    :func:`link_results`."""
     lvl = load_level(snap.fraction)
     on = snap.pressed
     cone = float(np.max(np.abs(snap.t_t[on]) / (mu * snap.t_n[on])))
     rows = []
     if snap.fraction == 1.0:  # the report's figures are at full load
-        sliding = on & (mu * snap.t_n - np.abs(snap.t_t) <= traction_tol)
+        sliding = on & (mu * snap.t_n - np.abs(snap.t_t) <= HERTZ_TRACTION_TOLERANCE)
         state = np.where(sliding, "slip", "stick")
         centre = int(np.argmin(np.abs(snap.X)))
         sticking = np.abs(snap.X[on & ~sliding])
