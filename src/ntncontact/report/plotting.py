@@ -473,7 +473,6 @@ def animate(
     path_gif: str | os.PathLike,
     max_frames: int = 60,
     field: str = "von_mises",
-    fps: int = 10,
 ) -> Path:
     """A GIF of the deformed meshes over (up to ``max_frames`` evenly spaced) output steps,
     drawn by matplotlib and saved by Pillow."""
@@ -503,5 +502,5 @@ def animate(
         # Pillow's fast octree palette: a tenth of the time of its default (median cut)
         images.append(rgb.quantize(method=Image.Quantize.FASTOCTREE))
     images[0].save(path_gif, save_all=True, append_images=images[1:],
-                   duration=round(1000 / fps), loop=0)
+                   duration=100, loop=0)  # milliseconds a frame: 10 frames a second
     return Path(path_gif)
