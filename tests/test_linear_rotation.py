@@ -11,7 +11,7 @@ from helpers import EXAMPLES
 
 import ntncontact as ntc
 from ntncontact.engine.builder import build_model
-from ntncontact.engine.diagnostics import largest_linear_rotation
+from ntncontact.engine.diagnostics import linear_elastic_measures
 
 
 def spinning(model: str, t_end: float = 0.5):
@@ -28,7 +28,7 @@ def test_a_rigid_rotation_is_measured_exactly(angle):
     c, s = np.cos(angle), np.sin(angle)
     X = model.X0 + [3.0, -1.0]  # anywhere
     d = X @ np.array([[c, s], [-s, c]]) - X + [0.5, 0.2]
-    turned, body = largest_linear_rotation(model, X, d)
+    turned, body = linear_elastic_measures(model, X, d)["rotation"]
     assert turned == pytest.approx(abs(angle), abs=1e-12) and body == "block"
 
 

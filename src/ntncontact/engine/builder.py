@@ -250,9 +250,9 @@ def _body_loads(body: Body, cfg: BodyConfig, ndof: int, X0: np.ndarray):
     """Fixed nodal patterns with their time functions, and the body forces that follow an ALE
     body's moving reference mesh (gravity there)."""
     patterns, functions, on_mesh = [], [], []
+    cells = body.mesh.cells + body.node_offset
     for load in cfg.loads:
         if load.type == "gravity":
-            cells = body.mesh.cells + body.node_offset
             force = body.material.density * np.asarray(load.vector, dtype=float)
             gravity = MeshBodyForce(cells, force, time_function(load.function))
             if body.mesh_motion == "ale":
@@ -265,7 +265,6 @@ def _body_loads(body: Body, cfg: BodyConfig, ndof: int, X0: np.ndarray):
         elif load.type == "point":
             f = point_load_vector(body.global_nodes(load.set), load.vector, ndof)
         else:
-            cells = body.mesh.cells + body.node_offset
             f = body_force_vector(X0, cells, load.vector, ndof)
         patterns.append(f)
         functions.append(time_function(load.function))
@@ -472,8 +471,7 @@ def _check_energy_equation(config: ScenarioConfig) -> None:
 def _tie(cfg: TieConfig, index: int, bodies: tuple[Body, ...], fixed_dofs: np.ndarray) -> Tie:
     """Pair the coincident nodes of one ``[[tie]]`` entry; errors name the entry."""
     where = f"tie.{index} ('{cfg.name}')"
-    by_name = {b.name: b for b in bodies}
-    b1, b2 = by_name[cfg.body_1], by_name[cfg.body_2]
+    b1, b2 = _bodies_of(cfg, bodies)
     try:
         local_1, local_2 = b1.mesh.node_set(cfg.surface_1), b2.mesh.node_set(cfg.surface_2)
     except MeshError as err:
@@ -565,8 +563,7 @@ def _interface(cfg: ContactConfig, index: int, bodies: tuple[Body, ...],
                kind: str) -> ContactInterface:
     """Surfaces, law and settings of one ``[[contact]]`` entry; errors name the entry."""
     where = f"contact.{index}"
-    by_name = {b.name: b for b in bodies}
-    b1, b2 = by_name[cfg.body_1], by_name[cfg.body_2]
+    b1, b2 = _bodies_of(cfg, bodies)
     try:
         chain1 = surface_chain(b1.mesh, cfg.surface_1)
         chain2 = surface_chain(b2.mesh, cfg.surface_2)
@@ -812,9 +809,8 @@ def _check_no_overlap(index: int, cfg: ContactConfig, ci: ContactInterface,
     (they would pass through each other). Each side's surface nodes are tested against the
     other body's elements; the message gives the deepest node, its place and its depth below
     the other body's boundary."""
-    by_name = {b.name: b for b in bodies}
-    sides = ((by_name[cfg.body_1], ci.interface.surface1, by_name[cfg.body_2]),
-             (by_name[cfg.body_2], ci.interface.surface2, by_name[cfg.body_1]))
+    b1, b2 = _bodies_of(cfg, bodies)
+    sides = ((b1, ci.interface.surface1, b2), (b2, ci.interface.surface2, b1))
     for body, surface, other in sides:
         local = surface.nodes - body.node_offset
         if surface.closed:  # the closing edge's side is tested too
@@ -840,8 +836,7 @@ def _check_facing(index: int, cfg: ContactConfig, ci: ContactInterface,
     partner in through the near side unresisted. Refused, not warned: no run of such a pair
     is valid, and surfaces facing each other (a ring far above a floor, a disk in a ring, a
     pin in a hole) have opposed normals at their nearest points, near or far."""
-    by_name = {b.name: b for b in bodies}
-    b1, b2 = by_name[cfg.body_1], by_name[cfg.body_2]
+    b1, b2 = _bodies_of(cfg, bodies)
     s1, s2 = ci.interface.surface1, ci.interface.surface2
     found = facing_away(b1.mesh.nodes[s1.nodes - b1.node_offset], s1.closed,
                         b2.mesh.nodes[s2.nodes - b2.node_offset], s2.closed)
@@ -882,6 +877,12 @@ def _check_unjoined_overlaps(config: ScenarioConfig, bodies: tuple[Body, ...]) -
                         f"'{one.name}' at ({x:.6g}, {y:.6g}) is {found.depth:.3g} deep inside "
                         f"'{two.name}', and nothing would push it out; place the bodies apart "
                         "(bodies.*.mesh origin, center or transform)")
+
+
+def _bodies_of(cfg: ContactConfig | TieConfig, bodies: tuple[Body, ...]) -> tuple[Body, Body]:
+    """The bodies ``body_1`` and ``body_2`` of a contact or tie entry."""
+    by_name = {b.name: b for b in bodies}
+    return by_name[cfg.body_1], by_name[cfg.body_2]
 
 
 def _xy(body: Body, surface: ContactSurface) -> np.ndarray:

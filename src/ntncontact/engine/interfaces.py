@@ -153,9 +153,9 @@ def _candidates(x: NDArray, v: NDArray, dt: float, ci: ContactInterface, state: 
     a free node wait for a free partner: a face of 9 nodes placed touching 6 partner nodes
     entered 6 pairs at step 1 and the other 3 a step later, 8.8e-5 inside (a tester)."""
     near = _near_candidates(x, v, dt, ci, abs(tol))
-    if ci.ordered_pairing and not ci.interface.surface2.closed:
-        return _ordered_candidates(x, ci, state, near)
     free = near[~np.isin(near, state.pairs[:, 0])]
+    if ci.ordered_pairing and not ci.interface.surface2.closed:
+        return _ordered_candidates(x, ci, state, free)
     return closest_pairs(x, ci.interface, free).pairs
 
 
@@ -266,10 +266,9 @@ def _not_in_front(x: NDArray, ci: ContactInterface, pairing: Pairing,
 
 
 def _ordered_candidates(x: NDArray, ci: ContactInterface, state: PairState,
-                        near: NDArray) -> NDArray:
+                        free: NDArray) -> NDArray:
     """Distinct, order-preserving partners for the free candidates (ALE partner surface):
     mutual nearest nodes, the kept pairs competing and bounding the order."""
-    free = near[~np.isin(near, state.pairs[:, 0])]
     partners = ordered_partners(x, ci.interface, free, kept=state.pairs,
                                 reference_arc=ci.reference_arc2)
     return np.column_stack([free, partners])[partners >= 0]
@@ -516,11 +515,9 @@ class LagrangeTerm:
 
 def lagrange_terms(interfaces: Sequence[ContactInterface], states: Sequence[PairState],
                    dt: float) -> list[LagrangeTerm]:
-    terms = [LagrangeTerm(ci, st, dt) for ci, st in zip(interfaces, states, strict=True)
+    exact = [(ci, st) for ci, st in zip(interfaces, states, strict=True)
              if ci.law.method == "lagrange" and len(st)]
-    for i, t in enumerate(terms):
-        t.order = i
-    return terms
+    return [LagrangeTerm(ci, st, dt, order) for order, (ci, st) in enumerate(exact)]
 
 
 def with_solved_multipliers(
@@ -750,21 +747,19 @@ def contact_rows(
             continue
         n1 = res.pairs[:, 0]
         cols["interface"] += [ci.name] * len(n1)
-        cols["node_1"].append(n1)
-        cols["node_2"].append(res.pairs[:, 1])
-        cols["x"].append(x[n1, 0])
-        cols["y"].append(x[n1, 1])
-        for key, val in (("gap", res.gap), ("gap_rate", res.gap_rate),
+        cols["status"] += ["slip" if s else "stick" for s in (res.status == 1)]
+        for key, val in (("node_1", n1), ("node_2", res.pairs[:, 1]), ("x", x[n1, 0]),
+                         ("y", x[n1, 1]), ("gap", res.gap), ("gap_rate", res.gap_rate),
                          ("normal_traction", res.t_N), ("tangential_traction", res.t_T),
                          ("normal_force", res.normal_force),
-                         ("tangential_force", res.tangential_force)):
+                         ("tangential_force", res.tangential_force),
+                         # the law's gap is the solve's (at t_{n+1/2} in a dynamic step); the
+                         # frame shows x
+                         ("end_gap", pair_gaps(x, ci.interface, res.pairs)[1]),
+                         # the normal the forces act along: without it their resultant cannot
+                         # be formed
+                         ("normal_x", res.normal[:, 0]), ("normal_y", res.normal[:, 1])):
             cols[key].append(val)
-        cols["status"] += ["slip" if s else "stick" for s in (res.status == 1)]
-        # the law's gap is the solve's (at t_{n+1/2} in a dynamic step); the frame shows x
-        cols["end_gap"].append(pair_gaps(x, ci.interface, res.pairs)[1])
-        # the normal the forces act along: without it their resultant cannot be formed
-        cols["normal_x"].append(res.normal[:, 0])
-        cols["normal_y"].append(res.normal[:, 1])
     return {k: (np.concatenate(v) if v and not isinstance(v[0], str) else np.asarray(v))
             for k, v in cols.items()}
 

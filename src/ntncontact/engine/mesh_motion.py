@@ -18,6 +18,7 @@ from ..ale.motion import AleCrossingError, AleMotionError, AleUpdate, lumped_mas
 from ..ale.multisurface import meeting_points, move_ale_surfaces, surface_of_nodes
 from ..contact import PairState, pair_gaps
 from ..jit import njit
+from ..mesh.boundary import chain_edge_lengths
 from ..mesh.quadmesh import MeshError
 from .model import AleSetup, Model
 from .problem import StepState
@@ -70,13 +71,9 @@ def _ale_nodes_and_partners(setup: AleSetup, contact: Sequence[PairState]):
     lo, hi = setup.node_offset, setup.node_offset + setup.n_nodes
     found = [_body_pairs(np.ascontiguousarray(state.pairs, dtype=np.int64), lo, hi)
              for state in contact]
-    if len(found) == 1:
-        own, partner = found[0]
-    elif not found:
-        own = partner = np.zeros(0, np.int64)
-    else:
-        own = np.concatenate([f[0] for f in found])
-        partner = np.concatenate([f[1] for f in found])
+    none = [np.zeros(0, np.int64)]
+    own = np.concatenate([f[0] for f in found] or none)
+    partner = np.concatenate([f[1] for f in found] or none)
     first = _first_occurrences(own)
     return own[first], partner[first]
 
@@ -224,7 +221,7 @@ def _crossing_with_partners(err: AleCrossingError, model: Model, base: StepState
     now = min(np.linalg.norm(x_start[pb] - x_start[pa]), np.linalg.norm(x_pred[pb] - x_pred[pa]))
     if not now < _CRUSHED * reference:
         return _with_spacing_advice(err, model, int(local[found[0][0]]) + offset, pa)
-    body = model.bodies[int(model.body_of_node()[pa])]
+    body = model.body_at(pa)
     where = " and ".join(f"({x_start[n, 0]:.6g}, {x_start[n, 1]:.6g})" for n in (pa, pb))
     message = (f"{err}. But their partners, nodes {pa - body.node_offset} and "
                f"{pb - body.node_offset} of body '{body.name}' (at {where}), are "
@@ -267,10 +264,8 @@ def _median_spacing(model: Model, node: int) -> float:
     for ci in model.interfaces:
         for surface in (ci.interface.surface1, ci.interface.surface2):
             if node in surface.nodes:
-                chain = surface.nodes if not surface.closed else np.append(surface.nodes,
-                                                                           surface.nodes[0])
-                return float(np.median(np.linalg.norm(np.diff(model.X0[chain], axis=0),
-                                                      axis=1)))
+                return float(np.median(chain_edge_lengths(model.X0[surface.nodes],
+                                                          surface.closed)))
     return float("nan")
 
 
@@ -480,9 +475,7 @@ def mesh_settled(model: Model, base: StepState, contact: Sequence[PairState],
         targets, meet = _targets(masses, nodes, partners, x_pred)
         _, new, _ = _request(model, setup, base, motion.updates[i], contact, nodes, partners,
                              x_pred, targets, meet, deep)
-        if not (np.array_equal(old[0], new[0]) and np.array_equal(old[1], new[1])):
-            return False
-        if float(np.abs(new[2] - old[2]).max()) > SETTLED * setup.motion.min_spacing:
+        if _request_change(old, new) > SETTLED * setup.motion.min_spacing:
             return False
     return True
 
@@ -511,11 +504,16 @@ def _same_request(old, new, setup: AleSetup) -> bool:
     """True if the same pairs want positions within the body's slide tolerance of the last
     request: the move would then change no node by more than that tolerance allows (the later
     augmentations of a step, whose predictions agree to ~1e-10 of an element)."""
-    if old is None or not (np.array_equal(old[0], new[0]) and np.array_equal(old[1], new[1])):
-        return False
-    motion = setup.motion
     spacing = min(m.min_spacing for m in setup.motions)
-    return float(np.abs(new[2] - old[2]).max()) <= motion.slide_tolerance * spacing
+    return old is not None and _request_change(old, new) <= setup.motion.slide_tolerance * spacing
+
+
+def _request_change(old: tuple, new: tuple) -> float:
+    """How far the positions of two requests (nodes, partners, positions) differ at the most;
+    infinite where their pairs differ."""
+    if not (np.array_equal(old[0], new[0]) and np.array_equal(old[1], new[1])):
+        return np.inf
+    return float(np.abs(new[2] - old[2]).max())
 
 
 @njit(cache=True)
@@ -588,8 +586,7 @@ def _mismatch_place(model: Model, interface: str, pair: NDArray, on_ale: NDArray
     mismatch is a partner node off the ALE surface's grid that no motion can reach."""
     a, b = int(pair[0]), int(pair[1])
     node, partner = (b, a) if on_ale[b] else (a, b)
-    owner = model.body_of_node()
-    ale, other = model.bodies[int(owner[node])], model.bodies[int(owner[partner])]
+    ale, other = model.body_at(node), model.body_at(partner)
     return {"interface": interface, "node": node, "body": ale.name,
             "body_node": node - ale.node_offset, "partner": partner,
             "partner_body": other.name, "partner_body_node": partner - other.node_offset,

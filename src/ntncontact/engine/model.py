@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from itertools import accumulate
 from typing import Literal
 
 import numpy as np
@@ -127,17 +128,19 @@ class Model:
         """Body index of each global node."""
         return np.concatenate([np.full(b.mesh.n_nodes, i) for i, b in enumerate(self.bodies)])
 
+    def body_at(self, node: int) -> Body:
+        """The body of the global node ``node``."""
+        return self.bodies[int(self.body_of_node()[node])]
+
 
 def stack_bodies(
     meshes: list[tuple[str, QuadMesh, Material]],
 ) -> tuple[list[tuple[str, QuadMesh, Material, int, int]], NDArray, NDArray, Assembler]:
     """Offsets, stacked coordinates and connectivity, and the assembler of all bodies."""
-    placed = []
-    node_off = cell_off = 0
-    for name, mesh, material in meshes:
-        placed.append((name, mesh, material, node_off, cell_off))
-        node_off += mesh.n_nodes
-        cell_off += mesh.n_cells
+    node_offsets = accumulate((m.n_nodes for _, m, _ in meshes), initial=0)
+    cell_offsets = accumulate((m.n_cells for _, m, _ in meshes), initial=0)
+    placed = [(*entry, n, c) for entry, n, c in zip(meshes, node_offsets, cell_offsets,
+                                                      strict=False)]  # the totals unused
     X0 = np.vstack([m.nodes for _, m, _ in meshes])
     cells = np.vstack([m.cells + off for (_, m, _, off, _) in placed])
     lam = np.concatenate([np.full(m.n_cells, mat.effective_lambda) for _, m, mat in meshes])

@@ -182,11 +182,8 @@ class StepProblem:
 
     def multipliers(self, y: NDArray) -> list[NDArray]:
         """The multipliers of each constraint term, in order."""
-        out, start = [], self.free_dofs.size
-        for c in self.constraints:
-            out.append(y[start:start + c.size])
-            start += c.size
-        return out
+        ends = np.cumsum([c.size for c in self.constraints], dtype=np.int64)
+        return np.split(y[self.free_dofs.size:], ends)[:-1]  # the last piece is empty
 
     def _evaluate(self, y: NDArray, need_tangent: bool) -> tuple[NDArray, sp.csr_matrix | None]:
         """R on all dofs and, if asked, its tangent K; sets ``self._scale``."""
@@ -480,12 +477,9 @@ class _KeptColumns:
 
     def times(self, coefficients: NDArray) -> NDArray:
         """W times ``coefficients``."""
-        out = np.zeros(self.size)
-        start = 0
-        for b in self.blocks:
-            out += b @ coefficients[start:start + b.shape[1]]
-            start += b.shape[1]
-        return out
+        ends = np.cumsum([b.shape[1] for b in self.blocks], dtype=np.int64)
+        parts = np.split(coefficients, ends)
+        return sum((b @ c for b, c in zip(self.blocks, parts, strict=False)), np.zeros(self.size))
 
 
 def _add_triplets(K: sp.csr_matrix, triplets: list, union: TripletUnion,

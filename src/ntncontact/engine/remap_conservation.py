@@ -74,7 +74,7 @@ def conserve_remap(model: Model, setup: AleSetup, X: NDArray, d: NDArray, v: NDA
     body = _body_data(model, setup)
     old = body.old_state(X, d, v)
     touched = np.flatnonzero(update.moved[motion.cells].any(axis=1))
-    free = _free_dofs(model, setup, time)
+    free = _free_mask(model, setup.node_offset, setup.n_nodes, time)
     changed = touched
     dynamic = model.analysis.kind == "dynamic"
     if setup.restore_strain and dynamic:  # a static step re-solves equilibrium on the new mesh
@@ -306,11 +306,6 @@ def _body_data(model: Model, setup: AleSetup) -> _BodyData:
         kept = _BodyData(model, setup)
         setup.motion._last_state["conservation"] = kept
     return kept
-
-
-def _free_dofs(model: Model, setup: AleSetup, time: float) -> NDArray[np.bool_]:
-    """Mask of the ALE body's local dofs that no support prescribes."""
-    return _free_mask(model, setup.node_offset, setup.n_nodes, time)
 
 
 def _free_mask(model: Model, node_offset: int, n_nodes: int, time: float) -> NDArray[np.bool_]:

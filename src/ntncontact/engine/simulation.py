@@ -371,7 +371,6 @@ class Simulation:
                                        watchdog=not model.interfaces)
         self.dynamic = model.analysis.kind == "dynamic"
         self.lumped = model.analysis.mass == "lumped"
-        self.state = initial_state(model)
         ale_cells = np.concatenate(
             [model.bodies[a.body_index].cells for a in model.ale_bodies] or [np.zeros(0, int)])
         # masses for dynamic runs only: a static run has no inertia (see balance); at Hertz
@@ -387,8 +386,8 @@ class Simulation:
                       if self.dynamic and not model.ale_bodies else None)
         self.length_scale = float(np.ptp(model.X0, axis=0).max())
         self.max_augmentations = max([ci.max_augmentations for ci in model.interfaces] or [1])
-        self.initial_contact = tuple(PairState.empty() for _ in model.interfaces)
-        self.state = replace(self.state, contact=self.initial_contact)
+        self.state = replace(initial_state(model),
+                             contact=tuple(PairState.empty() for _ in model.interfaces))
         self._last_contact: tuple = ((), 0)
         self._fp_errors = FloatingPointErrors()  # run() starts a new one
         self.ledger = dict.fromkeys(LEDGER, 0.0)  # cumulative energy ledger
@@ -1086,24 +1085,20 @@ class Simulation:
                 cuts += 1
                 self._failed_iterations += self._newton_run - run_before
                 self._fp_errors.drop_since(fp_mark)  # the failure, or the halving, tells them
+                failed = (f"step {self.state.step + 1} (t = {self.state.time:.6g} -> "
+                          f"{self.state.time + dt:.6g}) failed")
                 if not getattr(err, "halving_helps", True):
-                    raise SimulationError(
-                        f"step {self.state.step + 1} (t = {self.state.time:.6g} -> "
-                        f"{self.state.time + dt:.6g}) failed: {named_failure(self.model, err)}"
-                        "; the step was not halved: a shorter one cannot pass this test"
-                    ) from err
+                    raise SimulationError(f"{failed}: {named_failure(self.model, err)}; the step "
+                                          "was not halved: a shorter one cannot pass this test"
+                                          ) from err
                 if _same_problem(self.model, state, h):
-                    raise SimulationError(
-                        f"step {self.state.step + 1} (t = {self.state.time:.6g} -> "
-                        f"{self.state.time + dt:.6g}) failed: {named_failure(self.model, err)}"
-                        f"{_why_not_halved(err)}") from err
+                    raise SimulationError(f"{failed}: {named_failure(self.model, err)}"
+                                          f"{_why_not_halved(err)}") from err
                 if cuts > self.model.analysis.max_cutbacks:
                     raise SimulationError(
-                        f"step {self.state.step + 1} (t = {self.state.time:.6g} -> "
-                        f"{self.state.time + dt:.6g}) failed after {cuts - 1} halvings of the "
-                        f"step: {named_failure(self.model, err)}"
-                        f"{_last_attempt(self.state.time, state.time, h, cuts - 1)}"
-                    ) from err
+                        f"{failed} after {cuts - 1} halvings of the step: "
+                        f"{named_failure(self.model, err)}"
+                        f"{_last_attempt(self.state.time, state.time, h, cuts - 1)}") from err
                 self._step_work = before
                 h *= 0.5
                 continue
