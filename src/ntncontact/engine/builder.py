@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import warnings
+from itertools import combinations
 from pathlib import Path
 
 import numpy as np
@@ -293,19 +294,18 @@ def _check_support_conflicts(i: int, cfg: BodyConfig, entries: list[tuple[int, P
     on the order in the file (tester V: a corner in 'bottom' y = 0 and in
     'corner_bottom_left' y = 0.05 ended at 0.05 or 0.0 by the order). The same motion twice
     (a corner held by 'bottom' and 'left') is accepted."""
-    for k, (j, a) in enumerate(entries):
-        for jb, b in entries[k + 1:]:
-            dofs, va, vb = conflicting_dofs(a, b)
-            if not dofs.size:
-                continue
-            sa, sb = cfg.supports[j], cfg.supports[jb]
-            raise ScenarioError(
-                f"bodies.{i} ('{cfg.name}'): supports.{j} (set '{sa.set}') and supports.{jb} "
-                f"(set '{sb.set}') prescribe different {'xy'[dofs[0] % 2]} displacements to "
-                f"{_node_where(bodies, int(dofs[0]) // 2)}: {_motion_text(va[0], a.function)} "
-                f"and {_motion_text(vb[0], b.function)}: only one can hold, and which one "
-                "would depend on their order in the file; give the node one motion: leave "
-                "that component out of one support, or use a set without the node")
+    for (j, a), (jb, b) in combinations(entries, 2):
+        dofs, va, vb = conflicting_dofs(a, b)
+        if not dofs.size:
+            continue
+        sa, sb = cfg.supports[j], cfg.supports[jb]
+        raise ScenarioError(
+            f"bodies.{i} ('{cfg.name}'): supports.{j} (set '{sa.set}') and supports.{jb} "
+            f"(set '{sb.set}') prescribe different {'xy'[dofs[0] % 2]} displacements to "
+            f"{_node_where(bodies, int(dofs[0]) // 2)}: {_motion_text(va[0], a.function)} "
+            f"and {_motion_text(vb[0], b.function)}: only one can hold, and which one "
+            "would depend on their order in the file; give the node one motion: leave "
+            "that component out of one support, or use a set without the node")
 
 
 def _motion_text(value: float, function: TimeFunction) -> str:
@@ -714,20 +714,14 @@ def _check_tied_prescriptions(ties: tuple[Tie, ...], prescribed: tuple[Prescribe
         for n1, n2 in zip(tie.nodes_1.tolist(), tie.nodes_2.tolist(), strict=True):
             for c in (0, 1):
                 a, b = motion.get(2 * n1 + c), motion.get(2 * n2 + c)
-                if a is None or b is None or _same_motion(a, b):
+                if a is None or b is None or same_motions(  # value * s(t) equal at all times
+                        np.array([a[0]]), a[1].function, np.array([b[0]]), b[1].function)[0]:
                     continue
                 raise ScenarioError(
                     f"tie '{tie.name}': {_node_where(bodies, n1)} and "
                     f"{_node_where(bodies, n2)} are tied, and their supports prescribe "
                     f"different {'xy'[c]} motions ('{a[1].label}', '{b[1].label}'), which pull "
                     "the tie apart: prescribe one of them, or the same motion on both")
-
-
-def _same_motion(a: tuple[float, Prescribed], b: tuple[float, Prescribed]) -> bool:
-    """Whether two prescribed components value * s(t) agree at all times
-    (``fem.loads.same_motions``)."""
-    return bool(same_motions(np.array([a[0]]), a[1].function, np.array([b[0]]),
-                             b[1].function)[0])
 
 
 def _check_tied_lagrange_pairs(ties: tuple[Tie, ...],

@@ -29,8 +29,7 @@ def convective_terms(model: Model, motion: MeshMotion | None, dt: float) -> list
         if update is None or setup.motion.convection != "convective_term":
             continue
         c = np.zeros((model.n_nodes, 2))
-        rows = slice(setup.node_offset, setup.node_offset + setup.n_nodes)
-        c[rows] = update.convective
+        c[setup.node_offset:setup.node_offset + setup.n_nodes] = update.convective
         if np.any(c):
             terms.append(_body_term(model, setup, motion.state.X, c))
     return terms

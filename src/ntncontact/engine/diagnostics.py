@@ -8,6 +8,7 @@ import warnings
 from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass
+from itertools import permutations
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -633,8 +634,8 @@ def _pairs_to_check(model: Model, covered: dict) -> list[tuple[int, int]]:
     index = {body.name: k for k, body in enumerate(model.bodies)}
     tied = {(index[t.body_1], index[t.body_2]) for t in model.ties}
     tied |= {(b, a) for a, b in tied}
-    return [(a, b) for a in range(len(model.bodies)) for b in range(len(model.bodies))
-            if a != b and ((a, b) in covered or (a, b) not in tied)]
+    return [(a, b) for a, b in permutations(range(len(model.bodies)), 2)
+            if (a, b) in covered or (a, b) not in tied]
 
 
 #: an ALE body's cell with a corner below this angle (degrees), or above 180 minus it, is a

@@ -667,8 +667,7 @@ def _augmentation_failure(ci: ContactInterface, prev: ContactResult | None,
         reason += (f"; gap_tolerance {tol.normal:.3g} is below the round-off of the {measure}s "
                    f"({roundoff:.3g}, one ulp of the coordinates), which no augmentation, "
                    "update rule or shorter step can meet: raise it above that")
-        return AugmentationFailure(ci, reason, False, tests, sticking)
-    return AugmentationFailure(ci, reason, True, tests, sticking)
+    return AugmentationFailure(ci, reason, not tol.normal < roundoff, tests, sticking)
 
 
 def _failed_tests(check, tol, frictional: bool, measure: str) -> tuple[str, ...]:

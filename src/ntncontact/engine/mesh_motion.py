@@ -94,19 +94,15 @@ def move_meshes(
     unfollowed = set(previous.unfollowed) if previous is not None else set()
     for i, setup in enumerate(model.ale_bodies):
         nodes, partners = _ale_nodes_and_partners(setup, contact)
-        prev = previous.updates[i] if previous is not None else None
-        prev_request = previous.requests[i] if previous is not None else None
-        moved = _move_body(model, setup, base, (prev, prev_request), contact, nodes, partners,
-                           x_pred, dt, (masses, deep, unfollowed))
-        if moved is None:
-            updates.append(None)
-            requests.append(None)
-            continue
-        up, request = moved
-        rows = slice(setup.node_offset, setup.node_offset + setup.n_nodes)
-        X[rows], d[rows], v[rows], a[rows] = up.X, up.d, up.v, up.a
+        last = ((previous.updates[i], previous.requests[i]) if previous is not None
+                else (None, None))
+        up, request = _move_body(model, setup, base, last, contact, nodes, partners, x_pred,
+                                 dt, (masses, deep, unfollowed)) or (None, None)
         updates.append(up)
         requests.append(request)
+        if up is not None:
+            rows = slice(setup.node_offset, setup.node_offset + setup.n_nodes)
+            X[rows], d[rows], v[rows], a[rows] = up.X, up.d, up.v, up.a
     left = sum(up.energy_left for up in updates if up is not None)
     if left != 0.0:  # an ALE body too slow to give back what its remap changed
         owner = model.body_of_node()

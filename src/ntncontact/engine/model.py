@@ -146,14 +146,9 @@ def stack_bodies(
     lam = np.concatenate([np.full(m.n_cells, mat.effective_lambda) for _, m, mat in meshes])
     mu = np.concatenate([np.full(m.n_cells, mat.mu) for _, m, mat in meshes])
     rho = np.concatenate([np.full(m.n_cells, mat.density) for _, m, mat in meshes])
-    groups = []
-    for kind in ("linear_elastic", "neo_hookean"):
-        idx = np.concatenate(
-            [np.arange(c, c + m.n_cells) for (_, m, mat, _, c) in placed if mat.kind == kind]
-            or [np.zeros(0, dtype=np.int64)]
-        )
-        if idx.size:
-            groups.append(MaterialGroup(kind, idx.astype(np.int64)))
+    kinds = np.concatenate([np.full(m.n_cells, mat.kind) for _, m, mat in meshes])
+    groups = [MaterialGroup(kind, np.flatnonzero(kinds == kind).astype(np.int64))
+              for kind in ("linear_elastic", "neo_hookean") if np.any(kinds == kind)]
     return placed, X0, cells, Assembler(cells, len(X0), groups, lam, mu, rho)
 
 

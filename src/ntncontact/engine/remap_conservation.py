@@ -59,8 +59,7 @@ REPAIR_LAYERS = 3
 
 
 def conserve_remap(model: Model, setup: AleSetup, X: NDArray, d: NDArray, v: NDArray,
-                   time: float, update: AleUpdate,
-                   active: NDArray | None = None) -> AleUpdate:
+                   time: float, update: AleUpdate, active: NDArray) -> AleUpdate:
     """``update`` (the body's move from the t_n rows X, d, v) with its velocities corrected.
 
     ``active``: the body's local contact nodes the move was made for. The correction then
@@ -229,7 +228,7 @@ class _BodyData:
         return self.last
 
     def restore_strain(self, old: _OldState, X: NDArray, d: NDArray, update: AleUpdate,
-                       touched: NDArray, free: NDArray, active: NDArray | None = None
+                       touched: NDArray, free: NDArray, active: NDArray
                        ) -> tuple[AleUpdate, NDArray]:
         """``update`` with the reference positions of the interior nodes around the move
         changed at fixed positions so that the strain energy is the one before the move
@@ -249,8 +248,7 @@ class _BodyData:
         free_node = free.reshape(-1, 2).all(axis=1) & ~setup.motion.boundary
         weights = self._nodal_area(X_old)
         seeds = update.moved.copy()
-        if active is not None:
-            seeds[np.asarray(active, dtype=np.int64)] = True
+        seeds[np.asarray(active, dtype=np.int64)] = True
         result = None
         for layers in range(1, REPAIR_LAYERS + 1):
             allowed = setup.motion.within_layers(seeds, layers) & free_node

@@ -471,8 +471,7 @@ class Simulation:
         new penetrations (an active-set iteration), dynamic ones where an interface asks for
         it (``active_set_pass``), then the kinematic update."""
         interfaces = self.model.interfaces
-        contact = (detect_all(interfaces, state.contact, state.x, state.v, dt) if interfaces
-                   else ())
+        contact = detect_all(interfaces, state.contact, state.x, state.v, dt)
         iterations, start, converged_passes, repeats = 0, None, 0, 0
         tried = tuple(c.pairs[:, 0] for c in contact)  # per interface: nodes of any pass
         # per interface: nodes whose pairs were released as unfollowed (taken in again if
@@ -508,15 +507,14 @@ class Simulation:
             d1, v1, a1 = d, (d - s.d) / dt, np.zeros_like(d)
         check_end_of_step(self.model, s.X + d1, s.time + dt)  # inverted: cut back (issue 14)
         results = solved.results
-        committed = commit_all(interfaces, solved.used, results) if interfaces else ()
-        self._last_contact = (results if interfaces else (), solved.augmentations)
+        committed = commit_all(interfaces, solved.used, results)
+        self._last_contact = (results, solved.augmentations)
         # over the pressed pairs at the step's end (end_of_step_mismatch), and where
         self._last_mismatch, self._last_mismatch_at = (
             end_of_step_mismatch(self.model, results, s.X + d1)
             if self.model.ale_bodies and interfaces else (solved.mismatch, None))
         # where the solve evaluated the forces (the mid-point of a dynamic step)
-        self._last_moment = (contact_moment(interfaces, results, s.X + d) if interfaces
-                             else ContactMoment())
+        self._last_moment = contact_moment(interfaces, results, s.X + d)
         self._last_tie_forces = solved.tie_forces
         self._last_reactions = solved.reactions
         out_of_balance = (self._remap_out_of_balance_work(s, state, d1)
@@ -770,9 +768,7 @@ class Simulation:
         penetrating pairs there: if any, (result, iterations, the grown active sets) ends the
         pass before the rest of the solve (Hertz k = 4: 189 -> 165 solves); else it goes on
         to the inexact ratio of its start, as without the probe."""
-        solve = partial(self._newton, problem.residual, problem.jacobian, self.solve,
-                        settings=self.settings, length_scale=self.length_scale, factors=factors,
-                        active_set=problem.active_set_step)
+        solve = self._newton_on(problem, factors)
         if not probe:
             result = solve(y0, early_ratio=early_ratio)
             return result, result.iterations, None
@@ -826,10 +822,15 @@ class Simulation:
             if not (done and result.early) or (moves_again is not None
                                                 and moves_again(state, d, updated)):
                 return result, d, used, results, updated, done, iterations
-            result = self._newton(problem.residual, problem.jacobian, self.solve, result.y,
-                                  self.settings, self.length_scale, factors,
-                                  active_set=problem.active_set_step)
+            result = self._newton_on(problem, factors)(result.y)
             iterations += result.iterations
+
+    def _newton_on(self, problem: StepProblem, factors: FactorCache | None) -> Callable:
+        """Newton on an augmentation's ``problem`` from a start y, with the step's factor
+        cache and the problem's active-set step (``solvers.newton.newton``'s arguments)."""
+        return partial(self._newton, problem.residual, problem.jacobian, self.solve,
+                       settings=self.settings, length_scale=self.length_scale, factors=factors,
+                       active_set=problem.active_set_step)
 
     def _predicted_end(self, state: StepState, d: NDArray) -> NDArray:
         """The end-of-step positions the next mesh motion aims at, from the solution d on
@@ -850,14 +851,12 @@ class Simulation:
         (``contact.extrapolated_update``; Hertz k = 4: 4.9 -> 4.5 augmentations a step). Not
         for interfaces that converged already or take Newton updates, nor in dynamic steps,
         whose mesh moves between augmentations change the sequence."""
-        out = list(updated)
-        for index, (ci, state, res, prev) in enumerate(zip(self.model.interfaces, used, results,
-                                                           previous, strict=True)):
-            if (res is None or prev is None or not ci.law.frictionless_augmented
-                    or _newton_updated(ci) or updated[index] is state):
-                continue
-            out[index] = extrapolated_update(updated[index], res, prev, ci.law)
-        return tuple(out)
+        return tuple(
+            new if (res is None or prev is None or not ci.law.frictionless_augmented
+                    or _newton_updated(ci) or new is state)
+            else extrapolated_update(new, res, prev, ci.law)
+            for ci, state, new, res, prev in zip(self.model.interfaces, used, updated, results,
+                                                 previous, strict=True))
 
     def _newton_multipliers(self, problem: StepProblem, y: NDArray, d: NDArray, used: tuple,
                             updated: tuple, results: tuple, factors: FactorCache | None,
@@ -1053,9 +1052,7 @@ class Simulation:
         return self._moving_mass.matrix(state.X)
 
     def _contact_results(self, interfaces, contact, state: StepState, d: NDArray, dt: float,
-                         last: dict | None = None):
-        if not interfaces:
-            return ()
+                         last: dict):
         x_eval = state.X + d
         v_eval = midpoint_velocity(d, state.d, dt) if self.dynamic else None
         rate = velocity_factor(dt) if self.dynamic else None
@@ -1065,8 +1062,7 @@ class Simulation:
         """Advance by dt, halving (up to max_cutbacks times) sub-steps that fail; (the state,
         the accepted sub-steps' Newton iterations, the last sub-step). The iterations of the
         attempts the halvings discarded are kept apart in ``_failed_iterations``."""
-        state, remaining, iterations, cuts = self.state, dt, 0, 0
-        h = dt
+        state, remaining, iterations, cuts, h = self.state, dt, 0, 0, dt
         self._step_work = dict.fromkeys(LEDGER, 0.0)  # summed over the accepted sub-steps
         self._augmentations_converged = True
         self._state_substep = self._last_substep

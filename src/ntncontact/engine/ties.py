@@ -112,15 +112,14 @@ def pair_tie(name: str, body_1: str, X1: NDArray, nodes_1: NDArray, body_2: str,
 
 
 def make_tie(name: str, body_1: str, body_2: str, nodes_1: NDArray, nodes_2: NDArray,
-             fixed_dofs: NDArray, on_edges: tuple[NDArray, NDArray, NDArray] | None = None
-             ) -> Tie:
+             fixed_dofs: NDArray, on_edges: tuple[NDArray, NDArray, NDArray]) -> Tie:
     """The tie of paired nodes, leaving out the components prescribed on both sides;
     ``on_edges``: the surface-2 nodes held on surface-1 edges (global), the edges' end nodes
     (global, (m, 2)) and their parameters (see the module doc)."""
     d1 = (2 * nodes_1[:, None] + np.arange(2)).ravel()
     d2 = (2 * nodes_2[:, None] + np.arange(2)).ravel()
     keep = ~(np.isin(d1, fixed_dofs) & np.isin(d2, fixed_dofs))
-    if on_edges is None or on_edges[0].size == 0:
+    if on_edges[0].size == 0:
         return Tie(name, body_1, body_2, nodes_1, nodes_2, d1[keep], d2[keep])
     nodes, ends, xi = on_edges
     dofs = (2 * nodes[:, None] + np.arange(2)).ravel()
