@@ -17,10 +17,9 @@ from .ties import Tie
 def initial_state(model: Model) -> StepState:
     """Reference configuration at rest, but for each body's initial rigid velocity
     (translation + spin about its centre of mass); the supported dofs move as their supports
-    prescribe (:func:`_supports_prescribe`)."""
+    prescribe (:func:`_started_velocities`)."""
     n = model.n_nodes
-    v = _rigid_velocities(model)
-    _supports_prescribe(model, v)
+    v = _started_velocities(model)
     return StepState(0, 0.0, model.X0.copy(), np.zeros((n, 2)), v, np.zeros((n, 2)))
 
 
@@ -47,14 +46,17 @@ def _rigid_velocity(X: NDArray, body: Body, centre: NDArray | None) -> NDArray:
     return v
 
 
-def _supports_prescribe(model: Model, v: NDArray) -> None:
-    """Supported dofs start at their supports' rate, values x s'(0) (0 for a held node): kept,
-    a held node's given velocity flipped sign every step (the mid-point rule, v_n+1 = -v_n),
-    and a tester's bar counted 2.5 % of its energy in nodes that did not move and saw its
-    reaction alternate -4, -16 (:func:`warn_overridden_velocities` says so at build time)."""
+def _started_velocities(model: Model) -> NDArray:
+    """The rigid velocities with the supported dofs at their supports' rate, values x s'(0)
+    (0 for a held node): kept, a held node's given velocity flipped sign every step (the
+    mid-point rule, v_n+1 = -v_n), and a tester's bar counted 2.5 % of its energy in nodes
+    that did not move and saw its reaction alternate -4, -16
+    (:func:`warn_overridden_velocities` says so at build time)."""
+    v = _rigid_velocities(model)
     flat = v.reshape(-1)
     for support in model.prescribed:
         flat[support.dofs] = support.values * support.function.rate(0.0)
+    return v
 
 
 def warn_overridden_velocities(model: Model) -> None:
@@ -62,9 +64,7 @@ def warn_overridden_velocities(model: Model) -> None:
     below 1e-9 of the body's largest count as rest: a spinning pin held at its centre node
     was warned about, its centre's velocity from the spin being -1e-16 (the centre of mass's
     round-off; tester Z)."""
-    given = _rigid_velocities(model)
-    started = given.copy()
-    _supports_prescribe(model, started)
+    given, started = _rigid_velocities(model), _started_velocities(model)
     for body in model.bodies:
         tol = 1e-9 * float(np.abs(given[body.nodes]).max(initial=0.0))
         moved = (np.abs(started[body.nodes] - given[body.nodes]) > tol) \
@@ -81,8 +81,7 @@ def warn_tied_velocities(model: Model) -> None:
     ``initial.angular_velocity`` = 1.5 (each spins about its own centre of mass), kept
     |v_a - v_b| = 0.45 at their tied nodes at every one of 50 frames (the mid-point rule's
     alternating velocity mode), a spurious kinetic energy for the whole run, in silence."""
-    started = _rigid_velocities(model)
-    _supports_prescribe(model, started)
+    started = _started_velocities(model)
     for tie in model.ties:
         gap, node = _largest_velocity_difference(tie, started.reshape(-1))
         scale = max(float(np.abs(started[tie.nodes_1]).max(initial=0.0)), 1e-300)

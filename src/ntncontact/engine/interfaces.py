@@ -558,8 +558,7 @@ def _same_arguments(cached, x_eval, v_eval, rate, x_start) -> bool:
     x0, v0, rate0, start0, _ = cached
 
     def same(a, b):
-        return (a is None and b is None) or (a is not None and b is not None
-                                             and np.array_equal(a, b))
+        return (a is None) == (b is None) and (a is None or np.array_equal(a, b))
     return same(x0, x_eval) and same(v0, v_eval) and rate0 == rate and same(start0, x_start)
 
 

@@ -80,12 +80,9 @@ def coincident_partners(X1: NDArray, X2: NDArray, tolerance: float) -> NDArray:
     -2 where more than one is (ambiguous)."""
     if len(X2) == 0:
         return np.full(len(X1), -1)
-    tree = cKDTree(X2)
-    dist, idx = tree.query(X1, k=min(2, len(X2)))
-    dist, idx = dist.reshape(len(X1), -1), idx.reshape(len(X1), -1)
+    dist, idx = cKDTree(X2).query(X1, k=[1, 2])  # no second point: distance inf
     out = np.where(dist[:, 0] <= tolerance, idx[:, 0], -1)
-    if dist.shape[1] > 1:
-        out[(dist[:, 1] <= tolerance)] = -2
+    out[dist[:, 1] <= tolerance] = -2
     return out
 
 
