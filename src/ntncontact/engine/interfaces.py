@@ -796,12 +796,8 @@ def _shares_of(ci: ContactInterface, res: ContactResult, x: NDArray
     weights = transfer.weights[rows]
     normal = weights.T @ res.normal_force[paired]
     tangential = weights.T @ res.tangential_force[paired]
-    carried = np.zeros(len(x), bool)
-    carried[weights.indices] = True
-    carried[res.pairs[:, 0]] = False  # a paired node keeps its pair's own traction
-    on_surface = np.zeros(len(x), bool)
-    on_surface[surface.nodes] = True
-    nodes = np.flatnonzero(carried & on_surface)
+    # the surface-1 nodes the shares reach; a paired node keeps its pair's own traction
+    nodes = np.setdiff1d(np.intersect1d(weights.indices, surface.nodes), res.pairs[:, 0])
     k = surface.index_of(nodes)
     length = 0.5 * (np.linalg.norm(x[nodes] - x[surface.prev[k]], axis=1)
                     + np.linalg.norm(x[surface.next[k]] - x[nodes], axis=1))

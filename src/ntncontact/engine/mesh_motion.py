@@ -272,9 +272,7 @@ class _AleMasses:
 
     def __init__(self, model: Model, base: StepState, meetings: dict) -> None:
         self.model, self.base, self.meetings = model, base, meetings
-        self.is_ale = np.zeros(len(base.X), bool)
-        for setup in model.ale_bodies:
-            self.is_ale[setup.node_offset: setup.node_offset + setup.n_nodes] = True
+        self.is_ale = _on_ale(model)
         self._mass: NDArray | None = None
 
     @property
@@ -553,9 +551,7 @@ def end_of_step_mismatch(model: Model, results: Sequence, x: NDArray) -> tuple[f
     patch test read 0 while its corner pair ended 5.2e-3 apart. It also counts the pairs that
     carry no traction (a tester's row of blocks, one ALE: 0.0657 at t = 0.114 on a pair with
     no force, waiting for its release; 0.0634 over the pressed ones), so it is not taken."""
-    on_ale = np.zeros(model.n_nodes, bool)
-    for setup in model.ale_bodies:
-        on_ale[setup.node_offset:setup.node_offset + setup.n_nodes] = True
+    on_ale = _on_ale(model)
     worst, where = 0.0, None
     for ci, result in zip(model.interfaces, results, strict=True):
         if result is None:  # an interface without pairs
@@ -572,6 +568,11 @@ def end_of_step_mismatch(model: Model, results: Sequence, x: NDArray) -> tuple[f
     if where is None:
         return worst, None
     return worst, _mismatch_place(model, where[0], where[1], on_ale)
+
+
+def _on_ale(model: Model) -> NDArray[np.bool_]:
+    """Which global nodes belong to an ALE body."""
+    return np.isin(model.body_of_node(), [setup.body_index for setup in model.ale_bodies])
 
 
 def _mismatch_place(model: Model, interface: str, pair: NDArray, on_ale: NDArray) -> dict:

@@ -309,8 +309,4 @@ def _body_data(model: Model, setup: AleSetup) -> _BodyData:
 def _free_mask(model: Model, node_offset: int, n_nodes: int, time: float) -> NDArray[np.bool_]:
     """Mask of the local dofs of the body at ``node_offset`` that no support prescribes."""
     fixed, _ = dirichlet_values(model.prescribed, time, model.ndof)
-    lo = 2 * node_offset
-    local = fixed[(fixed >= lo) & (fixed < lo + 2 * n_nodes)] - lo
-    free = np.ones(2 * n_nodes, bool)
-    free[local] = False
-    return free
+    return ~np.isin(np.arange(2 * node_offset, 2 * (node_offset + n_nodes)), fixed)

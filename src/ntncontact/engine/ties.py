@@ -147,8 +147,7 @@ class TieTerm:
                  x_start: NDArray, lam: NDArray) -> tuple:
         xf = x_eval.ravel()
         rows, cols, vals = self.tie.gradient()
-        force = np.zeros(xf.size)
-        np.add.at(force, cols, vals * lam[rows])  # B lam, B = G^T
+        force = np.bincount(cols, weights=vals * lam[rows], minlength=xf.size)  # B lam, B = G^T
         empty = (np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros(0))
         return force, empty, self.tie.gaps(xf), (rows, cols, vals), (cols, rows, vals)
 
@@ -167,8 +166,8 @@ def tie_forces(constraints: Sequence, multipliers: Sequence[NDArray]) -> dict[st
         if isinstance(term, TieTerm):
             tie = term.tie
             rows, cols, vals = tie.gradient()
-            f = np.zeros(2 * (max(int(cols.max()) // 2, int(tie.nodes_1.max())) + 1))
-            np.add.at(f, cols, -vals * lam[rows])
+            f = np.bincount(cols, weights=-vals * lam[rows],
+                            minlength=2 * (max(int(cols.max()) // 2, int(tie.nodes_1.max())) + 1))
             out[tie.name] = f.reshape(-1, 2)[tie.nodes_1]  # body 1's nodes: pairs and edge ends
     return out
 
@@ -179,8 +178,7 @@ def tie_violation(ties: Sequence[Tie], x: NDArray) -> float:
             if t.nodes_1.size]
     for t in ties:
         if t.edge_dofs.size:  # per node held on an edge: the distance to its place there
-            squared = np.zeros(len(x))
-            np.add.at(squared, t.edge_dofs // 2, t.gaps(x.ravel())[t.dofs_1.size:] ** 2)
+            squared = np.bincount(t.edge_dofs // 2, weights=t.gaps(x.ravel())[t.dofs_1.size:] ** 2)
             gaps.append(float(np.sqrt(squared.max())))
     return float(max(gaps, default=0.0))
 
