@@ -352,10 +352,9 @@ MAX_REFINEMENTS = 3
 class Factorization:
     """A factored matrix: call it with b (n,) or (n, k) for the solution of A x = b."""
 
-    def __init__(self, owner: LinearSolver, n: int, solve, generation: int | None = None,
-                 refined: bool = False) -> None:
+    def __init__(self, owner: LinearSolver, n: int, solve, generation: int | None = None) -> None:
+        # a PARDISO factor has a generation, and its ``solve`` takes the caller's rtol
         self.owner, self.n, self._solve, self.generation = owner, n, solve, generation
-        self.refined = refined  # ``solve`` takes the caller's rtol (PARDISO's)
 
     @property
     def valid(self) -> bool:
@@ -375,7 +374,7 @@ class Factorization:
             raise LinearSolverError("this factorization was replaced by a later one")
         if self.n == 0:
             return np.zeros_like(b)
-        x = self._solve(b, rtol) if self.refined else self._solve(b)
+        x = self._solve(b) if self.generation is None else self._solve(b, rtol)
         self.owner.stats.solves += 1
         if not np.all(np.isfinite(x)):
             raise LinearSolverError("the solution is not finite: the matrix is singular")
@@ -451,8 +450,9 @@ class LinearSolver:
         impl = self._impls.get(symmetric)
         if impl is None:
             if backend == "pardiso":
-                impl = _PardisoBackend(self._pattern, symmetric, self.stats,
-                                       single=self._single_precision(A.shape[0]))
+                single = self.precision == "single" or (self.precision == "auto"
+                                                       and A.shape[0] >= MIXED_MIN_UNKNOWNS)
+                impl = _PardisoBackend(self._pattern, symmetric, self.stats, single=single)
             else:
                 impl = _BACKEND_CLASSES[backend](self._pattern, symmetric, self.stats)
             self._impls[symmetric] = impl
@@ -463,9 +463,8 @@ class LinearSolver:
         if self.check_pivots and isinstance(impl, _SuperLUBackend):
             impl.unchecked = True
         self._generation += 1
-        pardiso = backend == "pardiso"
         return Factorization(self, A.shape[0], impl.solver(),
-                             self._generation if pardiso else None, refined=pardiso)
+                             self._generation if backend == "pardiso" else None)
 
     def analysis_state(self) -> tuple[dict, dict[str, NDArray]]:
         """What decides how the next matrix is factored, for a restart checkpoint (JSON
@@ -515,11 +514,6 @@ class LinearSolver:
                 impl.usable = bool(mode["usable"]) and impl.symbolic is not None
                 impl.fallbacks_in_a_row = int(mode["fallbacks_in_a_row"])
             self._impls[mode["symmetric"]] = impl
-
-    def _single_precision(self, n: int) -> bool:
-        if self.precision == "auto":
-            return n >= MIXED_MIN_UNKNOWNS
-        return self.precision == "single"
 
     def _backend_for(self, n: int) -> str:
         if not self._auto:
@@ -902,7 +896,9 @@ class _PardisoBackend:
             code = getattr(err, "value", None)
             if code is None:
                 raise
-            raise LinearSolverError(_pardiso_message(code, phase)) from None
+            what = _PARDISO_ERRORS.get(code, "unknown error")
+            raise LinearSolverError(f"PARDISO failed in phase {phase} with error {code}: "
+                                    f"{what}") from None
 
     def release_factor(self) -> None:
         """Free the numerical factor (phase 0) and keep the analysis, which the next
@@ -1029,11 +1025,6 @@ _PARDISO_ERRORS = {
     -4: "zero pivot (numerically singular matrix)", -5: "unclassified internal error",
     -6: "reordering failed", -7: "diagonal matrix is singular", -8: "32-bit integer overflow",
 }
-
-
-def _pardiso_message(code: int, phase: int) -> str:
-    what = _PARDISO_ERRORS.get(code, "unknown error")
-    return f"PARDISO failed in phase {phase} with error {code}: {what}"
 
 
 _BACKEND_CLASSES = {"superlu": _SuperLUBackend, "static": _StaticLUBackend}

@@ -168,18 +168,11 @@ def newton(
     for the branches of a piecewise residual that the step itself switches (a semismooth
     Newton's active-set loop on the one linearization, ``StepProblem.active_set_step``);
     the next iteration then factors the Jacobian afresh."""
-    return _newton(residual, jacobian, solve, y0, settings, length_scale, factors, early_ratio,
-                   active_set)
-
-
-def _newton(residual: Residual, jacobian: Jacobian, solve: LinearSolve, y0: NDArray,
-            settings: NewtonSettings, length_scale: float, factors: FactorCache | None,
-            early_ratio: float, active_set: ActiveSetStep | None = None) -> NewtonResult:
     y = np.array(y0, dtype=float)
     R, scale = residual(y)
-    norms = [norm2(R)]
-    first = norms[0]
-    if y.size == 0 or norms[0] <= settings.atol or norms[0] == 0.0:
+    first = norm2(R)
+    norms = [first]
+    if y.size == 0 or first <= settings.atol or first == 0.0:
         return NewtonResult(y, 0, norms)
     reused = 0
     limit = settings.divergence_factor * max(first, 1e-300)

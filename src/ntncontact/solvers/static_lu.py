@@ -101,7 +101,9 @@ def analyse(indptr: NDArray, indices: NDArray, perm: NDArray) -> StaticSymbolic 
     s_ptr, s_rows = sym.indptr.astype(np.int64), sym.indices.astype(np.int64)
     parent = _etree(s_ptr, s_rows)
     u_ptr, u_rows = _upper_pattern(s_ptr, s_rows, parent)
-    l_ptr, l_rows = _transpose_pattern(u_ptr, u_rows)
+    # pattern(L) = pattern(U)^T: U's CSC read as CSR is U^T, whose CSC has its rows ascending
+    lower = sp.csr_matrix((np.ones(u_rows.size), u_rows, u_ptr), shape=(n, n)).tocsc()
+    l_ptr, l_rows = lower.indptr, lower.indices
     index_arrays = (perm, a_ptr, a_rows, gather, l_ptr, l_rows, u_ptr, u_rows)
     return StaticSymbolic(n, *(a.astype(np.uint64) for a in index_arrays))
 
@@ -182,25 +184,6 @@ def _upper_pattern(s_ptr: NDArray, s_rows: NDArray, parent: NDArray
         rows[start:size] = np.sort(rows[start:size])  # ascending: a topological order
         counts[k + 1] = size
     return counts, rows[:size].copy()
-
-
-@njit(cache=True)
-def _transpose_pattern(ptr: NDArray, rows: NDArray) -> tuple[NDArray, NDArray]:
-    """The transposed pattern (CSC -> CSC of the transpose), rows ascending."""
-    n = len(ptr) - 1
-    t_ptr = np.zeros(n + 1, dtype=np.int64)
-    for p in range(len(rows)):
-        t_ptr[rows[p] + 1] += 1
-    for i in range(n):
-        t_ptr[i + 1] += t_ptr[i]
-    fill = t_ptr[:-1].copy()
-    t_rows = np.empty(len(rows), dtype=np.int64)
-    for k in range(n):
-        for p in range(ptr[k], ptr[k + 1]):
-            i = rows[p]
-            t_rows[fill[i]] = k
-            fill[i] += 1
-    return t_ptr, t_rows
 
 
 # ---------------------------------------------------------------- numerical kernels
