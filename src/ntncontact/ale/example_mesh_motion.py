@@ -21,19 +21,12 @@ from ntncontact.mesh.quality import quality_statistics
 
 __all__ = ["layer_mesh", "mesh_motion_example"]
 
-STAGES = (
-    "original",
-    "distorted",
-    "before_smoothing",
-    "laplacian",
-    "simple_angle_based",
-    "weighted_angle_based",
-)
 _METHOD_OF_STAGE = {
     "laplacian": "laplacian",
     "simple_angle_based": "angle",
     "weighted_angle_based": "weighted_angle",
 }
+STAGES = ("original", "distorted", "before_smoothing", *_METHOD_OF_STAGE)
 
 
 def layer_mesh(

@@ -112,12 +112,10 @@ class StrainRepair:
 
     def energy(self, X: NDArray, d: NDArray, which: NDArray) -> float:
         """Strain energy of the cells ``which``; raises ValueError if one is inverted."""
-        value, ok = _energy_and_force(self.models, _c(X), _c(d), self.cells,
-                                      np.asarray(which, np.int64), self.lam, self.mu, False,
-                                      np.zeros((0, 2)))
+        value, _, ok = self.energy_and_force(X, d, which, want_force=False)
         if not ok:
             raise ValueError("inverted element in the strain-energy repair")
-        return float(value)
+        return value
 
     def around(self, which: NDArray) -> tuple[StrainRepair, NDArray, NDArray]:
         """(this repair on the cells ``which`` alone, numbered on their nodes; those nodes;
@@ -130,13 +128,14 @@ class StrainRepair:
                            self.lam[which], self.mu[which])
         return sub, nodes, np.arange(which.size, dtype=np.int64)
 
-    def energy_and_force(self, X: NDArray, d: NDArray, which: NDArray
+    def energy_and_force(self, X: NDArray, d: NDArray, which: NDArray, want_force: bool = True
                          ) -> tuple[float, NDArray, bool]:
-        """(energy, dW/dX at fixed x (n, 2), ok) over the cells ``which``."""
-        force = np.zeros((len(X), 2))
+        """(energy, dW/dX at fixed x (n, 2), ok) over the cells ``which``; without
+        ``want_force`` the force is an empty (0, 2) array (not computed)."""
+        force = np.zeros((len(X) if want_force else 0, 2))
         value, ok = _energy_and_force(self.models, _c(X), _c(d), self.cells,
-                                      np.asarray(which, np.int64), self.lam, self.mu, True,
-                                      force)
+                                      np.asarray(which, np.int64), self.lam, self.mu,
+                                      want_force, force)
         return float(value), force, bool(ok)
 
 
