@@ -105,10 +105,9 @@ class FactorCache:
         return (self.factor is not None and self.size == size
                 and getattr(self.factor, "valid", True))
 
-    def refresh(self, matrix: sp.spmatrix) -> Callable[[NDArray], NDArray]:
+    def refresh(self, matrix: sp.spmatrix) -> None:
         self.factor, self.size = self.factorize(matrix), matrix.shape[0]
         self.factorizations += 1
-        return self.factor
 
     def drop(self) -> None:
         self.factor = None
@@ -187,7 +186,11 @@ def newton(
             if step is not None:
                 dy, y, R, scale = step
             else:
-                dy = -_newton_step(jacobian(y), R, solve, factors, eta)
+                if factors is None:
+                    dy = -solve(jacobian(y), R)
+                else:  # J factored and kept, the step solved to the forcing term eta
+                    factors.refresh(jacobian(y))
+                    dy = -factors.solve(R, eta)
                 corrected = (active_set(y, dy, factors.solve, eta)
                              if active_set is not None and factors is not None else None)
                 if corrected is not None:
@@ -241,16 +244,6 @@ def _floor_note(norms: list[float], scale: float) -> str:
             "coordinates' size times the stiffest penalty (a tester's static contact 1000 "
             "units from the origin with a penalty 500 times the elements' stiffness: a "
             "smaller penalty_factor, or the model near the origin, lowers it)")
-
-
-def _newton_step(J: sp.spmatrix, R: NDArray, solve: LinearSolve, factors: FactorCache | None,
-                 eta: float) -> NDArray:
-    """J^-1 R, by the factor cache (J factored and kept, the solve to the forcing term
-    ``eta``) or by ``solve``."""
-    if factors is None:
-        return solve(J, R)
-    factors.refresh(J)
-    return factors.solve(R, eta)
 
 
 def _modified_step(residual: Residual, y: NDArray, R: NDArray, norm0: float,
