@@ -36,7 +36,7 @@ rigid-body velocity that restores the linear and angular momentum (METHOD_NOTES,
 from __future__ import annotations
 
 from functools import cached_property
-from typing import Any, Literal, NamedTuple
+from typing import Any, Literal, NamedTuple, get_args
 
 import numpy as np
 import scipy.sparse as sp
@@ -276,7 +276,7 @@ class Remapper:
         remapper (default: recovered at the located cells' nodes). ``hint``: likely cells of
         the points (see ``locate``).
         """
-        if method not in ("linear", "quadratic"):
+        if method not in get_args(RemapMethod):
             raise ValueError(f"unknown remap method {method!r}; use 'linear' or 'quadratic'")
         f = np.asarray(fields, dtype=float)
         f2 = f.reshape(len(self.nodes), -1)

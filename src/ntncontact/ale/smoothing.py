@@ -32,7 +32,7 @@ exactly as it is where nothing pushes it: zero surface moves give zero interior 
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
-from typing import Literal
+from typing import Literal, get_args
 
 import numpy as np
 import scipy.sparse as sp
@@ -52,7 +52,7 @@ __all__ = [
 ]
 
 SmoothingMethod = Literal["laplacian", "angle", "weighted_angle"]
-_METHODS = ("laplacian", "angle", "weighted_angle")
+_METHODS = get_args(SmoothingMethod)
 _TWO_PI = 2.0 * np.pi
 _DENSE_LIMIT = 400  # free nodes up to which the harmonic extension solves a dense system
 

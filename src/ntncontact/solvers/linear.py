@@ -44,7 +44,7 @@ import warnings
 from dataclasses import dataclass
 from functools import lru_cache
 from types import ModuleType
-from typing import Literal
+from typing import Literal, get_args
 
 import numpy as np
 import scipy.sparse as sp
@@ -402,9 +402,9 @@ class LinearSolver:
         self._pattern: _Pattern | None = None
         # one factorization per symmetry mode (PARDISO), so alternating modes keep both analyses
         self._impls: dict[bool | None, _PardisoBackend | _SuperLUBackend] = {}
-        if backend not in ("auto", "pardiso", "superlu", "static"):
+        if backend not in get_args(Backend):
             raise ValueError(f"unknown linear solver backend '{backend}'")
-        if precision not in ("auto", "single", "double"):
+        if precision not in get_args(Precision):
             raise ValueError(f"unknown factor precision '{precision}'")
         self.precision = precision
         self._auto = backend == "auto"
