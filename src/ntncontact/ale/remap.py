@@ -130,12 +130,8 @@ class Remapper:
         return cKDTree(self._cell_xy.mean(axis=1))
 
     @cached_property
-    def _box_lo(self) -> NDArray[np.float64]:
-        return self._cell_xy.min(axis=1)
-
-    @cached_property
-    def _box_hi(self) -> NDArray[np.float64]:
-        return self._cell_xy.max(axis=1)
+    def _boxes(self) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        return self._cell_xy.min(axis=1), self._cell_xy.max(axis=1)
 
     @cached_property
     def _reach(self) -> float:
@@ -173,8 +169,8 @@ class Remapper:
         """
         slack = (_INSIDE_TOL * self.cell_size[cand])[..., None]
         p = points[:, None, :]
-        inbox = np.all((p >= self._box_lo[cand] - slack) & (p <= self._box_hi[cand] + slack),
-                       axis=-1)
+        lo, hi = self._boxes
+        inbox = np.all((p >= lo[cand] - slack) & (p <= hi[cand] + slack), axis=-1)
         row, col = np.nonzero(inbox)  # row-major: nearest candidates first
         cell, xi = np.full(len(points), -1), np.zeros((len(points), 2))
         if row.size == 0:

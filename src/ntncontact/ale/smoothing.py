@@ -105,15 +105,15 @@ def harmonic_extension(
         return u
     if np.any(degree == 0):
         raise ValueError("a free node without neighbours has no harmonic extension")
+    # the diagonal is the degree, each inner edge one off-diagonal entry (no duplicates: the
+    # adjacency's are summed), so the dense form holds the same values
+    system = sp.csc_matrix((np.concatenate([degree, -weight[inner]]),
+                            (np.concatenate([np.arange(idx.size), row[inner]]),
+                             np.concatenate([np.arange(idx.size), local[col[inner]]]))),
+                           shape=(idx.size, idx.size))
     if idx.size <= dense_limit:
-        system = np.diag(degree)
-        np.add.at(system, (row[inner], local[col[inner]]), -weight[inner])
-        u[idx] = np.linalg.solve(system, rhs)
+        u[idx] = np.linalg.solve(system.toarray(), rhs)
     else:
-        system = sp.csc_matrix((np.concatenate([degree, -weight[inner]]),
-                                (np.concatenate([np.arange(idx.size), row[inner]]),
-                                 np.concatenate([np.arange(idx.size), local[col[inner]]]))),
-                               shape=(idx.size, idx.size))
         u[idx] = spla.splu(system, permc_spec="MMD_AT_PLUS_A").solve(rhs)
     return u
 
