@@ -206,3 +206,21 @@ def test_frames_written_in_the_background_are_the_synchronous_ones_byte_for_byte
     assert (tmp_path / "background" / "fields.pvd").read_bytes() == \
         (tmp_path / "synchronous" / "fields.pvd").read_bytes()
 
+
+
+@pytest.mark.parametrize("start, end, steps", [(0.0, 0.8, 320), (0.0, 2e-6, 400),
+                                               (5.0, 5.0 + 1e-3, 10), (0.0, 3e4, 300)])
+def test_a_frame_is_found_at_its_own_time_and_nowhere_between(start, end, steps):
+    """One tolerance for every lookup of a frame by its time, relative to the series' time
+    scale: each frame is found at its time given with round-off (t (1 + 1e-14), written as a
+    sum of steps), and a time a hundredth of a step away from every frame finds none, on runs
+    of microseconds, of hours, and of a short window late in a run."""
+    times = np.linspace(start, end, steps + 1)
+    step = (end - start) / steps
+    for k in (0, 1, steps // 2, steps):
+        assert vtk.frame_index(times, times[k] * (1 + 1e-14)) == k
+        assert vtk.frame_index(times, start + step * k) == k
+        assert vtk.frame_index(times, times[k] + 0.01 * step) is None
+    assert vtk.frame_index(times, end + step) is None
+    assert vtk.frame_index([0.0], 0.0) == 0  # one frame at t = 0: only exactly there
+    assert vtk.frame_index([0.0], 1e-12) is None

@@ -30,7 +30,7 @@ from .io.results import ResultWriter
 from .io.run_folder import read_summary
 from .io.run_setup import start_run
 from .io.scenario import Overrides, Scenario
-from .io.vtk import find_field_series, read_frame_mesh, read_series
+from .io.vtk import find_field_series, frame_index, read_frame_mesh, read_series
 from .io.writers import CONTACT_FILE, HISTORY_FILE, SUMMARY_FILE, MemoryResults, to_jsonable
 from .report.run_warnings import PhysicsWarning, result_warnings
 
@@ -82,10 +82,9 @@ class Results:
         points X, Q4 cells, point data (displacement, velocity, ...) and cell data."""
         if not self.frames:
             raise ValueError("these results hold no field frames")
-        times = np.array(self.times)
-        k = int(np.argmin(np.abs(times - t)))
-        scale = max(abs(times[-1]), 1.0)
-        if abs(times[k] - t) > 1e-9 * scale:
+        times = self.times
+        k = frame_index(times, t)
+        if k is None:
             shown = ", ".join(f"{time:g}" for time in times[:8])
             more = f", ... ({len(times)} in all)" if len(times) > 8 else ""
             raise ValueError(f"no field frame at t = {t:g}; frames at {shown}{more}")

@@ -209,6 +209,22 @@ class VtuSeriesWriter:
                         encoding="utf-8")
 
 
+def frame_time_tolerance(times: ArrayLike) -> float:
+    """How close to a frame's time a requested time must be to mean that frame: 1e-9 of the
+    series' time scale (its span or its last time, whichever is larger). The one tolerance of
+    every lookup of a frame by its time (the API's, the figures' and the validation's)."""
+    times = np.asarray(times, dtype=float)
+    return 1e-9 * max(times[-1] - times[0], abs(times[-1]))
+
+
+def frame_index(times: ArrayLike, t: float) -> int | None:
+    """The index of the frame written at time ``t`` (within :func:`frame_time_tolerance`),
+    or None if there is none."""
+    times = np.asarray(times, dtype=float)
+    k = int(np.argmin(np.abs(times - t)))
+    return k if abs(times[k] - t) <= frame_time_tolerance(times) else None
+
+
 def read_pvd(pvd_path: str | os.PathLike) -> list[tuple[float, Path]]:
     """(time, absolute VTU path) of each dataset a PVD lists whose file exists, in time order."""
     pvd = Path(pvd_path)

@@ -20,7 +20,14 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ntncontact.engine.diagnostics import energy_balance
-from ntncontact.io.vtk import FrameSource, VtuFrame, find_field_series, read_frame, read_series
+from ntncontact.io.vtk import (
+    FrameSource,
+    VtuFrame,
+    find_field_series,
+    frame_time_tolerance,
+    read_frame,
+    read_series,
+)
 from ntncontact.io.writers import CONTACT_FILE, HISTORY_FILE, read_csv_table
 
 if TYPE_CHECKING:
@@ -192,7 +199,7 @@ def frames_at(directory: str | os.PathLike, times: Sequence[float]
     folder = Path(directory)
     source, series = _series(folder)
     written = np.array([t for t, _ in series])
-    tolerance = 1e-9 * max(written[-1] - written[0], abs(written[-1]))
+    tolerance = frame_time_tolerance(written)
     check_times(times, written[0], written[-1], f"the frames of {source}", tolerance)
     read: dict[int, VtuFrame | None] = {}
 

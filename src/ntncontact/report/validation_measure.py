@@ -17,7 +17,7 @@ import numpy as np
 from ..ale.example_mesh_motion import mesh_motion_example
 from ..contact import pair_gaps
 from ..engine.model import Model
-from ..io.vtk import read_pvd, read_vtu
+from ..io.vtk import frame_index, read_pvd, read_vtu
 from ..io.writers import read_csv_table
 from ..mesh.boundary import nodal_tributary_lengths, surface_chain
 from ..mesh.quality import corner_jacobians
@@ -67,11 +67,10 @@ class _Results:
         return {k: v[keep][order] for k, v in self.contact.items()}
 
     def positions(self, t: float) -> np.ndarray:
-        times = np.array([s for s, _ in self.series])
-        i = int(np.argmin(np.abs(times - t)))
-        if abs(times[i] - t) > 1e-9:
+        i = frame_index([s for s, _ in self.series], t)
+        if i is None:
             raise LookupError(f"no VTU snapshot at t = {t:g}")
-        return read_vtu(self.series[i][1], time=times[i]).deformed_points
+        return read_vtu(self.series[i][1], time=self.series[i][0]).deformed_points
 
 
 def _measure_impact(case: Case, model: Model, directory: Path, quick: bool,
