@@ -23,7 +23,7 @@ import numpy as np
 
 from ntncontact.engine.builder import build_model
 from ntncontact.engine.postprocess import contact_node_fields, stress_fields
-from ntncontact.io.scenario import load_scenario
+from ntncontact.io.scenario import load_config
 from ntncontact.io.vtk import VtuSeriesWriter, XdmfSeriesWriter
 
 EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
@@ -34,7 +34,7 @@ def refined_ring(factor: int):
     overrides = [f"bodies.0.mesh.n_radial={4 * factor}", f"bodies.0.mesh.n_circ={48 * factor}",
                  f"bodies.1.mesh.nx={40 * factor}", f"bodies.1.mesh.ny={4 * factor}"]
     path = EXAMPLES / "ring_impact.toml"
-    return build_model(load_scenario(path, overrides), path.parent)
+    return build_model(load_config(path, overrides), path.parent)
 
 
 def frame_data(model, k: int):

@@ -158,7 +158,7 @@ def child(case: str, k: int, out: Path, sets: Sequence[str] = ()) -> dict:
     from ntncontact.engine.builder import build_model
     from ntncontact.engine.simulation import Simulation
     from ntncontact.io.results import ResultWriter
-    from ntncontact.io.scenario import load_scenario
+    from ntncontact.io.scenario import load_config
     from ntncontact.solvers.linear import LinearSolver
 
     if os.environ.get("SCALING_THREADED_BLAS"):  # the A/B variant of --threads
@@ -174,7 +174,7 @@ def child(case: str, k: int, out: Path, sets: Sequence[str] = ()) -> dict:
     if t_end is not None:
         overrides.append(f"analysis.t_end={t_end}")
     path = EXAMPLES / filename
-    model = build_model(load_scenario(path, overrides), path.parent)
+    model = build_model(load_config(path, overrides), path.parent)
     timer = PartTimer()
     instrument(timer)
     solver = LinearSolver(precision=model.analysis.factor_precision)

@@ -36,7 +36,7 @@ import scipy.sparse as sp  # noqa: E402
 
 from ntncontact.engine.builder import build_model  # noqa: E402
 from ntncontact.engine.simulation import Simulation  # noqa: E402
-from ntncontact.io.scenario import load_scenario  # noqa: E402
+from ntncontact.io.scenario import load_config  # noqa: E402
 from ntncontact.solvers.linear import LinearSolver, pardiso_available  # noqa: E402
 
 EXAMPLE = ROOT / "examples" / "ring_impact.toml"
@@ -54,7 +54,7 @@ class CapturingSolver(LinearSolver):
 
 def ring_matrix(steps: int) -> sp.csr_matrix:
     """The last tangent factored in the first ``steps`` steps of the ring impact."""
-    model = build_model(load_scenario(EXAMPLE), EXAMPLE.parent)
+    model = build_model(load_config(EXAMPLE), EXAMPLE.parent)
     solver = CapturingSolver("superlu")
     sim = Simulation(model, linear_solve=solver.solve)
     for _ in range(steps):
@@ -109,7 +109,7 @@ def child_run(backend: str, out: str) -> None:
     """One whole ring run in this process; prints the time loop's wall time and the stats."""
     from ntncontact.io.results import ResultWriter
 
-    model = build_model(load_scenario(EXAMPLE), EXAMPLE.parent)
+    model = build_model(load_config(EXAMPLE), EXAMPLE.parent)
     solver = LinearSolver(backend)
     sim = Simulation(model, [ResultWriter(out, model)], linear_solve=solver.solve)
     start, cpu = time.perf_counter(), time.process_time()

@@ -16,7 +16,7 @@ from ntncontact.engine.builder import build_model
 from ntncontact.engine.model import Model
 from ntncontact.engine.simulation import Simulation
 from ntncontact.fem.assembly import Assembler, MaterialGroup
-from ntncontact.io.scenario import load_scenario, parse_scenario
+from ntncontact.io.scenario import load_config, parse_scenario
 from ntncontact.io.writers import read_csv_table
 from ntncontact.mesh.generators import rectangle
 
@@ -84,7 +84,7 @@ def model_from_dict(data: dict, base: Path = Path(".")) -> Model:
 
 def model_from_example(name: str, overrides: list[str] | None = None) -> Model:
     path = EXAMPLES / name
-    return build_model(load_scenario(path, overrides), path.parent)
+    return build_model(load_config(path, overrides), path.parent)
 
 
 class Recorder:

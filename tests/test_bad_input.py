@@ -300,10 +300,10 @@ def _waited(startup: Timed) -> float:
 def test_the_base_scenario_is_good(tmp_path):
     """The table's base scenario itself runs (so each row fails for its own edit only)."""
     from ntncontact.engine.builder import build_model
-    from ntncontact.io.scenario import load_scenario
+    from ntncontact.io.scenario import load_config
 
     path = _write_case(Case("good", ()), tmp_path)
-    model = build_model(load_scenario(path), tmp_path)
+    model = build_model(load_config(path), tmp_path)
     assert model.analysis.dt == 0.01 and len(model.interfaces) == 1
 
 

@@ -15,7 +15,7 @@ from helpers import EXAMPLES
 import ntncontact as ntc
 from ntncontact.cli import main
 from ntncontact.io.checkpoint import checkpoint_files, read_checkpoint
-from ntncontact.io.scenario import ScenarioError, load_scenario
+from ntncontact.io.scenario import ScenarioError, load_config
 from ntncontact.io.vtk import read_pvd
 from ntncontact.io.writers import read_csv_table
 
@@ -57,11 +57,11 @@ def assert_same_rows(a: dict, b: dict) -> None:
 
 
 def test_the_key_defaults_to_every_step_and_refuses_other_values(tmp_path):
-    assert load_scenario(ROD).analysis.contact_output == "steps"
-    frames = load_scenario(ROD, ['analysis.contact_output="frames"'])
+    assert load_config(ROD).analysis.contact_output == "steps"
+    frames = load_config(ROD, ['analysis.contact_output="frames"'])
     assert frames.analysis.contact_output == "frames"
     with pytest.raises(ScenarioError) as info:
-        load_scenario(ROD, ['analysis.contact_output="sometimes"'])
+        load_config(ROD, ['analysis.contact_output="sometimes"'])
     message = str(info.value)
     assert "analysis.contact_output" in message and str(ROD) in message
     assert "\n" not in message

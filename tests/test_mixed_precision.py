@@ -58,7 +58,7 @@ def test_a_run_factored_in_single_precision_matches_the_run_in_double(example, o
 def test_the_scenario_chooses_how_pardiso_factors():
     """``analysis.newton.factor_precision`` reaches the run's default solver; a wrong value is
     refused with the key's name."""
-    from ntncontact.io.scenario import ScenarioError, load_scenario
+    from ntncontact.io.scenario import ScenarioError, load_config
 
     for precision in ("auto", "single", "double"):
         model = model_from_example("ring_impact.toml",
@@ -66,4 +66,4 @@ def test_the_scenario_chooses_how_pardiso_factors():
         assert model.analysis.factor_precision == precision
         assert Simulation(model).solve.__self__.precision == precision
     with pytest.raises(ScenarioError, match="factor_precision"):
-        load_scenario(EXAMPLES / "ring_impact.toml", ['analysis.newton.factor_precision="half"'])
+        load_config(EXAMPLES / "ring_impact.toml", ['analysis.newton.factor_precision="half"'])

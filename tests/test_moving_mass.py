@@ -6,12 +6,12 @@ from helpers import EXAMPLES
 
 from ntncontact.dynamics.mass import MovingMass
 from ntncontact.engine.builder import build_model
-from ntncontact.io.scenario import load_scenario
+from ntncontact.io.scenario import load_config
 
 
 @pytest.mark.parametrize("mass", ["consistent", "lumped"])
 def test_incremental_mass_equals_a_full_rebuild(mass):
-    model = build_model(load_scenario(EXAMPLES / "ring_impact.toml",
+    model = build_model(load_config(EXAMPLES / "ring_impact.toml",
                                       [f'analysis.mass="{mass}"']))
     obstacle = model.bodies[1]
     moving = MovingMass(model.assembler, model.X0, mass == "lumped", obstacle.cells)

@@ -8,7 +8,7 @@ from helpers import EXAMPLES
 
 from ntncontact.cli import main
 from ntncontact.engine.builder import build_model
-from ntncontact.io.scenario import ScenarioError, load_scenario
+from ntncontact.io.scenario import ScenarioError, load_config
 from ntncontact.mesh.boundary import surface_chain
 from ntncontact.mesh.generators import rectangle
 from ntncontact.mesh.overlap import deepest_overlap
@@ -17,7 +17,7 @@ RODS = EXAMPLES / "rod_impact.toml"  # two rods 10 x 1, 40 x 1 elements: rod_rig
 
 
 def build_rods(*sets):
-    return build_model(load_scenario(RODS, list(sets)), RODS.parent)
+    return build_model(load_config(RODS, list(sets)), RODS.parent)
 
 
 @pytest.mark.parametrize("overlap", [10.0, 1.0, 0.3, 0.25])
@@ -98,7 +98,7 @@ penalty_normal = 10.0
 def build_blocks(tmp_path, width=1.0, nx=3, ny=2, x=0.0, y=1.0):
     path = tmp_path / "blocks.toml"
     path.write_text(BLOCKS.format(width=width, nx=nx, ny=ny, x=x, y=y))
-    return build_model(load_scenario(path), tmp_path)
+    return build_model(load_config(path), tmp_path)
 
 
 @pytest.mark.parametrize("width, nx, x", [(1.0, 3, 0.0), (1.0, 4, 0.0), (1.0, 1, 0.0),

@@ -4,7 +4,7 @@ import pytest
 from helpers import EXAMPLES
 
 from ntncontact.engine.builder import build_model
-from ntncontact.io.scenario import ScenarioError, load_scenario
+from ntncontact.io.scenario import ScenarioError, load_config
 
 GOOD = """
 [analysis]
@@ -26,7 +26,7 @@ def write(tmp_path, text):
 
 
 def test_a_good_scenario_loads_and_builds(tmp_path):
-    cfg = load_scenario(write(tmp_path, GOOD))
+    cfg = load_config(write(tmp_path, GOOD))
     model = build_model(cfg, tmp_path)
     assert model.n_nodes == 9 and model.analysis.dt == 0.01
 
@@ -45,7 +45,7 @@ def test_a_good_scenario_loads_and_builds(tmp_path):
 def test_bad_values_name_the_file_and_key(tmp_path, replace, expected):
     path = write(tmp_path, GOOD.replace(*replace))
     with pytest.raises(ScenarioError) as info:
-        load_scenario(path)
+        load_config(path)
     assert str(path) in str(info.value) and expected in str(info.value)
 
 
@@ -53,32 +53,32 @@ def test_missing_mesh_file_and_unknown_set_are_named(tmp_path):
     text = GOOD.replace('{ type = "rectangle", width = 1.0, height = 1.0, nx = 2, ny = 2 }',
                         '{ type = "gmsh", file = "nowhere.msh" }')
     with pytest.raises(ScenarioError, match="block.*mesh file not found.*nowhere.msh"):
-        build_model(load_scenario(write(tmp_path, text)), tmp_path)
+        build_model(load_config(write(tmp_path, text)), tmp_path)
     text = GOOD + '\n[[bodies.supports]]\nset = "bottm"\ny = 0.0\n'
     with pytest.raises(ScenarioError, match="block.*bottm"):
-        build_model(load_scenario(write(tmp_path, text)), tmp_path)
+        build_model(load_config(write(tmp_path, text)), tmp_path)
 
 
 def test_overrides_set_nested_keys_and_reject_bad_paths(tmp_path):
     path = write(tmp_path, GOOD)
-    cfg = load_scenario(path, ["analysis.mass=lumped", "bodies.0.material.E=20.0"])
+    cfg = load_config(path, ["analysis.mass=lumped", "bodies.0.material.E=20.0"])
     assert cfg.analysis.mass == "lumped" and cfg.bodies[0].material.E == 20.0
     with pytest.raises(ScenarioError, match="no item 3"):
-        load_scenario(path, ["bodies.3.name=x"])
+        load_config(path, ["bodies.3.name=x"])
     with pytest.raises(ScenarioError, match="unknown key"):
-        load_scenario(path, ["analysis.speed=2"])
+        load_config(path, ["analysis.speed=2"])
 
 
 def test_missing_file_and_bad_toml(tmp_path):
     with pytest.raises(ScenarioError, match="not found"):
-        load_scenario(tmp_path / "none.toml")
+        load_config(tmp_path / "none.toml")
     with pytest.raises(ScenarioError, match="not valid TOML"):
-        load_scenario(write(tmp_path, "[analysis\n"))
+        load_config(write(tmp_path, "[analysis\n"))
 
 
 @pytest.mark.parametrize("path", sorted(EXAMPLES.glob("*.toml")), ids=lambda p: p.name)
 def test_every_example_is_a_valid_scenario(path):
-    build_model(load_scenario(path), path.parent)
+    build_model(load_config(path), path.parent)
 
 
 CONTACT = GOOD + """
@@ -113,11 +113,11 @@ penalty_normal = 100.0
 def test_bad_contact_entries_are_clear_errors(tmp_path, replace, expected):
     path = write(tmp_path, CONTACT.replace(*replace))
     with pytest.raises(ScenarioError, match=expected):
-        build_model(load_scenario(path), tmp_path)
+        build_model(load_config(path), tmp_path)
 
 
 def test_a_contact_scenario_builds_its_interface(tmp_path):
-    model = build_model(load_scenario(write(tmp_path, CONTACT)), tmp_path)
+    model = build_model(load_config(write(tmp_path, CONTACT)), tmp_path)
     (ci,) = model.interfaces
     assert ci.name == "interface0" and ci.persistency  # the dynamic default is persistency
     assert ci.interface.surface1.size == 3 and ci.interface.surface2.size == 3
@@ -128,18 +128,18 @@ def test_strict_types_keep_integers_for_floats_and_arrays_for_pairs(tmp_path):
     valid pair (E = 10, origin = [0, 1])."""
     text = GOOD.replace("E = 10.0", "E = 10").replace("nx = 2, ny = 2",
                                                        "nx = 2, ny = 2, origin = [0, 1]")
-    cfg = load_scenario(write(tmp_path, text))
+    cfg = load_config(write(tmp_path, text))
     assert cfg.bodies[0].material.E == 10.0 and isinstance(cfg.bodies[0].material.E, float)
     assert cfg.bodies[0].mesh.origin == (0.0, 1.0)
     for bad in ("nx = true", 'nx = "2"', "nx = 2.0"):
         with pytest.raises(ScenarioError, match="bodies.0.mesh.nx = "):
-            load_scenario(write(tmp_path, GOOD.replace("nx = 2", bad)))
+            load_config(write(tmp_path, GOOD.replace("nx = 2", bad)))
 
 
 def test_errors_are_one_line_naming_each_key_and_value(tmp_path):
     text = GOOD.replace("dt = 0.01", "dt = -1.0").replace("density = 1.0", "density = nan")
     with pytest.raises(ScenarioError) as info:
-        load_scenario(write(tmp_path, text))
+        load_config(write(tmp_path, text))
     message = str(info.value)
     assert "\n" not in message
     assert "analysis.dt = -1.0" in message and "bodies.0.material.density = nan" in message
@@ -148,14 +148,14 @@ def test_errors_are_one_line_naming_each_key_and_value(tmp_path):
 def test_utf8_with_a_byte_order_mark_is_read(tmp_path):
     path = tmp_path / "bom.toml"
     path.write_bytes(GOOD.encode("utf-8-sig"))
-    assert load_scenario(path).analysis.dt == 0.01
+    assert load_config(path).analysis.dt == 0.01
 
 
 def test_max_steps_allows_a_longer_run(tmp_path):
     path = write(tmp_path, GOOD.replace("t_end = 0.1", "t_end = 1e6"))
     with pytest.raises(ScenarioError, match="analysis.max_steps = 10000000"):
-        load_scenario(path)
-    assert load_scenario(path, ["analysis.max_steps=100000000"]).analysis.max_steps == 10**8
+        load_config(path)
+    assert load_config(path, ["analysis.max_steps=100000000"]).analysis.max_steps == 10**8
 
 
 RING_ON_BLOCK = GOOD + """
@@ -184,7 +184,7 @@ def test_bodies_overlapping_at_the_start_are_refused_with_depth_and_place(tmp_pa
     node (0.5, 1 - depth) is reported with its depth below the block's surface."""
     path = write(tmp_path, RING_ON_BLOCK.replace("LIFT", str(lift)))
     with pytest.raises(ScenarioError) as info:
-        build_model(load_scenario(path), tmp_path)
+        build_model(load_config(path), tmp_path)
     message = str(info.value)
     assert "contact.0: bodies 'ring' and 'block' overlap at t = 0" in message
     assert f"at (0.5, {1.0 - depth:.6g}) is {depth:.3g} deep inside 'block'" in message
@@ -193,7 +193,7 @@ def test_bodies_overlapping_at_the_start_are_refused_with_depth_and_place(tmp_pa
 @pytest.mark.parametrize("lift", [2.0, 2.0 + 1e-12, 2.5])
 def test_touching_or_separate_bodies_are_not_an_overlap(tmp_path, lift):
     path = write(tmp_path, RING_ON_BLOCK.replace("LIFT", repr(lift)))
-    assert len(build_model(load_scenario(path), tmp_path).interfaces) == 1
+    assert len(build_model(load_config(path), tmp_path).interfaces) == 1
 
 
 @pytest.mark.parametrize("dt, t_end", [(5e-324, 1.0), (float("nan"), 1.0), (0.01, float("inf")),
@@ -214,7 +214,7 @@ DISK = GOOD.replace('{ type = "rectangle", width = 1.0, height = 1.0, nx = 2, ny
 
 
 def test_a_disk_mesh_builds_with_its_sets(tmp_path):
-    model = build_model(load_scenario(write(tmp_path, DISK)), tmp_path)
+    model = build_model(load_config(write(tmp_path, DISK)), tmp_path)
     mesh = model.bodies[0].mesh
     assert mesh.n_cells == 16 + 2 * 16
     assert {"outer", "bottom", "top", "center", "all"} <= set(mesh.node_sets)
@@ -229,7 +229,7 @@ def test_a_disk_mesh_builds_with_its_sets(tmp_path):
 ])
 def test_bad_disk_keys_are_clear_errors(tmp_path, replace, expected):
     with pytest.raises(ScenarioError, match=expected):
-        build_model(load_scenario(write(tmp_path, DISK.replace(*replace))), tmp_path)
+        build_model(load_config(write(tmp_path, DISK.replace(*replace))), tmp_path)
 
 
 def test_contact_names_must_be_unique(tmp_path):
@@ -241,4 +241,4 @@ def test_contact_names_must_be_unique(tmp_path):
     path = tmp_path / "twice.toml"
     path.write_text(text + "\n" + contact)
     with pytest.raises(ScenarioError, match="contact names must be unique"):
-        load_scenario(path)
+        load_config(path)

@@ -12,7 +12,7 @@ from scipy.spatial import cKDTree
 from ntncontact.engine.problem import StepProblem
 from ntncontact.engine.simulation import Simulation, default_linear_solve, initial_state
 from ntncontact.engine.ties import tie_forces, tie_terms, tie_violation
-from ntncontact.io.scenario import ScenarioError, load_scenario
+from ntncontact.io.scenario import ScenarioError, load_config
 from ntncontact.solvers.newton import NewtonSettings, newton
 
 WIDTH, H_LOW, H_UP, P = 2.0, 0.5, 0.75, 30.0
@@ -185,7 +185,7 @@ def test_tied_rod_with_exact_contact_multipliers_matches_the_whole_rod():
     """Report 3.2's rods with exact gap multipliers (Lagrange terms in the bordered system):
     the right rod cut in two tied halves gives the same run as the whole rod, so the contact
     interface gets its own multipliers back, not the tie's."""
-    base = load_scenario(EXAMPLES / "rod_impact.toml", [
+    base = load_config(EXAMPLES / "rod_impact.toml", [
         'contact.0.method="lagrange"', 'contact.0.law="gap"', "analysis.t_end=0.5",
         "analysis.energy_conserving=true"]).model_dump(by_alias=True, exclude_none=True)
     whole = _run_records(base)

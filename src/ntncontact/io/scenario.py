@@ -16,7 +16,7 @@ from pydantic import ValidationError
 
 from ..engine.config import MESH_TYPES, ScenarioConfig, ScenarioError
 
-__all__ = ["Overrides", "Scenario", "apply_override", "load_scenario", "override_strings",
+__all__ = ["Overrides", "Scenario", "apply_override", "load_config", "override_strings",
            "parse_scenario", "read_text", "read_toml", "toml_value", "tomllib"]
 
 if sys.version_info >= (3, 11):
@@ -126,8 +126,9 @@ def override_strings(overrides: Overrides) -> tuple[str, ...]:
     return tuple(str(item) for item in overrides)
 
 
-def load_scenario(path: str | Path, overrides: Overrides = None) -> ScenarioConfig:
-    """Read and validate a TOML scenario, applying ``--set key=value`` overrides first."""
+def load_config(path: str | Path, overrides: Overrides = None) -> ScenarioConfig:
+    """The validated configuration of a TOML scenario, ``--set key=value`` overrides applied
+    first (``api.load_scenario`` gives the :class:`Scenario`, which also knows its folder)."""
     return Scenario.from_file(path, overrides).config
 
 
