@@ -22,7 +22,6 @@ from ntncontact.contact import (
     ContactSurface,
     Interface,
     PairState,
-    contact_term,
     evaluate_contact,
     lagrange_blocks,
 )
@@ -240,17 +239,3 @@ def test_empty_active_set():
     law = ContactLaw("penalty", eps_N=10.0)
     res = evaluate_contact(x, None, None, interface, PairState.empty(), law)
     assert res.force.shape == (x.size,) and not res.force.any() and res.vals.size == 0
-
-
-def test_contact_term_adapter_matches_evaluate():
-    """The StepProblem 'extra' adapter returns evaluate_contact's force and triplets."""
-    x, interface, pairs = strips(9)
-    v = velocities(x, 9)
-    law = ContactLaw("augmented_lagrangian", eps_N=40.0, eps_T=30.0, mu=0.4)
-    state = replace(PairState.from_pairs(pairs), lambda_N=np.full(len(pairs), 3.0))
-    force, (rows, cols, vals) = contact_term(interface, state, law)(x, v, 20.0, x - 0.1)
-    res = evaluate_contact(x, v, 20.0, interface, state, law, x_start=x - 0.1)
-    np.testing.assert_array_equal(force, res.force)
-    np.testing.assert_array_equal(vals, res.vals)
-    np.testing.assert_array_equal(rows, res.rows)
-    np.testing.assert_array_equal(cols, res.cols)

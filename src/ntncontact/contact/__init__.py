@@ -16,7 +16,7 @@ from .augmentation import (
     newton_update,
 )
 from .detection import Detection, detect, entering, release_mask
-from .evaluate import ContactResult, contact_term, evaluate_contact
+from .evaluate import ContactResult, evaluate_contact
 from .friction import SLIP, STICK
 from .kinematics import facing, pair_gaps, rate_roundoff
 from .lagrange import LagrangeBlocks, blocks_of, lagrange_blocks, release_tensile_pairs
@@ -54,7 +54,6 @@ __all__ = [
     "check_augmentation",
     "closest_pairs",
     "commit_step",
-    "contact_term",
     "corner_mask",
     "detect",
     "entering",

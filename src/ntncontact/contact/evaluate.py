@@ -35,12 +35,7 @@ from .state import PairState
 from .surfaces import Interface
 from .transfer import Transfer, unpaired_share
 
-__all__ = [
-    "ContactResult",
-    "ContactTerm",
-    "contact_term",
-    "evaluate_contact",
-]
+__all__ = ["ContactResult", "evaluate_contact"]
 
 #: A gap within this fraction of its nodes' largest coordinate is zero to round-off (a touch):
 #: detection decides it one way (``engine.interfaces.touch_tolerance``), and under the gap law
@@ -619,7 +614,7 @@ def evaluate_contact(
         elif moving_input:
             # the slip increment w - w_start, w_start = S x_start: K_start = -K_w
             moving = [(vals, x_nodes), (-vals_in, start_nodes)]
-        mapped = cache(partial(_share_tangent, transfer, rows, cols, vals, moving, force))
+        mapped = cache(partial(transfer.tangent, rows, cols, vals, moving, force))
         force = transfer.force(force)
         rows, cols, vals = (None, None, None) if deferred_tangent else mapped()
     return ContactResult(
@@ -634,34 +629,3 @@ def evaluate_contact(
             x_nodes, v_nodes, rate_factor, gradients_in if moving_input and rate_law else None),
         deferred=mapped if transfer is not None and deferred_tangent else None,
     )
-
-
-def _share_tangent(transfer: Transfer, rows: NDArray, cols: NDArray, vals: NDArray,
-                   moving: list[tuple[NDArray, NDArray]], kernel_force: NDArray
-                   ) -> tuple[NDArray, NDArray, NDArray]:
-    """The kernel's tangent mapped back through the share: S^T K S and the weights' terms."""
-    extra = transfer.weight_terms(rows, cols, moving, kernel_force)
-    return transfer.tangent(rows, cols, vals, extra)
-
-
-ContactTerm = Callable[
-    [NDArray, NDArray | None, float | None, NDArray | None],
-    tuple[NDArray, tuple[NDArray, NDArray, NDArray]],
-]
-
-
-def contact_term(
-    interface: Interface, state: PairState, law: ContactLaw, dt: float | None = None
-) -> ContactTerm:
-    """Adapter to the ``extra`` term signature of :class:`ntncontact.engine.problem.StepProblem`:
-    (x_eval, v_eval, rate_factor, x_start) -> (force, (rows, cols, vals)), multipliers fixed."""
-
-    def term(
-        x_eval: NDArray, v_eval: NDArray | None, rate_factor: float | None,
-        x_start: NDArray | None,
-    ) -> tuple[NDArray, tuple[NDArray, NDArray, NDArray]]:
-        res = evaluate_contact(x_eval, v_eval, rate_factor, interface, state, law,
-                               x_start=x_start, dt=dt)
-        return res.force, (res.rows, res.cols, res.vals)
-
-    return term

@@ -103,16 +103,16 @@ class Transfer:
         return out.reshape(np.shape(force))
 
     def tangent(self, rows: NDArray, cols: NDArray, vals: NDArray,
-                extra: tuple[NDArray, NDArray, NDArray] | None = None
+                moving: list[tuple[NDArray, NDArray]] | None = None,
+                kernel_force: NDArray[np.float64] | None = None
                 ) -> tuple[NDArray[np.int64], NDArray[np.int64], NDArray[np.float64]]:
-        """S^T K S of a COO K (dofs), plus ``extra`` entries already mapped (the weights'
-        own terms, :meth:`weight_terms`), summed into unique sorted entries."""
+        """S^T K S of a COO K (dofs), with ``moving`` plus the weights' own terms
+        (:meth:`weight_terms` of ``moving`` and ``kernel_force``), summed into unique sorted
+        entries."""
+        extra = [] if moving is None else [self.weight_terms(rows, cols, moving, kernel_force)]
         rows, cols, vals = self._expand(rows, cols, vals)  # S^T K: K's rows spread
         cols, rows, vals = self._expand(cols, rows, vals)  # (S^T K) S: its columns spread
-        if extra is not None:
-            rows, cols, vals = (np.concatenate(pair) for pair in
-                                zip((rows, cols, vals), extra, strict=True))
-        return _summed(rows, cols, vals, self.weights.shape[1] * 2)
+        return _summed([(rows, cols, vals), *extra], self.weights.shape[1] * 2)
 
     def weight_terms(self, rows: NDArray, cols: NDArray,
                      moving: list[tuple[NDArray, NDArray]], kernel_force: NDArray[np.float64]
@@ -176,10 +176,7 @@ class Transfer:
         parts = [] if not moving or self.derivative is None else [
             self._through(rows, cols, moving)]
         cols, rows, vals = self._expand(cols, rows, vals)
-        if parts:
-            rows, cols, vals = (np.concatenate(item) for item in
-                                zip((rows, cols, vals), *parts, strict=True))
-        return _summed(rows, cols, vals, self.weights.shape[1] * 2)
+        return _summed([(rows, cols, vals), *parts], self.weights.shape[1] * 2)
 
     def _expand(self, index: NDArray, other: NDArray, vals: NDArray
                 ) -> tuple[NDArray[np.int64], NDArray[np.int64], NDArray[np.float64]]:
@@ -236,9 +233,11 @@ def _ones(m: sp.csr_matrix) -> sp.csr_matrix:
     return sp.csr_matrix((np.ones(m.data.size), m.indices, m.indptr), shape=m.shape)
 
 
-def _summed(rows: NDArray, cols: NDArray, vals: NDArray, n_cols: int
+def _summed(parts: list[tuple[NDArray, NDArray, NDArray]], n_cols: int
             ) -> tuple[NDArray[np.int64], NDArray[np.int64], NDArray[np.float64]]:
-    """COO entries with equal (row, col) summed, sorted by row then column."""
+    """The COO entries of ``parts`` [(rows, cols, vals)] with equal (row, col) summed, sorted
+    by row then column."""
+    rows, cols, vals = (np.concatenate(item) for item in zip(*parts, strict=True))
     keys = rows * n_cols + cols
     unique, inverse = np.unique(keys, return_inverse=True)  # sorting path (small arrays)
     return unique // n_cols, unique % n_cols, np.bincount(inverse, weights=vals,
