@@ -423,7 +423,7 @@ class StepProblem:
         own data array: K is spent."""
         if self.fixed_dofs.size == 0:
             return K
-        return self.union.free_block.take(K, self.free_dofs)
+        return self.union.free_block(K, self.free_dofs, spend=True)
 
 
 def _range_with(tangent: NDArray, force: NDArray) -> NDArray:

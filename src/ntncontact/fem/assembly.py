@@ -12,6 +12,7 @@ from numpy.typing import NDArray
 from ..materials.models import MaterialKind
 from .kernels_numba import NumbaAssembly
 from .q4 import element_mass
+from .sparse import row_starts
 
 
 def element_dofs(cells: NDArray) -> NDArray:
@@ -37,11 +38,8 @@ class CsrPattern:
         cols = np.tile(edofs, (1, k)).ravel()
         keys = rows.astype(np.int64) * ndof + cols
         unique, entry_map = np.unique(keys, return_inverse=True)
-        urows = unique // ndof
-        indptr = np.zeros(ndof + 1, dtype=np.int64)
-        np.add.at(indptr, urows + 1, 1)
         position = np.int32 if unique.size < 2**31 else np.int64
-        return cls(np.cumsum(indptr), (unique % ndof).astype(np.int32),
+        return cls(row_starts(unique, (ndof, ndof)), (unique % ndof).astype(np.int32),
                    entry_map.astype(position), (ndof, ndof))
 
     @property

@@ -116,6 +116,17 @@ def _comb4(a, b, ca, cb):
 
 
 @njit(cache=True, error_model="numpy", inline="always")
+def _reference_point(Xx, Xy, g):
+    """(det J, Gx, Gy) at Gauss point g of an element's reference coordinates: the reference
+    Jacobian J_ij = dX_i/dxi_j and dN_a/dX = dN_a/dxi J^-1 (not finite where det J = 0)."""
+    dxi, deta = _DXI[g], _DETA[g]
+    J00, J01, J10, J11 = _dot4(Xx, dxi), _dot4(Xx, deta), _dot4(Xy, dxi), _dot4(Xy, deta)
+    det = J00 * J11 - J01 * J10
+    r = 1.0 / det
+    return det, _comb4(dxi, deta, J11 * r, -J10 * r), _comb4(dxi, deta, -J01 * r, J00 * r)
+
+
+@njit(cache=True, error_model="numpy", inline="always")
 def _reference(p, Xx, Xy, geo, Xc):
     """Recompute geo[p] (Gx, Gy and det J * weight per Gauss point) from the element's reference
     coordinates; return the number of Gauss points with det J > 0 (4: element valid).
@@ -125,16 +136,10 @@ def _reference(p, Xx, Xy, geo, Xc):
     (NaN never compares equal) so that the element is recomputed, and found inverted, next time.
     """
     for g in range(4):
-        dxi, deta = _DXI[g], _DETA[g]
-        # reference Jacobian J_ij = dX_i/dxi_j and dN_a/dX = dN_a/dxi J^-1
-        J00, J01, J10, J11 = _dot4(Xx, dxi), _dot4(Xx, deta), _dot4(Xy, dxi), _dot4(Xy, deta)
-        det = J00 * J11 - J01 * J10
+        det, Gx, Gy = _reference_point(Xx, Xy, g)
         if not det > 0.0:
             Xc[p, 0] = np.nan
             return g
-        r = 1.0 / det
-        Gx = _comb4(dxi, deta, J11 * r, -J10 * r)
-        Gy = _comb4(dxi, deta, -J01 * r, J00 * r)
         for a in range(4):
             geo[p, g, a] = Gx[a]
             geo[p, g, 4 + a] = Gy[a]
@@ -475,15 +480,9 @@ def cell_fields(model, X, d, ecells, lam, mu, plane_stress, out):
         acc[:] = 0.0
         reference_area = 0.0
         for g in range(4):
-            dxi, deta = _DXI[g], _DETA[g]
-            J00, J01 = _dot4(Xx, dxi), _dot4(Xx, deta)
-            J10, J11 = _dot4(Xy, dxi), _dot4(Xy, deta)
-            det = J00 * J11 - J01 * J10
+            det, Gx, Gy = _reference_point(Xx, Xy, g)
             if not det > 0.0:
                 return p
-            r = 1.0 / det
-            Gx = _comb4(dxi, deta, J11 * r, -J10 * r)
-            Gy = _comb4(dxi, deta, -J01 * r, J00 * r)
             H00, H01 = _dot4(ux, Gx), _dot4(ux, Gy)
             H10, H11 = _dot4(uy, Gx), _dot4(uy, Gy)
             _gauss_point_fields(model, H00, H01, H10, H11, lam[p], mu[p], plane_stress,

@@ -44,7 +44,7 @@ class TripletUnion:
         (a growing contact zone's next pairs: one analysis instead of one per growth)."""
         if not self._same_k(K):  # a new K pattern starts afresh (a first K takes up a restore)
             self._build(K)
-        if not self._same_triplets(rows, cols):
+        if self._t_key is None or not all(map(np.array_equal, (rows, cols), self._t_key)):
             # placed in the union of K and the keys so far, and so grown and reserved at the
             # same calls in a restored run as in the run it continues (bit for bit)
             self._place(K, rows, cols, reserve)
@@ -112,12 +112,6 @@ class TripletUnion:
         indptr, indices = self._k_key
         return _same_array(K.indptr, indptr) and _same_array(K.indices, indices)
 
-    def _same_triplets(self, rows: NDArray, cols: NDArray) -> bool:
-        if self._t_key is None:
-            return False
-        r, c = self._t_key
-        return np.array_equal(rows, r) and np.array_equal(cols, c)
-
     def _place(self, K: sp.csr_matrix, rows: NDArray, cols: NDArray,
                reserve: Reserve | None) -> None:
         """New triplet places: found in the union (pattern kept), else the union grown (by
@@ -125,7 +119,8 @@ class TripletUnion:
         keys_t = _keys(rows, cols, K.shape[1])
         at, found = self._locate(keys_t)
         if not found.all():
-            new = np.unique(np.concatenate([keys_t[~found], _reserved_keys(reserve, K.shape[1])]))
+            reserved = np.zeros(0, np.int64) if reserve is None else _keys(*reserve(), K.shape[1])
+            new = np.unique(np.concatenate([keys_t[~found], reserved]))
             self._grow(new[~self._locate(new)[1]])
             at, _ = self._locate(keys_t)
         self._t_map = at
@@ -182,7 +177,7 @@ class TripletUnion:
         union = _sorted_unique(np.concatenate([keys_k, restored]))
         self._restored = np.zeros(0, dtype=np.int64)
         self._shape = K.shape
-        self._indptr = _row_starts(union, K.shape)
+        self._indptr = row_starts(union, K.shape)
         self._indices = (union % n_cols).astype(K.indices.dtype)
         position = np.int32 if union.size < 2**31 else np.int64  # kept: half the bytes
         self._k_map = np.searchsorted(union, keys_k).astype(position)
@@ -232,14 +227,7 @@ def _gather(data: NDArray, places: NDArray) -> NDArray:
 Reserve = Callable[[], tuple[NDArray, NDArray]]
 
 
-def _reserved_keys(reserve: Reserve | None, n_cols: int) -> NDArray:
-    if reserve is None:
-        return np.zeros(0, dtype=np.int64)
-    rows, cols = reserve()
-    return _keys(rows, cols, n_cols)
-
-
-def _row_starts(keys: NDArray, shape: tuple[int, int]) -> NDArray:
+def row_starts(keys: NDArray, shape: tuple[int, int]) -> NDArray:
     """CSR indptr (int64) of sorted keys row * n_cols + col: where each row's keys start."""
     return np.searchsorted(keys, np.arange(shape[0] + 1, dtype=np.int64) * shape[1])
 
@@ -272,19 +260,13 @@ class FreeBlock:
         self._map = self._indptr = self._indices = None
         self._shape = (0, 0)
 
-    def __call__(self, K: sp.csr_matrix, free: NDArray) -> sp.csr_matrix:
+    def __call__(self, K: sp.csr_matrix, free: NDArray, spend: bool = False) -> sp.csr_matrix:
+        """The block; ``spend``: made in K's own data array, which it spends (K is not to be
+        used again): no second array of K's size (issue 18, memory)."""
         if not self._same(K, free):
             self._build(K, free)
-        return sp.csr_matrix((K.data[self._map], self._indices, self._indptr),
-                             shape=self._shape)
-
-    def take(self, K: sp.csr_matrix, free: NDArray) -> sp.csr_matrix:
-        """The same block made in K's own data array, which it spends (K is not to be used
-        again): no second array of K's size (issue 18, memory)."""
-        if not self._same(K, free):
-            self._build(K, free)
-        return sp.csr_matrix((_gather(K.data, self._map), self._indices, self._indptr),
-                             shape=self._shape)
+        data = _gather(K.data, self._map) if spend else K.data[self._map]
+        return sp.csr_matrix((data, self._indices, self._indptr), shape=self._shape)
 
     def _same(self, K: sp.csr_matrix, free: NDArray) -> bool:
         if self._key is None:
