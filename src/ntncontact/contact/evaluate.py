@@ -308,26 +308,19 @@ def _input_jacobian(q, t_n_coef, t_t_coef, dn_coef, gap, offset, e0, e1, length,
     """The pair's force Jacobian with respect to the moving input (:func:`_input_gradients`),
     written to vals_in from position q in :func:`_scatter`'s order (and the couple's)."""
     n0, n1 = e1, -e0
-    for node in range(2):
-        sgn = 1.0 if node == 0 else -1.0
-        for k in range(6):
-            for r in range(2):
-                nr, er = (n0, e0) if r == 0 else (n1, e1)
-                for c in range(2):
-                    d_tn = t_n_coef * d_meas[k, c]
-                    d_tt = t_t_coef * d_slip[k, c] + dn_coef * d_tn
-                    vals_in[q] = sgn * length * (nr * d_tn + er * d_tt)
-                    q += 1
-    if moment_free:
-        for node in range(2):  # +C on chord node b (slot 3), -C on a
+    for part in range(2 if moment_free else 1):  # the pair force, then the couple
+        for node in range(2):  # +F on i, -F on j; +C on chord node b (slot 3), -C on a
             sgn = 1.0 if node == 0 else -1.0
             for k in range(6):
                 for r in range(2):
-                    nr = n0 if r == 0 else n1
+                    nr, er = (n0, e0) if r == 0 else (n1, e1)
                     for c in range(2):
                         d_tn = t_n_coef * d_meas[k, c]
                         d_tt = t_t_coef * d_slip[k, c] + dn_coef * d_tn
-                        vals_in[q] = sgn * nr * length * (gap * d_tt - offset * d_tn) / chord
+                        if part == 0:
+                            vals_in[q] = sgn * length * (nr * d_tn + er * d_tt)
+                        else:
+                            vals_in[q] = sgn * nr * length * (gap * d_tt - offset * d_tn) / chord
                         q += 1
 
 

@@ -60,20 +60,16 @@ class UndefinedNormalError(ValueError):
 def raise_undefined_normal(x: NDArray, interface: Interface, pairs: NDArray) -> None:
     """Raise :class:`UndefinedNormalError` for the first pair whose normal chord has zero
     length at the positions ``x`` (a generic one when none has: the kernel's positions)."""
-    slots = _slots(interface, pairs)
-    length = np.linalg.norm(x[slots[:, 3]] - x[slots[:, 2]], axis=1)
-    zero = np.flatnonzero(~(length > 0.0))
-    if zero.size == 0:
-        raise ValueError("a contact normal is undefined (coincident chain neighbours)")
-    i, j, a, b = slots[zero[0], :4]
-    raise UndefinedNormalError(i, j, (a, b), x[a])
+    _unit_chord(x, _slots(interface, pairs), nan_too=True)
+    raise ValueError("a contact normal is undefined (coincident chain neighbours)")
 
 
-def _unit_chord(x: NDArray, slots: NDArray) -> tuple[NDArray, NDArray]:
-    """e = (x_b - x_a)/l and l of every pair's normal chord (slots 2, 3)."""
+def _unit_chord(x: NDArray, slots: NDArray, nan_too: bool = False) -> tuple[NDArray, NDArray]:
+    """e = (x_b - x_a)/l and l of every pair's normal chord (slots 2, 3); raises
+    :class:`UndefinedNormalError` for the first of length 0 (or NaN with ``nan_too``)."""
     chord = x[slots[:, 3]] - x[slots[:, 2]]
     length = np.linalg.norm(chord, axis=1)
-    zero = np.flatnonzero(length == 0.0)
+    zero = np.flatnonzero(~(length > 0.0) if nan_too else length == 0.0)
     if zero.size:
         i, j, a, b = slots[zero[0], :4]
         raise UndefinedNormalError(i, j, (a, b), x[a])

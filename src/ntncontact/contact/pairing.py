@@ -312,14 +312,12 @@ def beyond_reach(x: NDArray[np.float64], interface: Interface, pairs: ArrayLike,
     pairs = np.asarray(pairs, dtype=np.int64).reshape(-1, 2)
     if pairs.size == 0:
         return np.zeros(0, bool)
-    s1, s2 = interface.surface1, interface.surface2.nodes
-    reach1 = np.zeros(len(x))
-    reach1[s1.nodes] = _longest_adjacent_segment(x, s1)
-    reach2 = np.zeros(len(x))
-    reach2[s2] = _surface2_reach(x, interface, reference_arc)
+    s1, s2 = interface.surface1, interface.surface2
+    reach1 = _longest_adjacent_segment(x, s1)[s1.index_of(pairs[:, 0])]
+    reach2 = _surface2_reach(x, interface, reference_arc)[s2.index_of(pairs[:, 1])]
     depth = np.maximum(closest_pairs(x, interface, pairs[:, 0]).projection_gap, 0.0)
     dist = np.linalg.norm(x[pairs[:, 0]] - x[pairs[:, 1]], axis=1) - depth
-    return dist > np.maximum(reach1[pairs[:, 0]], reach2[pairs[:, 1]])
+    return dist > np.maximum(reach1, reach2)
 
 
 def _admissible_pairs(x: NDArray, interface: Interface, node1: NDArray, taken: ArrayLike,
@@ -336,20 +334,19 @@ def _admissible_pairs(x: NDArray, interface: Interface, node1: NDArray, taken: A
     contact closes, not the mesh. With the full distance, the fast-sliding blocks refined 8x
     (segments 6.25e-3) left unpaired the nodes that one step had taken 6.0-6.6e-3 deep
     (v dt = 6e-3), and their thin bottom row was crushed (issue 17)."""
-    s1 = interface.surface1
-    reach1 = np.zeros(len(x))
-    reach1[s1.nodes] = _longest_adjacent_segment(x, s1)
+    reach1 = _longest_adjacent_segment(x, interface.surface1)[
+        interface.surface1.index_of(node1)]
     reach2 = _longest_adjacent_segment(x, interface.surface2)
     capped2 = _surface2_reach(x, interface, reference_arc)
     behind = np.zeros(node1.size) if depth is None else np.asarray(depth, dtype=float)
-    cand, j = _nearby_pairs(x[node1], x[s2], behind + np.maximum(reach1[node1], reach2.max()))
+    cand, j = _nearby_pairs(x[node1], x[s2], behind + np.maximum(reach1, reach2.max()))
     dist = np.linalg.norm(x[node1][cand] - x[s2][j], axis=1)
     if depth is not None:
         dist = np.maximum(dist - behind[cand], 0.0)
-    reach = np.maximum(reach1[node1][cand], reach2[j])
+    reach = np.maximum(reach1[cand], reach2[j])
     busy = np.isin(s2, np.concatenate([np.asarray(taken, np.int64).reshape(-1), kept[:, 1]]))
     # the capped reach only bounds which pairs are admitted; closeness keeps the segments
-    within = (dist <= np.maximum(reach1[node1][cand], capped2[j])) & (dist <= reach) & ~busy[j]
+    within = (dist <= np.maximum(reach1[cand], capped2[j])) & (dist <= reach) & ~busy[j]
     cand, j, dist, reach = cand[within], j[within], dist[within], reach[within]
     closeness = 1.0 - dist / reach
     return cand, j, 1.0 + closeness / (node1.size + 1.0)

@@ -113,8 +113,7 @@ class ContactSurface:
 
     def edges(self) -> NDArray[np.int64]:
         """Surface segments (a, b) in walking order (closing segment included if closed)."""
-        nxt = np.roll(self.nodes, -1)
-        pairs = np.column_stack((self.nodes, nxt))
+        pairs = np.column_stack((self.nodes, self.next))  # an open chain's last is its own
         return pairs if self.closed else pairs[:-1]
 
 

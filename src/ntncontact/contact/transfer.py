@@ -273,23 +273,24 @@ def _dual_hat_chain(xi: list[float]) -> list[list[float]]:
     return out
 
 
-def _shared_segments(pos_s: NDArray, pos_o: NDArray, n_s: int, n_o: int, closed_s: bool,
-                     closed_o: bool) -> list[tuple[int, int]]:
+def _shared_segments(surface_s: ContactSurface, surface_o: ContactSurface, pos_s: NDArray,
+                     pos_o: NDArray) -> list[tuple[int, int]]:
     """(pair a, pair b) consecutive along surface s with unpaired nodes between them while
     their partners on the other surface are chain neighbours: one coarse segment facing
     several segments of s."""
+    n_s, n_o = surface_s.size, surface_o.size
     order = np.argsort(pos_s, kind="stable")
     a, b = order[:-1], order[1:]
-    if closed_s and order.size > 2:
+    if surface_s.closed and order.size > 2:
         a, b = np.append(a, order[-1]), np.append(b, order[0])
-    elif closed_s and order.size == 2 and (pos_s[b] - pos_s[a]) % n_s > n_s // 2:
+    elif surface_s.closed and order.size == 2 and (pos_s[b] - pos_s[a]) % n_s > n_s // 2:
         # two pairs on a closed surface have two arcs between them: the short one faces the
         # partner (pairs at a disk's chain positions 0 and 23 of 24 are neighbours across
         # the chain's start; the long arc's 22 nodes were taken as unpaired between them)
         a, b = b, a
     between = (pos_s[b] - pos_s[a]) % n_s
     step = np.abs(pos_o[b] - pos_o[a])
-    neighbours = (step == 1) | (closed_o & (step == n_o - 1))
+    neighbours = (step == 1) | (surface_o.closed & (step == n_o - 1))
     keep = (between >= 2) & neighbours
     return list(zip(a[keep].tolist(), b[keep].tolist(), strict=True))
 
@@ -310,12 +311,8 @@ def unpaired_share(x: NDArray[np.float64], interface: Interface,
         return None
     surfaces = (interface.surface1, interface.surface2)
     pos = [surfaces[s].index_of(pairs[:, s]) for s in range(2)]
-    found = []
-    for s in range(2):
-        o = 1 - s
-        for a, b in _shared_segments(pos[s], pos[o], surfaces[s].size, surfaces[o].size,
-                                     surfaces[s].closed, surfaces[o].closed):
-            found.append((s, a, b))
+    found = [(s, a, b) for s in range(2) for a, b in
+             _shared_segments(surfaces[s], surfaces[1 - s], pos[s], pos[1 - s])]
     if not found:
         return None
     surface1 = _without_inner_nodes(interface.surface1, pos[0],
