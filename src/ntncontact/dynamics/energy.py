@@ -26,7 +26,7 @@ x_{n+1} = X + 2 d - d_n, v_{n+1} = 4 (d - d_n)/dt - v_n with d = d_{n+1/2}.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 import scipy.sparse as sp
@@ -87,9 +87,8 @@ class EnergyConsistentContact:
 
     def __call__(self, x_eval, v_eval, rate, x_start, lam):
         lams, theta = self.split(lam)
-        ndof = x_eval.size
-        force, k_parts, hs, g_parts, b_parts, c_rows, c_vals = np.zeros(ndof), [], [], [], [], \
-            [], []
+        force = np.zeros(x_eval.size)
+        k_parts, hs, g_parts, b_parts, c_rows, c_vals = [], [], [], [], [], []
         row = 0
         for t, lam_t, h0 in zip(self.terms, lams, self.h_start, strict=True):
             f, (kr, kc, kv), h, (gr, gc, gv), (br, bc, bv) = t(x_eval, v_eval, rate, x_start,
@@ -111,11 +110,10 @@ class EnergyConsistentContact:
             hs.append(np.array([theta - self.fixed_theta]))
             c_rows.append(np.array([row]))
             c_vals.append(np.array([1.0]))
-        cat = [np.concatenate(p) for p in zip(*k_parts, strict=True)]
-        gcat = [np.concatenate(p) for p in zip(*g_parts, strict=True)]
-        bcat = [np.concatenate(p) for p in zip(*b_parts, strict=True)]
+        k, g, b = (tuple(np.concatenate(p) for p in zip(*parts, strict=True))
+                   for parts in (k_parts, g_parts, b_parts))
         crow = np.concatenate(c_rows)
-        return (force, tuple(cat), np.concatenate(hs), tuple(gcat), tuple(bcat),
+        return (force, k, np.concatenate(hs), g, b,
                 (crow, np.full(crow.size, row), np.concatenate(c_vals)))
 
     def excess(self, d: NDArray) -> float:
@@ -125,5 +123,4 @@ class EnergyConsistentContact:
 
     def with_theta(self, theta: float) -> EnergyConsistentContact:
         """The same term with theta held fixed (theta = 1: the persistency condition)."""
-        return EnergyConsistentContact(self.terms, self.h_start, self.end_energy, self.energy_n,
-                                       theta)
+        return replace(self, fixed_theta=theta)
