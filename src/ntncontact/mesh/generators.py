@@ -179,8 +179,7 @@ def rectangle(
         "top": grid[-1, ::-1],
         "left": grid[::-1, 0],
     }
-    node_sets = dict(chains)
-    node_sets |= {
+    node_sets = chains | {
         "corner_bottom_left": grid[:1, 0],
         "corner_bottom_right": grid[:1, -1],
         "corner_top_right": grid[-1:, -1],
@@ -224,14 +223,13 @@ def annulus(
     closed = np.concatenate((ring, ring[:, :1]), axis=1)  # wrap around: column n_circ = column 0
     # i runs counter-clockwise (tangential), j must run inward for a right-handed (i, j) frame
     cells = _grid_cells(closed[::-1])
-    outer, inner = closed[-1], closed[0, ::-1]
     node_sets = {
         "outer": ring[-1],
         "inner": ring[0],
         "bottom": ring[-1, :1],
         "all": ring.ravel(),
     }
-    edge_sets = {"outer": _chain_edges(outer), "inner": _chain_edges(inner)}
+    edge_sets = {"outer": _chain_edges(closed[-1]), "inner": _chain_edges(closed[0, ::-1])}
     return QuadMesh(nodes, cells, node_sets, edge_sets, name)
 
 
