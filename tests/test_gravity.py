@@ -92,7 +92,7 @@ def test_gravity_on_a_moved_mesh_is_the_lumped_mass_times_g():
     rng = np.random.default_rng(3)
     moved = mesh.nodes + 0.02 * rng.standard_normal(mesh.nodes.shape)
     rho, g = 1.7, np.array(G)
-    load = MeshBodyForce(mesh.cells, rho * g, TimeFunction.constant(1.0))
+    load = MeshBodyForce(mesh.cells, rho * g, TimeFunction())
     ndof = 2 * mesh.n_nodes
     expected = lumped_masses(moved, mesh.cells, rho)[:, None] * g
     np.testing.assert_allclose(load.vector(moved, ndof).reshape(-1, 2), expected, rtol=1e-13,

@@ -62,7 +62,7 @@ def test_the_rate_of_a_piecewise_linear_time_function():
     f = TimeFunction((0.0, 1.0, 3.0), (0.0, 2.0, 1.0))
     assert [f.rate(t) for t in (-1.0, 0.0, 0.5, 1.0, 2.0, 3.0)] == [0.0, 2.0, 2.0, -0.5, -0.5,
                                                                    0.0]
-    assert TimeFunction.constant(3.0).rate(0.0) == 0.0
+    assert TimeFunction(values=(3.0,)).rate(0.0) == 0.0
 
 
 def test_a_spinning_disk_held_at_its_centre_is_not_warned_about(recwarn):

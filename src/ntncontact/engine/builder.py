@@ -243,7 +243,7 @@ def _nonzero(load: LoadConfig) -> bool:
 
 def time_function(cfg: TimeFunctionConfig | None) -> TimeFunction:
     if cfg is None:
-        return TimeFunction.constant(1.0)
+        return TimeFunction()
     return TimeFunction(tuple(cfg.times), tuple(cfg.values))
 
 
@@ -311,7 +311,7 @@ def _check_support_conflicts(i: int, cfg: BodyConfig, entries: list[tuple[int, P
 def _motion_text(value: float, function: TimeFunction) -> str:
     """A prescribed component as the scenario gives it: "0.05", or "0.05 x s(t) (times
     [...], values [...])" with a time function."""
-    if function == TimeFunction.constant(1.0):
+    if function == TimeFunction():
         return f"{value:g}"
     return (f"{value:g} x s(t) (times {[float(t) for t in function.times]}, values "
             f"{[float(v) for v in function.values]})")

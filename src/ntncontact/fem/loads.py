@@ -35,10 +35,6 @@ class TimeFunction:
         if np.any(np.diff(self.times) <= 0):
             raise ValueError(f"time function times must increase strictly: {self.times}")
 
-    @classmethod
-    def constant(cls, value: float = 1.0) -> TimeFunction:
-        return cls((0.0,), (float(value),))
-
     def __call__(self, t: float) -> float:
         return float(np.interp(t, self.times, self.values))
 
