@@ -111,14 +111,13 @@ def _share_moving(result: ContactResult, g_vals: NDArray[np.float64]
     return [(g_vals - rate_factor * g_v, x), (g_v, v)]
 
 
-def release_tensile_pairs(
-    state: PairState, multipliers: NDArray[np.float64], tol: float = 0.0
-) -> tuple[PairState, NDArray[np.bool_]]:
-    """Drop pairs whose converged multiplier is tensile, t_N < -tol (violates 2.14).
+def release_tensile_pairs(state: PairState, multipliers: NDArray[np.float64]
+                          ) -> tuple[PairState, NDArray[np.bool_]]:
+    """Drop pairs whose converged multiplier is tensile, t_N < 0 (violates 2.14).
 
     Returns the reduced state (multipliers stored as lambda_N) and the released mask; if any
     pair was released the step must be solved again with the reduced active set.
     """
     multipliers = np.asarray(multipliers, dtype=float)
-    tensile = multipliers < -tol
+    tensile = multipliers < 0.0
     return state.with_multipliers(multipliers).take(~tensile), tensile

@@ -148,8 +148,7 @@ class Assembler:
         element masses: ALE runs rebuild only their moving bodies' part."""
         me = element_masses
         if lumped:
-            me = np.einsum("eab,ab->eab", np.broadcast_to(me.sum(axis=2)[:, :, None], me.shape),
-                           np.eye(4))
+            me = me.sum(axis=2)[:, :, None] * np.eye(4)
         blocks = np.zeros((len(me), 4, 2, 4, 2))
         blocks[:, :, 0, :, 0] = me
         blocks[:, :, 1, :, 1] = me

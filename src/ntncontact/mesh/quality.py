@@ -38,9 +38,7 @@ def _nodes_cells(
         return mesh_or_nodes.nodes, mesh_or_nodes.cells
     if cells is None:
         raise TypeError("pass a QuadMesh or both nodes and cells")
-    nodes = np.asarray(mesh_or_nodes, dtype=float)
-    cell_arr = np.asarray(cells, dtype=np.int64).reshape(-1, 4)
-    return nodes, cell_arr
+    return np.asarray(mesh_or_nodes, dtype=float), np.asarray(cells, dtype=np.int64).reshape(-1, 4)
 
 
 def unique_edges(cells: ArrayLike) -> NDArray[np.int64]:
