@@ -40,26 +40,17 @@ class Overlap:
     edge: bool = False
 
 
-def in_elements(points: NDArray, nodes: NDArray, cells: NDArray, slack: float) -> NDArray:
-    """Which ``points`` (m, 2) lie in some counter-clockwise quad of ``cells`` (edges included,
-    with ``slack`` of length; a valid mesh's quads are convex). Each point is tested against
-    the cells whose centroid lies within the largest centroid-corner distance of it (a k-d
-    tree): at run time this is called every step on a body's boundary nodes against another
-    body of up to 10^5 cells, where testing every pair costs m x cells."""
-    found = np.zeros(len(points), bool)
-    if len(points) == 0 or len(cells) == 0:
-        return found
-    point, _ = _inside_pairs(points, nodes, cells, slack)
-    found[point] = True
-    return found
-
-
 def _inside_pairs(points: NDArray, nodes: NDArray, cells: NDArray,
                   slack: float) -> tuple[NDArray, NDArray]:
-    """The (point, cell) index pairs of ``points`` inside quads of ``cells``, as
-    :func:`in_elements` finds them (the cells in the points' bounding box, then a k-d tree
-    on their centroids)."""
+    """The (point, cell) index pairs of ``points`` (m, 2) inside counter-clockwise quads of
+    ``cells`` (edges included, with ``slack`` of length; a valid mesh's quads are convex).
+    Each point is tested against the cells in the points' bounding box whose centroid lies
+    within the largest centroid-corner distance of it (a k-d tree): at run time this is
+    called every step on a body's boundary nodes against another body of up to 10^5 cells,
+    where testing every pair costs m x cells."""
     none = (np.zeros(0, np.int64), np.zeros(0, np.int64))
+    if len(points) == 0 or len(cells) == 0:
+        return none
     corners = nodes[cells]  # (ne, 4, 2)
     low, high = points.min(axis=0) - slack, points.max(axis=0) + slack
     c0, c1, c2, c3 = corners[:, 0], corners[:, 1], corners[:, 2], corners[:, 3]
@@ -184,7 +175,7 @@ def _inside_deeper_than(points: NDArray, nodes: NDArray, cells: NDArray, edges: 
     outline = nodes[edges[:, 0]]  # the body's extent (``nodes`` may hold other bodies too)
     low, high = outline.min(axis=0) - tolerance, outline.max(axis=0) + tolerance
     candidates = np.flatnonzero(np.all((points >= low) & (points <= high), axis=1))
-    inside = candidates[in_elements(points[candidates], nodes, cells, tolerance)]
+    inside = np.unique(candidates[_inside_pairs(points[candidates], nodes, cells, tolerance)[0]])
     if inside.size == 0:
         return inside, np.zeros(0)
     depth = distance_to_segments(points[inside], nodes[edges[:, 0]], nodes[edges[:, 1]])
@@ -216,7 +207,7 @@ def deepest_overlap(points: NDArray, nodes: NDArray, cells: NDArray,
 
     ``edges``, ``size``: the body's ``boundary_edges(cells)`` and ``edge_size``, if kept from an
     earlier call. Cost: each test gathers the cells in the points' bounding box (linear in
-    the cells), finds the candidates among them with a k-d tree (``in_elements``), then the
+    the cells), finds the candidates among them with a k-d tree (``_inside_pairs``), then the
     distances of the points inside to the nearby boundary edges (a k-d tree,
     ``distance_to_segments``; every surface node of bodies that touch is inside within the
     tolerance); the depths along the normals (edges inside x boundary edges, ``ray_exit``)
@@ -262,8 +253,6 @@ def deepest_self_overlap(boundary: NDArray, nodes: NDArray, cells: NDArray, edge
     ``size`` slack). The depth is the distance to the body's boundary edges away from the
     node: those with an end on one of the node's own cells are left out, since the node lies
     on them. ``Overlap.point`` indexes ``boundary``."""
-    if len(boundary) == 0 or len(cells) == 0:
-        return None
     tolerance = DEPTH_TOLERANCE * size
     point, cell = _inside_pairs(nodes[boundary], nodes, cells, tolerance)
     foreign = ~np.any(cells[cell] == boundary[point, None], axis=1)
