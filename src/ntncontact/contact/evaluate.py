@@ -575,8 +575,8 @@ def evaluate_contact(
                       x_start is not None, law.frictional, law.moment_free, moving_input],
                      dtype=np.int64)
     table1 = interface.surface1.kernel_table
-    x_nodes, v_nodes, start_nodes = x_eval, v_eval, x_start  # the weights' derivative
-    x_named = x_eval  # the nodes' own positions (an undefined normal names them)
+    # the nodes' own positions: the weights' derivative, and an undefined normal names them
+    x_nodes, v_nodes, start_nodes = x_eval, v_eval, x_start
     if transfer is not None:  # the kernel sees each shared pair's weighted point
         x_eval, v_eval, x_start = (transfer.positions(a) for a in (x_eval, v_eval, x_start))
         table1 = transfer.surface1.kernel_table
@@ -597,7 +597,7 @@ def evaluate_contact(
         interface.surface1.index_of(pairs[:, 0])  # raises, naming the nodes
         interface.surface2.index_of(pairs[:, 1])
     if code == ZERO_CHORD:
-        raise_undefined_normal(np.asarray(x_named), interface, pairs)
+        raise_undefined_normal(np.asarray(x_nodes), interface, pairs)
     if transfer is not None:
         moving = [(vals, x_nodes)]  # K's factors of dS/dx applied to x (and v, x_start)
         if moving_input and rate_law:
