@@ -609,10 +609,13 @@ def _interface(cfg: ContactConfig, index: int, bodies: tuple[Body, ...],
     ordered = "ale" in (b1.mesh_motion, b2.mesh_motion)
     # exact gap constraints must not inherit a step's penetration: detect before touching
     predicted = resolved["detection"] == "predicted"
+    # the arc length of every node along surface 2's (open) chain
+    arc2 = np.concatenate([[0.0], np.cumsum(chain_edge_lengths(b2.mesh.nodes[chain2.nodes],
+                                                               False))])
     return ContactInterface(cfg.name or f"interface{index}", Interface(surface1, surface2), law,
                             persistency, candidates, cfg.release_steps, tol, max_aug, ordered,
                             predicted, aug.update, aug.on_limit == "accept",
-                            reference_arc2=_arc_lengths(b2.mesh.nodes[chain2.nodes]),
+                            reference_arc2=arc2,
                             active_set_pass=cfg.active_set_pass, spacing=spacing)
 
 
@@ -790,11 +793,6 @@ def _median_spacing(xy: np.ndarray, closed: bool) -> float:
     """The median edge length of a surface chain: its contact spacing h (the median, so that
     a few long edges away from the contact zone, as in a graded mesh, do not set it)."""
     return float(np.median(chain_edge_lengths(xy, closed)))
-
-
-def _arc_lengths(xy: np.ndarray) -> np.ndarray:
-    """Arc length of every node along an (open) chain."""
-    return np.concatenate([[0.0], np.cumsum(chain_edge_lengths(xy, False))])
 
 
 def _check_no_overlap(index: int, cfg: ContactConfig, ci: ContactInterface,

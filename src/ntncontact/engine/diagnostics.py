@@ -320,10 +320,9 @@ def _singular_where(model: Model, columns: NDArray) -> str:
     if not dofs.size:
         return ""
     of_node = model.body_of_node()[dofs // 2]
-    parts = []
-    for b in np.unique(of_node):
-        axes = "".join(sorted({"xy"[d % 2] for d in dofs[of_node == b]}))
-        parts.append(f"'{model.bodies[int(b)].name}' ({' and '.join(axes)})")
+    parts = [f"'{model.bodies[int(b)].name}' "
+             f"({' and '.join(sorted({'xy'[d % 2] for d in dofs[of_node == b]}))})"
+             for b in np.unique(of_node)]
     light = [_lost_inertia(model, model.bodies[int(b)]) for b in np.unique(of_node)]
     return (f": the free motion moves the dofs of body {', '.join(parts)}"
             + "".join(f"; {note}" for note in light if note))

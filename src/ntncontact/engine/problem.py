@@ -383,7 +383,7 @@ class StepProblem:
         tangent = block[:, moved].toarray()
         f_S = force[self.free_dofs[where]]
         kept.extend(where, _range_with(tangent, f_S))
-        Q = kept.basis_on(where)
+        Q = kept.basis[np.searchsorted(kept.rows, where)]  # Q's rows at the unknowns where
         V = Q.T @ tangent
         VW = V @ kept.at(moved)
         c = Q.T @ f_S
@@ -467,10 +467,6 @@ class _KeptColumns:
             E = np.zeros((self.size, min(SOLVE_COLUMNS, new.shape[1] - start)))
             E[rows] = new[:, start:start + E.shape[1]]
             self.blocks.append(self.solve(E))
-
-    def basis_on(self, where: NDArray) -> NDArray:
-        """Q's rows at the unknowns ``where`` (a subset of its rows)."""
-        return self.basis[np.searchsorted(self.rows, where)]
 
     def at(self, index: NDArray) -> NDArray:
         """W's rows at the unknowns ``index``."""

@@ -143,11 +143,6 @@ def _same_problem(model: Model, state: StepState, h: float) -> bool:
     return all(_constant_over(f, state.time + 0.5 * h, state.time + h) for f in functions)
 
 
-def _tried_before(grown: tuple, tried: tuple) -> bool:
-    """Whether every pair of the active sets ``grown`` has a surface-1 node in ``tried``."""
-    return all(bool(np.isin(g.pairs[:, 0], t).all()) for g, t in zip(grown, tried, strict=True))
-
-
 def _cycling_active_set(interfaces, used: tuple) -> str:
     """The message of a step whose active set did not settle (:data:`ACTIVE_SET_REPEATS`):
     what it means and its usual cause."""
@@ -303,13 +298,6 @@ def _augmented_only(interfaces, states: tuple) -> bool:
     not finish in 10 minutes with the first solution looked at)."""
     return all(ci.law.method == "augmented_lagrangian"
                for ci, state in zip(interfaces, states, strict=True) if len(state))
-
-
-def _carries_multipliers(interfaces, states: tuple) -> bool:
-    """Whether the pairs come with augmented-Lagrangian multipliers (some lambda_N > 0) and
-    every interface with pairs is augmented Lagrangian (``_augmented_only``)."""
-    return (_augmented_only(interfaces, states)
-            and any(bool(np.any(state.lambda_N > 0.0)) for state in states))
 
 
 def _no_nodes(interfaces) -> tuple:
@@ -484,7 +472,9 @@ class Simulation:
             iterations += solved.iterations
             converged_passes += solved.grown is None
             if solved.grown is not None:
-                repeats += _tried_before(solved.grown, tried)
+                # every pair of the grown active sets has a surface-1 node tried before
+                repeats += all(bool(np.isin(g.pairs[:, 0], t).all())
+                               for g, t in zip(solved.grown, tried, strict=True))
                 tried = tuple(np.union1d(t, g.pairs[:, 0]) for t, g in zip(tried, solved.grown,
                                                                            strict=True))
                 if repeats > ACTIVE_SET_REPEATS:
@@ -590,10 +580,14 @@ class Simulation:
         if start is not None:
             x_pred = state.X + (start[0] + (state.d - start[1]).ravel()).reshape(-1, 2)
         previous, before, iterations, guess, floor = None, None, 0, start, None
-        factors = self._factor_cache()  # one factor serves the augmentations (modified Newton)
+        # one factor serves the augmentations (modified Newton), where the solver keeps factors
+        factorize = getattr(getattr(self.solve, "__self__", None), "factorize", None)
+        factors = FactorCache(factorize) if factorize is not None else None
         sensitivities: dict = {}  # per interface and pressed set, for Newton multiplier updates
-        carried = _carries_multipliers(interfaces, contact)  # see probe below
         first_looks = _augmented_only(interfaces, contact)  # see grown below
+        # the pairs come with augmented-Lagrangian multipliers (some lambda_N > 0), and every
+        # interface with pairs is augmented Lagrangian: see probe below
+        carried = first_looks and any(bool(np.any(s.lambda_N > 0.0)) for s in contact)
         early_ratio = self._first_early_ratio()
         for augmentation in range(1, self.max_augmentations + 1):  # noqa: B007 (used after)
             if self.model.ale_bodies and any(len(c) for c in contact):
@@ -1026,11 +1020,6 @@ class Simulation:
         by_term |= dict(zip(map(id, combined.terms), lams, strict=True))
         order = sorted(list(others) + list(combined.terms), key=lambda t: t.order)
         return [by_term[id(t)] for t in order]
-
-    def _factor_cache(self) -> FactorCache | None:
-        """A factor cache for this step if the linear solver can keep factors."""
-        factorize = getattr(getattr(self.solve, "__self__", None), "factorize", None)
-        return FactorCache(factorize) if factorize is not None else None
 
     def _start_velocity(self, state: StepState) -> NDArray:
         """The velocity a step's first Newton start advances the nodes with: the mid-point

@@ -275,7 +275,12 @@ class ResultWriter:
             if self._keeps_contact_rows(framed):
                 self.results.contact.write_step(s.step, s.time, rows)
             fields |= self._contact_summary(s.time, record.dt, rows, summary)
-            fields |= self._deepest_pair(s.time, rows, summary)  # max_penetration(_at)
+            # max_penetration and where it is, when this step's deepest pair is the deepest
+            # so far; measured at the step's end, as the frame shows it (the law's gap is at
+            # t_{n+1/2} in a dynamic step: the gap law's rod impact 2e-12 there, 0.058 at the
+            # step ends)
+            fields |= self._largest_pair("max_penetration", "depth", rows["end_gap"], s.time,
+                                         rows, summary)
             fields |= self._widest_pressed_opening(s.time, rows, summary)
         self.results.write_history(row, **fields)
         self._before, self._last = self._last, record
@@ -329,15 +334,6 @@ class ResultWriter:
             # the last step's contact: its end time is then the run's, not the contact's
             fields["contact_at_end"] = True
         return fields
-
-    def _deepest_pair(self, time: float, rows: dict, summary: dict) -> dict:
-        """``max_penetration`` and where it is, when this step's deepest pair is the deepest
-        so far: the time, the interface, its surface-1 node and the interface's surface
-        spacing, which ``ntncontact run`` compares it with. Measured at the step's end, as the
-        frame shows it (the law's gap is at t_{n+1/2} in a dynamic step: the gap law's rod
-        impact 2e-12 there, 0.058 at the step ends)."""
-        return self._largest_pair("max_penetration", "depth", rows["end_gap"], time, rows,
-                                  summary)
 
     def _largest_pair(self, key: str, name: str, values: np.ndarray, time: float, rows: dict,
                       summary: dict) -> dict:

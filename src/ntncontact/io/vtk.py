@@ -229,11 +229,9 @@ def read_pvd(pvd_path: str | os.PathLike) -> list[tuple[float, Path]]:
     """(time, absolute VTU path) of each dataset a PVD lists whose file exists, in time order."""
     pvd = Path(pvd_path)
     root = ET.parse(pvd).getroot()
-    series = []
-    for dataset in root.iter("DataSet"):
-        path = pvd.parent / dataset.attrib["file"]
-        if path.is_file():
-            series.append((float(dataset.attrib.get("timestep", "nan")), path))
+    series = [(float(dataset.attrib.get("timestep", "nan")), path)
+              for dataset in root.iter("DataSet")
+              if (path := pvd.parent / dataset.attrib["file"]).is_file()]
     return sorted(series, key=lambda item: item[0])
 
 

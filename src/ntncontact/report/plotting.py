@@ -170,11 +170,8 @@ def load_frames(directory: str | os.PathLike, max_frames: int = EVENLY_SPACED_PA
                 ) -> list[VtuFrame]:
     """Up to ``max_frames`` evenly spaced frames of the folder; unreadable files skipped."""
     _, series = _series(Path(directory))
-    frames = []
-    for index in _evenly_spaced(len(series), max_frames):
-        frame = _read_or_warn(series[index][1], series[index][0])
-        if frame is not None:
-            frames.append(frame)
+    frames = [frame for index in _evenly_spaced(len(series), max_frames)
+              if (frame := _read_or_warn(series[index][1], series[index][0])) is not None]
     if not frames:
         raise ResultsNotFoundError(f"no readable frames in results folder {directory}")
     return frames

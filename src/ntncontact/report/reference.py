@@ -61,11 +61,8 @@ def fit_hertz_ellipse(X: np.ndarray, p: np.ndarray, a0: float, p0: float) -> tup
     from scipy.optimize import least_squares
 
     X, p = np.asarray(X, float), np.asarray(p, float)
-
-    def misfit(z: np.ndarray) -> np.ndarray:
-        return z[1] * np.sqrt(np.clip(1.0 - (X / z[0]) ** 2, 0.0, None)) - p
-
-    a, peak = least_squares(misfit, [a0, p0]).x
+    a, peak = least_squares(
+        lambda z: z[1] * np.sqrt(np.clip(1.0 - (X / z[0]) ** 2, 0.0, None)) - p, [a0, p0]).x
     return float(a), float(peak)
 
 

@@ -62,12 +62,9 @@ def parse_cases(text: str, source: str = TABLE) -> tuple[Case, ...]:
     return tuple(cases)
 
 
-def load_cases() -> tuple[Case, ...]:
-    """The cases shipped with the package (``ntncontact/data/validation_cases.toml``)."""
-    return parse_cases((resources.files("ntncontact") / "data" / TABLE).read_text(), TABLE)
-
-
-CASES: tuple[Case, ...] = load_cases()
+#: The cases shipped with the package (``ntncontact/data/validation_cases.toml``)
+CASES: tuple[Case, ...] = parse_cases(
+    (resources.files("ntncontact") / "data" / TABLE).read_text(), TABLE)
 
 
 

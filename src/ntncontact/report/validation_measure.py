@@ -81,17 +81,12 @@ def _measure_impact(case: Case, model: Model, directory: Path, quick: bool,
         result.notes.append(f"Shortened run (to t = {t[-1]:g}): values derived from the "
                             "report's time tables are taken over the same span; quantities "
                             "that need the end of contact are left out if it had not ended.")
-    result.images = _impact_plots(directory, quick)
+    result.images = (plot_all(directory) if not quick else
+                     [f(directory) for f in (plot_energies, plot_momenta, plot_deformed,
+                                             plot_contact_tractions)])
     overlay = plot_report_overlay(directory, case)
     if overlay is not None:
         result.images.insert(0, overlay)
-
-
-def _impact_plots(directory: Path, quick: bool) -> list[Path]:
-    if not quick:
-        return plot_all(directory)
-    return [f(directory) for f in (plot_energies, plot_momenta, plot_deformed,
-                                   plot_contact_tractions)]
 
 
 def _measure_block_sliding(case: Case, model: Model, directory: Path, quick: bool,
