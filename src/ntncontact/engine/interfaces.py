@@ -224,9 +224,8 @@ def touch_tolerance(x: NDArray, ci: ContactInterface) -> float:
     (docs/theory.md, "A touch on a step boundary")."""
     nodes = np.concatenate([ci.interface.surface1.nodes, ci.interface.surface2.nodes])
     tol = TOUCH_ROUNDOFF * float(np.abs(x[nodes]).max())
-    if not ci.persistency:  # its force acts on the gap: a pair in early holds nothing open
-        return tol
-    return -tol if ci.predicted_detection else tol
+    # the gap law's force acts on the gap: a pair in early holds nothing open
+    return -tol if ci.persistency and ci.predicted_detection else tol
 
 
 def _near_candidates(x: NDArray, v: NDArray, dt: float, ci: ContactInterface,

@@ -1185,9 +1185,7 @@ class Simulation:
         none. A load that is on at full value from t = 0 is then counted as applied over the
         first step, as a quasi-static path applies it (a linear block under a traction set at
         t = 0: external work twice its strain energy, a balance error of 0.5 -> round-off)."""
-        if s.step == 0:
-            return np.zeros(ndof)
-        return self.model.loads(s.time, ndof, s.X)
+        return np.zeros(ndof) if s.step == 0 else self.model.loads(s.time, ndof, s.X)
 
     def _ledger_extra(self) -> dict:
         for key, value in self._step_work.items():

@@ -105,7 +105,8 @@ def outside_ledger(model: Model) -> list[str]:
 def _if_larger(summary: dict, key: str, value: float, at: Callable[[], dict]) -> dict:
     """``key`` = ``value`` and ``key_at`` = ``at()`` (when and where) if ``value`` is above
     the run's largest so far in ``summary`` (0 before any), else nothing. ``at`` is called
-    only then: a check that found nothing gives depth 0 and no interface to look up."""
+    only then: a check that found nothing gives depth 0 (its callers' ``found`` None too) and
+    no interface to look up."""
     return {} if value <= (summary.get(key) or 0.0) else {key: value, f"{key}_at": at()}
 
 
@@ -415,9 +416,7 @@ class ResultWriter:
         in no pair (``max_penetration_unpaired``, ``engine.diagnostics.UnpairedCheck``) and
         the surface-2 nodes inside surface 1's body (``max_penetration_surface_2``,
         ``SurfaceTwoCheck``)."""
-        if found is None:
-            return {}
-        return _if_larger(summary, key, found.depth, lambda: {
+        return _if_larger(summary, key, 0.0 if found is None else found.depth, lambda: {
             "time": time, "interface": found.interface, "node": found.node,
             "depth": found.depth, "file_node": self._file_node(found.node),
             "element_size": self._spacing[found.interface]})
@@ -426,10 +425,9 @@ class ResultWriter:
         """The deepest boundary node inside its own body so far, and where
         (``engine.diagnostics.SelfCrossingCheck``); ``first_time``: the end of the first step
         that found one, from which on the results are not physical."""
-        if found is None:
-            return {}
         before = summary.get("max_self_penetration_at") or {}
-        return _if_larger(summary, "max_self_penetration", found.depth, lambda: {
+        depth = 0.0 if found is None else found.depth
+        return _if_larger(summary, "max_self_penetration", depth, lambda: {
             "time": time, "body": found.body, "node": found.node,
             "file_node": self._file_node(found.node), "depth": found.depth,
             "element_size": found.size, "first_time": before.get("first_time", time)})
@@ -475,9 +473,8 @@ class ResultWriter:
     def _off_surface_summary(time: float, found, summary: dict) -> dict:
         """The deepest boundary node inside another body off the contact surfaces so far, and
         where (``engine.diagnostics.PenetrationCheck``)."""
-        if found is None:
-            return {}
-        return _if_larger(summary, "max_penetration_off_surfaces", found.depth, lambda: {
+        return _if_larger(summary, "max_penetration_off_surfaces",
+                          0.0 if found is None else found.depth, lambda: {
             "time": time, "body": found.body, "node": found.node, "inside": found.other,
             "element_size": found.size, "joined": found.joined})
 

@@ -37,9 +37,7 @@ class RunInfo:
 
 
 def _status(result: CaseResult) -> str:
-    if result.interrupted:
-        return "NOT RUN"
-    return "PASS" if result.passed() else "FAIL"
+    return "NOT RUN" if result.interrupted else "PASS" if result.passed() else "FAIL"
 
 
 def _summary_counts(result: CaseResult) -> str:
