@@ -318,16 +318,14 @@ def _turn(summary: dict, angle: float, at: dict) -> str:
     where = summary.get("max_linear_elastic_stretch_at")
     turned = (f"small-strain elasticity reads a rotation as a stretch of 1 - cos = "
               f"{1 - math.cos(angle):.2g} without stress")
+    rotated = (f"an element of the linear elastic body '{at['body']}' turned by {angle:.3g} rad "
+               f"(t = {at['time']:.6g}; summary.json max_linear_elastic_rotation)")
     if not where:  # a summary written before the stretch was kept
-        return (f"an element of the linear elastic body '{at['body']}' turned by {angle:.3g} "
-                f"rad (t = {at['time']:.6g}; summary.json max_linear_elastic_rotation): "
-                f"{turned}")
-    stretched = (f"the largest principal stretch was {stretch:.3g} ('{where['body']}', t = "
-                 f"{where['time']:.6g}; max_linear_elastic_stretch)")
+        return f"{rotated}: {turned}"
     if stretch <= STRETCH_WARNING:
-        return (f"an element of the linear elastic body '{at['body']}' turned by {angle:.3g} "
-                f"rad (t = {at['time']:.6g}; summary.json max_linear_elastic_rotation) and "
-                f"{stretched}: {turned}")
+        return (f"{rotated} and the largest principal stretch was {stretch:.3g} "
+                f"('{where['body']}', t = {where['time']:.6g}; max_linear_elastic_stretch): "
+                f"{turned}")
     return (f"an element of the linear elastic body '{where['body']}' stretched "
             f"{stretch:.3g}-fold (largest principal stretch, t = {where['time']:.6g}; "
             "summary.json max_linear_elastic_stretch), and the polar rotation of F reached "

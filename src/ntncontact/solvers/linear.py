@@ -698,15 +698,13 @@ def _check_pivots(lu: spla.SuperLU, perm: NDArray | None = None,
             largest = d[~border].max()
         d = d * np.where(border, weights, 1.0)
     small = np.flatnonzero(~(d > PIVOT_RTOL * largest))  # NaN pivots too
-    if small.size and (scale := _out_of_range(d, largest)):
-        raise LinearSolverError(f"matrix is numerically singular: {small.size} pivot(s) "
-                                f"below {PIVOT_RTOL:g} x the largest {RANGE_CAUSE.format(scale)}")
-    if small.size:
+    if small.size:  # pivots out of the floating-point range (_out_of_range), else a free motion
+        scale = _out_of_range(d, largest)
         raise LinearSolverError(
-            f"matrix is numerically singular: {small.size} pivot(s) below "
-            f"{PIVOT_RTOL:g} x the largest {SINGULAR_CAUSES}",
-            columns=np.unique(np.concatenate([_null_columns(lu, k, perm)
-                                              for k in small[:4]])))
+            f"matrix is numerically singular: {small.size} pivot(s) below {PIVOT_RTOL:g} x "
+            f"the largest {RANGE_CAUSE.format(scale) if scale else SINGULAR_CAUSES}",
+            columns=None if scale else np.unique(np.concatenate(
+                [_null_columns(lu, k, perm) for k in small[:4]])))
 
 
 def _out_of_range(pivots: NDArray, largest: float) -> str:
