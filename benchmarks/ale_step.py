@@ -18,7 +18,7 @@ import numpy as np
 
 from ntncontact.engine import mesh_motion, simulation
 from ntncontact.engine.builder import build_model
-from ntncontact.io.scenario import load_scenario
+from ntncontact.io.scenario import load_config
 
 EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
 
@@ -29,7 +29,7 @@ def timed_run(
     """(wall time, steps, time inside the ALE mesh update, time rebuilding the mass) of one
     run; appends (wall, CPU) seconds of every ``move_ale_body`` call to ``moves``."""
     path = EXAMPLES / example
-    config = load_scenario(path, [f"analysis.t_end={t_end}",
+    config = load_config(path, [f"analysis.t_end={t_end}",
                                   f'bodies.1.mesh_motion="{motion}"'])
     model = build_model(config, path.parent)
     spent = [0.0]

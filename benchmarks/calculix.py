@@ -10,7 +10,7 @@ Usage::
 Without ``ccx`` on the PATH (Debian: ``apt-get install calculix-ccx``) it prints one line and
 exits 0: the project does not depend on CalculiX.
 
-The deck generator reads a scenario with ntncontact's own loader (``load_scenario``) and takes
+The deck generator reads a scenario with ntncontact's own loader (``load_config``) and takes
 every body's mesh from ntncontact's mesh generators (``build_mesh``), then extrudes it one
 element thick (``THICKNESS``) into C3D8 elements with the out-of-plane displacement of every
 node fixed (plane strain; full 2x2x2 integration like ntncontact's 2x2 Q4). Per unit thickness
@@ -64,7 +64,7 @@ import numpy as np  # noqa: E402
 
 from ntncontact.engine.builder import build_mesh  # noqa: E402
 from ntncontact.engine.config import ScenarioConfig  # noqa: E402
-from ntncontact.io.scenario import load_scenario  # noqa: E402
+from ntncontact.io.scenario import load_config  # noqa: E402
 from ntncontact.mesh.quadmesh import QuadMesh  # noqa: E402
 
 EXAMPLES = ROOT / "examples"
@@ -451,7 +451,7 @@ ANALYTIC = {"hertz": (240000.0, 3239.0), "bars": (bars_force(), bars_pressure())
 def measure(case: str, k: int, repeats: int, folder: Path) -> dict:
     """``repeats`` interleaved pairs of runs (ccx, ntncontact, ccx, ...) of one problem."""
     scenario, overrides = problem(case, k, folder)
-    config = load_scenario(scenario, overrides)
+    config = load_config(scenario, overrides)
     deck_path = folder / f"{case}_k{k}.inp"
     deck = write_deck(config, scenario.parent, deck_path, CCX_SHIFT[case])
     runs = {"ccx": [], "ntncontact": []}
@@ -527,7 +527,7 @@ def main() -> None:
         case, k, path = args.deck
         path = Path(path).resolve()
         scenario, overrides = problem(case, int(k), path.parent)
-        deck = write_deck(load_scenario(scenario, overrides), scenario.parent, path,
+        deck = write_deck(load_config(scenario, overrides), scenario.parent, path,
                           CCX_SHIFT[case])
         print(f"{path}: {deck.n_nodes} nodes, {deck.n_cells} C3D8 elements")
         return

@@ -82,14 +82,14 @@ def worker() -> None:
     from run import GRIDS, deformed, distorted_grid, neo_hookean_assembler
 
     from ntncontact.engine.builder import build_model
-    from ntncontact.io.scenario import load_scenario
+    from ntncontact.io.scenario import load_config
 
     rng = __import__("numpy").random.default_rng(0)
     out = {}
     for name, refine, calls in (("ring", 1, 300), ("ring8", 8, 5)):
         overrides = [f"bodies.0.mesh.n_radial={4 * refine}", f"bodies.0.mesh.n_circ={48 * refine}",
                      f"bodies.1.mesh.nx={40 * refine}", f"bodies.1.mesh.ny={4 * refine}"]
-        model = build_model(load_scenario(EXAMPLE, overrides), EXAMPLE.parent)
+        model = build_model(load_config(EXAMPLE, overrides), EXAMPLE.parent)
         X = model.X0.copy()
         x = X + 1e-3 / refine * rng.random(X.shape)
         out[name] = measure_mesh(model.assembler, X, x, calls)

@@ -103,7 +103,7 @@ def test_bars_deck_reads_back(bars_deck):
 
 def test_hertz_pressure_faces_on_the_flat_face(tmp_path):
     scenario, overrides = calculix.problem("hertz", 1, tmp_path)
-    config = calculix.load_scenario(scenario, overrides)
+    config = calculix.load_config(scenario, overrides)
     shift = calculix.CCX_SHIFT["hertz"]
     deck = calculix.write_deck(config, scenario.parent, tmp_path / "hertz.inp", shift)
     nodes, elements, surfaces, dloads = read_deck(tmp_path / "hertz.inp")
