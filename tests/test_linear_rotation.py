@@ -32,6 +32,30 @@ def test_a_rigid_rotation_is_measured_exactly(angle):
     assert turned == pytest.approx(abs(angle), abs=1e-12) and body == "block"
 
 
+@pytest.mark.parametrize("angle, stretches", [(0.4, (1.3, 0.8)), (-2.5, (0.6, 1.05)),
+                                              (3.0, (2.0, 2.0))])
+def test_a_homogeneous_deformation_of_a_distorted_mesh_is_measured_exactly(angle, stretches):
+    """x = M X with M = R(angle) U: every bilinear cell, however distorted, has F = M at its
+    centre, so the figures are M's own (scipy's polar decomposition and singular values):
+    the closed-form 2 x 2 algebra of the measures checked on cells of many shapes."""
+    from scipy.linalg import polar
+    scenario = ntc.load_scenario(EXAMPLES / "spinning_block.toml",
+                                 ['bodies.0.material.model="linear_elastic"'])
+    model = build_model(scenario.config, scenario.base_dir)
+    spacing = np.min(np.ptp(model.X0, axis=0)) / 10
+    X = model.X0 + np.random.default_rng(7).uniform(-0.2, 0.2, model.X0.shape) * spacing
+    c, s = np.cos(0.7), np.sin(0.7)
+    axes = np.array([[c, -s], [s, c]])  # U's principal axes, not the frame's
+    U = axes @ np.diag(stretches) @ axes.T
+    M = np.array([[np.cos(angle), -np.sin(angle)], [np.sin(angle), np.cos(angle)]]) @ U
+    found = linear_elastic_measures(model, X, X @ M.T - X)
+    R = polar(M)[0]
+    singular = np.linalg.svd(M, compute_uv=False)
+    assert found["rotation"][0] == pytest.approx(abs(np.arctan2(R[1, 0], R[0, 0])), abs=1e-12)
+    assert found["stretch"][0] == pytest.approx(singular.max(), rel=1e-12)
+    assert found["strain"][0] == pytest.approx(np.max(np.abs(singular**2 - 1.0)) / 2, rel=1e-12)
+
+
 def test_a_spinning_linear_elastic_block_reports_its_turn():
     """omega = 3: the linear body's nodes fly off on straight lines, x = X + t (omega x X),
     so F = I + t W and the measured turn is atan(omega t), 0.98 rad at t = 0.5."""
