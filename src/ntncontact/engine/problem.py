@@ -475,9 +475,9 @@ class _KeptColumns:
 
     def times(self, coefficients: NDArray) -> NDArray:
         """W times ``coefficients``."""
-        ends = np.cumsum([b.shape[1] for b in self.blocks], dtype=np.int64)
-        parts = np.split(coefficients, ends)
-        return sum((b @ c for b, c in zip(self.blocks, parts, strict=False)), np.zeros(self.size))
+        ends = pairwise(accumulate((b.shape[1] for b in self.blocks), initial=0))
+        return sum((b @ coefficients[i:j] for b, (i, j) in zip(self.blocks, ends, strict=True)),
+                   np.zeros(self.size))
 
 
 def _add_triplets(K: sp.csr_matrix, triplets: list, union: TripletUnion,
