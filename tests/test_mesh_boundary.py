@@ -183,3 +183,27 @@ def test_a_surface_that_is_a_point_group_says_so():
         mesh.edge_set("corner")
     with pytest.raises(MeshError, match="no surface .* named 'nowhere'"):
         mesh.edge_set("nowhere")
+
+
+@pytest.mark.parametrize("size", [0, 1, 7, 5000])
+def test_unique_pairs_gives_numpys_row_unique(size):
+    """``unique_pairs`` (one int64 key a pair) against NumPy's row-wise unique: the same rows
+    in the same order, first indices, inverse and counts, on pairs with many repeats, zeros
+    and node numbers up to 10^6; and the boundary edges built on it are those of a mesh's
+    cell edges used once."""
+    from ntncontact.mesh.quadmesh import cell_edges, unique_pairs
+
+    rng = np.random.default_rng(size)
+    pairs = np.column_stack([rng.integers(0, 40, size), rng.integers(0, 40, size)])
+    pairs[: size // 2] *= 25_000  # large node numbers too
+    flags = dict(return_index=True, return_inverse=True, return_counts=True)
+    mine, reference = unique_pairs(pairs, **flags), np.unique(pairs, axis=0, **flags)
+    for a, b in zip(mine, reference, strict=True):
+        np.testing.assert_array_equal(a.reshape(-1), b.reshape(-1))
+    np.testing.assert_array_equal(unique_pairs(pairs), np.unique(pairs, axis=0).reshape(-1, 2))
+    mesh = annulus(0.5, 1.0, 3, 17)
+    edges = cell_edges(mesh.cells)
+    keys = np.sort(edges, axis=1)
+    used_once = [tuple(e) for e, k in zip(edges, keys, strict=True)
+                 if (keys == k).all(axis=1).sum() == 1]
+    assert sorted(map(tuple, boundary_edges(mesh))) == sorted(used_once)

@@ -43,7 +43,7 @@ import scipy.sparse as sp
 from numpy.typing import ArrayLike, NDArray
 from scipy.spatial import cKDTree
 
-from ntncontact.mesh.quadmesh import MeshError
+from ntncontact.mesh.quadmesh import MeshError, unique_pairs
 
 from ..fem.q4 import CORNERS
 from ..jit import njit
@@ -91,8 +91,7 @@ class RemapTopology:
         cells = np.asarray(cells, dtype=np.int64).reshape(-1, 4)
         self.cells, self.n_nodes = cells, n_nodes
         keys = np.sort(np.stack([cells, np.roll(cells, -1, axis=1)], -1), -1)
-        _, inverse, counts = np.unique(keys.reshape(-1, 2), axis=0, return_inverse=True,
-                                       return_counts=True)
+        _, inverse, counts = unique_pairs(keys, return_inverse=True, return_counts=True)
         self.outer_edge = (counts[inverse.reshape(-1)] == 1).reshape(-1, 4)
 
     @cached_property

@@ -14,7 +14,7 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.spatial import cKDTree
 
-from ntncontact.mesh.quadmesh import MeshError, QuadMesh, cell_edges
+from ntncontact.mesh.quadmesh import MeshError, QuadMesh, cell_edges, unique_pairs
 
 __all__ = [
     "SurfaceChain",
@@ -48,8 +48,8 @@ def boundary_edges(mesh: QuadMesh | NDArray[np.int64]) -> NDArray[np.int64]:
     cells, name = (mesh.cells, mesh.name) if isinstance(mesh, QuadMesh) else (mesh, "mesh")
     edges = cell_edges(cells)
     keys = np.sort(edges, axis=1)
-    _, first, inverse, counts = np.unique(
-        keys, axis=0, return_index=True, return_inverse=True, return_counts=True
+    _, first, inverse, counts = unique_pairs(
+        keys, return_index=True, return_inverse=True, return_counts=True
     )
     inverse = inverse.reshape(-1)
     if np.any(counts > 2):

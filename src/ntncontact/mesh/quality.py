@@ -12,7 +12,7 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from ntncontact.mesh.quadmesh import MeshError, QuadMesh, cell_edges
+from ntncontact.mesh.quadmesh import MeshError, QuadMesh, cell_edges, unique_pairs
 
 from ..jit import njit
 
@@ -44,7 +44,7 @@ def _nodes_cells(
 def unique_edges(cells: ArrayLike) -> NDArray[np.int64]:
     """Undirected edges of a Q4 mesh, each once, as sorted node pairs (e, 2)."""
     pairs = cell_edges(np.asarray(cells, dtype=np.int64).reshape(-1, 4))
-    return np.unique(np.sort(pairs, axis=1), axis=0)
+    return unique_pairs(np.sort(pairs, axis=1))
 
 
 def edge_lengths(mesh_or_nodes: QuadMesh | ArrayLike, cells: ArrayLike | None = None) -> NDArray:
