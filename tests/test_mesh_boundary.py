@@ -188,14 +188,15 @@ def test_a_surface_that_is_a_point_group_says_so():
 @pytest.mark.parametrize("size", [0, 1, 7, 5000])
 def test_unique_pairs_gives_numpys_row_unique(size):
     """``unique_pairs`` (one int64 key a pair) against NumPy's row-wise unique: the same rows
-    in the same order, first indices, inverse and counts, on pairs with many repeats, zeros
-    and node numbers up to 10^6; and the boundary edges built on it are those of a mesh's
-    cell edges used once."""
+    in the same order, first indices, inverse and counts, on pairs with many repeats, zeros,
+    node numbers up to 10^6 and negative ones; and the boundary edges built on it are those
+    of a mesh's cell edges used once."""
     from ntncontact.mesh.quadmesh import cell_edges, unique_pairs
 
     rng = np.random.default_rng(size)
     pairs = np.column_stack([rng.integers(0, 40, size), rng.integers(0, 40, size)])
     pairs[: size // 2] *= 25_000  # large node numbers too
+    pairs[size // 3: size // 2] -= 20  # and negative ones (bad input), kept apart
     flags = dict(return_index=True, return_inverse=True, return_counts=True)
     mine, reference = unique_pairs(pairs, **flags), np.unique(pairs, axis=0, **flags)
     for a, b in zip(mine, reference, strict=True):

@@ -36,15 +36,16 @@ def cell_edges(cells: NDArray[np.int64]) -> NDArray[np.int64]:
 
 
 def unique_pairs(pairs: NDArray[np.int64], **returns: bool) -> NDArray | tuple:
-    """``np.unique(pairs, axis=0, **returns)`` for pairs (m, 2) of non-negative integers (node
-    numbers), with the same results, through one int64 key a pair: NumPy's row-wise unique
-    sorts the rows as opaque records, ~10x slower (the 250 x 250 mesh's 250,000 cell edges: 69
-    against 7 ms; a 61,000-cell build called it 15 times)."""
+    """``np.unique(pairs, axis=0, **returns)`` for pairs (m, 2) of integers (node numbers),
+    with the same results, through one int64 key a pair: NumPy's row-wise unique sorts the
+    rows as opaque records, ~10x slower (the 250 x 250 mesh's 250,000 cell edges: 69 against
+    7 ms; a 61,000-cell build called it 15 times)."""
     pairs = np.asarray(pairs, dtype=np.int64).reshape(-1, 2)
-    span = int(pairs.max(initial=0)) + 1
-    found = np.unique(pairs[:, 0] * span + pairs[:, 1], **returns)
+    low = int(pairs.min(initial=0))  # a negative number (bad input) keeps its own key
+    span = int(pairs.max(initial=0)) - low + 1
+    found = np.unique((pairs[:, 0] - low) * span + (pairs[:, 1] - low), **returns)
     keys, rest = (found[0], found[1:]) if returns else (found, ())
-    rows = np.column_stack([keys // span, keys % span])
+    rows = np.column_stack([keys // span + low, keys % span + low])
     return (rows, *rest) if returns else rows
 
 
