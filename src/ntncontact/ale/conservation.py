@@ -32,7 +32,7 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.sparse as sp
 from numpy.typing import ArrayLike, NDArray
-from scipy.sparse.linalg import cg, splu
+from scipy.sparse.linalg import splu
 
 __all__ = ["ConservingCorrection", "conserving_correction", "dof_momenta", "rigid_modes"]
 
@@ -67,34 +67,15 @@ class ConservingCorrection:
 _SPD_LU = {"permc_spec": "MMD_AT_PLUS_A", "diag_pivot_thresh": 0.0,
            "options": {"SymmetricMode": True}}
 
-#: From this many dofs the mass block is solved by conjugate gradients preconditioned by its
-#: diagonal (SciPy's ``cg``) to MASS_RTOL instead of factored. The diagonally scaled Q4 mass
-#: has its eigenvalues within [1/4, 9/4] (Wathen 1987: element by element, so whatever the
-#: mesh's size and grading), so CG gains a factor ~2 an iteration: 43-45 on meshes of 12^2
-#: and 120^2 cells, uniform or graded 40:1 and distorted (1,592 without the preconditioner); a
-#: lumped mass is diagonal (one). A whole-body correction (``benchmarks/mass_correction.py``):
-#: 20,199 dofs SuperLU 0.094 s / CG 0.044 s, 125,499 dofs 0.78 / 0.30 s and the process's
-#: peak memory 368 / 297 MB, 320,799 dofs 2.24 / 0.97 s and 671 / 448 MB; the factor wins
-#: below ~2,000 dofs (543 dofs 1.9 against 4.0 ms: CG's 45 iterations of Python), the size of
-#: the corrections around moved nodes (the ring impact's 40-600), which keep it.
-MASS_CG_DOFS = 3000
-#: CG's relative residual: the momenta come out exact whatever it is (Phi's own products form
-#: C); the energy is restored to about this fraction of the kinetic energy
-MASS_RTOL = 1e-13
-#: CG iterations before the solve is called failed (the bound above gives ~45)
-MASS_MAXITER = 1000
-
 
 def _mass_solver(mass: sp.csr_matrix, dofs: NDArray) -> tuple[sp.spmatrix, Callable]:
     """(A = M_SS on the dofs (2 a + i), a function applying A^-1 to a vector or columns).
 
-    Sparse: S is the neighbourhood of a few moved nodes, but the whole body when that cannot
-    take the energy (dense, a whole block of 23,698 dofs took ~8 min and 4.5 GB a
-    factorization). Where S holds both dofs of each of its nodes (no support among them) A is
-    the scalar block M_NN for x and y alike, so that block is factored alone (0.11 s against
-    0.18 s for the two on that block)."""
-    if dofs.size >= MASS_CG_DOFS:
-        return _iterative_mass_solver(mass, dofs)
+    Sparse, for a sparse LU: S is the neighbourhood of a few moved nodes, but the whole body
+    when that cannot take the energy (dense, a whole block of 23,698 dofs took ~8 min and
+    4.5 GB a factorization). Where S holds both dofs of each of its nodes (no support among
+    them) A is the scalar block M_NN for x and y alike, so that block is factored alone (0.11
+    s against 0.18 s for the two on that block)."""
     pairs = dofs.reshape(-1, 2) if dofs.size % 2 == 0 else None
     if pairs is None or (pairs[:, 0] % 2).any() or not np.array_equal(pairs[:, 1], pairs[:, 0] + 1):
         A = _dof_block(mass, dofs)
@@ -108,27 +89,6 @@ def _mass_solver(mass: sp.csr_matrix, dofs: NDArray) -> tuple[sp.spmatrix, Calla
         return lu.solve(rhs.reshape(nodes.size, -1)).reshape(rhs.shape)
 
     return sp.kron(block, sp.identity(2), format="csr"), solve
-
-
-def _iterative_mass_solver(mass: sp.csr_matrix, dofs: NDArray) -> tuple[sp.spmatrix, Callable]:
-    """``_mass_solver`` by conjugate gradients (MASS_CG_DOFS)."""
-    A = _dof_block(mass, dofs).tocsr()
-    jacobi = sp.diags(1.0 / A.diagonal())
-
-    def solve(rhs: NDArray) -> NDArray:
-        columns = rhs.reshape(rhs.shape[0], -1)
-        out = np.empty(columns.shape)
-        for j, column in enumerate(columns.T):
-            out[:, j], info = cg(A, column, rtol=MASS_RTOL, atol=0.0, maxiter=MASS_MAXITER,
-                                 M=jacobi)
-            if info != 0:
-                raise FloatingPointError(
-                    f"the remap's velocity correction did not converge: conjugate gradients "
-                    f"on the mass block of {A.shape[0]} dofs left a residual above "
-                    f"{MASS_RTOL:g} after {MASS_MAXITER} iterations (a degenerate element?)")
-        return out.reshape(rhs.shape)
-
-    return A, solve
 
 
 def _dof_block(mass: sp.csr_matrix, dofs: NDArray) -> sp.csc_matrix:
