@@ -42,6 +42,35 @@ class CsrPattern:
         return cls(row_starts(unique, (ndof, ndof)), (unique % ndof).astype(np.int32),
                    entry_map.astype(position), (ndof, ndof))
 
+    def of_dofs(self, cells: NDArray) -> CsrPattern:
+        """The pattern of the elements' dofs (``element_dofs(cells)``, 2 a + i) from this
+        pattern of their nodes (``from_element_dofs(cells, n_nodes)``), the same arrays as
+        ``from_element_dofs(element_dofs(cells), 2 n_nodes)`` without its sort of 64 keys an
+        element: node a's row of neighbours b becomes rows 2a and 2a + 1, each 2b, 2b + 1 for
+        every b (Hertz refined 8x, 61,086 cells: 0.48 s a dof pattern by the sort)."""
+        n = self.shape[0]
+        start = self.indptr[:-1].astype(np.int64)
+        degree = np.diff(self.indptr).astype(np.int64)
+        indptr = np.empty(2 * n + 1, dtype=np.int64)
+        indptr[0:-1:2], indptr[1::2] = 4 * start, 4 * start + 2 * degree
+        indptr[-1] = 4 * self.indices.size
+        row = np.repeat(np.arange(n), degree)  # the node row of each node entry
+        indices = np.empty(4 * self.indices.size, dtype=self.indices.dtype)
+        for i in range(2):  # row 2a + i: for each neighbour b, 2b then 2b + 1
+            at = (2 * start[row] + 2 * i * degree[row]
+                  + 2 * np.arange(self.indices.size, dtype=np.int64))
+            indices[at], indices[at + 1] = 2 * self.indices, 2 * self.indices + 1
+        # node entry (e, alpha, beta) at place m of row a -> dof entry (e, 2 alpha + i,
+        # 2 beta + j) at 2 start[a] + 2 i degree[a] + 2 m + j
+        node_map = self.entry_map.reshape(-1, 4, 1, 4, 1).astype(np.int64)
+        a = np.asarray(cells, dtype=np.int64)[:, :, None, None, None]
+        i = np.arange(2).reshape(1, 1, 2, 1, 1)
+        j = np.arange(2).reshape(1, 1, 1, 1, 2)
+        entry = 2 * start[a] + 2 * i * degree[a] + 2 * node_map + j
+        position = np.int32 if indices.size < 2**31 else np.int64
+        return CsrPattern(indptr, indices, entry.reshape(-1).astype(position),
+                          (2 * n, 2 * n))
+
     @property
     def nnz(self) -> int:
         return int(self.indices.size)
@@ -81,8 +110,8 @@ class Assembler:
         self.groups = groups
         self.lam, self.mu, self.rho = (np.asarray(a, dtype=float) for a in (lam, mu, rho))
         self.edofs = element_dofs(self.cells)
-        self.pattern = CsrPattern.from_element_dofs(self.edofs, self.ndof)
         self.node_pattern = CsrPattern.from_element_dofs(self.cells, self.n_nodes)
+        self.pattern = self.node_pattern.of_dofs(self.cells)
 
     def internal(
         self, X: NDArray, *, d: NDArray, need_tangent: bool = True,
