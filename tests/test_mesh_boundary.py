@@ -202,6 +202,10 @@ def test_unique_pairs_gives_numpys_row_unique(size):
     for a, b in zip(mine, reference, strict=True):
         np.testing.assert_array_equal(a.reshape(-1), b.reshape(-1))
     np.testing.assert_array_equal(unique_pairs(pairs), np.unique(pairs, axis=0).reshape(-1, 2))
+    only = unique_pairs(pairs, return_index=False, return_counts=True)  # a flag given False
+    np.testing.assert_array_equal(only[1], reference[3])
+    np.testing.assert_array_equal(unique_pairs(pairs, return_index=False),  # all of them
+                                  np.unique(pairs, axis=0).reshape(-1, 2))
     mesh = annulus(0.5, 1.0, 3, 17)
     edges = cell_edges(mesh.cells)
     keys = np.sort(edges, axis=1)

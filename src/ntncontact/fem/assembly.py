@@ -47,7 +47,7 @@ class CsrPattern:
         pattern of their nodes (``from_element_dofs(cells, n_nodes)``), the same arrays as
         ``from_element_dofs(element_dofs(cells), 2 n_nodes)`` without its sort of 64 keys an
         element: node a's row of neighbours b becomes rows 2a and 2a + 1, each 2b, 2b + 1 for
-        every b (Hertz refined 8x, 61,086 cells: 0.48 s a dof pattern by the sort)."""
+        every b (a 250 x 250 mesh: 0.95 s by the sort, 0.04 s so)."""
         n = self.shape[0]
         start = self.indptr[:-1].astype(np.int64)
         degree = np.diff(self.indptr).astype(np.int64)
@@ -55,10 +55,11 @@ class CsrPattern:
         indptr[0:-1:2], indptr[1::2] = 4 * start, 4 * start + 2 * degree
         indptr[-1] = 4 * self.indices.size
         row = np.repeat(np.arange(n), degree)  # the node row of each node entry
+        # node entry g (place g - start[a] of row a) -> 2 start[a] + 2 g in dof row 2a
+        first = 2 * start[row] + 2 * np.arange(self.indices.size, dtype=np.int64)
         indices = np.empty(4 * self.indices.size, dtype=self.indices.dtype)
-        for i in range(2):  # row 2a + i: for each neighbour b, 2b then 2b + 1
-            at = (2 * start[row] + 2 * i * degree[row]
-                  + 2 * np.arange(self.indices.size, dtype=np.int64))
+        for i in range(2):  # row 2a + i (2 degree[a] further on): 2b then 2b + 1
+            at = first + 2 * i * degree[row]
             indices[at], indices[at + 1] = 2 * self.indices, 2 * self.indices + 1
         # node entry (e, alpha, beta) at place m of row a -> dof entry (e, 2 alpha + i,
         # 2 beta + j) at 2 start[a] + 2 i degree[a] + 2 m + j

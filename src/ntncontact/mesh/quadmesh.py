@@ -44,9 +44,9 @@ def unique_pairs(pairs: NDArray[np.int64], **returns: bool) -> NDArray | tuple:
     low = int(pairs.min(initial=0))  # a negative number (bad input) keeps its own key
     span = int(pairs.max(initial=0)) - low + 1
     found = np.unique((pairs[:, 0] - low) * span + (pairs[:, 1] - low), **returns)
-    keys, rest = (found[0], found[1:]) if returns else (found, ())
+    keys, rest = (found[0], found[1:]) if isinstance(found, tuple) else (found, ())
     rows = np.column_stack([keys // span + low, keys % span + low])
-    return (rows, *rest) if returns else rows
+    return (rows, *rest) if isinstance(found, tuple) else rows
 
 
 @dataclass(frozen=True)
