@@ -8,10 +8,12 @@ import scipy.sparse as sp
 from test_linear_solver import spd_matrix
 
 from ntncontact.solvers import linear
+from ntncontact.solvers import newton as newton_module
 from ntncontact.solvers.linear import LinearSolver, pardiso_available
 from ntncontact.solvers.newton import (
     FORCING_MAX,
     FORCING_MIN,
+    KEPT_STEP_FRACTION,
     FactorCache,
     NewtonSettings,
     forcing_term,
@@ -112,4 +114,52 @@ def test_newton_on_a_single_factor_reaches_its_tolerance():
     assert np.linalg.norm(R) <= settings.rtol * scale
     assert single.stats.refinements > 0 and single.stats.double_fallbacks == 0
     assert abs(result.iterations - reference.iterations) <= 1
+    assert np.abs(result.y - reference.y).max() <= 1e-6 * np.abs(reference.y).max()
+
+
+@pardiso
+def test_a_kept_factor_step_asks_only_the_accuracy_its_contraction_needs(monkeypatch):
+    """Modified Newton's steps are solved to KEPT_STEP_FRACTION x reuse_contraction of |R|
+    (1e-3), not to the forcing term's 1e-6: the stale matrix limits them, and the single
+    factor's first solution (~4e-4 |R| here) then needs no sweep. Fresh steps keep their
+    forcing term, and Newton ends at its rtol on the root a double solve finds."""
+    A = ill_conditioned()
+    b = np.random.default_rng(5).standard_normal(A.shape[0])
+
+    def residual(y):
+        return A @ y + 0.05 * y**3 - b, float(np.linalg.norm(b))
+
+    def jacobian(y):
+        return sp.csr_matrix(A + sp.diags(0.15 * y**2))
+
+    asked, kept_phase = [], []
+    modified_step, call = newton_module._modified_step, linear.Factorization.__call__
+
+    def marked(*args, **kwargs):
+        kept_phase.append(True)
+        try:
+            return modified_step(*args, **kwargs)
+        finally:
+            kept_phase.pop()
+
+    def recorded(self, rhs, rtol=linear.MIXED_RTOL):
+        asked.append((bool(kept_phase), rtol))
+        return call(self, rhs, rtol)
+
+    monkeypatch.setattr(newton_module, "_modified_step", marked)
+    monkeypatch.setattr(linear.Factorization, "__call__", recorded)
+    settings = NewtonSettings(rtol=1e-10)
+    single = LinearSolver("pardiso", precision="single")
+    cache = FactorCache(single.factorize)
+    result = newton(residual, jacobian, single.solve, np.zeros(A.shape[0]), settings,
+                    factors=cache)
+    kept = [rtol for in_kept, rtol in asked if in_kept]
+    fresh = [rtol for in_kept, rtol in asked if not in_kept]
+    assert cache.reused_steps > 0 and kept
+    assert min(kept) >= KEPT_STEP_FRACTION * settings.reuse_contraction
+    assert fresh[0] == FORCING_MIN
+    reference = newton(residual, jacobian, LinearSolver("superlu").solve,
+                       np.zeros(A.shape[0]), NewtonSettings(rtol=1e-10, max_reused_steps=0))
+    R, scale = residual(result.y)
+    assert np.linalg.norm(R) <= settings.rtol * scale
     assert np.abs(result.y - reference.y).max() <= 1e-6 * np.abs(reference.y).max()
