@@ -143,8 +143,10 @@ def test_a_kept_factor_step_asks_only_the_accuracy_its_contraction_needs(monkeyp
             kept_phase.pop()
 
     def recorded(self, rhs, rtol=linear.MIXED_RTOL):
-        asked.append((bool(kept_phase), rtol))
-        return call(self, rhs, rtol)
+        sweeps = single.stats.refinements
+        x = call(self, rhs, rtol)
+        asked.append((bool(kept_phase), rtol, single.stats.refinements - sweeps))
+        return x
 
     monkeypatch.setattr(newton_module, "_modified_step", marked)
     monkeypatch.setattr(linear.Factorization, "__call__", recorded)
@@ -153,11 +155,12 @@ def test_a_kept_factor_step_asks_only_the_accuracy_its_contraction_needs(monkeyp
     cache = FactorCache(single.factorize)
     result = newton(residual, jacobian, single.solve, np.zeros(A.shape[0]), settings,
                     factors=cache)
-    kept = [rtol for in_kept, rtol in asked if in_kept]
-    fresh = [rtol for in_kept, rtol in asked if not in_kept]
+    kept = [(rtol, sweeps) for in_kept, rtol, sweeps in asked if in_kept]
+    fresh = [(rtol, sweeps) for in_kept, rtol, sweeps in asked if not in_kept]
     assert cache.reused_steps > 0 and kept
-    assert min(kept) >= KEPT_STEP_FRACTION * settings.reuse_contraction
-    assert fresh[0] == FORCING_MIN
+    assert min(rtol for rtol, _ in kept) >= KEPT_STEP_FRACTION * settings.reuse_contraction
+    assert sum(sweeps for _, sweeps in kept) == 0
+    assert fresh[0][0] == FORCING_MIN and fresh[0][1] > 0  # the 1e-6 a sweep reaches
     reference = newton(residual, jacobian, LinearSolver("superlu").solve,
                        np.zeros(A.shape[0]), NewtonSettings(rtol=1e-10, max_reused_steps=0))
     R, scale = residual(result.y)

@@ -135,7 +135,8 @@ FORCING_GAMMA = 0.9
 #: being what limits it, so solving A_kept further buys nothing, and a single-precision
 #: factor's first solution (1e-7 to 2e-3 |R|) then needs no refinement sweep as a rule. Ring
 #: refined 8x: 99 -> 17 sweeps, the same 10.0 Newton iterations and 5.94 augmentations a
-#: contact step, 0.45 -> 0.40 s a step (benchmarks/README.md, session 54)
+#: contact step, 0.53 -> 0.47 s a step in benchmarks/scaling.py (benchmarks/README.md,
+#: session 54)
 KEPT_STEP_FRACTION = 1e-2
 
 
